@@ -1,0 +1,78 @@
+//! Errors of the scenario simulators, each naming the file, field, seed or step at fault.
+
+use std::path::PathBuf;
+
+/// What can go wrong while loading or running a scenario.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// A scenario name that no simulator implements.
+    #[error("unknown scenario '{name}' (available: {available})")]
+    UnknownScenario {
+        /// The name asked for.
+        name: String,
+        /// The names that exist.
+        available: String,
+    },
+    /// A scenario file could not be read.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// Malformed TOML or an unknown key.
+    #[error("{path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The parser's message (with line and key).
+        message: String,
+    },
+    /// A value out of its allowed range.
+    #[error("{path}: field '{field}': {reason}")]
+    InvalidField {
+        /// The file.
+        path: PathBuf,
+        /// Dotted field path.
+        field: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// MuJoCo refused the generated model.
+    #[error("MuJoCo could not load the {scenario} model: {message}")]
+    Model {
+        /// Scenario name.
+        scenario: String,
+        /// MuJoCo's message.
+        message: String,
+    },
+    /// The simulation state became NaN/inf or left the world (a diverging simulation).
+    #[error("non-finite or diverging {scenario} state at seed {seed}, step {step}: {detail}")]
+    NonFinite {
+        /// Scenario name.
+        scenario: String,
+        /// Episode seed.
+        seed: u64,
+        /// Control step at which it was detected.
+        step: u32,
+        /// Which quantity.
+        detail: String,
+    },
+    /// MuJoCo's offscreen renderer failed (no EGL/GL context, ...).
+    #[error("MuJoCo renderer: {message} (run scripts/setup.sh for the EGL/Mesa packages)")]
+    Render {
+        /// What failed.
+        message: String,
+    },
+    /// An action that is NaN or infinite.
+    #[error("non-finite action {action:?} at seed {seed}, step {step}")]
+    BadAction {
+        /// Episode seed.
+        seed: u64,
+        /// Control step.
+        step: u32,
+        /// The action.
+        action: [f64; 2],
+    },
+}

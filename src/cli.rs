@@ -1,0 +1,117 @@
+//! Command-line interface (clap derive). Doc comments are the help text.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+use crate::commands::RendererKind;
+
+/// Rank robot-policy checkpoints offline in a learned world model (DriftWorld),
+/// checked against a MuJoCo reference simulator.
+#[derive(Debug, Parser)]
+#[command(name = "evalharness", version, about)]
+pub struct Cli {
+    /// More logging (-v debug, -vv trace). RUST_LOG overrides.
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
+    /// Only warnings and errors on stderr, no progress bars.
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+    /// The command.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// evalharness commands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run episodes in the MuJoCo reference simulator and score them.
+    Simulate(SimulateArgs),
+    /// Collect a dataset (zarr replay buffer) from a mix of scripted behaviours.
+    Collect(CollectArgs),
+    /// Inspect datasets.
+    #[command(subcommand)]
+    Dataset(DatasetCommand),
+}
+
+/// Options shared by commands that run a scenario.
+#[derive(Debug, Args)]
+pub struct ScenarioArgs {
+    /// Scenario name (pusht) or path to a scenario .toml file.
+    #[arg(long, default_value = "pusht")]
+    pub scenario: String,
+    /// Number of episodes.
+    #[arg(long, default_value_t = 10)]
+    pub episodes: u64,
+    /// Seed of the first episode; episode i uses seed-start + i.
+    #[arg(long, default_value_t = 100_000)]
+    pub seed_start: u64,
+    /// Step limit per episode (default: the scenario's, 300 for Push-T).
+    #[arg(long)]
+    pub max_steps: Option<u32>,
+    /// Worker threads (results are identical for any value).
+    #[arg(long, default_value_t = default_jobs())]
+    pub jobs: usize,
+    /// Replace the output if it exists.
+    #[arg(long)]
+    pub force: bool,
+    /// Gaussian noise (std, world units) added to the expert's actions.
+    #[arg(long, default_value_t = 0.0)]
+    pub noise: f64,
+    /// Control-step lag applied to the expert's actions.
+    #[arg(long, default_value_t = 0)]
+    pub lag: usize,
+}
+
+fn default_jobs() -> usize {
+    std::thread::available_parallelism().map(usize::from).unwrap_or(1)
+}
+
+/// `evalharness simulate`.
+#[derive(Debug, Args)]
+pub struct SimulateArgs {
+    /// Scenario, episodes, seeds, jobs.
+    #[command(flatten)]
+    pub common: ScenarioArgs,
+    /// Behaviour to run: `expert` (sampling planner) or `explore` (smooth random targets).
+    #[arg(long, default_value = "expert")]
+    pub policy: String,
+    /// Output directory: summary.json, episodes.jsonl, config.json and a GIF of the first episode.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Side in pixels of the GIF frames.
+    #[arg(long, default_value_t = 256)]
+    pub gif_size: usize,
+    /// Renderer of the GIF: `raster` (the observations' 2-D rasteriser) or `mujoco`
+    /// (MuJoCo's OpenGL renderer beside the rasteriser, a visual cross-check; also
+    /// writes render_crosscheck.json).
+    #[arg(long, value_enum, default_value_t = RendererKind::Raster)]
+    pub renderer: RendererKind,
+}
+
+/// `evalharness collect`.
+#[derive(Debug, Args)]
+pub struct CollectArgs {
+    /// Scenario, episodes, seeds, jobs.
+    #[command(flatten)]
+    pub common: ScenarioArgs,
+    /// Behaviour mix, as name=weight pairs; each episode draws one from its seed.
+    #[arg(long, default_value = "expert=0.8,explore=0.2")]
+    pub mix: String,
+    /// Output zarr folder (diffusion_policy / GPC replay-buffer layout).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// `evalharness dataset ...`.
+#[derive(Debug, Subcommand)]
+pub enum DatasetCommand {
+    /// Episodes, steps, shapes and score statistics of a dataset.
+    Info {
+        /// The zarr dataset folder.
+        path: PathBuf,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}

@@ -1,0 +1,54 @@
+//! Output directories that never look complete before they are.
+//!
+//! A command writes into `OUT.partial/` and renames it to `OUT` at the end; an
+//! existing `OUT` is refused unless `--force`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+
+/// A staging directory for an output folder.
+pub struct Staged {
+    target: PathBuf,
+    tmp: PathBuf,
+}
+
+impl Staged {
+    /// Prepares `target` (refusing an existing one unless `force`).
+    pub fn new(target: &Path, force: bool) -> Result<Self> {
+        if target.exists() && !force {
+            bail!("output {} already exists (pass --force to replace it)", target.display());
+        }
+        let mut tmp = target.as_os_str().to_owned();
+        tmp.push(".partial");
+        let tmp = PathBuf::from(tmp);
+        if tmp.exists() {
+            std::fs::remove_dir_all(&tmp).with_context(|| format!("removing stale {}", tmp.display()))?;
+        }
+        std::fs::create_dir_all(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+        Ok(Self { target: target.to_path_buf(), tmp })
+    }
+
+    /// Path of `name` inside the staging directory.
+    pub fn file(&self, name: &str) -> PathBuf {
+        self.tmp.join(name)
+    }
+
+    /// Moves the staging directory into place (replacing an old output).
+    pub fn commit(self) -> Result<PathBuf> {
+        if self.target.exists() {
+            std::fs::remove_dir_all(&self.target)
+                .with_context(|| format!("removing old {}", self.target.display()))?;
+        }
+        std::fs::rename(&self.tmp, &self.target)
+            .with_context(|| format!("moving {} into place", self.target.display()))?;
+        Ok(self.target)
+    }
+}
+
+/// Writes pretty JSON to a file.
+pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+    let mut text = serde_json::to_string_pretty(value)?;
+    text.push('\n');
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}

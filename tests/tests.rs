@@ -1,0 +1,5 @@
+//! Integration tests: drive the real `evalharness` binary on tiny inputs.
+
+mod dataset;
+mod simulate;
+mod util;

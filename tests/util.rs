@@ -1,0 +1,49 @@
+//! Helpers: run the binary in a scrubbed environment, read its outputs.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// The binary under test, with a clean environment (no RUST_LOG surprises).
+pub fn evalharness() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_evalharness"));
+    c.env_remove("RUST_LOG").env("NO_COLOR", "1");
+    c
+}
+
+/// Runs with `args` and returns the output.
+pub fn run(args: &[&str]) -> Output {
+    evalharness().args(args).output().expect("evalharness runs")
+}
+
+/// Asserts exit code `code` and returns (stdout, stderr).
+pub fn expect_code(out: &Output, code: i32) -> (String, String) {
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(code), "stdout:\n{stdout}\nstderr:\n{stderr}");
+    (stdout, stderr)
+}
+
+/// Reads a JSON file.
+pub fn read_json(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// All files under `dir`, relative paths with their bytes, sorted.
+pub fn tree_bytes(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).expect("readable dir") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).expect("under dir").display().to_string();
+                out.push((rel, std::fs::read(&p).expect("readable file")));
+            }
+        }
+    }
+    out.sort();
+    out
+}
