@@ -32,6 +32,54 @@ pub enum Command {
     /// Inspect datasets.
     #[command(subcommand)]
     Dataset(DatasetCommand),
+    /// Train models.
+    #[command(subcommand)]
+    Train(TrainCommand),
+}
+
+/// `evalharness train ...`.
+#[derive(Debug, Subcommand)]
+pub enum TrainCommand {
+    /// The frame autoencoder whose latent space the world model works in.
+    Autoencoder(TrainAutoencoderArgs),
+}
+
+/// `evalharness train autoencoder`.
+#[derive(Debug, Args)]
+pub struct TrainAutoencoderArgs {
+    /// Training dataset (zarr replay buffer); every 10th episode is held out.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output folder (checkpoints, logs, provenance).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Optimizer steps in total (default 4000); with `--resume`, extends or shortens the run.
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Frames per step.
+    #[arg(long, default_value_t = 16)]
+    pub batch: usize,
+    /// Peak learning rate (after a 200-step warm-up).
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Seed of the weights and batches.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Held-out evaluation interval (steps).
+    #[arg(long, default_value_t = 250)]
+    pub eval_every: u64,
+    /// Checkpoint interval (steps).
+    #[arg(long, default_value_t = 100)]
+    pub checkpoint_every: u64,
+    /// Stop (with a checkpoint) after this many minutes; `--resume` continues.
+    #[arg(long)]
+    pub max_minutes: Option<f64>,
+    /// Continue the run in `--out` from its last checkpoint (its config wins).
+    #[arg(long)]
+    pub resume: bool,
+    /// Replace an existing `--out` (without `--resume`).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Options shared by commands that run a scenario.

@@ -2,4 +2,5 @@
 
 mod dataset;
 mod simulate;
+mod train;
 mod util;

@@ -4,3 +4,4 @@
 //! summary and the LaTeX table of `rank` will live here too.
 
 pub mod gif;
+pub mod png;

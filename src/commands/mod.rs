@@ -4,6 +4,7 @@ mod collect;
 mod dataset;
 mod episodes;
 mod simulate;
+mod train;
 
 use std::process::ExitCode;
 
@@ -11,7 +12,7 @@ use anyhow::Result;
 
 pub use episodes::RendererKind;
 
-use crate::cli::{Cli, Command, DatasetCommand};
+use crate::cli::{Cli, Command, DatasetCommand, TrainCommand};
 
 /// Runs the parsed command; the exit code is 0 unless a gate failed (1).
 pub fn run(cli: &Cli) -> Result<ExitCode> {
@@ -19,5 +20,6 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Simulate(a) => simulate::run(a, cli.quiet),
         Command::Collect(a) => collect::run(a, cli.quiet),
         Command::Dataset(DatasetCommand::Info { path, json }) => dataset::info(path, *json),
+        Command::Train(TrainCommand::Autoencoder(a)) => train::autoencoder(a, cli.quiet),
     }
 }

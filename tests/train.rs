@@ -1,0 +1,95 @@
+//! `evalharness train autoencoder` on a tiny dataset: outputs, resume, bad input.
+
+use std::path::Path;
+
+use crate::util::{expect_code, read_json, run};
+
+/// 10 short explorer episodes (episode 9 is the held-out one).
+fn tiny_dataset(dir: &Path, scenario: Option<&Path>) -> std::path::PathBuf {
+    let out = dir.join("tiny.zarr");
+    let mut args =
+        vec!["collect", "--episodes", "10", "--seed-start", "0", "--max-steps", "4", "--mix", "explore=1"];
+    if let Some(s) = scenario {
+        args.extend(["--scenario", s.to_str().unwrap()]);
+    }
+    args.extend(["--out", out.to_str().unwrap()]);
+    expect_code(&run(&args), 0);
+    out
+}
+
+#[test]
+fn autoencoder_trains_checkpoints_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = tiny_dataset(dir.path(), None);
+    let out = dir.path().join("ae");
+    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+    let base = [
+        "train",
+        "autoencoder",
+        "--data",
+        d,
+        "--out",
+        o,
+        "--batch",
+        "2",
+        "--eval-every",
+        "1",
+        "--checkpoint-every",
+        "1",
+    ];
+    let mut first = base.to_vec();
+    first.extend(["--steps", "2"]);
+    let (stdout, _) = expect_code(&run(&first), 0);
+    assert!(stdout.contains("step 2/2"), "{stdout}");
+    let prov = read_json(&out.join("provenance.json"));
+    assert_eq!(prov["steps"], 2);
+    assert_eq!(prov["finished"], true);
+    assert_eq!(prov["data"]["episodes"], 10);
+    assert!(prov["metrics"]["held_out_psnr_db"].as_f64().unwrap().is_finite());
+    for f in
+        ["model.bpk", "optimizer.bpk", "state.json", "train_log.jsonl", "reconstructions.png", "config.json"]
+    {
+        assert!(out.join(f).is_file(), "missing {f}");
+    }
+    // Without --resume an existing run is refused.
+    let (_, err) = expect_code(&run(&first), 2);
+    assert!(err.contains("--resume"), "{err}");
+    // Resuming a finished run without --steps trains nothing more (the saved config wins).
+    let mut again = base.to_vec();
+    again.push("--resume");
+    let (stdout, _) = expect_code(&run(&again), 0);
+    assert!(stdout.contains("step 2/2"), "{stdout}");
+    // --resume --steps 3 extends it by exactly one step.
+    again.extend(["--steps", "3"]);
+    let (stdout, _) = expect_code(&run(&again), 0);
+    assert!(stdout.contains("step 3/3"), "{stdout}");
+    let log = std::fs::read_to_string(out.join("train_log.jsonl")).unwrap();
+    let steps: Vec<u64> = log
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["step"].as_u64().unwrap())
+        .collect();
+    assert_eq!(steps, vec![1, 2, 3]);
+}
+
+#[test]
+fn autoencoder_rejects_a_dataset_of_the_wrong_image_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let shipped =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/pusht.toml")).unwrap();
+    let small = dir.path().join("small.toml");
+    std::fs::write(&small, shipped.replace("size = 96 ", "size = 64 ")).unwrap();
+    let data = tiny_dataset(dir.path(), Some(&small));
+    let out = dir.path().join("ae");
+    let args = [
+        "train",
+        "autoencoder",
+        "--data",
+        data.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--steps",
+        "1",
+    ];
+    let (_, err) = expect_code(&run(&args), 2);
+    assert!(err.contains("tiny.zarr") && err.contains("64x64") && err.contains("96x96"), "{err}");
+}

@@ -1,0 +1,179 @@
+//! Frame autoencoder: 96x96 RGB frames <-> 12x12xC latents.
+//!
+//! DriftWorld's latent family runs the drifting U-Net on autoencoder latents; on
+//! a CPU this is what makes training feasible (a 96x96 pixel-space U-Net step is
+//! ~50 s here). Three stride-2 convolutions take 96 -> 12; GroupNorm + SiLU
+//! residual blocks in between; the decoder mirrors it with nearest-neighbour
+//! upsampling and a residual block at full resolution to keep edges sharp.
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::nn::conv::{Conv2d, Conv2dConfig};
+use burn::nn::interpolate::{Interpolate2d, Interpolate2dConfig, InterpolateMode};
+use burn::nn::{GroupNorm, GroupNormConfig, PaddingConfig2d};
+use burn::tensor::activation::silu;
+use burn::tensor::{Device, Tensor};
+
+/// Autoencoder hyper-parameters.
+#[derive(Config, Debug, PartialEq)]
+pub struct AutoencoderConfig {
+    /// Image side (frames are square).
+    #[config(default = 96)]
+    pub image_size: usize,
+    /// Channels at 96, 48, 24 and 12 pixels.
+    #[config(default = "[16, 32, 64, 64]")]
+    pub channels: [usize; 4],
+    /// Latent channels C (the latent is C x image/8 x image/8).
+    #[config(default = 8)]
+    pub latent_channels: usize,
+    /// GroupNorm groups.
+    #[config(default = 8)]
+    pub groups: usize,
+}
+
+impl AutoencoderConfig {
+    /// Latent side (image / 8).
+    pub fn latent_size(&self) -> usize {
+        self.image_size / 8
+    }
+
+    /// Builds the module.
+    pub fn init(&self, device: &Device) -> Autoencoder {
+        let [c0, c1, c2, c3] = self.channels;
+        let g = self.groups;
+        let up = || {
+            Interpolate2dConfig::new()
+                .with_scale_factor(Some([2.0, 2.0]))
+                .with_mode(InterpolateMode::Nearest)
+                .init()
+        };
+        Autoencoder {
+            enc_in: conv(3, c0, 3, 1, device),
+            enc_down: vec![
+                conv(c0, c1, 3, 2, device),
+                conv(c1, c2, 3, 2, device),
+                conv(c2, c3, 3, 2, device),
+            ],
+            enc_blocks: vec![
+                ResBlock::new(c1, g, device),
+                ResBlock::new(c2, g, device),
+                ResBlock::new(c3, g, device),
+            ],
+            enc_norm: GroupNormConfig::new(g, c3).init(device),
+            enc_out: conv(c3, self.latent_channels, 1, 1, device),
+            dec_in: conv(self.latent_channels, c3, 3, 1, device),
+            dec_blocks: vec![
+                ResBlock::new(c3, g, device),
+                ResBlock::new(c2, g, device),
+                ResBlock::new(c1, g, device),
+                ResBlock::new(c0, g, device),
+            ],
+            dec_up: vec![conv(c3, c2, 3, 1, device), conv(c2, c1, 3, 1, device), conv(c1, c0, 3, 1, device)],
+            upsample: up(),
+            dec_norm: GroupNormConfig::new(g, c0).init(device),
+            dec_out: conv(c0, 3, 3, 1, device),
+        }
+    }
+}
+
+fn conv(cin: usize, cout: usize, k: usize, stride: usize, device: &Device) -> Conv2d {
+    let p = k / 2;
+    Conv2dConfig::new([cin, cout], [k, k])
+        .with_stride([stride, stride])
+        .with_padding(PaddingConfig2d::Explicit(p, p, p, p))
+        .init(device)
+}
+
+/// GroupNorm -> SiLU -> conv, twice, plus the input.
+#[derive(Module, Debug)]
+pub struct ResBlock {
+    norm1: GroupNorm,
+    conv1: Conv2d,
+    norm2: GroupNorm,
+    conv2: Conv2d,
+}
+
+impl ResBlock {
+    fn new(c: usize, groups: usize, device: &Device) -> Self {
+        Self {
+            norm1: GroupNormConfig::new(groups, c).init(device),
+            conv1: conv(c, c, 3, 1, device),
+            norm2: GroupNormConfig::new(groups, c).init(device),
+            conv2: conv(c, c, 3, 1, device),
+        }
+    }
+
+    /// # Shapes
+    /// `[b, c, h, w] -> [b, c, h, w]`
+    fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        let h = self.conv1.forward(silu(self.norm1.forward(x.clone())));
+        let h = self.conv2.forward(silu(self.norm2.forward(h)));
+        x + h
+    }
+}
+
+/// The frame autoencoder.
+#[derive(Module, Debug)]
+pub struct Autoencoder {
+    enc_in: Conv2d,
+    enc_down: Vec<Conv2d>,
+    enc_blocks: Vec<ResBlock>,
+    enc_norm: GroupNorm,
+    enc_out: Conv2d,
+    dec_in: Conv2d,
+    dec_blocks: Vec<ResBlock>,
+    dec_up: Vec<Conv2d>,
+    upsample: Interpolate2d,
+    dec_norm: GroupNorm,
+    dec_out: Conv2d,
+}
+
+impl Autoencoder {
+    /// Frames in [-1, 1] to latents.
+    ///
+    /// # Shapes
+    /// `[b, 3, 96, 96] -> [b, C, 12, 12]`
+    pub fn encode(&self, x: Tensor<4>) -> Tensor<4> {
+        let mut h = self.enc_in.forward(x); // [b, c0, 96, 96]
+        for (down, block) in self.enc_down.iter().zip(&self.enc_blocks) {
+            h = block.forward(down.forward(h)); // [b, c1, 48, 48], [b, c2, 24, 24], [b, c3, 12, 12]
+        }
+        self.enc_out.forward(silu(self.enc_norm.forward(h))) // [b, C, 12, 12]
+    }
+
+    /// Latents to frames (raw, nominally in [-1, 1]).
+    ///
+    /// # Shapes
+    /// `[b, C, 12, 12] -> [b, 3, 96, 96]`
+    pub fn decode(&self, z: Tensor<4>) -> Tensor<4> {
+        let mut h = self.dec_blocks[0].forward(self.dec_in.forward(z)); // [b, c3, 12, 12]
+        for (up, block) in self.dec_up.iter().zip(&self.dec_blocks[1..]) {
+            h = block.forward(up.forward(self.upsample.forward(h))); // 24, 48, 96
+        }
+        self.dec_out.forward(silu(self.dec_norm.forward(h))) // [b, 3, 96, 96]
+    }
+
+    /// Encode then decode.
+    ///
+    /// # Shapes
+    /// `[b, 3, 96, 96] -> [b, 3, 96, 96]`
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        self.decode(self.encode(x))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shapes_round_trip() {
+        let device = Device::flex();
+        let cfg = AutoencoderConfig::new();
+        let ae = cfg.init(&device);
+        let x = Tensor::<4>::zeros([2, 3, 96, 96], &device);
+        let z = ae.encode(x);
+        assert_eq!(z.dims(), [2, 8, 12, 12]);
+        assert_eq!(ae.decode(z).dims(), [2, 3, 96, 96]);
+    }
+}

@@ -1,0 +1,42 @@
+//! Errors of the world model, each naming the file, step or field at fault.
+
+use std::path::PathBuf;
+
+/// What can go wrong while loading data or checkpoints, or training.
+#[derive(Debug, thiserror::Error)]
+pub enum WorldModelError {
+    /// A dataset that cannot be used.
+    #[error("dataset {path}: {message}")]
+    Data {
+        /// The dataset.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A checkpoint that cannot be read or does not match its config.
+    #[error("checkpoint {path}: {message}")]
+    Checkpoint {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A loss or output that became NaN or infinite.
+    #[error("non-finite {what} at training step {step} (output {path})")]
+    NonFinite {
+        /// Which quantity.
+        what: String,
+        /// The step.
+        step: u64,
+        /// The run's output folder.
+        path: PathBuf,
+    },
+    /// Plain I/O.
+    #[error("{path}: {source}")]
+    Io {
+        /// The path.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+}

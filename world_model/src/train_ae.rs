@@ -1,0 +1,309 @@
+//! Training the frame autoencoder: resumable, time-boxed, evaluated on held-out episodes.
+//!
+//! Output folder:
+//! - `config.json`: model and training configs (written first; reloaded on `--resume`);
+//! - `model.bpk`, `optimizer.bpk`, `state.json`: the latest checkpoint (step, elapsed time);
+//! - `train_log.jsonl`: one line per logged step (loss, learning rate, held-out PSNR).
+//!
+//! Batches are a pure function of (seed, step), so a resumed run draws exactly the
+//! batches an uninterrupted one would have.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::{AdamWConfig, GradientsParams};
+use burn::tensor::Device;
+use harness::seed::derive;
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+
+use crate::autoencoder::{Autoencoder, AutoencoderConfig};
+use crate::data::{EpisodeData, Split, psnr, tensor_to_frames};
+use crate::error::WorldModelError;
+
+/// Training hyper-parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AeTrainConfig {
+    /// Optimizer steps in total.
+    pub steps: u64,
+    /// Frames per step.
+    pub batch: usize,
+    /// Peak learning rate (AdamW, β = (0.9, 0.95), weight decay 0.01).
+    pub lr: f64,
+    /// Linear warm-up steps from 1e-6 to `lr`, then constant.
+    pub warmup: u64,
+    /// Seed of the initial weights and the batches.
+    pub seed: u64,
+    /// Held-out evaluation every this many steps.
+    pub eval_every: u64,
+    /// Held-out frames used for the evaluation (evenly spaced over the split).
+    pub eval_frames: usize,
+    /// Checkpoint every this many steps.
+    pub checkpoint_every: u64,
+}
+
+impl Default for AeTrainConfig {
+    fn default() -> Self {
+        Self {
+            steps: 4000,
+            batch: 16,
+            lr: 1e-3,
+            warmup: 200,
+            seed: 0,
+            eval_every: 250,
+            eval_frames: 256,
+            checkpoint_every: 100,
+        }
+    }
+}
+
+/// How to run a training session.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunOptions {
+    /// Continue the run in the output folder from its checkpoint.
+    pub resume: bool,
+    /// When resuming, replace the saved total steps with `cfg.steps`.
+    pub extend: bool,
+    /// Stop (with a checkpoint) after this many minutes.
+    pub max_minutes: Option<f64>,
+}
+
+/// A training progress report.
+#[derive(Clone, Debug)]
+pub struct AeProgress {
+    /// Steps done.
+    pub step: u64,
+    /// Steps in total.
+    pub total: u64,
+    /// Last batch loss (MSE on [-1, 1] pixels).
+    pub loss: f64,
+    /// Last held-out PSNR (dB), if evaluated.
+    pub psnr: Option<f64>,
+}
+
+/// What a (possibly time-limited) run ended with.
+#[derive(Clone, Debug)]
+pub struct AeOutcome {
+    /// Steps done in total.
+    pub step: u64,
+    /// Steps configured in total.
+    pub total: u64,
+    /// Whether all configured steps are done.
+    pub finished: bool,
+    /// Held-out PSNR (dB) and MSE at the end.
+    pub psnr: f64,
+    /// Held-out MSE on [-1, 1] pixels.
+    pub mse: f64,
+    /// A few held-out frames and their reconstructions (HWC bytes).
+    pub samples: Vec<SamplePair>,
+    /// Wall seconds over all sessions.
+    pub elapsed_s: f64,
+}
+
+/// A held-out frame and its reconstruction (HWC bytes).
+pub type SamplePair = (Vec<u8>, Vec<u8>);
+
+#[derive(Serialize, Deserialize)]
+struct State {
+    step: u64,
+    elapsed_s: f64,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Configs {
+    model: AutoencoderConfig,
+    train: AeTrainConfig,
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> WorldModelError + '_ {
+    move |source| WorldModelError::Io { path: path.to_path_buf(), source }
+}
+
+fn ckpt(path: &Path, e: impl std::fmt::Display) -> WorldModelError {
+    WorldModelError::Checkpoint { path: path.to_path_buf(), message: e.to_string() }
+}
+
+/// Loads a trained autoencoder from its folder (`config.json` + `model.bpk`).
+///
+/// # Errors
+/// [`WorldModelError::Checkpoint`] naming the file when it is missing, unreadable or
+/// does not match its config.
+pub fn load_autoencoder(
+    dir: &Path,
+    device: &Device,
+) -> Result<(Autoencoder, AutoencoderConfig), WorldModelError> {
+    let cfg_path = dir.join("config.json");
+    let text = std::fs::read_to_string(&cfg_path).map_err(|e| ckpt(&cfg_path, e))?;
+    let cfgs: Configs = serde_json::from_str(&text).map_err(|e| ckpt(&cfg_path, e))?;
+    let weights = dir.join("model.bpk");
+    let model = cfgs.model.init(device).try_load_file(&weights).map_err(|e| ckpt(&weights, e))?;
+    Ok((model, cfgs.model))
+}
+
+/// Held-out PSNR/MSE of `model` on `idx`, in chunks of 32 frames.
+fn evaluate(
+    model: &Autoencoder,
+    data: &EpisodeData,
+    idx: &[usize],
+    device: &Device,
+) -> (f64, f64, Vec<SamplePair>) {
+    let model = model.valid();
+    let (mut psnr_sum, mut mse_sum, mut samples) = (0.0, 0.0, Vec::new());
+    // Eight sample pairs spread over the evaluation frames (different episodes).
+    let every = (idx.len() / 8).max(1);
+    let mut k = 0;
+    for chunk in idx.chunks(32) {
+        let x = data.frames_tensor(chunk, device);
+        let y = model.forward(x.clone());
+        let mse: f64 = (y.clone() - x.clone()).powf_scalar(2.0).mean().into_scalar::<f32>().into();
+        mse_sum += mse * chunk.len() as f64;
+        for (orig, rec) in tensor_to_frames(x).into_iter().zip(tensor_to_frames(y)) {
+            psnr_sum += psnr(&orig, &rec).min(100.0);
+            if k % every == 0 && samples.len() < 8 {
+                samples.push((orig, rec));
+            }
+            k += 1;
+        }
+    }
+    let n = idx.len().max(1) as f64;
+    (psnr_sum / n, mse_sum / n, samples)
+}
+
+/// Trains (or resumes training) into `out`; stops at the configured steps or after
+/// `max_minutes`, whichever comes first, with a checkpoint either way. When
+/// resuming, the saved configs win, except that `cfg.steps` replaces the saved
+/// total if `extend` is set (to continue a finished run further).
+///
+/// # Errors
+/// [`WorldModelError`] for unreadable checkpoints, I/O failures, or a non-finite loss
+/// (naming the step).
+pub fn train_autoencoder(
+    data: &EpisodeData,
+    out: &Path,
+    model_cfg: &AutoencoderConfig,
+    cfg: &AeTrainConfig,
+    run: RunOptions,
+    on_progress: &mut dyn FnMut(&AeProgress),
+) -> Result<AeOutcome, WorldModelError> {
+    let RunOptions { resume, extend, max_minutes } = run;
+    let device = Device::flex().autodiff();
+    device.seed(cfg.seed);
+    let cfg_path = out.join("config.json");
+    let (model_cfg, cfg) = if resume {
+        let text = std::fs::read_to_string(&cfg_path).map_err(|e| ckpt(&cfg_path, e))?;
+        let mut c: Configs = serde_json::from_str(&text).map_err(|e| ckpt(&cfg_path, e))?;
+        if extend && c.train.steps != cfg.steps {
+            c.train.steps = cfg.steps;
+            std::fs::write(&cfg_path, serde_json::to_string_pretty(&c).unwrap_or_default())
+                .map_err(io(&cfg_path))?;
+        }
+        (c.model, c.train)
+    } else {
+        std::fs::create_dir_all(out).map_err(io(out))?;
+        let c = Configs { model: model_cfg.clone(), train: cfg.clone() };
+        std::fs::write(&cfg_path, serde_json::to_string_pretty(&c).unwrap_or_default())
+            .map_err(io(&cfg_path))?;
+        (c.model, c.train)
+    };
+    let mut model = model_cfg.init(&device);
+    let mut optim = AdamWConfig::new().with_beta_1(0.9).with_beta_2(0.95).with_weight_decay(0.01).init();
+    let mut state = State { step: 0, elapsed_s: 0.0 };
+    let (model_path, optim_path, state_path) =
+        (out.join("model.bpk"), out.join("optimizer.bpk"), out.join("state.json"));
+    if resume {
+        model = model.try_load_file(&model_path).map_err(|e| ckpt(&model_path, e))?;
+        optim = optim.load(&optim_path).map_err(|e| ckpt(&optim_path, e))?;
+        let text = std::fs::read_to_string(&state_path).map_err(|e| ckpt(&state_path, e))?;
+        state = serde_json::from_str(&text).map_err(|e| ckpt(&state_path, e))?;
+    }
+    let train_idx = data.frame_indices(Split::Train);
+    let held = data.frame_indices(Split::HeldOut);
+    if train_idx.is_empty() || held.is_empty() {
+        return Err(WorldModelError::Data {
+            path: out.to_path_buf(),
+            message: "need at least 10 episodes (every 10th is held out)".into(),
+        });
+    }
+    let stride = (held.len() / cfg.eval_frames.max(1)).max(1);
+    let eval_idx: Vec<usize> = held.iter().step_by(stride).take(cfg.eval_frames).copied().collect();
+    let log_path = out.join("train_log.jsonl");
+    let mut log =
+        std::fs::OpenOptions::new().create(true).append(true).open(&log_path).map_err(io(&log_path))?;
+    let started = Instant::now();
+    let base_elapsed = state.elapsed_s;
+    let deadline = max_minutes.map(|m| m * 60.0);
+    let mut last_psnr = None;
+    let save = |model: &Autoencoder,
+                optim: &burn::optim::ModuleOptimizer,
+                state: &State|
+     -> Result<(), WorldModelError> {
+        model.clone().save_file(&model_path).map_err(|e| ckpt(&model_path, e))?;
+        optim.save(&optim_path).map_err(|e| ckpt(&optim_path, e))?;
+        std::fs::write(&state_path, serde_json::to_string(state).unwrap_or_default()).map_err(io(&state_path))
+    };
+    while state.step < cfg.steps {
+        if deadline.is_some_and(|d| started.elapsed().as_secs_f64() >= d) {
+            break;
+        }
+        let step = state.step;
+        let mut rng = derive(cfg.seed, &[step]);
+        let idx: Vec<usize> = (0..cfg.batch)
+            .map(|_| {
+                rng = harness::seed::splitmix64(rng);
+                train_idx[(rng % train_idx.len() as u64) as usize]
+            })
+            .collect();
+        let lr =
+            if step < cfg.warmup { 1e-6 + (cfg.lr - 1e-6) * step as f64 / cfg.warmup as f64 } else { cfg.lr };
+        let x = data.frames_tensor(&idx, &device);
+        let loss = (model.forward(x.clone()) - x).powf_scalar(2.0).mean();
+        let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
+        if !loss_value.is_finite() {
+            return Err(WorldModelError::NonFinite {
+                what: "autoencoder loss".into(),
+                step,
+                path: out.to_path_buf(),
+            });
+        }
+        let grads = GradientsParams::from_grads(loss.backward(), &model);
+        model = optim.step(lr, model, grads);
+        state.step += 1;
+        state.elapsed_s = base_elapsed + started.elapsed().as_secs_f64();
+        if state.step.is_multiple_of(cfg.eval_every) || state.step == cfg.steps {
+            let (p, mse, _) = evaluate(&model, data, &eval_idx, &device);
+            last_psnr = Some(p);
+            tracing::info!(
+                step = state.step,
+                loss = loss_value,
+                psnr = p,
+                mse,
+                "autoencoder held-out evaluation"
+            );
+        }
+        let line = json!({"step": state.step, "loss": loss_value, "lr": lr, "psnr": last_psnr, "elapsed_s": state.elapsed_s});
+        writeln!(log, "{line}").map_err(io(&log_path))?;
+        if state.step.is_multiple_of(cfg.checkpoint_every) {
+            save(&model, &optim, &state)?;
+        }
+        on_progress(&AeProgress { step: state.step, total: cfg.steps, loss: loss_value, psnr: last_psnr });
+    }
+    save(&model, &optim, &state)?;
+    let (psnr_v, mse, samples) = evaluate(&model, data, &eval_idx, &device);
+    Ok(AeOutcome {
+        step: state.step,
+        total: cfg.steps,
+        finished: state.step >= cfg.steps,
+        psnr: psnr_v,
+        mse,
+        samples,
+        elapsed_s: state.elapsed_s,
+    })
+}
+
+/// The files a training run leaves, for provenance records.
+pub fn checkpoint_files(out: &Path) -> Vec<PathBuf> {
+    ["config.json", "model.bpk", "state.json", "train_log.jsonl"].iter().map(|f| out.join(f)).collect()
+}
