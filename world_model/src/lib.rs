@@ -11,5 +11,6 @@ pub mod data;
 pub mod drift;
 pub mod error;
 pub mod train_ae;
+pub mod unet;
 
 pub use error::WorldModelError;

@@ -1,0 +1,297 @@
+//! The DriftWorld U-Net (spec §5): a factorised spatio-temporal U-Net that maps
+//! noise, a history of K frames and F actions to F future frames in one pass.
+//!
+//! The history is flattened k-major into channels and broadcast over the F
+//! future frames, then concatenated after the noise channels. Each future frame
+//! f gets its own action embedding `e_f = MLP(a_f)`, applied by FiLM in every
+//! residual block. There is no timestep input for the drifting objective; the
+//! diffusion baseline adds a sinusoidal timestep embedding to `e_f`.
+//! Skips follow the ADM layout: one after `conv_in`, one after every residual
+//! block (with its attention) and one after every downsampling.
+
+pub mod blocks;
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::nn::interpolate::{Interpolate2d, Interpolate2dConfig, InterpolateMode};
+use burn::nn::{GroupNorm, GroupNormConfig, Linear, LinearConfig};
+use burn::tensor::activation::silu;
+use burn::tensor::{Device, Tensor};
+
+use blocks::{Attention, Conv3dF, ResBlock, group_norm};
+
+/// U-Net hyper-parameters.
+#[derive(Config, Debug, PartialEq)]
+pub struct UNetConfig {
+    /// Channels of one frame (3 in pixel space, C in latent space).
+    pub frame_channels: usize,
+    /// Context frames K.
+    #[config(default = 4)]
+    pub history: usize,
+    /// Base channels.
+    pub model_channels: usize,
+    /// Channel multiplier per level.
+    pub channel_mult: Vec<usize>,
+    /// Residual blocks per level (the decoder has one more).
+    #[config(default = 2)]
+    pub res_blocks: usize,
+    /// Downsampling rates (1, 2, 4, ...) whose levels get spatial attention.
+    pub attention_rates: Vec<usize>,
+    /// Channels per attention head.
+    #[config(default = 8)]
+    pub head_dim: usize,
+    /// GroupNorm groups.
+    #[config(default = 32)]
+    pub groups: usize,
+    /// Action dimension.
+    #[config(default = 2)]
+    pub action_dim: usize,
+    /// Action (and timestep) embedding size.
+    #[config(default = 256)]
+    pub emb_dim: usize,
+    /// Add a diffusion timestep embedding (the multi-step baseline).
+    #[config(default = false)]
+    pub timestep_embedding: bool,
+}
+
+impl UNetConfig {
+    /// The paper's pixel-space Push-T model: 96x96 RGB, 96 channels, 4 levels,
+    /// attention at 24² and 12² (8,375,201 parameters).
+    pub fn pusht_pixel() -> Self {
+        Self::new(3, 96, vec![1, 1, 1, 1], vec![4, 8])
+    }
+
+    /// The CPU default: on 12x12x8 autoencoder latents, 2 levels (12², 6²).
+    pub fn pusht_latent(latent_channels: usize) -> Self {
+        Self::new(latent_channels, 64, vec![1, 2], vec![2]).with_groups(16)
+    }
+
+    /// Builds the module.
+    pub fn init(&self, device: &Device) -> UNet {
+        let (e, g) = (self.emb_dim, self.groups);
+        let mc = self.model_channels;
+        let in_ch = self.frame_channels * (1 + self.history);
+        let mut chans = vec![mc]; // channels of every skip, in push order
+        let mut enc = Vec::new();
+        let mut downs = Vec::new();
+        let mut c = mc;
+        let mut rate = 1;
+        let levels = self.channel_mult.len();
+        for (l, m) in self.channel_mult.iter().enumerate() {
+            let co = m * mc;
+            for _ in 0..self.res_blocks {
+                let attn = self
+                    .attention_rates
+                    .contains(&rate)
+                    .then(|| Attention::new(co, self.head_dim, g, device));
+                enc.push(Level { res: ResBlock::new(c, co, e, g, device), attn });
+                c = co;
+                chans.push(c);
+            }
+            if l + 1 < levels {
+                downs.push(Conv3dF::new(c, c, 3, 2, device));
+                chans.push(c);
+                rate *= 2;
+            }
+        }
+        let mid = [ResBlock::new(c, c, e, g, device), ResBlock::new(c, c, e, g, device)];
+        let mid_attn = Attention::new(c, self.head_dim, g, device);
+        let mut dec = Vec::new();
+        let mut ups = Vec::new();
+        for (l, m) in self.channel_mult.iter().enumerate().rev() {
+            let co = m * mc;
+            for _ in 0..=self.res_blocks {
+                let skip = chans.pop().unwrap_or(mc);
+                let attn = self
+                    .attention_rates
+                    .contains(&rate)
+                    .then(|| Attention::new(co, self.head_dim, g, device));
+                dec.push(Level { res: ResBlock::new(c + skip, co, e, g, device), attn });
+                c = co;
+            }
+            if l > 0 {
+                ups.push(Conv3dF::new(c, c, 3, 1, device));
+                rate /= 2;
+            }
+        }
+        let time = self
+            .timestep_embedding
+            .then(|| [LinearConfig::new(e, e).init(device), LinearConfig::new(e, e).init(device)]);
+        UNet {
+            act1: LinearConfig::new(self.action_dim, e).init(device),
+            act2: LinearConfig::new(e, e).init(device),
+            time: time.map(|[a, b]| TimeMlp { l1: a, l2: b }),
+            conv_in: Conv3dF::new(in_ch, mc, 3, 1, device),
+            enc,
+            downs,
+            mid,
+            mid_attn,
+            dec,
+            ups,
+            upsample: Interpolate2dConfig::new()
+                .with_scale_factor(Some([2.0, 2.0]))
+                .with_mode(InterpolateMode::Nearest)
+                .init(),
+            norm_out: GroupNormConfig::new(g, c).init(device),
+            conv_out: Conv3dF::new(c, self.frame_channels, 3, 1, device),
+            res_blocks: self.res_blocks,
+            emb_dim: e,
+        }
+    }
+}
+
+/// A residual block with optional attention after it.
+#[derive(Module, Debug)]
+pub struct Level {
+    res: ResBlock,
+    attn: Option<Attention>,
+}
+
+impl Level {
+    fn forward(&self, x: Tensor<5>, emb: Tensor<3>) -> Tensor<5> {
+        let h = self.res.forward(x, emb);
+        match &self.attn {
+            Some(a) => a.forward(h),
+            None => h,
+        }
+    }
+}
+
+/// The timestep MLP of the diffusion baseline.
+#[derive(Module, Debug)]
+pub struct TimeMlp {
+    l1: Linear,
+    l2: Linear,
+}
+
+/// The U-Net.
+#[derive(Module, Debug)]
+pub struct UNet {
+    act1: Linear,
+    act2: Linear,
+    time: Option<TimeMlp>,
+    conv_in: Conv3dF,
+    enc: Vec<Level>,
+    downs: Vec<Conv3dF>,
+    mid: [ResBlock; 2],
+    mid_attn: Attention,
+    dec: Vec<Level>,
+    ups: Vec<Conv3dF>,
+    upsample: Interpolate2d,
+    norm_out: GroupNorm,
+    conv_out: Conv3dF,
+    res_blocks: usize,
+    emb_dim: usize,
+}
+
+impl UNet {
+    /// Predicts F future frames in one pass.
+    ///
+    /// # Shapes
+    /// - `noise`: `[b, cf, F, h, w]`
+    /// - `history`: `[b, cf, K, h, w]`
+    /// - `actions`: `[b, F, a]` (a_{t+f} drives frame t+f+1)
+    /// - `timestep`: `[b]` in [0, 1] (diffusion baseline only)
+    /// - returns `[b, cf, F, h, w]`
+    pub fn forward(
+        &self,
+        noise: Tensor<5>,
+        history: Tensor<5>,
+        actions: Tensor<3>,
+        timestep: Option<Tensor<1>>,
+    ) -> Tensor<5> {
+        let [b, cf, f, h, w] = noise.dims();
+        let [_, _, k, _, _] = history.dims();
+        let hist = history.swap_dims(1, 2).reshape([b, k * cf, 1, h, w]).expand([b, k * cf, f, h, w]); // k-major
+        let x = Tensor::cat(vec![noise, hist], 1); // [b, cf (1 + K), F, h, w]
+        let mut emb = self.act2.forward(silu(self.act1.forward(actions))); // [b, F, e]
+        if let (Some(mlp), Some(t)) = (&self.time, timestep) {
+            let te = mlp.l2.forward(silu(mlp.l1.forward(sinusoidal(t, self.emb_dim)))); // [b, e]
+            emb = emb + te.unsqueeze_dim::<3>(1);
+        }
+        let mut hcur = self.conv_in.forward(x); // [b, mc, F, h, w]
+        let mut skips = vec![hcur.clone()];
+        let levels = self.downs.len() + 1;
+        for l in 0..levels {
+            for i in 0..self.res_blocks {
+                hcur = self.enc[l * self.res_blocks + i].forward(hcur, emb.clone());
+                skips.push(hcur.clone());
+            }
+            if l + 1 < levels {
+                hcur = self.downs[l].forward(hcur); // spatial / 2
+                skips.push(hcur.clone());
+            }
+        }
+        hcur = self.mid[0].forward(hcur, emb.clone());
+        hcur = self.mid_attn.forward(hcur);
+        hcur = self.mid[1].forward(hcur, emb.clone());
+        let per = self.res_blocks + 1;
+        for (k, _) in (0..levels).rev().enumerate() {
+            for i in 0..per {
+                let skip = skips.pop().unwrap_or_else(|| hcur.clone());
+                hcur = self.dec[k * per + i].forward(Tensor::cat(vec![hcur, skip], 1), emb.clone());
+            }
+            if k + 1 < levels {
+                hcur = self.ups[k].forward(self.up2(hcur)); // spatial x 2
+            }
+        }
+        self.conv_out.forward(silu(group_norm(&self.norm_out, hcur)))
+    }
+
+    /// Nearest-neighbour 2x upsampling in space.
+    fn up2(&self, x: Tensor<5>) -> Tensor<5> {
+        let [b, c, f, h, w] = x.dims();
+        self.upsample.forward(x.reshape([b, c * f, h, w])).reshape([b, c, f, 2 * h, 2 * w])
+    }
+}
+
+/// Sinusoidal embedding of t ∈ [0, 1] (scaled by 1000), `[b] -> [b, dim]`.
+fn sinusoidal(t: Tensor<1>, dim: usize) -> Tensor<2> {
+    let half = dim / 2;
+    let device = t.device();
+    let freqs: Vec<f32> =
+        (0..half).map(|i| (-(10000f32).ln() * i as f32 / half as f32).exp() * 1000.0).collect();
+    let freqs = Tensor::<1>::from_floats(freqs.as_slice(), &device).reshape([1, half]);
+    let [b] = t.dims();
+    let args = t.reshape([b, 1]) * freqs; // [b, half]
+    Tensor::cat(vec![args.clone().cos(), args.sin()], 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixel_config_has_the_papers_parameter_count() {
+        // Spec §5: 66,560 + 40,800 + 2,652,480 + 580,032 + 5,032,512 + 2,817 = 8,375,201.
+        let unet = UNetConfig::pusht_pixel().init(&Device::flex());
+        assert_eq!(unet.num_params(), 8_375_201);
+    }
+
+    #[test]
+    fn latent_model_predicts_four_frames_in_one_pass() {
+        let device = Device::flex();
+        let cfg = UNetConfig::pusht_latent(8);
+        let unet = cfg.init(&device);
+        let noise = Tensor::<5>::zeros([2, 8, 4, 12, 12], &device);
+        let hist = Tensor::<5>::zeros([2, 8, 4, 12, 12], &device);
+        let act = Tensor::<3>::zeros([2, 4, 2], &device);
+        assert_eq!(unet.forward(noise.clone(), hist.clone(), act.clone(), None).dims(), [2, 8, 4, 12, 12]);
+        // Fewer future frames (a truncated last chunk) work too: the temporal convs pad.
+        let out = unet.forward(noise.narrow(2, 0, 3), hist, act.narrow(1, 0, 3), None);
+        assert_eq!(out.dims(), [2, 8, 3, 12, 12]);
+    }
+
+    #[test]
+    fn actions_condition_the_output() {
+        let device = Device::flex();
+        let unet = UNetConfig { model_channels: 32, ..UNetConfig::pusht_latent(4) }.init(&device);
+        let noise = Tensor::<5>::random([1, 4, 4, 12, 12], burn::tensor::Distribution::Default, &device);
+        let hist = Tensor::<5>::random([1, 4, 4, 12, 12], burn::tensor::Distribution::Default, &device);
+        let a = Tensor::<3>::zeros([1, 4, 2], &device);
+        let y1 = unet.forward(noise.clone(), hist.clone(), a.clone(), None);
+        let y2 = unet.forward(noise, hist, a + 0.5, None);
+        let diff: f32 = (y1 - y2).abs().mean().into_scalar();
+        assert!(diff > 1e-4, "actions have no effect ({diff})");
+    }
+}
