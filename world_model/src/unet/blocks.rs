@@ -7,6 +7,7 @@
 //! - [`ResBlock`]: GN → SiLU → conv, per-frame FiLM from the action embedding,
 //!   GN → FiLM → SiLU → conv, plus a (1×1) skip;
 //! - [`Attention`]: spatial self-attention inside each frame.
+//!
 //! GroupNorm statistics span the whole clip (channels-in-group × f × h × w), as
 //! PyTorch's GroupNorm does on a 5-D tensor.
 
