@@ -295,3 +295,35 @@ mod tests {
         assert!(diff > 1e-4, "actions have no effect ({diff})");
     }
 }
+
+#[cfg(test)]
+mod timing {
+    use super::*;
+    use crate::drift::{PUSHT_TEMPERATURES, drift_loss};
+    use burn::optim::{AdamWConfig, GradientsParams};
+
+    /// One drifting training step on latents: 4 contexts x 16 samples = 64 clips.
+    /// Run by hand: `cargo test --release -p world_model step_time -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "timing, run by hand"]
+    fn step_time() {
+        let device = Device::flex().autodiff();
+        let mut unet = UNetConfig::pusht_latent(8).init(&device);
+        let mut optim = AdamWConfig::new().init();
+        let (b, n, c) = (4, 16, 8);
+        for i in 0..3 {
+            let t0 = std::time::Instant::now();
+            let noise = Tensor::<5>::random([b * n, c, 4, 12, 12], burn::tensor::Distribution::Normal(0.0, 1.0), &device);
+            let hist = Tensor::<5>::zeros([b * n, c, 4, 12, 12], &device);
+            let act = Tensor::<3>::zeros([b * n, 4, 2], &device);
+            let out = unet.forward(noise, hist, act, None); // [b n, c, 4, 12, 12]
+            // One field per (context, future frame): [b 4, n, c 12 12].
+            let out = out.reshape([b, n, c, 4, 144]).permute([0, 3, 1, 2, 4]).reshape([b * 4, n, c * 144]);
+            let pos = Tensor::<3>::zeros([b * 4, 1, c * 144], &device);
+            let (loss, _) = drift_loss(out, None, &pos, &PUSHT_TEMPERATURES);
+            let grads = GradientsParams::from_grads(loss.backward(), &unet);
+            unet = optim.step(1e-4, unet, grads);
+            eprintln!("step {i}: {:.2} s ({} params)", t0.elapsed().as_secs_f64(), unet.num_params());
+        }
+    }
+}
