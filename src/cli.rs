@@ -35,6 +35,23 @@ pub enum Command {
     /// Train models.
     #[command(subcommand)]
     Train(TrainCommand),
+    /// Agreement metrics (Pearson, Spearman, Kendall τ_b, inversions, MMRV, regret@1, CIs)
+    /// between predicted and actual policy scores in a CSV; JSON on stdout.
+    Agreement(AgreementArgs),
+}
+
+/// `evalharness agreement`.
+#[derive(Debug, Args)]
+pub struct AgreementArgs {
+    /// CSV with columns policy,predicted,actual (one row per episode or per policy).
+    #[arg(long)]
+    pub csv: PathBuf,
+    /// Bootstrap replicates for the 95% intervals.
+    #[arg(long, default_value_t = 2000)]
+    pub bootstrap: usize,
+    /// Bootstrap seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
 }
 
 /// `evalharness train ...`.

@@ -1,5 +1,6 @@
 //! Integration tests: drive the real `evalharness` binary on tiny inputs.
 
+mod agreement;
 mod dataset;
 mod simulate;
 mod train;

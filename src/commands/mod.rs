@@ -1,5 +1,6 @@
 //! One module per subcommand; [`run`] dispatches.
 
+mod agreement;
 mod collect;
 mod dataset;
 mod episodes;
@@ -21,5 +22,6 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Collect(a) => collect::run(a, cli.quiet),
         Command::Dataset(DatasetCommand::Info { path, json }) => dataset::info(path, *json),
         Command::Train(TrainCommand::Autoencoder(a)) => train::autoencoder(a, cli.quiet),
+        Command::Agreement(a) => agreement::run(a),
     }
 }

@@ -313,7 +313,11 @@ mod timing {
         let (b, n, c) = (4, 16, 8);
         for i in 0..3 {
             let t0 = std::time::Instant::now();
-            let noise = Tensor::<5>::random([b * n, c, 4, 12, 12], burn::tensor::Distribution::Normal(0.0, 1.0), &device);
+            let noise = Tensor::<5>::random(
+                [b * n, c, 4, 12, 12],
+                burn::tensor::Distribution::Normal(0.0, 1.0),
+                &device,
+            );
             let hist = Tensor::<5>::zeros([b * n, c, 4, 12, 12], &device);
             let act = Tensor::<3>::zeros([b * n, 4, 2], &device);
             let out = unet.forward(noise, hist, act, None); // [b n, c, 4, 12, 12]

@@ -1,0 +1,67 @@
+//! Metric values checked against published (scipy documentation) and hand-computed values.
+
+use super::*;
+
+#[test]
+fn spearman_matches_scipy_docs() {
+    // scipy.stats.spearmanr([1, 2, 3, 4, 5], [5, 6, 7, 8, 7]).statistic = 0.8207826816681233
+    let r = spearman(&[1., 2., 3., 4., 5.], &[5., 6., 7., 8., 7.]).unwrap();
+    assert!((r - 0.8207826816681233).abs() < 1e-12, "{r}");
+}
+
+#[test]
+fn kendall_tau_b_matches_scipy_docs() {
+    // scipy.stats.kendalltau([12, 2, 1, 12, 2], [1, 4, 7, 1, 0]).statistic = -0.47140452079103173
+    let t = kendall_tau_b(&[12., 2., 1., 12., 2.], &[1., 4., 7., 1., 0.]).unwrap();
+    assert!((t + 0.47140452079103173).abs() < 1e-12, "{t}");
+}
+
+#[test]
+fn average_ranks_share_ties() {
+    // [10, 20, 10, 30] -> 10s take ranks 1 and 2 -> 1.5 each; 20 -> 3; 30 -> 4.
+    assert_eq!(average_ranks(&[10., 20., 10., 30.]), vec![1.5, 3.0, 1.5, 4.0]);
+}
+
+#[test]
+fn undefined_correlations_are_none() {
+    assert_eq!(pearson(&[1., 1., 1.], &[1., 2., 3.]), None);
+    assert_eq!(pearson(&[1.], &[1.]), None);
+    assert_eq!(kendall_tau_b(&[2., 2.], &[1., 3.]), None);
+    assert_eq!(pearson(&[1., 2., 3.], &[2., 4., 6.]), Some(1.0));
+}
+
+#[test]
+fn inversions_hand_computed() {
+    // pred [0.9, 0.5, 0.7, 0.5], actual [0.8, 0.6, 0.4, 0.2]:
+    // (0,1) +,+ ok; (0,2) +,+ ok; (0,3) +,+ ok; (1,2) -,+ inversion; (1,3) tie in pred;
+    // (2,3) +,+ ok. One inversion of 6 pairs, one tie (1,3).
+    let inv = rank_inversions(&[0.9, 0.5, 0.7, 0.5], &[0.8, 0.6, 0.4, 0.2]);
+    assert_eq!(inv.count, 1);
+    assert!((inv.fraction - 1.0 / 6.0).abs() < 1e-12);
+    assert_eq!(inv.ties, vec![(1, 3)]);
+    assert_eq!(rank_inversions(&[1., 2., 3.], &[4., 5., 6.]).count, 0);
+}
+
+#[test]
+fn mmrv_hand_computed_and_asymmetric() {
+    // pred [0.2, 0.5, 0.4], actual [0.1, 0.3, 0.6].
+    // i=0: vs 1: (0.2>0.5)=F, (0.1>0.3)=F ok; vs 2: F,F ok -> RV_0 = 0.
+    // i=1: vs 0: T,T ok; vs 2: (0.5>0.4)=T, (0.3>0.6)=F violation |0.3-0.6| = 0.3 -> RV_1 = 0.3.
+    // i=2: vs 0: T,T ok; vs 1: (0.4>0.5)=F, (0.6>0.3)=T violation 0.3 -> RV_2 = 0.3.
+    // MMRV = 0.6 / 3 = 0.2.
+    let (p, a) = ([0.2, 0.5, 0.4], [0.1, 0.3, 0.6]);
+    assert!((mmrv(&p, &a) - 0.2).abs() < 1e-12);
+    // Swapping the arguments changes the magnitudes used: actual' = [0.2, 0.5, 0.4],
+    // violations are the same pairs (1,2), magnitude |0.5-0.4| = 0.1 -> 0.2 / 3.
+    assert!((mmrv(&a, &p) - 0.2 / 3.0).abs() < 1e-12);
+    // A predicted tie with a real difference is a violation charged to the better one:
+    // pred [0.5, 0.5], actual [0.9, 0.1]: i=0: (F) != (T) -> 0.8; i=1: F == F -> 0. MMRV 0.4.
+    assert!((mmrv(&[0.5, 0.5], &[0.9, 0.1]) - 0.4).abs() < 1e-12);
+}
+
+#[test]
+fn regret_hand_computed() {
+    // The predictor picks policy 1 (0.9); its true score 0.6 is 0.2 below the best 0.8.
+    assert!((regret_at_1(&[0.1, 0.9, 0.5], &[0.8, 0.6, 0.7]) - 0.2).abs() < 1e-12);
+    assert_eq!(regret_at_1(&[1., 2., 3.], &[1., 2., 3.]), 0.0);
+}

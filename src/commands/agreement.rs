@@ -1,0 +1,108 @@
+//! `evalharness agreement --csv FILE`: agreement metrics for any predictor.
+//!
+//! The CSV has a header with (at least) the columns `policy,predicted,actual`; each
+//! row is one episode (or one policy's aggregate). Per-policy scores are the means
+//! of their rows, in order of first appearance. With at least two rows for every
+//! policy, 95% intervals come from the paired, stratified bootstrap (episodes
+//! resampled within each policy); otherwise they are null.
+
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use harness::metrics::agreement;
+use harness::metrics::bootstrap::agreement_ci;
+use serde_json::json;
+
+use crate::cli::AgreementArgs;
+
+/// Per-policy episode scores `(name, predicted, actual)` read from the CSV.
+fn read_csv(path: &Path) -> Result<Vec<(String, Vec<f64>, Vec<f64>)>> {
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .with_context(|| format!("opening {}", path.display()))?;
+    let headers =
+        reader.headers().with_context(|| format!("reading the header of {}", path.display()))?.clone();
+    let col = |name: &str| {
+        headers.iter().position(|h| h == name).with_context(|| {
+            format!(
+                "{}: no column '{name}' (header: {})",
+                path.display(),
+                headers.iter().collect::<Vec<_>>().join(",")
+            )
+        })
+    };
+    let (cp, cs, ca) = (col("policy")?, col("predicted")?, col("actual")?);
+    let mut out: Vec<(String, Vec<f64>, Vec<f64>)> = Vec::new();
+    for (k, rec) in reader.records().enumerate() {
+        let line = k + 2; // 1-based, after the header
+        let rec = rec.with_context(|| format!("{}: line {line}", path.display()))?;
+        let get = |c: usize, name: &str| -> Result<f64> {
+            let text = rec.get(c).unwrap_or("");
+            let v: f64 = text.parse().with_context(|| {
+                format!("{}: line {line}: {name} '{text}' is not a number", path.display())
+            })?;
+            if !v.is_finite() {
+                bail!("{}: line {line}: {name} is {v}", path.display());
+            }
+            Ok(v)
+        };
+        let (p, a) = (get(cs, "predicted")?, get(ca, "actual")?);
+        let name = rec.get(cp).unwrap_or("").to_string();
+        if name.is_empty() {
+            bail!("{}: line {line}: empty policy name", path.display());
+        }
+        match out.iter_mut().find(|(n, _, _)| *n == name) {
+            Some((_, ps, as_)) => {
+                ps.push(p);
+                as_.push(a);
+            }
+            None => out.push((name, vec![p], vec![a])),
+        }
+    }
+    if out.is_empty() {
+        bail!("{}: no rows", path.display());
+    }
+    Ok(out)
+}
+
+/// Runs the command.
+pub fn run(a: &AgreementArgs) -> Result<ExitCode> {
+    let policies = read_csv(&a.csv)?;
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let pred: Vec<f64> = policies.iter().map(|p| mean(&p.1)).collect();
+    let act: Vec<f64> = policies.iter().map(|p| mean(&p.2)).collect();
+    if policies.len() < 2 {
+        tracing::warn!("only one policy: correlations are undefined");
+    }
+    let m = agreement(&pred, &act);
+    let ci = if policies.iter().all(|p| p.1.len() >= 2) {
+        let pairs: Vec<(Vec<f64>, Vec<f64>)> = policies.iter().map(|p| (p.1.clone(), p.2.clone())).collect();
+        Some(agreement_ci(&pairs, a.bootstrap, a.seed))
+    } else {
+        None
+    };
+    let names: Vec<&str> = policies.iter().map(|p| p.0.as_str()).collect();
+    let ties: Vec<[&str; 2]> = m.rank_inversions.ties.iter().map(|&(i, j)| [names[i], names[j]]).collect();
+    let out = json!({
+        "csv": a.csv.display().to_string(),
+        "policies": policies.iter().zip(pred.iter().zip(&act)).map(|(p, (s, g))| json!({
+            "name": p.0, "rows": p.1.len(), "predicted": s, "actual": g,
+        })).collect::<Vec<_>>(),
+        "agreement": {
+            "pearson": m.pearson,
+            "spearman": m.spearman,
+            "kendall_tau_b": m.kendall_tau_b,
+            "rank_inversions": m.rank_inversions.count,
+            "rank_inversion_fraction": m.rank_inversions.fraction,
+            "ties": ties,
+            "mmrv": m.mmrv,
+            "regret_at_1": m.regret_at_1,
+            "ci95": ci,
+        },
+        "bootstrap": {"replicates": a.bootstrap, "seed": a.seed, "scheme": "paired, stratified by policy (episodes resampled within each policy)"},
+    });
+    println!("{}", serde_json::to_string_pretty(&out)?);
+    Ok(ExitCode::SUCCESS)
+}
