@@ -16,8 +16,15 @@ use serde_json::json;
 
 use crate::cli::AgreementArgs;
 
-/// Per-policy episode scores `(name, predicted, actual)` read from the CSV.
-fn read_csv(path: &Path) -> Result<Vec<(String, Vec<f64>, Vec<f64>)>> {
+/// One policy's rows.
+struct PolicyRows {
+    name: String,
+    predicted: Vec<f64>,
+    actual: Vec<f64>,
+}
+
+/// Per-policy episode scores read from the CSV, in order of first appearance.
+fn read_csv(path: &Path) -> Result<Vec<PolicyRows>> {
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .from_path(path)
@@ -34,7 +41,7 @@ fn read_csv(path: &Path) -> Result<Vec<(String, Vec<f64>, Vec<f64>)>> {
         })
     };
     let (cp, cs, ca) = (col("policy")?, col("predicted")?, col("actual")?);
-    let mut out: Vec<(String, Vec<f64>, Vec<f64>)> = Vec::new();
+    let mut out: Vec<PolicyRows> = Vec::new();
     for (k, rec) in reader.records().enumerate() {
         let line = k + 2; // 1-based, after the header
         let rec = rec.with_context(|| format!("{}: line {line}", path.display()))?;
@@ -53,12 +60,12 @@ fn read_csv(path: &Path) -> Result<Vec<(String, Vec<f64>, Vec<f64>)>> {
         if name.is_empty() {
             bail!("{}: line {line}: empty policy name", path.display());
         }
-        match out.iter_mut().find(|(n, _, _)| *n == name) {
-            Some((_, ps, as_)) => {
-                ps.push(p);
-                as_.push(a);
+        match out.iter_mut().find(|r| r.name == name) {
+            Some(r) => {
+                r.predicted.push(p);
+                r.actual.push(a);
             }
-            None => out.push((name, vec![p], vec![a])),
+            None => out.push(PolicyRows { name, predicted: vec![p], actual: vec![a] }),
         }
     }
     if out.is_empty() {
@@ -71,24 +78,25 @@ fn read_csv(path: &Path) -> Result<Vec<(String, Vec<f64>, Vec<f64>)>> {
 pub fn run(a: &AgreementArgs) -> Result<ExitCode> {
     let policies = read_csv(&a.csv)?;
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-    let pred: Vec<f64> = policies.iter().map(|p| mean(&p.1)).collect();
-    let act: Vec<f64> = policies.iter().map(|p| mean(&p.2)).collect();
+    let pred: Vec<f64> = policies.iter().map(|p| mean(&p.predicted)).collect();
+    let act: Vec<f64> = policies.iter().map(|p| mean(&p.actual)).collect();
     if policies.len() < 2 {
         tracing::warn!("only one policy: correlations are undefined");
     }
     let m = agreement(&pred, &act);
-    let ci = if policies.iter().all(|p| p.1.len() >= 2) {
-        let pairs: Vec<(Vec<f64>, Vec<f64>)> = policies.iter().map(|p| (p.1.clone(), p.2.clone())).collect();
+    let ci = if policies.iter().all(|p| p.predicted.len() >= 2) {
+        let pairs: Vec<(Vec<f64>, Vec<f64>)> =
+            policies.iter().map(|p| (p.predicted.clone(), p.actual.clone())).collect();
         Some(agreement_ci(&pairs, a.bootstrap, a.seed))
     } else {
         None
     };
-    let names: Vec<&str> = policies.iter().map(|p| p.0.as_str()).collect();
+    let names: Vec<&str> = policies.iter().map(|p| p.name.as_str()).collect();
     let ties: Vec<[&str; 2]> = m.rank_inversions.ties.iter().map(|&(i, j)| [names[i], names[j]]).collect();
     let out = json!({
         "csv": a.csv.display().to_string(),
         "policies": policies.iter().zip(pred.iter().zip(&act)).map(|(p, (s, g))| json!({
-            "name": p.0, "rows": p.1.len(), "predicted": s, "actual": g,
+            "name": p.name, "rows": p.predicted.len(), "predicted": s, "actual": g,
         })).collect::<Vec<_>>(),
         "agreement": {
             "pearson": m.pearson,
