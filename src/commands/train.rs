@@ -33,6 +33,57 @@ fn git_commit() -> String {
     }
 }
 
+/// How an evalharness dataset was collected (from its attributes), to regenerate it:
+/// `collect` is deterministic, so the same arguments give the same bytes.
+fn dataset_origin(data: &std::path::Path) -> serde_json::Value {
+    let attrs = harness::zarr::read_attrs(data).unwrap_or_default();
+    let e = &attrs["evalharness"];
+    if e.is_null() {
+        return serde_json::Value::Null;
+    }
+    let episodes = e["episodes"].as_array().map_or(0, Vec::len);
+    json!({
+        "command": format!(
+            "evalharness collect --episodes {episodes} --seed-start {} --mix {} --noise {} --lag {} --max-steps {}",
+            e["seed_start"], e["mix"].as_str().unwrap_or("?"), e["noise"], e["lag"], e["max_steps"]
+        ),
+        "evalharness_version": e["version"],
+    })
+}
+
+/// The step of the checkpoint in `out`, 0 if none.
+fn read_step(out: &std::path::Path) -> u64 {
+    std::fs::read_to_string(out.join("state.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|v| v["step"].as_u64())
+        .unwrap_or(0)
+}
+
+/// Appends this invocation to `out/sessions.jsonl` and returns every session so far,
+/// so that a run trained over several sessions keeps each command and commit.
+fn record_session(
+    out: &std::path::Path,
+    command: &str,
+    from: u64,
+    to: u64,
+    elapsed_s: f64,
+) -> Result<Vec<serde_json::Value>> {
+    use std::io::Write;
+    let path = out.join("sessions.jsonl");
+    let line = json!({"command": command, "commit": git_commit(), "from_step": from, "to_step": to, "elapsed_s_total": elapsed_s});
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&path)
+        .with_context(|| format!("opening {}", path.display()))?;
+    writeln!(f, "{line}").with_context(|| format!("writing {}", path.display()))?;
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    text.lines()
+        .map(|l| serde_json::from_str(l).with_context(|| format!("{}: invalid line", path.display())))
+        .collect()
+}
+
 /// `evalharness train autoencoder`.
 pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     if a.out.exists() && !a.resume {
@@ -47,6 +98,7 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     if a.resume && !a.out.join("state.json").is_file() {
         bail!("--resume: {} has no checkpoint (state.json)", a.out.display());
     }
+    let from_step = read_step(&a.out);
     let model_cfg = AutoencoderConfig::new();
     let cfg = AeTrainConfig {
         steps: a.steps.unwrap_or(4000),
@@ -77,11 +129,13 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     let strip_path = a.out.join("reconstructions.png");
     reports::png::write_png(&strip_path, &strip.pixels, strip.width, strip.height)?;
     let args: Vec<String> = std::env::args().collect();
+    let sessions = record_session(&a.out, &args.join(" "), from_step, outcome.step, outcome.elapsed_s)?;
     write_json(
         &a.out.join("provenance.json"),
         &json!({
             "what": "frame autoencoder (96x96x3 <-> 12x12x8)",
             "command": args.join(" "),
+            "sessions": sessions,
             "seed": a.seed,
             "commit": git_commit(),
             "data": {
@@ -89,6 +143,7 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
                 "episodes": data.episodes.len(),
                 "frames": data.len(),
                 "held_out": "episodes with index % 10 == 9",
+                "collected_with": dataset_origin(&a.data),
             },
             "steps": outcome.step,
             "finished": outcome.finished,
