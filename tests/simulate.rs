@@ -1,6 +1,6 @@
 //! `evalharness simulate`: outputs, determinism, bad input.
 
-use crate::util::{expect_code, read_json, run};
+use crate::util::{expect_code, read_json, run, scenario_variant};
 
 #[test]
 fn expert_episodes_write_summary_steps_and_gif() {
@@ -74,10 +74,7 @@ fn unknown_scenario_and_policy_are_named() {
 #[test]
 fn scenario_file_errors_name_file_and_key() {
     let dir = tempfile::tempdir().unwrap();
-    let shipped =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/pusht.toml")).unwrap();
-    let bad = dir.path().join("bad.toml");
-    std::fs::write(&bad, shipped.replace("[task]", "[task]\nmax_stpes = 3")).unwrap();
+    let bad = scenario_variant(dir.path(), "bad.toml", "[task]", "[task]\nmax_stpes = 3");
     let o = dir.path().join("x");
     let args = ["simulate", "--scenario", bad.to_str().unwrap(), "--out", o.to_str().unwrap()];
     let (_, err) = expect_code(&run(&args), 2);
@@ -90,10 +87,7 @@ fn diverging_simulation_names_seed_and_step() {
     // A PD gain far beyond the explicit integrator's stability limit (kp dt^2 >> 1)
     // makes the agent's motion explode within a few steps.
     let dir = tempfile::tempdir().unwrap();
-    let shipped =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/pusht.toml")).unwrap();
-    let unstable = dir.path().join("unstable.toml");
-    std::fs::write(&unstable, shipped.replace("kp = 100.0", "kp = 1.0e9")).unwrap();
+    let unstable = scenario_variant(dir.path(), "unstable.toml", "kp = 100.0", "kp = 1.0e9");
     let o = dir.path().join("x");
     let args = [
         "simulate",

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use crate::util::{expect_code, read_json, run};
+use crate::util::{expect_code, read_json, run, scenario_variant};
 
 /// 10 short explorer episodes (episode 9 is the held-out one).
 fn tiny_dataset(dir: &Path, scenario: Option<&Path>) -> std::path::PathBuf {
@@ -74,10 +74,7 @@ fn autoencoder_trains_checkpoints_and_resumes() {
 #[test]
 fn autoencoder_rejects_a_dataset_of_the_wrong_image_size() {
     let dir = tempfile::tempdir().unwrap();
-    let shipped =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/pusht.toml")).unwrap();
-    let small = dir.path().join("small.toml");
-    std::fs::write(&small, shipped.replace("size = 96 ", "size = 64 ")).unwrap();
+    let small = scenario_variant(dir.path(), "small.toml", "size = 96 ", "size = 64 ");
     let data = tiny_dataset(dir.path(), Some(&small));
     let out = dir.path().join("ae");
     let args = [

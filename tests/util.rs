@@ -47,3 +47,13 @@ pub fn tree_bytes(dir: &Path) -> Vec<(String, Vec<u8>)> {
     out.sort();
     out
 }
+
+/// Writes `dir/name`: the shipped `scenarios/pusht.toml` with `from` replaced by `to`.
+pub fn scenario_variant(dir: &Path, name: &str, from: &str, to: &str) -> std::path::PathBuf {
+    let shipped = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/pusht.toml"))
+        .expect("shipped scenario file");
+    assert!(shipped.contains(from), "pusht.toml has no '{from}'");
+    let path = dir.join(name);
+    std::fs::write(&path, shipped.replace(from, to)).expect("writable temp dir");
+    path
+}
