@@ -127,6 +127,7 @@ mod tests {
             let (state, goal) = super::super::initial_state(&cfg, seed);
             let a = mj.render(&state, &goal).unwrap();
             let b = raster.render(&state, &goal);
+            // MJ_RENDER_DUMP=DIR writes each pair side by side as a PPM, to look at.
             if let Ok(dir) = std::env::var("MJ_RENDER_DUMP") {
                 let mut ppm = b"P6\n192 96\n255\n".to_vec();
                 for row in 0..96 {

@@ -9,7 +9,7 @@
 //! batches an uninterrupted one would have.
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use burn::module::Module;
@@ -301,9 +301,4 @@ pub fn train_autoencoder(
         samples,
         elapsed_s: state.elapsed_s,
     })
-}
-
-/// The files a training run leaves, for provenance records.
-pub fn checkpoint_files(out: &Path) -> Vec<PathBuf> {
-    ["config.json", "model.bpk", "state.json", "train_log.jsonl"].iter().map(|f| out.join(f)).collect()
 }
