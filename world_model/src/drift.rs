@@ -91,7 +91,7 @@ pub fn drift_field(x: &Tensor<3>, neg: Option<&Negatives>, y_pos: &Tensor<3>, te
         let v_r =
             a_pos.matmul(y_pos_t.clone()) * s_neg - a_neg.matmul(y_neg_t.clone()) * s_pos - x_t.clone() * c; // [b, g, s]
         let ms = v_r.clone().powf_scalar(2.0).mean_dims(&[1, 2]); // [b, 1, 1]
-        loss_r.push(ms.clone().mean().into_scalar_f32());
+        loss_r.push(ms.clone().mean().into_scalar::<f32>());
         let lambda = ms.clamp_min(1e-8).sqrt();
         v = v + v_r / lambda;
     }
@@ -121,16 +121,6 @@ fn self_mask(g: usize, m: usize, device: &Device) -> Tensor<3, burn::tensor::Boo
         data[i * m + i] = true;
     }
     Tensor::from_data(TensorData::new(data, [1, g, m]), device)
-}
-
-trait ScalarF32 {
-    fn into_scalar_f32(self) -> f32;
-}
-
-impl ScalarF32 for Tensor<1> {
-    fn into_scalar_f32(self) -> f32 {
-        self.into_data().convert::<f32>().as_slice::<f32>().map(|s| s[0]).unwrap_or(f32::NAN)
-    }
 }
 
 #[cfg(test)]

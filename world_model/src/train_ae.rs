@@ -126,6 +126,12 @@ fn ckpt(path: &Path, e: impl std::fmt::Display) -> WorldModelError {
     WorldModelError::Checkpoint { path: path.to_path_buf(), message: e.to_string() }
 }
 
+/// Reads a run's `config.json`.
+fn read_configs(path: &Path) -> Result<Configs, WorldModelError> {
+    let text = std::fs::read_to_string(path).map_err(|e| ckpt(path, e))?;
+    serde_json::from_str(&text).map_err(|e| ckpt(path, e))
+}
+
 /// Loads a trained autoencoder from its folder (`config.json` + `model.bpk`).
 ///
 /// # Errors
@@ -136,8 +142,7 @@ pub fn load_autoencoder(
     device: &Device,
 ) -> Result<(Autoencoder, AutoencoderConfig), WorldModelError> {
     let cfg_path = dir.join("config.json");
-    let text = std::fs::read_to_string(&cfg_path).map_err(|e| ckpt(&cfg_path, e))?;
-    let cfgs: Configs = serde_json::from_str(&text).map_err(|e| ckpt(&cfg_path, e))?;
+    let cfgs = read_configs(&cfg_path)?;
     let weights = dir.join("model.bpk");
     let model = cfgs.model.init(device).try_load_file(&weights).map_err(|e| ckpt(&weights, e))?;
     Ok((model, cfgs.model))
@@ -193,8 +198,7 @@ pub fn train_autoencoder(
     device.seed(cfg.seed);
     let cfg_path = out.join("config.json");
     let (model_cfg, cfg) = if resume {
-        let text = std::fs::read_to_string(&cfg_path).map_err(|e| ckpt(&cfg_path, e))?;
-        let mut c: Configs = serde_json::from_str(&text).map_err(|e| ckpt(&cfg_path, e))?;
+        let mut c = read_configs(&cfg_path)?;
         if extend && c.train.steps != cfg.steps {
             c.train.steps = cfg.steps;
             std::fs::write(&cfg_path, serde_json::to_string_pretty(&c).unwrap_or_default())
