@@ -38,6 +38,8 @@ pub enum Command {
     /// Agreement metrics (Pearson, Spearman, Kendall τ_b, inversions, MMRV, regret@1, CIs)
     /// between predicted and actual policy scores in a CSV; JSON on stdout.
     Agreement(AgreementArgs),
+    /// Rank policy checkpoints in the world model, checked against MuJoCo (paired episodes).
+    Rank(RankArgs),
 }
 
 /// `evalharness agreement`.
@@ -54,11 +56,182 @@ pub struct AgreementArgs {
     pub seed: u64,
 }
 
+/// `evalharness rank`.
+#[derive(Debug, Args)]
+pub struct RankArgs {
+    /// A policy checkpoint, or a folder of them.
+    #[arg(long, default_value = "checkpoints/pusht/policies")]
+    pub policies: PathBuf,
+    /// The world model (from `train world-model`).
+    #[arg(long, default_value = "checkpoints/pusht/world_model")]
+    pub world_model: PathBuf,
+    /// Scenario name or .toml file.
+    #[arg(long, default_value = "pusht")]
+    pub scenario: String,
+    /// Episodes per policy.
+    #[arg(long, default_value_t = 100)]
+    pub episodes: usize,
+    /// First episode seed (training data uses seeds from 0).
+    #[arg(long, default_value_t = 100_000)]
+    pub seed_start: u64,
+    /// Control steps per episode.
+    #[arg(long, default_value_t = 300)]
+    pub max_steps: usize,
+    /// Episodes advanced together (one batched policy / world-model call).
+    #[arg(long, default_value_t = 100)]
+    pub batch: usize,
+    /// Output folder.
+    #[arg(long, default_value = "results/rank")]
+    pub out: PathBuf,
+    /// Threads for the MuJoCo branch.
+    #[arg(long, default_value_t = 2)]
+    pub jobs: usize,
+    /// Master seed of the policies' sampling noise and of the bootstrap.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Bootstrap replicates for the CIs.
+    #[arg(long, default_value_t = 2000)]
+    pub bootstrap: usize,
+    /// Continue a run in `--out`, skipping finished episodes.
+    #[arg(long)]
+    pub resume: bool,
+    /// Replace an existing `--out`.
+    #[arg(long)]
+    pub force: bool,
+    /// Run only part i of n (0-based; whole batches), e.g. `--shard 0/4`.
+    #[arg(long)]
+    pub shard: Option<String>,
+    /// Exit 1 if the Pearson correlation is below this.
+    #[arg(long)]
+    pub min_pearson: Option<f64>,
+    /// Exit 1 if there are more rank inversions than this.
+    #[arg(long)]
+    pub max_inversions: Option<u64>,
+}
+
 /// `evalharness train ...`.
 #[derive(Debug, Subcommand)]
 pub enum TrainCommand {
     /// The frame autoencoder whose latent space the world model works in.
     Autoencoder(TrainAutoencoderArgs),
+    /// The DriftWorld U-Net (or a baseline) on the autoencoder's latents.
+    WorldModel(TrainWorldModelArgs),
+    /// A diffusion policy; checkpoints every few epochs form a graded policy set.
+    Policy(TrainPolicyArgs),
+}
+
+/// `evalharness train policy`.
+#[derive(Debug, Args)]
+pub struct TrainPolicyArgs {
+    /// Demonstration dataset (zarr replay buffer).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output folder: `epoch-NNNN/` checkpoints and the resumable `.train/` state.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Epochs (passes over the demonstration samples); with `--resume`, the new total.
+    #[arg(long)]
+    pub epochs: Option<u64>,
+    /// Save a policy checkpoint every this many epochs.
+    #[arg(long, default_value_t = 1)]
+    pub save_every: u64,
+    /// Use only episodes of this behaviour (as recorded by `collect`); "all" for every episode.
+    #[arg(long, default_value = "expert")]
+    pub behaviour: String,
+    /// Use at most this many episodes (after the behaviour filter).
+    #[arg(long)]
+    pub episodes: Option<usize>,
+    /// Samples per step.
+    #[arg(long, default_value_t = 64)]
+    pub batch: usize,
+    /// Learning rate (after a 200-step warm-up).
+    #[arg(long, default_value_t = 3e-4)]
+    pub lr: f64,
+    /// Frame-encoder width.
+    #[arg(long, default_value_t = 16)]
+    pub encoder_width: usize,
+    /// U-Net channels per level, comma-separated.
+    #[arg(long, default_value = "32,64,128", value_delimiter = ',')]
+    pub down_dims: Vec<usize>,
+    /// DDIM steps at inference.
+    #[arg(long, default_value_t = 10)]
+    pub inference_steps: usize,
+    /// Seed of the weights, sample order and noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Stop (with a saved state) after this many minutes; `--resume` continues.
+    #[arg(long)]
+    pub max_minutes: Option<f64>,
+    /// Continue the run in `--out`.
+    #[arg(long)]
+    pub resume: bool,
+    /// Replace an existing `--out` (without `--resume`).
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// The world model's training objective.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ObjectiveArg {
+    /// DriftWorld's drifting loss (one pass per chunk).
+    Drifting,
+    /// One-step MSE regression baseline.
+    Mse,
+    /// Multi-step diffusion baseline (DDIM sampling with `--sample-steps`).
+    Diffusion,
+}
+
+/// `evalharness train world-model`.
+#[derive(Debug, Args)]
+pub struct TrainWorldModelArgs {
+    /// Training dataset (zarr replay buffer); every 10th episode is held out.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Trained autoencoder folder (from `train autoencoder`).
+    #[arg(long)]
+    pub autoencoder: PathBuf,
+    /// Training objective.
+    #[arg(long, value_enum, default_value_t = ObjectiveArg::Drifting)]
+    pub objective: ObjectiveArg,
+    /// Output folder (checkpoints, logs, provenance).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Optimizer steps in total (default 6000); with `--resume`, extends or shortens the run.
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// U-Net base channels.
+    #[arg(long, default_value_t = 32)]
+    pub base_channels: usize,
+    /// Contexts per step (default 4 for drifting, 32 for the baselines).
+    #[arg(long)]
+    pub contexts: Option<usize>,
+    /// Generated samples per context (drifting negatives; default 8).
+    #[arg(long)]
+    pub samples: Option<usize>,
+    /// Peak learning rate (after a 500-step warm-up).
+    #[arg(long, default_value_t = 2e-4)]
+    pub lr: f64,
+    /// DDIM steps per generated chunk (diffusion).
+    #[arg(long, default_value_t = 10)]
+    pub sample_steps: usize,
+    /// Seed of the weights, windows and noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Held-out evaluation interval (steps).
+    #[arg(long, default_value_t = 250)]
+    pub eval_every: u64,
+    /// Checkpoint interval (steps).
+    #[arg(long, default_value_t = 50)]
+    pub checkpoint_every: u64,
+    /// Stop (with a checkpoint) after this many minutes; `--resume` continues.
+    #[arg(long)]
+    pub max_minutes: Option<f64>,
+    /// Continue the run in `--out` from its last checkpoint (its config wins).
+    #[arg(long)]
+    pub resume: bool,
+    /// Replace an existing `--out` (without `--resume`).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `evalharness train autoencoder`.

@@ -1,11 +1,14 @@
 //! evalharness core: what every other crate shares, with no burn or MuJoCo in sight.
 //!
+//! - [`policy`] + [`rng`]: the batched policy interface and the caller-owned noise streams;
 //! - [`seed`]: deterministic seed derivation (episode RNGs never depend on thread order);
 //! - [`metrics`]: agreement metrics between predicted and true policy scores, with CIs;
 //! - [`zarr`] and [`replay`]: the diffusion_policy / GPC replay-buffer dataset layout.
 
 pub mod blosc;
 pub mod metrics;
+pub mod policy;
 pub mod replay;
+pub mod rng;
 pub mod seed;
 pub mod zarr;

@@ -9,6 +9,7 @@
 pub mod config;
 pub mod expert;
 pub mod explore;
+pub mod frame_score;
 pub mod geometry;
 #[cfg(feature = "mujoco-render")]
 pub mod mj_render;

@@ -6,6 +6,8 @@ mod dataset;
 mod episodes;
 mod simulate;
 mod train;
+mod train_policy;
+mod train_wm;
 
 use std::process::ExitCode;
 
@@ -22,6 +24,9 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Collect(a) => collect::run(a, cli.quiet),
         Command::Dataset(DatasetCommand::Info { path, json }) => dataset::info(path, *json),
         Command::Train(TrainCommand::Autoencoder(a)) => train::autoencoder(a, cli.quiet),
+        Command::Train(TrainCommand::WorldModel(a)) => train_wm::run(a, cli.quiet),
+        Command::Train(TrainCommand::Policy(a)) => train_policy::run(a, cli.quiet),
         Command::Agreement(a) => agreement::run(a),
+        Command::Rank(a) => crate::rank::run(a, cli.quiet),
     }
 }

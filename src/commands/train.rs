@@ -17,7 +17,7 @@ use crate::output::write_json;
 use crate::progress;
 
 /// The commit of the working tree, or "unknown" outside a git checkout.
-fn git_commit() -> String {
+pub(super) fn git_commit() -> String {
     let out = std::process::Command::new("git").args(["rev-parse", "HEAD"]).output();
     let dirty =
         std::process::Command::new("git").args(["status", "--porcelain", "--untracked-files=no"]).output();
@@ -35,7 +35,7 @@ fn git_commit() -> String {
 
 /// How an evalharness dataset was collected (from its attributes), to regenerate it:
 /// `collect` is deterministic, so the same arguments give the same bytes.
-fn dataset_origin(data: &std::path::Path) -> serde_json::Value {
+pub(super) fn dataset_origin(data: &std::path::Path) -> serde_json::Value {
     let attrs = harness::zarr::read_attrs(data).unwrap_or_default();
     let e = &attrs["evalharness"];
     if e.is_null() {
@@ -52,7 +52,7 @@ fn dataset_origin(data: &std::path::Path) -> serde_json::Value {
 }
 
 /// The step of the checkpoint in `out`, 0 if none.
-fn read_step(out: &std::path::Path) -> u64 {
+pub(super) fn read_step(out: &std::path::Path) -> u64 {
     std::fs::read_to_string(out.join("state.json"))
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
@@ -62,7 +62,7 @@ fn read_step(out: &std::path::Path) -> u64 {
 
 /// Appends this invocation to `out/sessions.jsonl` and returns every session so far,
 /// so that a run trained over several sessions keeps each command and commit.
-fn record_session(
+pub(super) fn record_session(
     out: &std::path::Path,
     command: &str,
     from: u64,

@@ -2,15 +2,22 @@
 //! drifting loss (Lu, Chen, Ye, Du 2026), so that it predicts a chunk of future
 //! frames in one forward pass.
 //!
-//! Built so far: the drifting loss ([`drift`]), the frame autoencoder
-//! ([`autoencoder`]) with its resumable trainer ([`train_ae`]), and dataset
-//! loading with a held-out split ([`data`]).
+//! - [`drift`]: the drifting loss; [`unet`]: the action-conditioned U-Net;
+//! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer;
+//! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
+//!   (drifting, MSE and diffusion objectives);
+//! - [`model`]: a trained world model for inference;
+//! - [`data`]: datasets with a held-out split.
 
 pub mod autoencoder;
 pub mod data;
 pub mod drift;
 pub mod error;
+pub mod latents;
+pub mod model;
+pub mod optim;
 pub mod train_ae;
+pub mod train_wm;
 pub mod unet;
 
 pub use error::WorldModelError;

@@ -106,10 +106,11 @@ pub struct AeOutcome {
 /// A held-out frame and its reconstruction (HWC bytes).
 pub type SamplePair = (Vec<u8>, Vec<u8>);
 
+/// The progress saved with a checkpoint (`state.json`).
 #[derive(Serialize, Deserialize)]
-struct State {
-    step: u64,
-    elapsed_s: f64,
+pub(crate) struct State {
+    pub(crate) step: u64,
+    pub(crate) elapsed_s: f64,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -118,11 +119,11 @@ struct Configs {
     train: AeTrainConfig,
 }
 
-fn io(path: &Path) -> impl FnOnce(std::io::Error) -> WorldModelError + '_ {
+pub(crate) fn io(path: &Path) -> impl FnOnce(std::io::Error) -> WorldModelError + '_ {
     move |source| WorldModelError::Io { path: path.to_path_buf(), source }
 }
 
-fn ckpt(path: &Path, e: impl std::fmt::Display) -> WorldModelError {
+pub(crate) fn ckpt(path: &Path, e: impl std::fmt::Display) -> WorldModelError {
     WorldModelError::Checkpoint { path: path.to_path_buf(), message: e.to_string() }
 }
 
@@ -260,8 +261,7 @@ pub fn train_autoencoder(
                 train_idx[(rng % train_idx.len() as u64) as usize]
             })
             .collect();
-        let lr =
-            if step < cfg.warmup { 1e-6 + (cfg.lr - 1e-6) * step as f64 / cfg.warmup as f64 } else { cfg.lr };
+        let lr = crate::optim::warmup_lr(step, cfg.lr, cfg.warmup);
         let x = data.frames_tensor(&idx, &device);
         let loss = (model.forward(x.clone()) - x).powf_scalar(2.0).mean();
         let loss_value: f64 = loss.clone().into_scalar::<f32>().into();

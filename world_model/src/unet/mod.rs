@@ -303,14 +303,17 @@ mod timing {
     use burn::optim::{AdamWConfig, GradientsParams};
 
     /// One drifting training step on latents: 4 contexts x 16 samples = 64 clips.
-    /// Run by hand: `cargo test --release -p world_model step_time -- --ignored --nocapture`.
+    /// Run by hand: `cargo test --release -p world_model step_time -- --ignored --nocapture`
+    /// (`UNET_BASE`, `CONTEXTS`, `SAMPLES` override 64, 4, 16).
     #[test]
     #[ignore = "timing, run by hand"]
     fn step_time() {
         let device = Device::flex().autodiff();
-        let mut unet = UNetConfig::pusht_latent(8).init(&device);
+        let env = |k: &str, d: usize| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
+        let base = env("UNET_BASE", 64);
+        let mut unet = UNetConfig { model_channels: base, ..UNetConfig::pusht_latent(8) }.init(&device);
         let mut optim = AdamWConfig::new().init();
-        let (b, n, c) = (4, 16, 8);
+        let (b, n, c) = (env("CONTEXTS", 4), env("SAMPLES", 16), 8);
         for i in 0..3 {
             let t0 = std::time::Instant::now();
             let noise = Tensor::<5>::random(

@@ -1,0 +1,276 @@
+//! The `diffusion` policy kind: DDPM training with ε-prediction on a squared-cosine
+//! schedule (diffusers' `squaredcos_cap_v2`), few-step deterministic DDIM at
+//! inference with x₀ clipped to [-1, 1], positions min-max normalised to [-1, 1].
+//!
+//! An observation is the last `obs_horizon` frames and agent positions; the
+//! policy predicts `horizon` actions and executes `action_horizon` of them from
+//! index `obs_horizon − 1` (the step of the current observation), as in Chi et al.
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor, TensorData};
+use harness::policy::{ActionChunk, Observation, Policy, PolicyError, sanitize};
+use harness::rng::Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::net::{CondUnet1d, NetConfig, ObsEncoder};
+
+/// Min-max statistics of one 2-D quantity.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Range2 {
+    /// Per-dimension minimum.
+    pub min: [f32; 2],
+    /// Per-dimension maximum.
+    pub max: [f32; 2],
+}
+
+impl Range2 {
+    /// To [-1, 1].
+    pub fn normalise(&self, v: [f32; 2]) -> [f32; 2] {
+        [0, 1].map(|d| 2.0 * (v[d] - self.min[d]) / (self.max[d] - self.min[d]).max(1e-6) - 1.0)
+    }
+
+    /// From [-1, 1].
+    pub fn denormalise(&self, v: [f32; 2]) -> [f32; 2] {
+        [0, 1].map(|d| (v[d] + 1.0) / 2.0 * (self.max[d] - self.min[d]) + self.min[d])
+    }
+}
+
+/// Normalisation statistics (from the training data).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Normalisation {
+    /// Agent positions.
+    pub agent_pos: Range2,
+    /// Actions.
+    pub action: Range2,
+}
+
+/// The `diffusion` kind's configuration (`policy.json` "config").
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiffusionConfig {
+    /// Networks.
+    pub net: NetConfig,
+    /// Predicted actions per decision.
+    pub horizon: usize,
+    /// Executed actions per decision.
+    pub action_horizon: usize,
+    /// DDPM training steps T.
+    pub train_steps: usize,
+    /// DDIM steps at inference.
+    pub inference_steps: usize,
+}
+
+impl Default for DiffusionConfig {
+    fn default() -> Self {
+        Self { net: NetConfig::new(), horizon: 16, action_horizon: 8, train_steps: 100, inference_steps: 10 }
+    }
+}
+
+/// ᾱ_t of diffusers' `squaredcos_cap_v2` schedule: β_i = min(1 − ᾱ(i+1)/ᾱ(i), 0.999)
+/// with ᾱ(t) = cos²((t/T + 0.008)/1.008 · π/2).
+pub fn alphas_cumprod(steps: usize) -> Vec<f64> {
+    let f =
+        |i: usize| ((i as f64 / steps as f64 + 0.008) / 1.008 * std::f64::consts::FRAC_PI_2).cos().powi(2);
+    let mut acc = 1.0;
+    (0..steps)
+        .map(|i| {
+            let beta = (1.0 - f(i + 1) / f(i)).min(0.999);
+            acc *= 1.0 - beta;
+            acc
+        })
+        .collect()
+}
+
+/// The networks of a diffusion policy.
+#[derive(Module, Debug)]
+pub struct DiffusionNet {
+    /// Frame encoder.
+    pub encoder: ObsEncoder,
+    /// Noise predictor.
+    pub unet: CondUnet1d,
+}
+
+impl DiffusionNet {
+    /// Builds fresh networks.
+    pub fn new(cfg: &DiffusionConfig, device: &Device) -> Self {
+        Self { encoder: ObsEncoder::new(&cfg.net, device), unet: CondUnet1d::new(&cfg.net, device) }
+    }
+
+    /// Observation conditioning.
+    ///
+    /// # Shapes
+    /// - `frames`: `[b·o, 3, 96, 96]` in [-1, 1] (episode-major, oldest first)
+    /// - `pos`: `[b, o, 2]` normalised
+    /// - returns `[b, o·(feature + 2)]`
+    pub fn obs_cond(&self, frames: Tensor<4>, pos: Tensor<3>) -> Tensor<2> {
+        let [b, o, _] = pos.dims();
+        let feat = self.encoder.forward(frames); // [b o, f]
+        let f = feat.dims()[1];
+        Tensor::cat(vec![feat.reshape([b, o, f]), pos], 2).reshape([b, o * (f + 2)])
+    }
+
+    /// The ε-prediction loss of noisy actions at integer steps `t`.
+    ///
+    /// # Shapes
+    /// `cond: [b, c]`, `actions, noise: [b, horizon, 2]`, `t: [b]`
+    pub fn loss(
+        &self,
+        cond: Tensor<2>,
+        actions: Tensor<3>,
+        noise: Tensor<3>,
+        t: &[usize],
+        ac: &[f64],
+    ) -> Tensor<1> {
+        let b = t.len();
+        let device = actions.device();
+        let coef = |g: &dyn Fn(f64) -> f64| {
+            let v: Vec<f32> = t.iter().map(|&i| g(ac[i]) as f32).collect();
+            Tensor::<1>::from_floats(v.as_slice(), &device).reshape([b, 1, 1])
+        };
+        let noisy = actions * coef(&|a| a.sqrt()) + noise.clone() * coef(&|a| (1.0 - a).sqrt());
+        let tt: Vec<f32> = t.iter().map(|&i| i as f32).collect();
+        let pred = self.unet.forward(noisy, Tensor::from_floats(tt.as_slice(), &device), cond);
+        (pred - noise).powf_scalar(2.0).mean()
+    }
+
+    /// Deterministic DDIM from noise `x` (`[b, horizon, 2]`) with `k` steps.
+    pub fn sample(&self, cond: Tensor<2>, mut x: Tensor<3>, k: usize, ac: &[f64]) -> Tensor<3> {
+        let t_total = ac.len();
+        let ratio = (t_total / k.max(1)).max(1);
+        let b = x.dims()[0];
+        let device = x.device();
+        let steps: Vec<usize> = (0..k.max(1)).map(|j| j * ratio).filter(|&t| t < t_total).rev().collect();
+        for &t in &steps {
+            let a = ac[t];
+            let a_prev = if t >= ratio { ac[t - ratio] } else { 1.0 };
+            let tt = Tensor::<1>::from_floats(vec![t as f32; b].as_slice(), &device);
+            let eps = self.unet.forward(x.clone(), tt, cond.clone());
+            let x0 = ((x - eps.clone() * (1.0 - a).sqrt()) / a.sqrt()).clamp(-1.0, 1.0);
+            x = x0 * a_prev.sqrt() + eps * (1.0 - a_prev).sqrt();
+        }
+        x
+    }
+}
+
+/// A loaded diffusion policy (inference).
+pub struct DiffusionPolicy {
+    /// Checkpoint name.
+    pub name: String,
+    /// Configuration.
+    pub cfg: DiffusionConfig,
+    /// Normalisation.
+    pub norm: Normalisation,
+    net: DiffusionNet,
+    ac: Vec<f64>,
+    device: Device,
+}
+
+impl DiffusionPolicy {
+    /// Wraps trained networks.
+    pub fn new(
+        name: String,
+        cfg: DiffusionConfig,
+        norm: Normalisation,
+        net: DiffusionNet,
+        device: &Device,
+    ) -> Self {
+        let ac = alphas_cumprod(cfg.train_steps);
+        Self { name, cfg, norm, net, ac, device: device.clone() }
+    }
+}
+
+/// Byte frames (HWC) to a `[n, 3, s, s]` tensor in [-1, 1].
+pub fn frames_to_tensor(frames: &[&[u8]], s: usize, device: &Device) -> Tensor<4> {
+    let plane = s * s;
+    let mut v = vec![0f32; frames.len() * 3 * plane];
+    for (k, f) in frames.iter().enumerate() {
+        for p in 0..plane {
+            for c in 0..3 {
+                v[(k * 3 + c) * plane + p] = f32::from(f[p * 3 + c]) / 127.5 - 1.0;
+            }
+        }
+    }
+    Tensor::from_data(TensorData::new(v, [frames.len(), 3, s, s]), device)
+}
+
+impl Policy for DiffusionPolicy {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn obs_horizon(&self) -> usize {
+        self.cfg.net.obs_horizon
+    }
+
+    fn action_horizon(&self) -> usize {
+        self.cfg.action_horizon
+    }
+
+    fn act(&self, obs: &[Observation], rngs: &mut [Rng]) -> Result<Vec<ActionChunk>, PolicyError> {
+        let (o, s, h) = (self.cfg.net.obs_horizon, self.cfg.net.image_size, self.cfg.horizon);
+        let bad = |m: String| PolicyError::Input { policy: self.name.clone(), message: m };
+        let mut frames = Vec::with_capacity(obs.len() * o);
+        let mut pos = Vec::with_capacity(obs.len() * o * 2);
+        for (i, ob) in obs.iter().enumerate() {
+            if ob.frames.len() != o || ob.agent_pos.len() != o {
+                return Err(bad(format!("episode {i}: {} frames, the policy takes {o}", ob.frames.len())));
+            }
+            if ob.size != s || ob.frames.iter().any(|f| f.len() != s * s * 3) {
+                return Err(bad(format!(
+                    "episode {i}: frames are {0}x{0}, the policy takes {s}x{s}",
+                    ob.size
+                )));
+            }
+            frames.extend(ob.frames.iter().map(Vec::as_slice));
+            pos.extend(ob.agent_pos.iter().flat_map(|p| self.norm.agent_pos.normalise(*p)));
+        }
+        let b = obs.len();
+        let cond = self.net.obs_cond(
+            frames_to_tensor(&frames, s, &self.device),
+            Tensor::from_data(TensorData::new(pos, [b, o, 2]), &self.device),
+        );
+        let noise: Vec<f32> = rngs.iter_mut().flat_map(|r| r.normals_f32(h * 2)).collect();
+        let x = Tensor::from_data(TensorData::new(noise, [b, h, 2]), &self.device);
+        let out = self.net.sample(cond, x, self.cfg.inference_steps, &self.ac);
+        let v: Vec<f32> = out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+        let start = o - 1;
+        let mut chunks: Vec<ActionChunk> = (0..b)
+            .map(|i| {
+                (start..(start + self.cfg.action_horizon).min(h))
+                    .map(|t| self.norm.action.denormalise([v[(i * h + t) * 2], v[(i * h + t) * 2 + 1]]))
+                    .collect()
+            })
+            .collect();
+        let clamped = sanitize(&self.name, &mut chunks, 0.0, 512.0)?;
+        if clamped > 0 {
+            tracing::warn!(policy = %self.name, clamped, "actions outside the world clamped");
+        }
+        Ok(chunks)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn squared_cosine_schedule() {
+        let ac = alphas_cumprod(100);
+        // β_0 = 1 − f(1)/f(0), f(i) = cos²((i/100 + 0.008)/1.008 · π/2):
+        // f(0) = cos²(0.012467) = 0.999845, f(1) = cos²(0.028050) = 0.999213, β_0 = 6.313e-4.
+        assert!((1.0 - ac[0] - 6.313e-4).abs() < 1e-6, "{}", 1.0 - ac[0]);
+        assert!(ac.windows(2).all(|w| w[1] < w[0]));
+        // The product of (1 − β_i) ends at 2.43e-7 (the last β is capped at 0.999).
+        assert!((ac[99] / 2.4286e-7 - 1.0).abs() < 1e-3, "{}", ac[99]);
+    }
+
+    #[test]
+    fn normalisation_round_trips() {
+        let r = Range2 { min: [10.0, 0.0], max: [500.0, 512.0] };
+        assert_eq!(r.normalise([10.0, 512.0]), [-1.0, 1.0]);
+        let back = r.denormalise(r.normalise([123.0, 45.0]));
+        assert!((back[0] - 123.0).abs() < 1e-4 && (back[1] - 45.0).abs() < 1e-4);
+    }
+}

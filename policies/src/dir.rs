@@ -1,0 +1,255 @@
+//! The policy directory format and its loader.
+//!
+//! A checkpoint is a folder with `policy.json` — kind, config, normalisation
+//! statistics, training epoch, provenance — and its weights (`model.bpk`).
+//! A policy directory is either one checkpoint or a folder of them (hidden
+//! sub-folders, such as a trainer's `.train/`, are skipped). Loading validates the
+//! kind, the image size and the action dimension against what the scenario
+//! provides, and every error names the checkpoint folder.
+
+use std::path::{Path, PathBuf};
+
+use burn::module::{Module, ModuleMapper, Param};
+use burn::store::ModuleRecord;
+use burn::tensor::{DType, Device, Tensor};
+use harness::policy::Policy;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::diffusion::{DiffusionConfig, DiffusionNet, DiffusionPolicy, Normalisation};
+
+/// A problem with a policy checkpoint, naming its folder or file.
+#[derive(Debug, thiserror::Error)]
+#[error("policy {path}: {message}")]
+pub struct PolicyLoadError {
+    /// The checkpoint folder or file.
+    pub path: PathBuf,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl PolicyLoadError {
+    /// An error about `path`.
+    pub fn new(path: &Path, message: impl Into<String>) -> Self {
+        Self { path: path.to_path_buf(), message: message.into() }
+    }
+}
+
+/// `policy.json`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PolicyFile {
+    /// The policy kind (`diffusion`).
+    pub kind: String,
+    /// Training epoch of this checkpoint.
+    pub epoch: u64,
+    /// Optimizer steps of this checkpoint.
+    pub step: u64,
+    /// Kind-specific configuration.
+    pub config: Value,
+    /// Normalisation statistics.
+    pub normalisation: Normalisation,
+    /// How it was made (command, data, seed, commit).
+    pub provenance: Value,
+    /// Training loss at the checkpoint.
+    pub train_loss: f64,
+}
+
+impl PolicyFile {
+    /// The file of a diffusion-policy checkpoint.
+    pub fn diffusion(
+        cfg: &DiffusionConfig,
+        norm: &Normalisation,
+        epoch: u64,
+        step: u64,
+        provenance: &Value,
+        train_loss: f64,
+    ) -> Self {
+        Self {
+            kind: "diffusion".into(),
+            epoch,
+            step,
+            config: serde_json::to_value(cfg).unwrap_or(Value::Null),
+            normalisation: norm.clone(),
+            provenance: provenance.clone(),
+            train_loss,
+        }
+    }
+}
+
+struct ToF16;
+
+impl ModuleMapper for ToF16 {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        param.map(|t| t.cast(DType::F16))
+    }
+}
+
+/// Saves a module's weights in f16 (half the size; policies lose nothing measurable).
+///
+/// # Errors
+/// The recorder's error, as text.
+pub fn save_f16<M: Module>(module: &M, path: &Path) -> Result<(), String> {
+    module.clone().map(&mut ToF16).save_file(path).map_err(|e| e.to_string())
+}
+
+/// Loads weights saved in any float precision into `module`'s dtype.
+///
+/// # Errors
+/// The recorder's error (missing, truncated or mismatched file), as text.
+pub fn load_weights<M: Module>(module: M, path: &Path) -> Result<M, String> {
+    let record = ModuleRecord::load(path).map_err(|e| e.to_string())?.cast_to_module_dtype();
+    module.try_load_record(record).map_err(|e| e.to_string())
+}
+
+/// Writes a checkpoint folder (`policy.json` + `model.bpk`, weights in f16).
+///
+/// # Errors
+/// [`PolicyLoadError`] naming the file that could not be written.
+pub fn write_policy(dir: &Path, file: &PolicyFile, net: &DiffusionNet) -> Result<(), PolicyLoadError> {
+    std::fs::create_dir_all(dir).map_err(|e| PolicyLoadError::new(dir, e.to_string()))?;
+    let weights = dir.join("model.bpk");
+    save_f16(net, &weights).map_err(|e| PolicyLoadError::new(&weights, e))?;
+    let json = dir.join("policy.json");
+    let text = serde_json::to_string_pretty(file).unwrap_or_default();
+    std::fs::write(&json, text + "\n").map_err(|e| PolicyLoadError::new(&json, e.to_string()))
+}
+
+/// What the scenario feeds a policy and accepts from it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Expectations {
+    /// Frame side in pixels.
+    pub image_size: usize,
+    /// Action dimension.
+    pub action_dim: usize,
+}
+
+/// Loads one checkpoint folder.
+///
+/// # Errors
+/// [`PolicyLoadError`] naming the folder for a missing or invalid `policy.json`, an
+/// unknown kind, a config that does not fit the scenario, or weights that are
+/// missing, truncated or do not match the config.
+pub fn load_policy(
+    dir: &Path,
+    expect: Expectations,
+    device: &Device,
+) -> Result<Box<dyn Policy>, PolicyLoadError> {
+    let err = |m: String| PolicyLoadError::new(dir, m);
+    let json = dir.join("policy.json");
+    let text = std::fs::read_to_string(&json).map_err(|e| err(format!("policy.json: {e}")))?;
+    let file: PolicyFile = serde_json::from_str(&text).map_err(|e| err(format!("policy.json: {e}")))?;
+    let name =
+        dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+    match file.kind.as_str() {
+        "diffusion" => {
+            let cfg: DiffusionConfig = serde_json::from_value(file.config.clone())
+                .map_err(|e| err(format!("policy.json \"config\": {e}")))?;
+            if cfg.net.image_size != expect.image_size {
+                return Err(err(format!(
+                    "takes {0}x{0} frames, the scenario renders {1}x{1}",
+                    cfg.net.image_size, expect.image_size
+                )));
+            }
+            if cfg.net.action_dim != expect.action_dim {
+                return Err(err(format!(
+                    "outputs {}-D actions, the scenario takes {}-D",
+                    cfg.net.action_dim, expect.action_dim
+                )));
+            }
+            if cfg.action_horizon == 0 || cfg.action_horizon + cfg.net.obs_horizon - 1 > cfg.horizon {
+                return Err(err(format!(
+                    "action horizon {} does not fit horizon {}",
+                    cfg.action_horizon, cfg.horizon
+                )));
+            }
+            let weights = dir.join("model.bpk");
+            let net = load_weights(DiffusionNet::new(&cfg, device), &weights)
+                .map_err(|e| err(format!("model.bpk: {e}")))?;
+            Ok(Box::new(DiffusionPolicy::new(name, cfg, file.normalisation, net, device)))
+        }
+        other => Err(err(format!("unknown policy kind \"{other}\" (known: diffusion)"))),
+    }
+}
+
+/// The checkpoint folders of a policy directory: itself if it holds `policy.json`,
+/// else its non-hidden sub-folders, sorted by name.
+///
+/// # Errors
+/// [`PolicyLoadError`] if `dir` cannot be read or holds no checkpoint.
+pub fn checkpoint_dirs(dir: &Path) -> Result<Vec<PathBuf>, PolicyLoadError> {
+    if dir.join("policy.json").is_file() {
+        return Ok(vec![dir.to_path_buf()]);
+    }
+    let rd = std::fs::read_dir(dir).map_err(|e| PolicyLoadError::new(dir, e.to_string()))?;
+    let mut dirs: Vec<PathBuf> = rd
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.is_dir() && !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with('.')))
+        .collect();
+    dirs.sort();
+    if dirs.is_empty() {
+        return Err(PolicyLoadError::new(dir, "no policy.json and no checkpoint sub-folders"));
+    }
+    Ok(dirs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn f16_weights_round_trip() {
+        let device = Device::flex();
+        let cfg = DiffusionConfig {
+            net: crate::net::NetConfig::new().with_encoder_width(8).with_down_dims(vec![16, 32]),
+            ..DiffusionConfig::default()
+        };
+        let net = DiffusionNet::new(&cfg, &device);
+        let path = std::env::temp_dir().join(format!("evalharness-f16-{}.bpk", std::process::id()));
+        save_f16(&net, &path).unwrap();
+        let back = load_weights(DiffusionNet::new(&cfg, &device), &path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        let x = Tensor::<4>::ones([1, 3, 96, 96], &device) * 0.3;
+        let (a, b) = (net.encoder.forward(x.clone()), back.encoder.forward(x));
+        let rel: f32 = ((a.clone() - b).abs().max() / a.abs().max()).into_scalar();
+        // f16 has an 11-bit mantissa: relative weight error ≤ 2^-11 ≈ 4.9e-4.
+        assert!(rel < 5e-3, "{rel}");
+    }
+
+    #[test]
+    fn errors_name_the_checkpoint() {
+        let tmp = std::env::temp_dir().join(format!("evalharness-policy-{}", std::process::id()));
+        let ck = tmp.join("epoch-0001");
+        std::fs::create_dir_all(&ck).unwrap();
+        let expect = Expectations { image_size: 96, action_dim: 2 };
+        let device = Device::flex();
+        let e = load_policy(&ck, expect, &device).err().unwrap();
+        assert!(e.to_string().contains("epoch-0001") && e.to_string().contains("policy.json"), "{e}");
+        let norm = crate::diffusion::Range2 { min: [0.0; 2], max: [1.0; 2] };
+        let mut file = PolicyFile::diffusion(
+            &DiffusionConfig::default(),
+            &Normalisation { agent_pos: norm.clone(), action: norm },
+            1,
+            1,
+            &Value::Null,
+            0.0,
+        );
+        file.kind = "transformer".into();
+        std::fs::write(ck.join("policy.json"), serde_json::to_string(&file).unwrap()).unwrap();
+        let e = load_policy(&ck, expect, &device).err().unwrap();
+        assert!(e.to_string().contains("unknown policy kind \"transformer\""), "{e}");
+        file.kind = "diffusion".into();
+        std::fs::write(ck.join("policy.json"), serde_json::to_string(&file).unwrap()).unwrap();
+        let e = load_policy(&ck, Expectations { image_size: 64, action_dim: 2 }, &device).err().unwrap();
+        assert!(e.to_string().contains("96x96"), "{e}");
+        // Weights missing, then truncated.
+        let e = load_policy(&ck, expect, &device).err().unwrap();
+        assert!(e.to_string().contains("model.bpk"), "{e}");
+        std::fs::write(ck.join("model.bpk"), b"not a burnpack").unwrap();
+        let e = load_policy(&ck, expect, &device).err().unwrap();
+        assert!(e.to_string().contains("model.bpk"), "{e}");
+        assert_eq!(checkpoint_dirs(&tmp).unwrap(), vec![ck.clone()]);
+        std::fs::remove_dir_all(&tmp).unwrap();
+    }
+}

@@ -1,0 +1,14 @@
+//! Vision policies for Push-T, trained on the project's own demonstrations.
+//!
+//! - [`net`]: the CNN frame encoder and the conditional 1-D U-Net;
+//! - [`diffusion`]: the `diffusion` kind (DDPM training, DDIM inference) behind
+//!   [`harness::policy::Policy`];
+//! - [`data`]: demonstrations from a replay-buffer dataset;
+//! - [`train`]: the trainer, which saves a checkpoint every few epochs;
+//! - [`dir`]: the policy directory format and its validating loader.
+
+pub mod data;
+pub mod diffusion;
+pub mod dir;
+pub mod net;
+pub mod train;

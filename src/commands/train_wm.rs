@@ -1,0 +1,162 @@
+//! `evalharness train world-model`: trains the DriftWorld U-Net (or the MSE or
+//! diffusion baseline) on a trained autoencoder's latents, and writes the run's
+//! provenance.
+
+use std::path::{Component, Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use burn::tensor::Device;
+use serde_json::json;
+use world_model::data::EpisodeData;
+use world_model::latents::Latents;
+use world_model::model::{Objective, WorldModelConfig};
+use world_model::train_ae::{RunOptions, load_autoencoder};
+use world_model::train_wm::{WmTrainConfig, train_world_model};
+use world_model::unet::UNetConfig;
+
+use super::train::{dataset_origin, git_commit, read_step, record_session};
+use crate::cli::{ObjectiveArg, TrainWorldModelArgs};
+use crate::output::write_json;
+use crate::progress;
+
+/// `target` relative to the folder `base` (both must exist), e.g. `../autoencoder`.
+fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
+    let b = base.canonicalize().with_context(|| format!("resolving {}", base.display()))?;
+    let t = target.canonicalize().with_context(|| format!("resolving {}", target.display()))?;
+    let (bc, tc): (Vec<Component>, Vec<Component>) = (b.components().collect(), t.components().collect());
+    let common = bc.iter().zip(&tc).take_while(|(x, y)| x == y).count();
+    let mut rel = PathBuf::new();
+    for _ in common..bc.len() {
+        rel.push("..");
+    }
+    for c in &tc[common..] {
+        rel.push(c);
+    }
+    Ok(rel)
+}
+
+/// `evalharness train world-model`.
+pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
+    if a.out.exists() && !a.resume {
+        if !a.force {
+            bail!(
+                "{} already exists (pass --resume to continue it or --force to replace it)",
+                a.out.display()
+            );
+        }
+        std::fs::remove_dir_all(&a.out).with_context(|| format!("removing {}", a.out.display()))?;
+    }
+    if a.resume && !a.out.join("state.json").is_file() {
+        bail!("--resume: {} has no checkpoint (state.json)", a.out.display());
+    }
+    let objective = match a.objective {
+        ObjectiveArg::Drifting => Objective::Drifting,
+        ObjectiveArg::Mse => Objective::Mse,
+        ObjectiveArg::Diffusion => Objective::Diffusion,
+    };
+    let from_step = read_step(&a.out);
+    let inner = Device::flex();
+    let (ae, ae_cfg) = load_autoencoder(&a.autoencoder, &inner)?;
+    tracing::info!(data = %a.data.display(), "loading frames");
+    let data = EpisodeData::load(&a.data, ae_cfg.image_size)?;
+    tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let defaults = WmTrainConfig::for_objective(objective);
+    let cfg = WmTrainConfig {
+        steps: a.steps.unwrap_or(defaults.steps),
+        contexts: a.contexts.unwrap_or(defaults.contexts),
+        samples: if objective == Objective::Drifting { a.samples.unwrap_or(defaults.samples) } else { 1 },
+        lr: a.lr,
+        seed: a.seed,
+        eval_every: a.eval_every.max(1),
+        checkpoint_every: a.checkpoint_every.max(1),
+        ..defaults
+    };
+    if objective == Objective::Drifting && cfg.samples < 2 {
+        bail!(
+            "--samples: drifting needs at least 2 samples per context (the other samples are the negatives)"
+        );
+    }
+    let model_cfg = if a.resume {
+        None // the saved config wins
+    } else {
+        tracing::info!("measuring latent statistics");
+        let stats = Latents::measure_stats(&data, &ae, 2048, &inner);
+        let unet = UNetConfig {
+            model_channels: a.base_channels,
+            timestep_embedding: objective == Objective::Diffusion,
+            ..UNetConfig::pusht_latent(ae_cfg.latent_channels)
+        };
+        Some(WorldModelConfig {
+            objective,
+            unet,
+            latents: stats,
+            autoencoder: relative_to(&a.out, &a.autoencoder)?,
+            future: 4,
+            sample_steps: if objective == Objective::Diffusion { a.sample_steps.max(1) } else { 1 },
+        })
+    };
+    let placeholder_cfg;
+    let model_cfg_ref = match &model_cfg {
+        Some(c) => c,
+        None => {
+            placeholder_cfg = saved_model_config(&a.out)?;
+            &placeholder_cfg
+        }
+    };
+    let pb = progress::bar(cfg.steps, objective.name(), quiet);
+    let run = RunOptions { resume: a.resume, extend: a.steps.is_some(), max_minutes: a.max_minutes };
+    let outcome = train_world_model(&data, &ae, &a.out, model_cfg_ref, &cfg, run, &mut |p| {
+        pb.set_length(p.total);
+        pb.set_position(p.step);
+        let lr: Vec<String> = p.loss_r.iter().map(|v| format!("{v:.3}")).collect();
+        let eval = p.eval_mse.map_or(String::new(), |m| format!(" eval {m:.4}"));
+        pb.set_message(format!("loss {:.4} loss_R [{}]{eval}", p.loss, lr.join(" ")));
+    })?;
+    pb.finish_and_clear();
+    let args: Vec<String> = std::env::args().collect();
+    let sessions = record_session(&a.out, &args.join(" "), from_step, outcome.step, outcome.elapsed_s)?;
+    let saved = saved_model_config(&a.out)?;
+    write_json(
+        &a.out.join("provenance.json"),
+        &json!({
+            "what": format!("world model U-Net, objective {}, on {} latents", saved.objective.name(), a.autoencoder.display()),
+            "command": args.join(" "),
+            "sessions": sessions,
+            "seed": a.seed,
+            "commit": git_commit(),
+            "autoencoder": saved.autoencoder,
+            "data": {
+                "path": a.data.display().to_string(),
+                "episodes": data.episodes.len(),
+                "frames": data.len(),
+                "held_out": "episodes with index % 10 == 9",
+                "collected_with": dataset_origin(&a.data),
+            },
+            "steps": outcome.step,
+            "finished": outcome.finished,
+            "elapsed_s": outcome.elapsed_s,
+            "metrics": {"held_out_one_chunk_latent_mse": outcome.eval_mse},
+        }),
+    )?;
+    println!(
+        "world model ({}): step {}/{}{}, held-out one-chunk latent MSE {:.5} -> {}",
+        saved.objective.name(),
+        outcome.step,
+        outcome.total,
+        if outcome.finished { "" } else { " (stopped early; --resume continues)" },
+        outcome.eval_mse,
+        a.out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The "model" entry of a run's `config.json`.
+fn saved_model_config(out: &Path) -> Result<WorldModelConfig> {
+    let path = out.join("config.json");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    serde_json::from_value(v["model"].clone()).with_context(|| format!("{}: \"model\"", path.display()))
+}

@@ -1,0 +1,232 @@
+//! `evalharness rank`: every policy checkpoint, many seeded episodes, two branches
+//! (MuJoCo and the world model) from the same initial state; per-policy scores
+//! with CIs and how well the world model's ranking agrees with MuJoCo's.
+//!
+//! Output folder: `config.json` (resolved arguments), `episodes.jsonl` (appended
+//! as batches finish), `episodes.csv`, `results.json`. `--resume` skips episodes
+//! already in `episodes.jsonl`; `--shard i/n` runs every n-th batch.
+
+mod paired;
+pub mod results;
+
+use std::path::Path;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use burn::tensor::Device;
+use policies::dir::{Expectations, checkpoint_dirs, load_policy};
+use scenarios::pusht::PushTPhysics;
+use serde_json::{Value, json};
+use world_model::model::WorldModel;
+
+use crate::cli::RankArgs;
+use crate::output::write_json;
+use crate::progress;
+use paired::{Setup, Timing, run_batch};
+use results::{EpisodeRow, append_rows, read_rows, summarise};
+
+/// Parses `--shard i/n`.
+fn parse_shard(s: Option<&str>) -> Result<(usize, usize)> {
+    let Some(s) = s else { return Ok((0, 1)) };
+    let (i, n) = s.split_once('/').with_context(|| format!("--shard {s}: expected i/n"))?;
+    let (i, n): (usize, usize) = (i.parse().context("--shard index")?, n.parse().context("--shard count")?);
+    if n == 0 || i >= n {
+        bail!("--shard {s}: need 0 <= i < n");
+    }
+    Ok((i, n))
+}
+
+/// `evalharness rank`.
+pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
+    let (shard, shards) = parse_shard(a.shard.as_deref())?;
+    if a.episodes == 0 || a.max_steps == 0 || a.batch == 0 {
+        bail!("--episodes, --max-steps and --batch must be positive");
+    }
+    let jsonl = a.out.join("episodes.jsonl");
+    if a.out.exists() && !a.resume {
+        if !a.force {
+            bail!(
+                "{} already exists (pass --resume to continue it or --force to replace it)",
+                a.out.display()
+            );
+        }
+        std::fs::remove_dir_all(&a.out).with_context(|| format!("removing {}", a.out.display()))?;
+    }
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let cfg = crate::scenario::load_pusht(&a.scenario)?;
+    let model = PushTPhysics::compile(&cfg)?;
+    let device = Device::flex();
+    let wm = WorldModel::load(&a.world_model, &device)
+        .with_context(|| format!("loading world model {}", a.world_model.display()))?;
+    let dirs = checkpoint_dirs(&a.policies)?;
+    let config = json!({
+        "command": std::env::args().collect::<Vec<_>>().join(" "),
+        "scenario": a.scenario, "policies": a.policies, "world_model": a.world_model,
+        "world_model_config": serde_json::to_value(&wm.cfg)?,
+        "episodes": a.episodes, "seed_start": a.seed_start, "max_steps": a.max_steps,
+        "batch": a.batch, "seed": a.seed, "bootstrap": a.bootstrap, "shard": [shard, shards],
+        "checkpoints": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
+    });
+    write_json(&a.out.join("config.json"), &config)?;
+    let mut rows = read_rows(&jsonl)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.jobs.max(1))
+        .build()
+        .context("starting worker threads")?;
+    let setup = Setup { cfg: &cfg, model: &model, wm: &wm, master_seed: a.seed, max_steps: a.max_steps };
+    let expect = Expectations { image_size: cfg.render.size as usize, action_dim: 2 };
+    let seeds: Vec<u64> = (0..a.episodes as u64).map(|i| a.seed_start + i).collect();
+    let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
+    let pb = progress::bar((dirs.len() * a.episodes) as u64, "rank", quiet);
+    let mut timing = Timing::default();
+    let mut failed: Vec<Value> = Vec::new();
+    let mut names = Vec::new();
+    let started = Instant::now();
+    for (pi, dir) in dirs.iter().enumerate() {
+        let name =
+            dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+        names.push(name.clone());
+        let policy = match load_policy(dir, expect, &device) {
+            Ok(p) => p,
+            Err(e) => {
+                tracing::error!("{e}; continuing with the other policies");
+                failed.push(json!({"policy": name, "error": e.to_string()}));
+                pb.inc(a.episodes as u64);
+                continue;
+            }
+        };
+        for (bi, batch) in batches.iter().enumerate() {
+            if (pi * batches.len() + bi) % shards != shard {
+                pb.inc(batch.len() as u64);
+                continue;
+            }
+            let todo: Vec<u64> = batch
+                .iter()
+                .copied()
+                .filter(|s| rows.iter().filter(|r| r.policy == name && r.seed == *s).count() < 2)
+                .collect();
+            pb.inc((batch.len() - todo.len()) as u64);
+            if todo.is_empty() {
+                continue;
+            }
+            let out = pool.install(|| run_batch(policy.as_ref(), &todo, &setup, &mut timing));
+            match out {
+                Ok(new) => {
+                    // Drop half-written pairs of these seeds (from a killed run) before appending.
+                    rows.retain(|r| !(r.policy == name && todo.contains(&r.seed)));
+                    append_rows(&jsonl, &new)?;
+                    rows.extend(new);
+                    pb.inc(todo.len() as u64);
+                }
+                Err(e) => {
+                    tracing::error!("policy {name}: {e:#}; continuing with the other policies");
+                    failed.push(json!({"policy": name, "error": format!("{e:#}")}));
+                    break;
+                }
+            }
+        }
+    }
+    pb.finish_and_clear();
+    let failed_names: Vec<&str> = failed.iter().filter_map(|f| f["policy"].as_str()).collect();
+    let ok_names: Vec<String> =
+        names.iter().filter(|n| !failed_names.contains(&n.as_str())).cloned().collect();
+    let mut res = summarise(&rows, &ok_names, a.bootstrap, a.seed);
+    let wall = started.elapsed().as_secs_f64();
+    res["scenario"] = json!(a.scenario);
+    res["world_model"] = json!(a.world_model);
+    res["episodes"] = json!(a.episodes);
+    res["seed_start"] = json!(a.seed_start);
+    res["max_steps"] = json!(a.max_steps);
+    res["failed_policies"] = json!(failed);
+    res["timing"] = json!({
+        "wall_seconds": wall,
+        "sim_seconds": timing.sim_s,
+        "world_model_seconds": timing.world_model_s,
+        "world_model_ms_per_frame": 1e3 * timing.world_model_s / timing.frames.max(1) as f64,
+        "policy_seconds": timing.policy_s,
+        "note": "this session only (a resumed run times its own part)",
+    });
+    write_json(&a.out.join("results.json"), &res)?;
+    write_csv(&a.out.join("episodes.csv"), &rows)?;
+    print_summary(&res, &a.out);
+    gates(a, &res, &failed)
+}
+
+/// Exit 1 when a gate fails (or a policy failed), 0 otherwise.
+fn gates(a: &RankArgs, res: &Value, failed: &[Value]) -> Result<ExitCode> {
+    let mut ok = true;
+    if let Some(min) = a.min_pearson {
+        let r = res["agreement"]["pearson"].as_f64();
+        if r.is_none_or(|r| r < min) {
+            eprintln!("gate failed: Pearson {r:?} < --min-pearson {min}");
+            ok = false;
+        }
+    }
+    if let Some(max) = a.max_inversions {
+        let k = res["agreement"]["rank_inversions"].as_u64().unwrap_or(u64::MAX);
+        if k > max {
+            eprintln!("gate failed: {k} rank inversions > --max-inversions {max}");
+            ok = false;
+        }
+    }
+    if !failed.is_empty() {
+        eprintln!("{} policies failed (see results.json \"failed_policies\")", failed.len());
+        ok = false;
+    }
+    Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}
+
+fn write_csv(path: &Path, rows: &[EpisodeRow]) -> Result<()> {
+    let mut sorted: Vec<&EpisodeRow> = rows.iter().collect();
+    sorted.sort_by(|x, y| (&x.policy, x.seed, x.branch).cmp(&(&y.policy, y.seed, y.branch)));
+    let mut w = csv::Writer::from_path(path).with_context(|| format!("creating {}", path.display()))?;
+    w.write_record([
+        "policy",
+        "seed",
+        "branch",
+        "score",
+        "max_coverage",
+        "final_coverage",
+        "success",
+        "steps",
+    ])?;
+    for r in sorted {
+        let branch = serde_json::to_value(r.branch)?.as_str().unwrap_or("").to_string();
+        w.write_record([
+            r.policy.clone(),
+            r.seed.to_string(),
+            branch,
+            format!("{:.6}", r.score),
+            format!("{:.6}", r.max_coverage),
+            format!("{:.6}", r.final_coverage),
+            r.success.to_string(),
+            r.steps.to_string(),
+        ])?;
+    }
+    w.flush().with_context(|| format!("writing {}", path.display()))
+}
+
+fn print_summary(res: &Value, out: &Path) {
+    println!("{:<16} {:>10} {:>12}", "policy", "MuJoCo", "world model");
+    for p in res["policies"].as_array().into_iter().flatten() {
+        println!(
+            "{:<16} {:>10.3} {:>12.3}",
+            p["name"].as_str().unwrap_or("?"),
+            p["sim"]["mean"].as_f64().unwrap_or(f64::NAN),
+            p["world_model"]["mean"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
+    let ag = &res["agreement"];
+    let f = |k: &str| ag[k].as_f64().map_or("n/a".to_string(), |v| format!("{v:.3}"));
+    println!(
+        "Pearson {}  Spearman {}  Kendall tau_b {}  inversions {}  MMRV {}  regret@1 {}",
+        f("pearson"),
+        f("spearman"),
+        f("kendall_tau_b"),
+        ag["rank_inversions"],
+        f("mmrv"),
+        f("regret_at_1")
+    );
+    println!("results: {}", out.join("results.json").display());
+}

@@ -1,0 +1,195 @@
+//! A trained world model for inference: the frame autoencoder, the (EMA) U-Net
+//! and the sampler of its objective, behind one "predict the next F frames" call.
+//!
+//! - `drifting` and `mse`: one U-Net pass maps noise + history + actions to F frames.
+//! - `diffusion`: v-prediction with a cosine schedule, sampled with K deterministic
+//!   DDIM steps (K U-Net passes per chunk) — the multi-step baseline.
+//!
+//! Sampling noise comes from per-row RNGs the caller owns, so a row's frames
+//! never depend on the batch it runs in.
+
+use std::path::{Path, PathBuf};
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor, TensorData};
+use harness::rng::Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::autoencoder::Autoencoder;
+use crate::error::WorldModelError;
+use crate::latents::LatentStats;
+use crate::train_ae::{ckpt, load_autoencoder};
+use crate::unet::{UNet, UNetConfig};
+
+/// The training objective, which also decides how frames are sampled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Objective {
+    /// DriftWorld: the drifting loss, one pass per chunk.
+    Drifting,
+    /// One-step regression baseline, one pass per chunk.
+    Mse,
+    /// Multi-step diffusion baseline (v-prediction, DDIM sampling).
+    Diffusion,
+}
+
+impl Objective {
+    /// The lowercase name used on the command line and in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Objective::Drifting => "drifting",
+            Objective::Mse => "mse",
+            Objective::Diffusion => "diffusion",
+        }
+    }
+}
+
+/// Everything needed to rebuild a world model (its `config.json` "model" entry).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorldModelConfig {
+    /// Training objective / sampler.
+    pub objective: Objective,
+    /// U-Net hyper-parameters.
+    pub unet: UNetConfig,
+    /// Latent normalisation.
+    pub latents: LatentStats,
+    /// The autoencoder folder, relative to the world-model folder.
+    pub autoencoder: PathBuf,
+    /// Future frames per pass F.
+    pub future: usize,
+    /// DDIM steps per chunk (diffusion only).
+    pub sample_steps: usize,
+}
+
+/// ᾱ(t) of the cosine schedule (Nichol & Dhariwal), t ∈ [0, 1].
+pub fn alpha_bar(t: f64) -> f64 {
+    let s = 0.008;
+    let f = |t: f64| ((t + s) / (1.0 + s) * std::f64::consts::FRAC_PI_2).cos().powi(2);
+    (f(t) / f(0.0)).clamp(1e-5, 1.0)
+}
+
+/// A loaded world model (inference only, EMA weights).
+pub struct WorldModel {
+    /// Its configuration.
+    pub cfg: WorldModelConfig,
+    ae: Autoencoder,
+    unet: UNet,
+    device: Device,
+}
+
+/// Standard-normal noise `[rows, per]`, row r drawn from `rngs[r]`.
+pub fn row_noise(rngs: &mut [Rng], per: usize) -> Vec<f32> {
+    rngs.iter_mut().flat_map(|r| r.normals_f32(per)).collect()
+}
+
+impl WorldModel {
+    /// Loads `dir/config.json` and `dir/ema.bpk`, and the autoencoder it names.
+    ///
+    /// # Errors
+    /// [`WorldModelError::Checkpoint`] naming the file that is missing, unreadable or
+    /// does not match its config.
+    pub fn load(dir: &Path, device: &Device) -> Result<Self, WorldModelError> {
+        let cfg_path = dir.join("config.json");
+        let text = std::fs::read_to_string(&cfg_path).map_err(|e| ckpt(&cfg_path, e))?;
+        let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| ckpt(&cfg_path, e))?;
+        let cfg: WorldModelConfig = serde_json::from_value(v["model"].clone())
+            .map_err(|e| ckpt(&cfg_path, format!("\"model\": {e}")))?;
+        let weights = dir.join("ema.bpk");
+        let unet = cfg.unet.init(device).try_load_file(&weights).map_err(|e| ckpt(&weights, e))?;
+        let (ae, ae_cfg) = load_autoencoder(&dir.join(&cfg.autoencoder), device)?;
+        if ae_cfg.latent_channels != cfg.latents.channels || ae_cfg.latent_size() != cfg.latents.size {
+            return Err(ckpt(&cfg_path, "latent shape differs from the autoencoder's"));
+        }
+        Ok(Self { cfg, ae, unet, device: device.clone() })
+    }
+
+    /// Builds a model from parts (used by the trainer's evaluation).
+    pub fn from_parts(cfg: WorldModelConfig, ae: Autoencoder, unet: UNet, device: &Device) -> Self {
+        Self { cfg, ae, unet, device: device.clone() }
+    }
+
+    /// The device it runs on.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// U-Net passes per generated chunk.
+    pub fn passes_per_chunk(&self) -> usize {
+        if self.cfg.objective == Objective::Diffusion { self.cfg.sample_steps } else { 1 }
+    }
+
+    /// Encodes frames in [-1, 1] to normalised latents.
+    ///
+    /// # Shapes
+    /// `[b, 3, H, W] -> [b, C, s, s]`
+    pub fn encode(&self, frames: Tensor<4>) -> Tensor<4> {
+        let z = self.ae.encode(frames);
+        let (m, s) = self.stat_tensors();
+        (z - m) / s
+    }
+
+    /// Decodes normalised latents to frames (raw, nominally [-1, 1]).
+    ///
+    /// # Shapes
+    /// `[b, C, s, s] -> [b, 3, H, W]`
+    pub fn decode(&self, z: Tensor<4>) -> Tensor<4> {
+        let (m, s) = self.stat_tensors();
+        self.ae.decode(z * s + m)
+    }
+
+    fn stat_tensors(&self) -> (Tensor<4>, Tensor<4>) {
+        let c = self.cfg.latents.channels;
+        let t = |v: &[f32]| Tensor::<1>::from_floats(v, &self.device).reshape([1, c, 1, 1]);
+        (t(&self.cfg.latents.mean), t(&self.cfg.latents.std))
+    }
+
+    /// Predicts the next F latent frames in latent space.
+    ///
+    /// # Shapes
+    /// - `history`: `[b, K, C, s, s]` normalised latents
+    /// - `actions`: `[b, F, 2]` normalised actions (F ≤ the configured future)
+    /// - returns `[b, F, C, s, s]`
+    pub fn predict(&self, history: Tensor<5>, actions: Tensor<3>, rngs: &mut [Rng]) -> Tensor<5> {
+        let [b, _, c, s, _] = history.dims();
+        let [_, f, _] = actions.dims();
+        let hist = history.swap_dims(1, 2); // [b, C, K, s, s]
+        let noise = row_noise(rngs, c * f * s * s);
+        let x = Tensor::<5>::from_data(TensorData::new(noise, [b, c, f, s, s]), &self.device);
+        let out = match self.cfg.objective {
+            Objective::Drifting | Objective::Mse => self.unet.forward(x, hist, actions, None),
+            Objective::Diffusion => self.ddim(x, hist, actions),
+        };
+        out.swap_dims(1, 2) // [b, F, C, s, s]
+    }
+
+    /// Deterministic DDIM from t = 1 to 0 in `sample_steps` steps (v-prediction).
+    fn ddim(&self, mut x: Tensor<5>, hist: Tensor<5>, actions: Tensor<3>) -> Tensor<5> {
+        let k = self.cfg.sample_steps.max(1);
+        let b = x.dims()[0];
+        for i in 0..k {
+            let (t, t_next) = (1.0 - i as f64 / k as f64, 1.0 - (i + 1) as f64 / k as f64);
+            let (a, a_next) = (alpha_bar(t), alpha_bar(t_next));
+            let tt = Tensor::<1>::from_floats(vec![t as f32; b].as_slice(), &self.device);
+            let v = self.unet.forward(x.clone(), hist.clone(), actions.clone(), Some(tt));
+            let x0 = x.clone() * a.sqrt() - v.clone() * (1.0 - a).sqrt();
+            let eps = x * (1.0 - a).sqrt() + v * a.sqrt();
+            x = x0 * a_next.sqrt() + eps * (1.0 - a_next).sqrt();
+        }
+        x
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cosine_schedule_ends() {
+        // ᾱ(0) = 1 exactly; ᾱ(1) = cos²(π/2) / cos²(0.008/1.008 · π/2) ≈ 0, clamped to 1e-5.
+        assert_eq!(alpha_bar(0.0), 1.0);
+        assert_eq!(alpha_bar(1.0), 1e-5);
+        // ᾱ(0.5) = cos²(0.508/1.008 · π/2) / cos²(0.008/1.008 · π/2) = 0.49384 (hand-computed).
+        assert!((alpha_bar(0.5) - 0.49384).abs() < 1e-4, "{}", alpha_bar(0.5));
+    }
+}

@@ -1,0 +1,349 @@
+//! Training the world model's U-Net on autoencoder latents with one of three
+//! objectives (drifting, one-step MSE, multi-step diffusion), resumable and
+//! time-boxed like the autoencoder's trainer (spec §6).
+//!
+//! One drifting step: B contexts, each repeated N times with fresh noise; the U-Net
+//! predicts F frames per clip in one pass; each (context, future frame) is its own
+//! drift problem with the N generated frames as negatives and the true frame as the
+//! single positive. AdamW β = (0.9, 0.95), weight decay 0.01, linear warm-up then a
+//! constant rate, global grad-norm clip, EMA of the weights (all sampling uses it).
+//!
+//! Output folder: `config.json` (model + training config), `model.bpk`, `ema.bpk`,
+//! `optimizer.bpk`, `state.json`, `train_log.jsonl`.
+
+use std::io::Write;
+use std::path::Path;
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::{AdamWConfig, GradientsParams};
+use burn::tensor::{Device, Distribution, Tensor, TensorData};
+use harness::rng::Rng;
+use harness::seed::{derive, splitmix64};
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+
+use crate::autoencoder::Autoencoder;
+use crate::data::{EpisodeData, Split};
+use crate::drift::drift_loss;
+use crate::error::WorldModelError;
+use crate::latents::{Latents, Window, window, window_starts};
+use crate::model::{Objective, WorldModel, WorldModelConfig, alpha_bar};
+use crate::optim::{Ema, clip_global_norm, warmup_lr};
+use crate::train_ae::{RunOptions, State, ckpt, io};
+use crate::unet::UNet;
+
+/// Training hyper-parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WmTrainConfig {
+    /// Optimizer steps in total.
+    pub steps: u64,
+    /// Contexts per step B.
+    pub contexts: usize,
+    /// Generated samples per context N (drifting; 1 for the baselines).
+    pub samples: usize,
+    /// Peak learning rate.
+    pub lr: f64,
+    /// Warm-up steps.
+    pub warmup: u64,
+    /// Seed of the initial weights, windows and noise.
+    pub seed: u64,
+    /// EMA decay per step.
+    pub ema_decay: f64,
+    /// Global gradient-norm clip.
+    pub clip_norm: f64,
+    /// Drift temperatures.
+    pub temperatures: Vec<f32>,
+    /// Held-out evaluation every this many steps.
+    pub eval_every: u64,
+    /// Held-out windows in that evaluation.
+    pub eval_windows: usize,
+    /// Checkpoint every this many steps.
+    pub checkpoint_every: u64,
+}
+
+impl WmTrainConfig {
+    /// Defaults sized for a 2-core CPU: 4 contexts x 8 samples for drifting,
+    /// 32 contexts x 1 for the baselines (the same number of clips per step).
+    pub fn for_objective(objective: Objective) -> Self {
+        let (contexts, samples) = if objective == Objective::Drifting { (4, 8) } else { (32, 1) };
+        Self {
+            steps: 6000,
+            contexts,
+            samples,
+            lr: 2e-4,
+            warmup: 500,
+            seed: 1,
+            ema_decay: 0.999,
+            clip_norm: 2.0,
+            temperatures: crate::drift::PUSHT_TEMPERATURES.to_vec(),
+            eval_every: 250,
+            eval_windows: 32,
+            checkpoint_every: 50,
+        }
+    }
+}
+
+/// A training progress report.
+#[derive(Clone, Debug)]
+pub struct WmProgress {
+    /// Steps done.
+    pub step: u64,
+    /// Steps in total.
+    pub total: u64,
+    /// Last batch loss.
+    pub loss: f64,
+    /// Per-temperature `loss_R` (drifting only).
+    pub loss_r: Vec<f32>,
+    /// Last held-out one-chunk latent MSE.
+    pub eval_mse: Option<f64>,
+}
+
+/// What a (possibly time-limited) run ended with.
+#[derive(Clone, Debug)]
+pub struct WmOutcome {
+    /// Steps done.
+    pub step: u64,
+    /// Steps configured.
+    pub total: u64,
+    /// Whether all configured steps are done.
+    pub finished: bool,
+    /// Held-out one-chunk latent MSE of the EMA model at the end.
+    pub eval_mse: f64,
+    /// Wall seconds over all sessions.
+    pub elapsed_s: f64,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Configs {
+    model: WorldModelConfig,
+    train: WmTrainConfig,
+}
+
+/// Stacked windows: `[b·K]` history and `[b·F]` target indices, `[b, F, 2]` actions.
+fn stack(windows: &[Window], repeat: usize, device: &Device) -> (Vec<usize>, Vec<usize>, Tensor<3>) {
+    let mut hist = Vec::new();
+    let mut targets = Vec::new();
+    let mut acts = Vec::new();
+    for w in windows {
+        for _ in 0..repeat {
+            hist.extend_from_slice(&w.history);
+            targets.extend_from_slice(&w.targets);
+            acts.extend_from_slice(&w.actions);
+        }
+    }
+    let f = windows.first().map_or(0, |w| w.targets.len());
+    let act = Tensor::from_data(TensorData::new(acts, [windows.len() * repeat, f, 2]), device);
+    (hist, targets, act)
+}
+
+/// Held-out one-chunk latent MSE of `model` on `windows` (fixed noise seeds).
+fn evaluate(model: &WorldModel, latents: &mut Latents, ae: &Autoencoder, windows: &[Window]) -> f64 {
+    let device = model.device().clone();
+    let (k, f) = (windows[0].history.len(), windows[0].targets.len());
+    let (hist, targets, act) = stack(windows, 1, &device);
+    latents.ensure(&hist, ae, &device);
+    latents.ensure(&targets, ae, &device);
+    let mut rngs: Vec<Rng> = (0..windows.len()).map(|i| Rng::new(i as u64)).collect();
+    let pred = model.predict(latents.tensor(&hist, k, &device), act, &mut rngs);
+    let truth = latents.tensor(&targets, f, &device);
+    (pred - truth).powf_scalar(2.0).mean().into_scalar::<f32>().into()
+}
+
+/// Trains (or resumes) into `out`. `ae` must be the autoencoder at
+/// `out/model.autoencoder` (loaded on the plain CPU device).
+///
+/// # Errors
+/// [`WorldModelError`] for unreadable checkpoints, I/O failures or a non-finite loss
+/// (naming the step).
+pub fn train_world_model(
+    data: &EpisodeData,
+    ae: &Autoencoder,
+    out: &Path,
+    model_cfg: &WorldModelConfig,
+    cfg: &WmTrainConfig,
+    run: RunOptions,
+    on_progress: &mut dyn FnMut(&WmProgress),
+) -> Result<WmOutcome, WorldModelError> {
+    let device = Device::flex().autodiff();
+    let inner = Device::flex();
+    let cfg_path = out.join("config.json");
+    let (model_cfg, cfg) = if run.resume {
+        let text = std::fs::read_to_string(&cfg_path).map_err(|e| ckpt(&cfg_path, e))?;
+        let mut c: Configs = serde_json::from_str(&text).map_err(|e| ckpt(&cfg_path, e))?;
+        if run.extend && c.train.steps != cfg.steps {
+            c.train.steps = cfg.steps;
+            std::fs::write(&cfg_path, serde_json::to_string_pretty(&c).unwrap_or_default())
+                .map_err(io(&cfg_path))?;
+        }
+        (c.model, c.train)
+    } else {
+        std::fs::create_dir_all(out).map_err(io(out))?;
+        let c = Configs { model: model_cfg.clone(), train: cfg.clone() };
+        std::fs::write(&cfg_path, serde_json::to_string_pretty(&c).unwrap_or_default())
+            .map_err(io(&cfg_path))?;
+        (c.model, c.train)
+    };
+    let objective = model_cfg.objective;
+    let (k, f) = (model_cfg.unet.history, model_cfg.future);
+    let starts = window_starts(data, Split::Train, f);
+    let held = window_starts(data, Split::HeldOut, f);
+    if starts.is_empty() || held.is_empty() {
+        return Err(WorldModelError::Data {
+            path: out.to_path_buf(),
+            message: format!("need episodes longer than {f} steps in both splits (every 10th is held out)"),
+        });
+    }
+    let stride = (held.len() / cfg.eval_windows.max(1)).max(1);
+    let eval_windows: Vec<Window> =
+        held.iter().step_by(stride).take(cfg.eval_windows).map(|&t| window(data, t, k, f)).collect();
+    let mut latents = Latents::new(data, model_cfg.latents.clone());
+    let mut unet: UNet = model_cfg.unet.init(&device);
+    let mut optim = AdamWConfig::new().with_beta_1(0.9).with_beta_2(0.95).with_weight_decay(0.01).init();
+    let mut ema = Ema::new(&unet, cfg.ema_decay);
+    let mut state = State { step: 0, elapsed_s: 0.0 };
+    let paths = ["model.bpk", "ema.bpk", "optimizer.bpk", "state.json"].map(|p| out.join(p));
+    if run.resume {
+        unet = unet.try_load_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;
+        ema.module = model_cfg.unet.init(&inner).try_load_file(&paths[1]).map_err(|e| ckpt(&paths[1], e))?;
+        optim = optim.load(&paths[2]).map_err(|e| ckpt(&paths[2], e))?;
+        let text = std::fs::read_to_string(&paths[3]).map_err(|e| ckpt(&paths[3], e))?;
+        state = serde_json::from_str(&text).map_err(|e| ckpt(&paths[3], e))?;
+    }
+    // Noise continues from a seed of (seed, step), so a resumed run draws fresh noise.
+    device.seed(derive(cfg.seed, &[u64::MAX, state.step]));
+    let save = |unet: &UNet, ema: &UNet, optim: &burn::optim::ModuleOptimizer, state: &State| {
+        unet.clone().save_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;
+        ema.clone().save_file(&paths[1]).map_err(|e| ckpt(&paths[1], e))?;
+        optim.save(&paths[2]).map_err(|e| ckpt(&paths[2], e))?;
+        std::fs::write(&paths[3], serde_json::to_string(state).unwrap_or_default()).map_err(io(&paths[3]))
+    };
+    let log_path = out.join("train_log.jsonl");
+    let mut log =
+        std::fs::OpenOptions::new().create(true).append(true).open(&log_path).map_err(io(&log_path))?;
+    let started = Instant::now();
+    let base_elapsed = state.elapsed_s;
+    let deadline = run.max_minutes.map(|m| m * 60.0);
+    let eval_model = |ema: &UNet| WorldModel::from_parts(model_cfg.clone(), ae.clone(), ema.clone(), &inner);
+    let mut last_eval = None;
+    let (c, s) = (model_cfg.latents.channels, model_cfg.latents.size);
+    while state.step < cfg.steps {
+        if deadline.is_some_and(|d| started.elapsed().as_secs_f64() >= d) {
+            break;
+        }
+        let step = state.step;
+        let mut rng = derive(cfg.seed, &[step]);
+        let windows: Vec<Window> = (0..cfg.contexts)
+            .map(|_| {
+                rng = splitmix64(rng);
+                window(data, starts[(rng % starts.len() as u64) as usize], k, f)
+            })
+            .collect();
+        let n = if objective == Objective::Drifting { cfg.samples } else { 1 };
+        let (hist_idx, target_idx, act) = stack(&windows, n, &device);
+        latents.ensure(&hist_idx, ae, &inner);
+        latents.ensure(&target_idx, ae, &inner);
+        let hist = latents.tensor(&hist_idx, k, &device).swap_dims(1, 2); // [b n, C, K, s, s]
+        let b = windows.len();
+        let mut loss_r = Vec::new();
+        let loss = match objective {
+            Objective::Drifting => {
+                let noise = Tensor::<5>::random([b * n, c, f, s, s], Distribution::Normal(0.0, 1.0), &device);
+                let out = unet.forward(noise, hist, act, None); // [b n, C, F, s, s]
+                let out =
+                    out.reshape([b, n, c, f, s * s]).permute([0, 3, 1, 2, 4]).reshape([b * f, n, c * s * s]);
+                let pos_idx: Vec<usize> = windows.iter().flat_map(|w| w.targets.iter().copied()).collect();
+                let pos = latents.tensor(&pos_idx, f, &device).reshape([b * f, 1, c * s * s]);
+                let (loss, field) = drift_loss(out, None, &pos, &cfg.temperatures);
+                loss_r = field.loss_r;
+                loss
+            }
+            Objective::Mse => {
+                let noise = Tensor::<5>::random([b, c, f, s, s], Distribution::Normal(0.0, 1.0), &device);
+                let target = latents.tensor(&target_idx, f, &device).swap_dims(1, 2); // [b, C, F, s, s]
+                (unet.forward(noise, hist, act, None) - target).powf_scalar(2.0).mean()
+            }
+            Objective::Diffusion => {
+                let x0 = latents.tensor(&target_idx, f, &device).swap_dims(1, 2); // [b, C, F, s, s]
+                let eps = Tensor::<5>::random([b, c, f, s, s], Distribution::Normal(0.0, 1.0), &device);
+                let t: Vec<f32> = (0..b)
+                    .map(|_| {
+                        rng = splitmix64(rng);
+                        (rng >> 11) as f32 / (1u64 << 53) as f32
+                    })
+                    .collect();
+                let coef = |g: &dyn Fn(f64) -> f64| {
+                    let v: Vec<f32> = t.iter().map(|&t| g(alpha_bar(f64::from(t))) as f32).collect();
+                    Tensor::<1>::from_floats(v.as_slice(), &device).reshape([b, 1, 1, 1, 1])
+                };
+                let (sa, sb) = (coef(&|a| a.sqrt()), coef(&|a| (1.0 - a).sqrt()));
+                let xt = x0.clone() * sa.clone() + eps.clone() * sb.clone();
+                let v = eps * sa - x0 * sb; // v-prediction target
+                let tt = Tensor::<1>::from_floats(t.as_slice(), &device);
+                (unet.forward(xt, hist, act, Some(tt)) - v).powf_scalar(2.0).mean()
+            }
+        };
+        let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
+        if !loss_value.is_finite() {
+            return Err(WorldModelError::NonFinite {
+                what: format!("{} loss", objective.name()),
+                step,
+                path: out.to_path_buf(),
+            });
+        }
+        let mut grads = GradientsParams::from_grads(loss.backward(), &unet);
+        let grad_norm = clip_global_norm(&unet, &mut grads, cfg.clip_norm);
+        if !grad_norm.is_finite() {
+            return Err(WorldModelError::NonFinite {
+                what: "gradient norm".into(),
+                step,
+                path: out.to_path_buf(),
+            });
+        }
+        let lr = warmup_lr(step, cfg.lr, cfg.warmup);
+        unet = optim.step(lr, unet, grads);
+        ema.update(&unet);
+        state.step += 1;
+        state.elapsed_s = base_elapsed + started.elapsed().as_secs_f64();
+        if state.step.is_multiple_of(cfg.eval_every) || state.step == cfg.steps {
+            let mse = evaluate(&eval_model(&ema.module), &mut latents, ae, &eval_windows);
+            if !mse.is_finite() {
+                return Err(WorldModelError::NonFinite {
+                    what: "generated frames".into(),
+                    step,
+                    path: out.to_path_buf(),
+                });
+            }
+            last_eval = Some(mse);
+            tracing::info!(
+                step = state.step,
+                loss = loss_value,
+                eval_mse = mse,
+                "world-model held-out evaluation"
+            );
+        }
+        let line = json!({"step": state.step, "loss": loss_value, "loss_r": loss_r, "grad_norm": grad_norm,
+            "lr": lr, "eval_mse": last_eval, "elapsed_s": state.elapsed_s});
+        writeln!(log, "{line}").map_err(io(&log_path))?;
+        if state.step.is_multiple_of(cfg.checkpoint_every) {
+            save(&unet, &ema.module, &optim, &state)?;
+        }
+        on_progress(&WmProgress {
+            step: state.step,
+            total: cfg.steps,
+            loss: loss_value,
+            loss_r,
+            eval_mse: last_eval,
+        });
+    }
+    save(&unet, &ema.module, &optim, &state)?;
+    let eval_mse = evaluate(&eval_model(&ema.module), &mut latents, ae, &eval_windows);
+    Ok(WmOutcome {
+        step: state.step,
+        total: cfg.steps,
+        finished: state.step >= cfg.steps,
+        eval_mse,
+        elapsed_s: state.elapsed_s,
+    })
+}
