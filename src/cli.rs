@@ -38,6 +38,9 @@ pub enum Command {
     /// Agreement metrics (Pearson, Spearman, Kendall τ_b, inversions, MMRV, regret@1, CIs)
     /// between predicted and actual policy scores in a CSV; JSON on stdout.
     Agreement(AgreementArgs),
+    /// World-model tools.
+    #[command(subcommand)]
+    Wm(WmCommand),
     /// Rank policy checkpoints in the world model, checked against MuJoCo (paired episodes).
     Rank(RankArgs),
 }
@@ -54,6 +57,42 @@ pub struct AgreementArgs {
     /// Bootstrap seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+}
+
+/// `evalharness wm ...`.
+#[derive(Debug, Subcommand)]
+pub enum WmCommand {
+    /// Video quality (MSE, PSNR, SSIM, ms/frame) of world models on held-out episodes.
+    Eval(WmEvalArgs),
+}
+
+/// `evalharness wm eval`.
+#[derive(Debug, Args)]
+pub struct WmEvalArgs {
+    /// World-model folders to compare (repeat the flag).
+    #[arg(long = "world-model", required = true)]
+    pub world_models: Vec<PathBuf>,
+    /// Dataset; only held-out episodes (index % 10 == 9) are used.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Held-out episodes for the 64-frame rollouts (4 real + 60 generated).
+    #[arg(long, default_value_t = 20)]
+    pub episodes: usize,
+    /// Held-out episodes rolled out from start to end.
+    #[arg(long, default_value_t = 4)]
+    pub full_episodes: usize,
+    /// Videos generated together.
+    #[arg(long, default_value_t = 20)]
+    pub batch: usize,
+    /// Seed of the generator noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output folder (eval.json, filmstrip.png).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Replace an existing `--out`.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `evalharness rank`.
@@ -311,9 +350,14 @@ pub struct SimulateArgs {
     /// Scenario, episodes, seeds, jobs.
     #[command(flatten)]
     pub common: ScenarioArgs,
-    /// Behaviour to run: `expert` (sampling planner) or `explore` (smooth random targets).
+    /// Behaviour to run: `expert` (sampling planner), `explore` (smooth random targets),
+    /// or a policy checkpoint folder / folder of checkpoints (scores each checkpoint).
     #[arg(long, default_value = "expert")]
     pub policy: String,
+    /// With a policy folder: write each checkpoint's measured MuJoCo score into its
+    /// `provenance.json`.
+    #[arg(long)]
+    pub record_scores: bool,
     /// Output directory: summary.json, episodes.jsonl, config.json and a GIF of the first episode.
     #[arg(long)]
     pub out: PathBuf,

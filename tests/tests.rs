@@ -2,6 +2,7 @@
 
 mod agreement;
 mod dataset;
+mod pipeline;
 mod simulate;
 mod train;
 mod util;

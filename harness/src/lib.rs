@@ -1,11 +1,13 @@
 //! evalharness core: what every other crate shares, with no burn or MuJoCo in sight.
 //!
 //! - [`policy`] + [`rng`]: the batched policy interface and the caller-owned noise streams;
+//! - [`image`]: PSNR and SSIM as scikit-image computes them on 8-bit frames;
 //! - [`seed`]: deterministic seed derivation (episode RNGs never depend on thread order);
 //! - [`metrics`]: agreement metrics between predicted and true policy scores, with CIs;
 //! - [`zarr`] and [`replay`]: the diffusion_policy / GPC replay-buffer dataset layout.
 
 pub mod blosc;
+pub mod image;
 pub mod metrics;
 pub mod policy;
 pub mod replay;

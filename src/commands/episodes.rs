@@ -33,11 +33,9 @@ impl BehaviourKind {
         match name {
             "expert" => Ok(Self::Expert),
             "explore" => Ok(Self::Explore),
-            other if std::path::Path::new(other).is_dir() => bail!(
-                "'{other}' is a directory: policy checkpoint directories are not supported yet \
-                 (built-in behaviours: expert, explore)"
+            other => bail!(
+                "unknown policy '{other}' (built-in behaviours: expert, explore; or a checkpoint folder)"
             ),
-            other => bail!("unknown policy '{other}' (built-in behaviours: expert, explore)"),
         }
     }
 

@@ -5,9 +5,11 @@ mod collect;
 mod dataset;
 mod episodes;
 mod simulate;
+mod simulate_policy;
 mod train;
 mod train_policy;
 mod train_wm;
+mod wm_eval;
 
 use std::process::ExitCode;
 
@@ -15,7 +17,7 @@ use anyhow::Result;
 
 pub use episodes::RendererKind;
 
-use crate::cli::{Cli, Command, DatasetCommand, TrainCommand};
+use crate::cli::{Cli, Command, DatasetCommand, TrainCommand, WmCommand};
 
 /// Runs the parsed command; the exit code is 0 unless a gate failed (1).
 pub fn run(cli: &Cli) -> Result<ExitCode> {
@@ -28,5 +30,6 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Train(TrainCommand::Policy(a)) => train_policy::run(a, cli.quiet),
         Command::Agreement(a) => agreement::run(a),
         Command::Rank(a) => crate::rank::run(a, cli.quiet),
+        Command::Wm(WmCommand::Eval(a)) => wm_eval::run(a),
     }
 }

@@ -33,6 +33,9 @@ fn side_by_side_difference(frames: &[Vec<u8>], size: usize) -> f64 {
 
 /// Runs the command.
 pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
+    if std::path::Path::new(&args.policy).is_dir() {
+        return super::simulate_policy::run(args, quiet);
+    }
     let c = &args.common;
     let kind = BehaviourKind::parse(&args.policy)?;
     let cfg = load_pusht(&c.scenario)?;

@@ -6,7 +6,7 @@
 //! as batches finish), `episodes.csv`, `results.json`. `--resume` skips episodes
 //! already in `episodes.jsonl`; `--shard i/n` runs every n-th batch.
 
-mod paired;
+pub mod paired;
 pub mod results;
 
 use std::path::Path;
@@ -74,7 +74,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         .num_threads(a.jobs.max(1))
         .build()
         .context("starting worker threads")?;
-    let setup = Setup { cfg: &cfg, model: &model, wm: &wm, master_seed: a.seed, max_steps: a.max_steps };
+    let setup = Setup { cfg: &cfg, model: &model, master_seed: a.seed, max_steps: a.max_steps };
     let expect = Expectations { image_size: cfg.render.size as usize, action_dim: 2 };
     let seeds: Vec<u64> = (0..a.episodes as u64).map(|i| a.seed_start + i).collect();
     let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
@@ -110,7 +110,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
             if todo.is_empty() {
                 continue;
             }
-            let out = pool.install(|| run_batch(policy.as_ref(), &todo, &setup, &mut timing));
+            let out = pool.install(|| run_batch(policy.as_ref(), &todo, &setup, &wm, &mut timing));
             match out {
                 Ok(new) => {
                     // Drop half-written pairs of these seeds (from a killed run) before appending.

@@ -5,8 +5,10 @@
 //! - **World model**: the history starts as the first rendered frame repeated 4×;
 //!   each action chunk is imagined in one-pass chunks of F frames; the policy sees
 //!   only decoded imagined frames, with the last commanded action standing in for
-//!   the agent position (as in DriftWorld's evaluation); frames are scored by
-//!   [`FrameScorer`] against the known goal.
+//!   the agent position (as in DriftWorld's evaluation). Only the frames the
+//!   policy sees (the last `obs_horizon` of each chunk) are decoded to pixels, and
+//!   those are scored by [`FrameScorer`] against the known goal; the MuJoCo branch
+//!   is scored exactly at every step.
 //!
 //! Both branches draw the policy's sampling noise from clones of the same
 //! per-episode stream, so they are matched pairs. All episodes advance in
@@ -51,8 +53,6 @@ pub struct Setup<'a> {
     pub cfg: &'a PushTConfig,
     /// Compiled MuJoCo model.
     pub model: &'a Arc<MjModel>,
-    /// The world model.
-    pub wm: &'a WorldModel,
     /// Master seed of the policy noise.
     pub master_seed: u64,
     /// Control steps per episode.
@@ -96,6 +96,53 @@ fn push(hist: &mut VecDeque<Seen>, item: Seen, keep: usize) {
     }
 }
 
+/// What both branches start from: environments reset to the seeds, their goals,
+/// frame scorers, the first rendered frames and the policy noise streams.
+pub struct Start {
+    envs: Vec<PushTEnv>,
+    goals: Vec<[f64; 3]>,
+    scorers: Vec<FrameScorer>,
+    first: Vec<Vec<u8>>,
+    start_pos: Vec<[f32; 2]>,
+    policy_rngs: Vec<Rng>,
+    seeds: Vec<u64>,
+}
+
+impl Start {
+    /// Resets one environment per seed.
+    ///
+    /// # Errors
+    /// A diverging first physics step, naming the seed.
+    pub fn new(policy: &str, seeds: &[u64], s: &Setup) -> Result<Self> {
+        let raster = Rasterizer::new(s.cfg);
+        let mut envs = Vec::with_capacity(seeds.len());
+        for &seed in seeds {
+            let mut env = PushTEnv::new(s.model.clone(), s.cfg);
+            env.reset(seed)?;
+            envs.push(env);
+        }
+        let scorers = envs.iter().map(|e| FrameScorer::new(s.cfg, &e.goal(), raster.size())).collect();
+        Ok(Self {
+            goals: envs.iter().map(|e| e.goal().to_array()).collect(),
+            scorers,
+            first: envs.iter().map(|e| raster.render(&e.state(), &e.goal())).collect(),
+            start_pos: envs.iter().map(|e| e.state().agent.map(|v| v as f32)).collect(),
+            policy_rngs: seeds
+                .iter()
+                .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(policy), sd])))
+                .collect(),
+            seeds: seeds.to_vec(),
+            envs,
+        })
+    }
+
+    fn histories(&self, o: usize) -> Vec<VecDeque<Seen>> {
+        (0..self.envs.len())
+            .map(|i| (0..o).map(|_| (self.first[i].clone(), self.start_pos[i])).collect())
+            .collect()
+    }
+}
+
 /// Runs both branches for `seeds`; returns one row per (seed, branch), MuJoCo first.
 ///
 /// # Errors
@@ -105,68 +152,54 @@ pub fn run_batch(
     policy: &dyn Policy,
     seeds: &[u64],
     s: &Setup,
+    wm: &WorldModel,
     timing: &mut Timing,
 ) -> Result<Vec<EpisodeRow>> {
-    let (cfg, wm) = (s.cfg, s.wm);
+    let start = Start::new(policy.name(), seeds, s)?;
+    let wm_rows = wm_branch(policy, &start, s, wm, timing)?;
+    let sim_rows = sim_branch(policy, start, s, timing)?;
+    Ok(sim_rows.into_iter().zip(wm_rows).flat_map(|(a, b)| [a, b]).collect())
+}
+
+/// The MuJoCo branch: real frames, real agent positions, exact scores.
+///
+/// # Errors
+/// A policy error or a diverging simulation.
+pub fn sim_branch(
+    policy: &dyn Policy,
+    mut start: Start,
+    s: &Setup,
+    timing: &mut Timing,
+) -> Result<Vec<EpisodeRow>> {
     let name = policy.name().to_string();
-    let n = seeds.len();
-    let raster = Rasterizer::new(cfg);
+    let n = start.envs.len();
+    let raster = Rasterizer::new(s.cfg);
     let size = raster.size();
     let o = policy.obs_horizon().max(1);
-    let thr = cfg.task.success_coverage;
-    let t0 = Instant::now();
-    let mut envs: Vec<PushTEnv> = Vec::with_capacity(n);
-    for &seed in seeds {
-        let mut env = PushTEnv::new(s.model.clone(), cfg);
-        env.reset(seed)?;
-        envs.push(env);
-    }
-    let goals: Vec<_> = envs.iter().map(PushTEnv::goal).collect();
-    let scorers: Vec<FrameScorer> = goals.iter().map(|g| FrameScorer::new(cfg, g, size)).collect();
-    let first: Vec<Vec<u8>> = envs.iter().map(|e| raster.render(&e.state(), &e.goal())).collect();
-    let start_pos: Vec<[f32; 2]> = envs.iter().map(|e| e.state().agent.map(|v| v as f32)).collect();
-    let init = |i: usize| -> VecDeque<Seen> { (0..o).map(|_| (first[i].clone(), start_pos[i])).collect() };
-    let mut sim_hist: Vec<_> = (0..n).map(init).collect();
-    let mut wm_hist: Vec<_> = (0..n).map(init).collect();
-    let mut sim_rngs: Vec<Rng> =
-        seeds.iter().map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(&name), sd]))).collect();
-    let mut wm_rngs = sim_rngs.clone();
-    let mut gen_rngs: Vec<Rng> = seeds
-        .iter()
-        .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(&name), sd, fnv1a("world_model")])))
-        .collect();
-    let mut sim_track = vec![Track::default(); n];
-    let mut wm_track = vec![Track::default(); n];
+    let thr = s.cfg.task.success_coverage;
+    let mut hist = start.histories(o);
+    let mut rngs = start.policy_rngs.clone();
+    let mut track = vec![Track::default(); n];
     let mut scorer_err = vec![(0.0f64, 0usize); n];
-    for i in 0..n {
-        let c = envs[i].score().coverage;
-        sim_track[i].add(c, thr);
-        wm_track[i].add(scorers[i].coverage(&first[i]), thr);
+    for (t, env) in track.iter_mut().zip(&start.envs) {
+        t.add(env.score().coverage, thr);
     }
-    let device = wm.device().clone();
-    let k = wm.cfg.unet.history;
-    let refs: Vec<&[u8]> = first.iter().map(Vec::as_slice).collect();
-    let first_t = policies::diffusion::frames_to_tensor(&refs, size, &device); // [n, 3, H, W]
-    let z0 = wm.encode(first_t); // [n, C, s, s]
-    let [_, c, ls, _] = z0.dims();
-    let mut zh = z0.unsqueeze_dim::<5>(1).expand([n, k, c, ls, ls]); // [n, K, C, s, s]
-    timing.sim_s += t0.elapsed().as_secs_f64();
     let mut steps = 0;
     while steps < s.max_steps {
-        // MuJoCo branch.
         let tp = Instant::now();
-        let obs: Vec<Observation> = sim_hist.iter().map(|h| obs_of(h, size)).collect();
-        let chunks: Vec<ActionChunk> = policy.act(&obs, &mut sim_rngs).map_err(|e| anyhow!(e))?;
+        let obs: Vec<Observation> = hist.iter().map(|h| obs_of(h, size)).collect();
+        let chunks: Vec<ActionChunk> = policy.act(&obs, &mut rngs).map_err(|e| anyhow!(e))?;
         timing.policy_s += tp.elapsed().as_secs_f64();
         let len = chunks.iter().map(Vec::len).min().unwrap_or(0).min(s.max_steps - steps);
         if len == 0 {
             bail!("policy {name} returned an empty action chunk");
         }
         let ts = Instant::now();
-        let results: Vec<ChunkResult> = envs
+        let results: Vec<ChunkResult> = start
+            .envs
             .par_iter_mut()
             .zip(chunks.par_iter())
-            .zip(scorers.par_iter())
+            .zip(start.scorers.par_iter())
             .map(|((env, chunk), scorer)| {
                 let (mut covs, mut frames, mut err) = (Vec::with_capacity(len), Vec::new(), 0.0);
                 for (j, a) in chunk[..len].iter().enumerate() {
@@ -184,19 +217,80 @@ pub fn run_batch(
             .collect();
         for (i, r) in results.into_iter().enumerate() {
             let (covs, frames, err) = r?;
-            covs.iter().for_each(|&cv| sim_track[i].add(cv, thr));
+            covs.iter().for_each(|&cv| track[i].add(cv, thr));
             scorer_err[i].0 += err;
             scorer_err[i].1 += frames.len();
-            frames.into_iter().for_each(|f| push(&mut sim_hist[i], f, o));
+            frames.into_iter().for_each(|f| push(&mut hist[i], f, o));
         }
         timing.sim_s += ts.elapsed().as_secs_f64();
-        // World-model branch.
+        steps += len;
+    }
+    Ok((0..n)
+        .map(|i| {
+            let t = track[i];
+            let err = scorer_err[i].0 / scorer_err[i].1.max(1) as f64;
+            EpisodeRow::new(
+                &name,
+                start.seeds[i],
+                Branch::Sim,
+                t.best_reward,
+                t.max_cov,
+                t.last_cov,
+                thr,
+                steps,
+            )
+            .with_poses(Some(start.envs[i].state().block.to_array()), start.goals[i])
+            .with_scorer_error(Some(err))
+        })
+        .collect())
+}
+
+/// The world-model branch: imagined frames only, scored from frames.
+///
+/// # Errors
+/// A policy error or non-finite generated latents, naming the policy.
+pub fn wm_branch(
+    policy: &dyn Policy,
+    start: &Start,
+    s: &Setup,
+    wm: &WorldModel,
+    timing: &mut Timing,
+) -> Result<Vec<EpisodeRow>> {
+    let name = policy.name().to_string();
+    let n = start.envs.len();
+    let size = Rasterizer::new(s.cfg).size();
+    let o = policy.obs_horizon().max(1);
+    let thr = s.cfg.task.success_coverage;
+    let mut hist = start.histories(o);
+    let mut rngs = start.policy_rngs.clone();
+    let mut gen_rngs: Vec<Rng> = start
+        .seeds
+        .iter()
+        .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(&name), sd, fnv1a("world_model")])))
+        .collect();
+    let mut track = vec![Track::default(); n];
+    for i in 0..n {
+        track[i].add(start.scorers[i].coverage(&start.first[i]), thr);
+    }
+    let tw = Instant::now();
+    let device = wm.device().clone();
+    let (k, f_max) = (wm.cfg.unet.history, wm.cfg.future);
+    let refs: Vec<&[u8]> = start.first.iter().map(Vec::as_slice).collect();
+    let z0 = wm.encode(policies::diffusion::frames_to_tensor(&refs, size, &device)); // [n, C, s, s]
+    let [_, c, ls, _] = z0.dims();
+    let mut zh = z0.unsqueeze_dim::<5>(1).expand([n, k, c, ls, ls]); // [n, K, C, s, s]
+    timing.world_model_s += tw.elapsed().as_secs_f64();
+    let mut steps = 0;
+    while steps < s.max_steps {
         let tp = Instant::now();
-        let obs: Vec<Observation> = wm_hist.iter().map(|h| obs_of(h, size)).collect();
-        let chunks: Vec<ActionChunk> = policy.act(&obs, &mut wm_rngs).map_err(|e| anyhow!(e))?;
+        let obs: Vec<Observation> = hist.iter().map(|h| obs_of(h, size)).collect();
+        let chunks: Vec<ActionChunk> = policy.act(&obs, &mut rngs).map_err(|e| anyhow!(e))?;
         timing.policy_s += tp.elapsed().as_secs_f64();
+        let len = chunks.iter().map(Vec::len).min().unwrap_or(0).min(s.max_steps - steps);
+        if len == 0 {
+            bail!("policy {name} returned an empty action chunk");
+        }
         let tw = Instant::now();
-        let f_max = wm.cfg.future;
         let mut done = 0;
         while done < len {
             let f = f_max.min(len - done);
@@ -210,56 +304,42 @@ pub fn run_batch(
             if !check.is_finite() {
                 bail!("world model produced non-finite latents for policy {name} at step {}", steps + done);
             }
-            let frames = tensor_to_frames(wm.decode(pred.clone().reshape([n * f, c, ls, ls])));
-            zh = Tensor::cat(vec![zh, pred], 1).narrow(1, f, k);
-            for i in 0..n {
-                for j in 0..f {
-                    let fr = &frames[i * f + j];
-                    wm_track[i].add(scorers[i].coverage(fr), thr);
-                    if done + j + o >= len {
-                        push(&mut wm_hist[i], (fr.clone(), chunks[i][done + j]), o);
+            // Decode only the frames the policy will see (the chunk's last `o`): decoding
+            // is the most expensive part of the branch. They are also the frames scored.
+            let first_seen = len.saturating_sub(o).max(done).min(done + f) - done;
+            if first_seen < f {
+                let m = f - first_seen;
+                let seen = pred.clone().narrow(1, first_seen, m).reshape([n * m, c, ls, ls]);
+                let frames = tensor_to_frames(wm.decode(seen));
+                for i in 0..n {
+                    for j in 0..m {
+                        let fr = &frames[i * m + j];
+                        track[i].add(start.scorers[i].coverage(fr), thr);
+                        push(&mut hist[i], (fr.clone(), chunks[i][done + first_seen + j]), o);
                     }
                 }
             }
+            zh = Tensor::cat(vec![zh, pred], 1).narrow(1, f, k);
             timing.frames += (n * f) as u64;
             done += f;
         }
         timing.world_model_s += tw.elapsed().as_secs_f64();
         steps += len;
     }
-    let mut rows = Vec::with_capacity(2 * n);
-    for i in 0..n {
-        let g = goals[i].to_array();
-        let st = envs[i].state();
-        let (st_, wt) = (sim_track[i], wm_track[i]);
-        let err = scorer_err[i].0 / scorer_err[i].1.max(1) as f64;
-        rows.push(
+    Ok((0..n)
+        .map(|i| {
+            let t = track[i];
             EpisodeRow::new(
                 &name,
-                seeds[i],
-                Branch::Sim,
-                st_.best_reward,
-                st_.max_cov,
-                st_.last_cov,
-                thr,
-                steps,
-            )
-            .with_poses(Some(st.block.to_array()), g)
-            .with_scorer_error(Some(err)),
-        );
-        rows.push(
-            EpisodeRow::new(
-                &name,
-                seeds[i],
+                start.seeds[i],
                 Branch::WorldModel,
-                wt.best_reward,
-                wt.max_cov,
-                wt.last_cov,
+                t.best_reward,
+                t.max_cov,
+                t.last_cov,
                 thr,
                 steps,
             )
-            .with_poses(None, g),
-        );
-    }
-    Ok(rows)
+            .with_poses(None, start.goals[i])
+        })
+        .collect())
 }

@@ -135,7 +135,7 @@ pub fn append_rows(path: &Path, rows: &[EpisodeRow]) -> Result<()> {
 }
 
 /// Mean, bootstrap CI, success rate and Wilson CI of one branch of one policy.
-fn branch_stats(rows: &[&EpisodeRow], bootstrap: usize, seed: u64) -> Value {
+pub fn branch_stats(rows: &[&EpisodeRow], bootstrap: usize, seed: u64) -> Value {
     let scores: Vec<f64> = rows.iter().map(|r| r.score).collect();
     let n = scores.len();
     let k = rows.iter().filter(|r| r.success).count();

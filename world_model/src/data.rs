@@ -83,6 +83,12 @@ impl EpisodeData {
             .collect()
     }
 
+    /// Frame `i` (HWC bytes).
+    pub fn frame(&self, i: usize) -> &[u8] {
+        let n = self.size * self.size * 3;
+        &self.frames[i * n..(i + 1) * n]
+    }
+
     /// Frames `idx` as a `[b, 3, h, w]` tensor in [-1, 1].
     pub fn frames_tensor(&self, idx: &[usize], device: &Device) -> Tensor<4> {
         let s = self.size;
@@ -120,23 +126,11 @@ pub fn tensor_to_frames(t: Tensor<4>) -> Vec<Vec<u8>> {
         .collect()
 }
 
-/// PSNR (dB) between two byte images, as scikit-image computes it on uint8 (data range 255).
-pub fn psnr(a: &[u8], b: &[u8]) -> f64 {
-    let mse = a.iter().zip(b).map(|(x, y)| (f64::from(*x) - f64::from(*y)).powi(2)).sum::<f64>()
-        / a.len().max(1) as f64;
-    if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64 * 255.0 / mse).log10() }
-}
+pub use harness::image::psnr;
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn psnr_reference_values() {
-        // One pixel off by 255 out of 4 values: mse = 255²/4, PSNR = 10 log10(4) = 6.0206 dB.
-        assert!((psnr(&[0, 0, 0, 0], &[255, 0, 0, 0]) - 6.0206).abs() < 1e-4);
-        assert_eq!(psnr(&[7, 8], &[7, 8]), f64::INFINITY);
-    }
 
     #[test]
     fn split_holds_out_every_tenth_episode() {

@@ -6,13 +6,14 @@
 //! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer;
 //! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
 //!   (drifting, MSE and diffusion objectives);
-//! - [`model`]: a trained world model for inference;
+//! - [`model`]: a trained world model for inference; [`eval`]: video-quality metrics;
 //! - [`data`]: datasets with a held-out split.
 
 pub mod autoencoder;
 pub mod data;
 pub mod drift;
 pub mod error;
+pub mod eval;
 pub mod latents;
 pub mod model;
 pub mod optim;

@@ -1,0 +1,116 @@
+//! `evalharness simulate --policy DIR`: MuJoCo scores of policy checkpoints —
+//! what users do today without a world model, and how the shipped policy set's
+//! checkpoints get their measured scores (`--record-scores`).
+
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use burn::tensor::Device;
+use policies::dir::{Expectations, checkpoint_dirs, load_policy};
+use scenarios::pusht::PushTPhysics;
+use serde_json::{Value, json};
+
+use super::train::git_commit;
+use crate::cli::SimulateArgs;
+use crate::output::{Staged, write_json};
+use crate::progress;
+use crate::rank::paired::{Setup, Start, Timing, sim_branch};
+use crate::rank::results::{EpisodeRow, append_rows, branch_stats};
+use crate::scenario::load_pusht;
+
+/// Runs every checkpoint under `--policy` in MuJoCo.
+pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
+    let c = &args.common;
+    let dir = std::path::Path::new(&args.policy);
+    let cfg = load_pusht(&c.scenario)?;
+    let model = PushTPhysics::compile(&cfg)?;
+    let max_steps = c.max_steps.map_or(cfg.task.max_steps as usize, |m| m as usize);
+    let setup = Setup { cfg: &cfg, model: &model, master_seed: 0, max_steps };
+    let device = Device::flex();
+    let dirs = checkpoint_dirs(dir)?;
+    let out = Staged::new(&args.out, c.force)?;
+    let expect = Expectations { image_size: cfg.render.size as usize, action_dim: 2 };
+    let seeds: Vec<u64> = (0..c.episodes).map(|i| c.seed_start + i).collect();
+    let pool =
+        rayon::ThreadPoolBuilder::new().num_threads(c.jobs.max(1)).build().context("starting threads")?;
+    let pb = progress::bar((dirs.len() as u64) * c.episodes, "simulate", quiet);
+    let jsonl = out.file("episodes.jsonl");
+    let mut summary: Vec<Value> = Vec::new();
+    let mut ok = true;
+    for d in &dirs {
+        let name =
+            d.file_name().map_or_else(|| d.display().to_string(), |n| n.to_string_lossy().into_owned());
+        let started = Instant::now();
+        let rows: Result<Vec<EpisodeRow>> = (|| {
+            let policy = load_policy(d, expect, &device)?;
+            let mut timing = Timing::default();
+            let mut rows = Vec::new();
+            for batch in seeds.chunks(100) {
+                let start = Start::new(policy.name(), batch, &setup)?;
+                rows.extend(pool.install(|| sim_branch(policy.as_ref(), start, &setup, &mut timing))?);
+                pb.inc(batch.len() as u64);
+            }
+            Ok(rows)
+        })();
+        match rows {
+            Ok(rows) => {
+                append_rows(&jsonl, &rows)?;
+                let refs: Vec<&EpisodeRow> = rows.iter().collect();
+                let stats = branch_stats(&refs, 2000, 0);
+                println!(
+                    "{name:<16} mean score {:.3}  success {:.1}%  ({:.0} s)",
+                    stats["mean"].as_f64().unwrap_or(f64::NAN),
+                    100.0 * stats["success_rate"].as_f64().unwrap_or(f64::NAN),
+                    started.elapsed().as_secs_f64()
+                );
+                if args.record_scores {
+                    record(d, &stats, c.seed_start, c.episodes, max_steps)?;
+                }
+                summary.push(json!({"name": name, "mujoco": stats}));
+            }
+            Err(e) => {
+                tracing::error!("{name}: {e:#}; continuing with the other checkpoints");
+                summary.push(json!({"name": name, "error": format!("{e:#}")}));
+                ok = false;
+            }
+        }
+    }
+    pb.finish_and_clear();
+    write_json(
+        &out.file("summary.json"),
+        &json!({"scenario": c.scenario, "policies_dir": dir, "seed_start": c.seed_start, "episodes": c.episodes,
+                "max_steps": max_steps, "score": "max over the episode of clip(coverage / 0.95, 0, 1)",
+                "policies": summary}),
+    )?;
+    let o = out.commit()?;
+    println!("-> {}", o.display());
+    Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}
+
+/// Writes `provenance.json` into a checkpoint: its training provenance plus the measured score.
+fn record(
+    dir: &std::path::Path,
+    stats: &Value,
+    seed_start: u64,
+    episodes: u64,
+    max_steps: usize,
+) -> Result<()> {
+    let pj = dir.join("policy.json");
+    let text = std::fs::read_to_string(&pj).with_context(|| format!("reading {}", pj.display()))?;
+    let file: Value = serde_json::from_str(&text).with_context(|| format!("parsing {}", pj.display()))?;
+    let args: Vec<String> = std::env::args().collect();
+    write_json(
+        &dir.join("provenance.json"),
+        &json!({
+            "training": file["provenance"],
+            "epoch": file["epoch"], "step": file["step"], "train_loss": file["train_loss"],
+            "mujoco_score": {
+                "seeds": [seed_start, seed_start + episodes - 1], "max_steps": max_steps,
+                "mean": stats["mean"], "ci95": stats["ci95"],
+                "success_rate": stats["success_rate"], "success_ci95": stats["success_ci95"],
+                "measured_with": args.join(" "), "commit": git_commit(),
+            },
+        }),
+    )
+}

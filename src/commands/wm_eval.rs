@@ -1,0 +1,88 @@
+//! `evalharness wm eval`: compares world models' rollouts with held-out episodes
+//! and writes `eval.json` and a filmstrip (real row above each model's row).
+
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use burn::tensor::Device;
+use serde_json::json;
+use world_model::data::{EpisodeData, Split};
+use world_model::eval::evaluate;
+use world_model::model::WorldModel;
+
+use crate::cli::WmEvalArgs;
+use crate::output::{Staged, write_json};
+
+/// Frames shown per filmstrip row (every 4th generated frame).
+const STRIP_EVERY: usize = 4;
+
+/// `evalharness wm eval`.
+pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
+    let device = Device::flex();
+    let models: Vec<(String, WorldModel)> = a
+        .world_models
+        .iter()
+        .map(|p| {
+            let name =
+                p.file_name().map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into_owned());
+            WorldModel::load(p, &device)
+                .map(|m| (name, m))
+                .with_context(|| format!("loading {}", p.display()))
+        })
+        .collect::<Result<_>>()?;
+    let data = EpisodeData::load(&a.data, 96)?;
+    let k = models[0].1.cfg.unet.history;
+    let held: Vec<std::ops::Range<usize>> = data
+        .episodes
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| Split::HeldOut.contains(*i))
+        .map(|(_, r)| r.clone())
+        .collect();
+    let short: Vec<(usize, usize)> =
+        held.iter().filter(|r| r.len() >= k + 60).take(a.episodes).map(|r| (r.start, 60)).collect();
+    let full: Vec<(usize, usize)> =
+        held.iter().filter(|r| r.len() > k).take(a.full_episodes).map(|r| (r.start, r.len() - k)).collect();
+    if short.is_empty() {
+        bail!("{}: no held-out episode has {} frames", a.data.display(), k + 60);
+    }
+    let staged = Staged::new(&a.out, a.force)?;
+    let mut rows = Vec::new();
+    let mut strip_rows: Vec<Vec<Vec<u8>>> = Vec::new();
+    for (name, wm) in &models {
+        tracing::info!(model = %name, videos = short.len(), "64-frame rollouts");
+        let (row, videos) = evaluate(wm, name, &data, &short, "64", a.batch, a.seed);
+        if strip_rows.is_empty() {
+            strip_rows.push(videos[0].real.iter().step_by(STRIP_EVERY).cloned().collect());
+        }
+        strip_rows.push(videos[0].generated.iter().step_by(STRIP_EVERY).cloned().collect());
+        println!(
+            "{name:<20} {:<9} 64-frame: MSE {:.5} PSNR {:.2} SSIM {:.4} ({:.1} ms/frame)",
+            row.objective, row.mse, row.psnr, row.ssim, row.ms_per_frame
+        );
+        rows.push(row);
+        if !full.is_empty() {
+            tracing::info!(model = %name, videos = full.len(), "full-episode rollouts");
+            let (row, _) = evaluate(wm, name, &data, &full, "episode", a.batch, a.seed);
+            println!(
+                "{name:<20} {:<9} episode:  MSE {:.5} PSNR {:.2} SSIM {:.4} ({:.1} ms/frame)",
+                row.objective, row.mse, row.psnr, row.ssim, row.ms_per_frame
+            );
+            rows.push(row);
+        }
+    }
+    let strip = reports::png::filmstrip(&strip_rows, data.size, data.size);
+    reports::png::write_png(&staged.file("filmstrip.png"), &strip.pixels, strip.width, strip.height)?;
+    write_json(
+        &staged.file("eval.json"),
+        &json!({
+            "models": rows,
+            "data": a.data, "held_out": "episodes with index % 10 == 9",
+            "videos_64": short.len(), "videos_episode": full.len(), "batch": a.batch, "seed": a.seed,
+            "filmstrip": format!("row 1: real frames of held-out episode at step {}, every {STRIP_EVERY}th after the 4 context frames; then one row per model", short[0].0),
+        }),
+    )?;
+    let out = staged.commit()?;
+    println!("-> {}", out.display());
+    Ok(ExitCode::SUCCESS)
+}

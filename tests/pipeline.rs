@@ -1,0 +1,228 @@
+//! The whole pipeline on tiny inputs: dataset → autoencoder → world model →
+//! policy → `wm eval`, `simulate --policy`, `rank` (resume, jobs, a corrupt
+//! checkpoint among good ones, gates).
+
+use std::path::{Path, PathBuf};
+
+use crate::util::{expect_code, read_json, run};
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Builds dataset, autoencoder, world model and one policy checkpoint in `dir`.
+fn build(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+    let data = dir.join("data.zarr");
+    // 10 explorer episodes of 68 steps: episode 9 is held out and long enough for
+    // a 64-frame evaluation (4 context + 60 generated).
+    let args = [
+        "collect",
+        "--episodes",
+        "10",
+        "--seed-start",
+        "0",
+        "--max-steps",
+        "68",
+        "--mix",
+        "explore=1",
+        "--out",
+        s(&data),
+    ];
+    expect_code(&run(&args), 0);
+    let ae = dir.join("autoencoder");
+    expect_code(
+        &run(&["train", "autoencoder", "--data", s(&data), "--out", s(&ae), "--steps", "1", "--batch", "2"]),
+        0,
+    );
+    let wm = dir.join("wm");
+    let (stdout, _) = expect_code(
+        &run(&[
+            "train",
+            "world-model",
+            "--data",
+            s(&data),
+            "--autoencoder",
+            s(&ae),
+            "--out",
+            s(&wm),
+            "--steps",
+            "2",
+            "--base-channels",
+            "16",
+            "--contexts",
+            "2",
+            "--samples",
+            "2",
+            "--eval-every",
+            "1",
+        ]),
+        0,
+    );
+    assert!(stdout.contains("step 2/2"), "{stdout}");
+    let prov = read_json(&wm.join("provenance.json"));
+    assert!(prov["metrics"]["held_out_one_chunk_latent_mse"].as_f64().unwrap().is_finite());
+    assert_eq!(read_json(&wm.join("config.json"))["model"]["autoencoder"], "../autoencoder");
+    let pol = dir.join("policies");
+    let (stdout, _) = expect_code(
+        &run(&[
+            "train",
+            "policy",
+            "--data",
+            s(&data),
+            "--out",
+            s(&pol),
+            "--epochs",
+            "1",
+            "--episodes",
+            "1",
+            "--behaviour",
+            "all",
+            "--batch",
+            "34",
+            "--encoder-width",
+            "8",
+            "--down-dims",
+            "16,32",
+            "--inference-steps",
+            "2",
+        ]),
+        0,
+    );
+    assert!(stdout.contains("saved") && stdout.contains("epoch-0001"), "{stdout}");
+    (data, wm, pol)
+}
+
+#[test]
+fn pipeline_end_to_end() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (data, wm, pol) = build(dir);
+
+    // wm eval: one held-out 64-frame video; metrics and a filmstrip.
+    let ev = dir.join("eval");
+    let args = [
+        "wm",
+        "eval",
+        "--world-model",
+        s(&wm),
+        "--data",
+        s(&data),
+        "--episodes",
+        "1",
+        "--full-episodes",
+        "1",
+        "--out",
+        s(&ev),
+    ];
+    expect_code(&run(&args), 0);
+    let e = read_json(&ev.join("eval.json"));
+    assert_eq!(e["models"].as_array().unwrap().len(), 2);
+    assert_eq!(e["models"][0]["frames"], 60);
+    assert_eq!(e["models"][1]["frames"], 64); // the whole 68-step episode after 4 context frames
+    let ssim = e["models"][0]["ssim"].as_f64().unwrap();
+    assert!((-1.0..=1.0).contains(&ssim), "{ssim}");
+    assert!(ev.join("filmstrip.png").is_file());
+
+    // A policy set: the trained checkpoint, a copy, and a corrupt one.
+    let set = dir.join("set");
+    std::fs::create_dir_all(&set).unwrap();
+    for name in ["a", "b", "c"] {
+        let d = set.join(name);
+        std::fs::create_dir_all(&d).unwrap();
+        for f in ["policy.json", "model.bpk"] {
+            std::fs::copy(pol.join("epoch-0001").join(f), d.join(f)).unwrap();
+        }
+    }
+    std::fs::write(set.join("c/model.bpk"), b"truncated").unwrap();
+
+    // simulate --policy scores each checkpoint; the corrupt one is reported, the others kept.
+    let sim = dir.join("sim");
+    let args = [
+        "simulate",
+        "--policy",
+        s(&set),
+        "--episodes",
+        "2",
+        "--max-steps",
+        "9",
+        "--record-scores",
+        "--out",
+        s(&sim),
+    ];
+    let (stdout, _) = expect_code(&run(&args), 1);
+    assert!(stdout.contains("mean score"), "{stdout}");
+    let summary = read_json(&sim.join("summary.json"));
+    assert!(summary["policies"][2]["error"].as_str().unwrap().contains("model.bpk"));
+    let prov = read_json(&set.join("a/provenance.json"));
+    assert!(prov["mujoco_score"]["mean"].as_f64().is_some());
+
+    // rank: exit 1 because policy c failed; a and b (identical weights, different names
+    // and therefore different noise) are both ranked.
+    let out = dir.join("rank");
+    let base = [
+        "rank",
+        "--policies",
+        s(&set),
+        "--world-model",
+        s(&wm),
+        "--episodes",
+        "3",
+        "--max-steps",
+        "10",
+        "--batch",
+        "2",
+        "--bootstrap",
+        "50",
+    ];
+    let mut args = base.to_vec();
+    args.extend(["--out", s(&out), "--jobs", "2"]);
+    let (stdout, _) = expect_code(&run(&args), 1);
+    assert!(stdout.contains("Pearson"), "{stdout}");
+    let res = read_json(&out.join("results.json"));
+    assert_eq!(res["policies"].as_array().unwrap().len(), 2);
+    assert_eq!(res["failed_policies"][0]["policy"], "c");
+    for key in ["pearson", "spearman", "kendall_tau_b", "rank_inversions", "mmrv", "regret_at_1", "ci95"] {
+        assert!(res["agreement"].get(key).is_some(), "missing agreement.{key}");
+    }
+    assert_eq!(res["policies"][0]["sim"]["episodes"], 3);
+    let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
+    assert_eq!(rows.lines().count(), 2 * 3 * 2); // policies x seeds x branches
+
+    // --resume redoes nothing: the rows stay exactly the same.
+    let mut again = args.clone();
+    again.push("--resume");
+    expect_code(&run(&again), 1);
+    assert_eq!(std::fs::read_to_string(out.join("episodes.jsonl")).unwrap(), rows);
+
+    // One thread gives the same rows and results (timings aside).
+    let out1 = dir.join("rank1");
+    let mut args1 = base.to_vec();
+    args1.extend(["--out", s(&out1), "--jobs", "1"]);
+    expect_code(&run(&args1), 1);
+    assert_eq!(std::fs::read_to_string(out1.join("episodes.jsonl")).unwrap(), rows);
+    let strip = |mut v: serde_json::Value| {
+        v.as_object_mut().unwrap().remove("timing");
+        v
+    };
+    assert_eq!(strip(read_json(&out1.join("results.json"))), strip(res));
+
+    // Without the corrupt checkpoint the run passes, unless a gate fails.
+    std::fs::remove_dir_all(set.join("c")).unwrap();
+    let out2 = dir.join("rank2");
+    let mut ok = base.to_vec();
+    ok.extend(["--out", s(&out2)]);
+    expect_code(&run(&ok), 0);
+    ok.extend(["--force", "--max-inversions", "0", "--min-pearson", "1.01"]);
+    let (_, err) = expect_code(&run(&ok), 1);
+    assert!(err.contains("gate failed: Pearson"), "{err}");
+}
+
+#[test]
+fn rank_reports_a_missing_world_model() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("r");
+    let missing = tmp.path().join("nope");
+    let args = ["rank", "--world-model", s(&missing), "--out", s(&out)];
+    let (_, err) = expect_code(&run(&args), 2);
+    assert!(err.contains("nope") && err.contains("config.json"), "{err}");
+}
