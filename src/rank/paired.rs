@@ -269,8 +269,8 @@ pub fn wm_branch(
         .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(&name), sd, fnv1a("world_model")])))
         .collect();
     let mut track = vec![Track::default(); n];
-    for i in 0..n {
-        track[i].add(start.scorers[i].coverage(&start.first[i]), thr);
+    for ((t, sc), f) in track.iter_mut().zip(&start.scorers).zip(&start.first) {
+        t.add(sc.coverage(f), thr);
     }
     let tw = Instant::now();
     let device = wm.device().clone();
