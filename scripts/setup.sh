@@ -3,6 +3,7 @@
 #
 #   scripts/setup.sh            Debian packages + MuJoCo 3.17.0 + release build
 #   scripts/setup.sh --no-build the same without `cargo build --release`
+#   scripts/setup.sh --tests    also Chromium, which the report test screenshots the HTML with
 #
 # MuJoCo comes from the official `mujoco==3.17.0` wheel on PyPI (Debian ships 2.2.2,
 # and mujoco-rs 7.0.0 binds 3.17.0): the wheel is downloaded with pip, checked
@@ -15,10 +16,12 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 
 build=1
+tests=0
 for arg in "$@"; do
   case "$arg" in
     --no-build) build=0 ;;
-    -h|--help) sed -n '2,12p' "$0"; exit 0 ;;
+    --tests) tests=1 ;;
+    -h|--help) sed -n '2,13p' "$0"; exit 0 ;;
     *) echo "setup.sh: unknown option '$arg'" >&2; exit 2 ;;
   esac
 done
@@ -36,6 +39,8 @@ packages=(ca-certificates pkg-config unzip libegl1 libegl-mesa0 libgl1-mesa-dri 
 # pip is only needed when the machine has none already.
 command -v python3 >/dev/null 2>&1 || packages+=(python3)
 python3 -m pip --version >/dev/null 2>&1 || packages+=(python3-pip)
+# Headless Chromium for the HTML report's screenshot test.
+[ "$tests" -eq 1 ] && packages+=(chromium)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || missing+=("$p")

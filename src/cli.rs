@@ -38,6 +38,8 @@ pub enum Command {
     /// Agreement metrics (Pearson, Spearman, Kendall τ_b, inversions, MMRV, regret@1, CIs)
     /// between predicted and actual policy scores in a CSV; JSON on stdout.
     Agreement(AgreementArgs),
+    /// Re-render a rank run's report (plots, table.tex, summary.csv, report.html) from its files.
+    Report(ReportArgs),
     /// World-model tools.
     #[command(subcommand)]
     Wm(WmCommand),
@@ -146,6 +148,16 @@ pub struct RankArgs {
     /// Exit 1 if there are more rank inversions than this.
     #[arg(long)]
     pub max_inversions: Option<u64>,
+    /// Skip the report (plots, filmstrips, table.tex, report.html); `evalharness report OUT` makes it later.
+    #[arg(long)]
+    pub no_report: bool,
+}
+
+/// `evalharness report`.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// A `rank` output folder (with results.json and config.json).
+    pub out: PathBuf,
 }
 
 /// `evalharness train ...`.

@@ -212,6 +212,26 @@ fn pipeline_end_to_end() {
     let mut ok = base.to_vec();
     ok.extend(["--out", s(&out2)]);
     expect_code(&run(&ok), 0);
+    // The report: plots in PNG and SVG, LaTeX, CSV, filmstrips, one self-contained page.
+    for f in [
+        "plots/scatter.png",
+        "plots/scatter.svg",
+        "plots/bars.svg",
+        "plots/bump.png",
+        "table.tex",
+        "summary.csv",
+    ] {
+        assert!(out2.join(f).is_file(), "missing {f}");
+    }
+    let index = read_json(&out2.join("filmstrips/index.json"));
+    assert!(!index.as_array().unwrap().is_empty());
+    let html = std::fs::read_to_string(out2.join("report.html")).unwrap();
+    assert!(html.contains("data:image/png;base64,") && !html.contains("src=\"http"));
+    screenshot(&out2.join("report.html"), &dir.join("report.png"));
+    // `report` re-renders the same page from the files alone.
+    std::fs::remove_file(out2.join("report.html")).unwrap();
+    expect_code(&run(&["report", s(&out2)]), 0);
+    assert_eq!(std::fs::read_to_string(out2.join("report.html")).unwrap(), html);
     ok.extend(["--force", "--max-inversions", "0", "--min-pearson", "1.01"]);
     let (_, err) = expect_code(&run(&ok), 1);
     assert!(err.contains("gate failed: Pearson"), "{err}");
@@ -225,4 +245,18 @@ fn rank_reports_a_missing_world_model() {
     let args = ["rank", "--world-model", s(&missing), "--out", s(&out)];
     let (_, err) = expect_code(&run(&args), 2);
     assert!(err.contains("nope") && err.contains("config.json"), "{err}");
+}
+
+/// Screenshots a report with headless Chromium (Debian's `chromium`; `scripts/setup.sh
+/// --tests` installs it) and checks that the page rendered: a non-trivial PNG.
+pub fn screenshot(html: &Path, png: &Path) {
+    let status = std::process::Command::new("chromium")
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--window-size=1280,1800"])
+        .arg(format!("--screenshot={}", png.display()))
+        .arg(format!("file://{}", html.display()))
+        .output()
+        .expect("chromium runs (scripts/setup.sh --tests installs it)");
+    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    let bytes = std::fs::read(png).unwrap();
+    assert!(bytes.starts_with(b"\x89PNG") && bytes.len() > 20_000, "screenshot is {} bytes", bytes.len());
 }

@@ -1,7 +1,14 @@
 //! evalharness media and reports.
 //!
-//! So far: animated GIFs of episodes ([`gif`]). Plots, filmstrips, the HTML
-//! summary and the LaTeX table of `rank` will live here too.
+//! - [`gif`], [`png`]: animated GIFs and filmstrips of episodes;
+//! - [`summary`]: what a `rank` report shows, read from `results.json`;
+//! - [`plots`]: scatter, bar and bump charts (PNG + SVG, bundled font);
+//! - [`tables`]: the LaTeX table and the summary CSV;
+//! - [`html`]: the self-contained HTML report.
 
 pub mod gif;
+pub mod html;
+pub mod plots;
 pub mod png;
+pub mod summary;
+pub mod tables;

@@ -30,6 +30,11 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Train(TrainCommand::Policy(a)) => train_policy::run(a, cli.quiet),
         Command::Agreement(a) => agreement::run(a),
         Command::Rank(a) => crate::rank::run(a, cli.quiet),
+        Command::Report(a) => {
+            let html = crate::rank::report::write_report(&a.out)?;
+            println!("{}", html.display());
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Wm(WmCommand::Eval(a)) => wm_eval::run(a),
     }
 }

@@ -48,7 +48,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
             let mut rows = Vec::new();
             for batch in seeds.chunks(100) {
                 let start = Start::new(policy.name(), batch, &setup)?;
-                rows.extend(pool.install(|| sim_branch(policy.as_ref(), start, &setup, &mut timing))?);
+                rows.extend(pool.install(|| sim_branch(policy.as_ref(), start, &setup, &mut timing))?.rows);
                 pb.inc(batch.len() as u64);
             }
             Ok(rows)

@@ -6,7 +6,9 @@
 //! as batches finish), `episodes.csv`, `results.json`. `--resume` skips episodes
 //! already in `episodes.jsonl`; `--shard i/n` runs every n-th batch.
 
+mod media;
 pub mod paired;
+pub mod report;
 pub mod results;
 
 use std::path::Path;
@@ -149,8 +151,47 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     });
     write_json(&a.out.join("results.json"), &res)?;
     write_csv(&a.out.join("episodes.csv"), &rows)?;
+    if !a.no_report {
+        if shards == 1 {
+            rollouts(a, &dirs, &rows, &failed_names, &setup, &wm, &pool)?;
+        }
+        let html = report::write_report(&a.out)?;
+        tracing::info!(report = %html.display(), "report written");
+    }
     print_summary(&res, &a.out);
     gates(a, &res, &failed)
+}
+
+/// Replays each policy's best- and worst-agreeing episodes with frame recording.
+fn rollouts(
+    a: &RankArgs,
+    dirs: &[std::path::PathBuf],
+    rows: &[EpisodeRow],
+    failed: &[&str],
+    setup: &Setup,
+    wm: &WorldModel,
+    pool: &rayon::ThreadPool,
+) -> Result<()> {
+    let dir = a.out.join("filmstrips");
+    let device = Device::flex();
+    let expect = Expectations { image_size: setup.cfg.render.size as usize, action_dim: 2 };
+    let mut index = Vec::new();
+    for d in dirs {
+        let name =
+            d.file_name().map_or_else(|| d.display().to_string(), |n| n.to_string_lossy().into_owned());
+        if failed.contains(&name.as_str()) {
+            continue;
+        }
+        let Ok(policy) = load_policy(d, expect, &device) else { continue };
+        let picks = media::pick_seeds(rows, &name);
+        let strips = pool.install(|| media::write_rollouts(&dir, policy.as_ref(), &picks, setup, wm, 4))?;
+        for (png, caption) in strips {
+            let file = png.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+            index.push(json!({"png": file, "caption": caption}));
+        }
+    }
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    write_json(&dir.join("index.json"), &Value::Array(index))
 }
 
 /// Exit 1 when a gate fails (or a policy failed), 0 otherwise.

@@ -106,6 +106,17 @@ pub struct Start {
     start_pos: Vec<[f32; 2]>,
     policy_rngs: Vec<Rng>,
     seeds: Vec<u64>,
+    /// Keep the last frame of every action chunk (for filmstrips and GIFs).
+    pub record: bool,
+}
+
+/// A branch's rows and, when recording, each episode's frames at the end of every
+/// action chunk (the first frame first).
+pub struct BranchOut {
+    /// One row per episode.
+    pub rows: Vec<EpisodeRow>,
+    /// Recorded frames per episode (empty unless recording).
+    pub frames: Vec<Vec<Vec<u8>>>,
 }
 
 impl Start {
@@ -132,8 +143,13 @@ impl Start {
                 .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(policy), sd])))
                 .collect(),
             seeds: seeds.to_vec(),
+            record: false,
             envs,
         })
+    }
+
+    fn recording(&self) -> Vec<Vec<Vec<u8>>> {
+        if self.record { self.first.iter().map(|f| vec![f.clone()]).collect() } else { Vec::new() }
     }
 
     fn histories(&self, o: usize) -> Vec<VecDeque<Seen>> {
@@ -156,8 +172,8 @@ pub fn run_batch(
     timing: &mut Timing,
 ) -> Result<Vec<EpisodeRow>> {
     let start = Start::new(policy.name(), seeds, s)?;
-    let wm_rows = wm_branch(policy, &start, s, wm, timing)?;
-    let sim_rows = sim_branch(policy, start, s, timing)?;
+    let wm_rows = wm_branch(policy, &start, s, wm, timing)?.rows;
+    let sim_rows = sim_branch(policy, start, s, timing)?.rows;
     Ok(sim_rows.into_iter().zip(wm_rows).flat_map(|(a, b)| [a, b]).collect())
 }
 
@@ -170,7 +186,7 @@ pub fn sim_branch(
     mut start: Start,
     s: &Setup,
     timing: &mut Timing,
-) -> Result<Vec<EpisodeRow>> {
+) -> Result<BranchOut> {
     let name = policy.name().to_string();
     let n = start.envs.len();
     let raster = Rasterizer::new(s.cfg);
@@ -181,6 +197,7 @@ pub fn sim_branch(
     let mut rngs = start.policy_rngs.clone();
     let mut track = vec![Track::default(); n];
     let mut scorer_err = vec![(0.0f64, 0usize); n];
+    let mut rec = start.recording();
     for (t, env) in track.iter_mut().zip(&start.envs) {
         t.add(env.score().coverage, thr);
     }
@@ -221,11 +238,14 @@ pub fn sim_branch(
             scorer_err[i].0 += err;
             scorer_err[i].1 += frames.len();
             frames.into_iter().for_each(|f| push(&mut hist[i], f, o));
+            if let (Some(r), Some(last)) = (rec.get_mut(i), hist[i].back()) {
+                r.push(last.0.clone());
+            }
         }
         timing.sim_s += ts.elapsed().as_secs_f64();
         steps += len;
     }
-    Ok((0..n)
+    let rows = (0..n)
         .map(|i| {
             let t = track[i];
             let err = scorer_err[i].0 / scorer_err[i].1.max(1) as f64;
@@ -242,7 +262,8 @@ pub fn sim_branch(
             .with_poses(Some(start.envs[i].state().block.to_array()), start.goals[i])
             .with_scorer_error(Some(err))
         })
-        .collect())
+        .collect();
+    Ok(BranchOut { rows, frames: rec })
 }
 
 /// The world-model branch: imagined frames only, scored from frames.
@@ -255,7 +276,7 @@ pub fn wm_branch(
     s: &Setup,
     wm: &WorldModel,
     timing: &mut Timing,
-) -> Result<Vec<EpisodeRow>> {
+) -> Result<BranchOut> {
     let name = policy.name().to_string();
     let n = start.envs.len();
     let size = Rasterizer::new(s.cfg).size();
@@ -269,6 +290,7 @@ pub fn wm_branch(
         .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(&name), sd, fnv1a("world_model")])))
         .collect();
     let mut track = vec![Track::default(); n];
+    let mut rec = start.recording();
     for ((t, sc), f) in track.iter_mut().zip(&start.scorers).zip(&start.first) {
         t.add(sc.coverage(f), thr);
     }
@@ -324,9 +346,14 @@ pub fn wm_branch(
             done += f;
         }
         timing.world_model_s += tw.elapsed().as_secs_f64();
+        for (r, h) in rec.iter_mut().zip(&hist) {
+            if let Some(last) = h.back() {
+                r.push(last.0.clone());
+            }
+        }
         steps += len;
     }
-    Ok((0..n)
+    let rows = (0..n)
         .map(|i| {
             let t = track[i];
             EpisodeRow::new(
@@ -341,5 +368,6 @@ pub fn wm_branch(
             )
             .with_poses(None, start.goals[i])
         })
-        .collect())
+        .collect();
+    Ok(BranchOut { rows, frames: rec })
 }
