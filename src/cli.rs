@@ -38,6 +38,8 @@ pub enum Command {
     /// Agreement metrics (Pearson, Spearman, Kendall τ_b, inversions, MMRV, regret@1, CIs)
     /// between predicted and actual policy scores in a CSV; JSON on stdout.
     Agreement(AgreementArgs),
+    /// Join `rank --shard i/n` outputs into what one unsharded run writes.
+    Merge(MergeArgs),
     /// Re-render a rank run's report (plots, table.tex, summary.csv, report.html) from its files.
     Report(ReportArgs),
     /// World-model tools.
@@ -124,7 +126,9 @@ pub struct RankArgs {
     /// Output folder.
     #[arg(long, default_value = "results/rank")]
     pub out: PathBuf,
-    /// Threads for the MuJoCo branch.
+    /// Threads for replaying the report's episodes. The two branches of every batch always
+    /// run side by side on one thread each (burn kernels single-threaded, so results are
+    /// bit-reproducible), whatever this is.
     #[arg(long, default_value_t = 2)]
     pub jobs: usize,
     /// Master seed of the policies' sampling noise and of the bootstrap.
@@ -149,6 +153,23 @@ pub struct RankArgs {
     #[arg(long)]
     pub max_inversions: Option<u64>,
     /// Skip the report (plots, filmstrips, table.tex, report.html); `evalharness report OUT` makes it later.
+    #[arg(long)]
+    pub no_report: bool,
+}
+
+/// `evalharness merge`.
+#[derive(Debug, Args)]
+pub struct MergeArgs {
+    /// The shards' output folders.
+    #[arg(required = true)]
+    pub shards: Vec<PathBuf>,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Replace an existing `--out`.
+    #[arg(long)]
+    pub force: bool,
+    /// Skip the report.
     #[arg(long)]
     pub no_report: bool,
 }

@@ -206,6 +206,22 @@ fn pipeline_end_to_end() {
     };
     assert_eq!(strip(read_json(&out1.join("results.json"))), strip(res));
 
+    // Two shards merged give exactly the unsharded rows and results (timings aside).
+    let mut shard_dirs = Vec::new();
+    for i in 0..2 {
+        let d = dir.join(format!("shard{i}"));
+        let mut a = base.to_vec();
+        let spec = format!("{i}/2");
+        a.extend(["--out", s(&d), "--shard", &spec, "--no-report"]);
+        expect_code(&run(&a), 1);
+        shard_dirs.push(d);
+    }
+    let merged = dir.join("merged");
+    let args = ["merge", s(&shard_dirs[0]), s(&shard_dirs[1]), "--out", s(&merged), "--no-report"];
+    expect_code(&run(&args), 0);
+    assert_eq!(std::fs::read_to_string(merged.join("episodes.jsonl")).unwrap(), rows);
+    assert_eq!(strip(read_json(&merged.join("results.json"))), strip(read_json(&out1.join("results.json"))));
+
     // Without the corrupt checkpoint the run passes, unless a gate fails.
     std::fs::remove_dir_all(set.join("c")).unwrap();
     let out2 = dir.join("rank2");

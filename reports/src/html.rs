@@ -154,6 +154,7 @@ fn plot_caption(name: &str, s: &Summary) -> String {
         "bars" => {
             "Mean score of both branches per policy (95% bootstrap CIs), sorted by MuJoCo score.".into()
         }
+        "score_over_time" => "Score so far across episodes (mean and 95% band) at the end of each action chunk, per policy; blue MuJoCo, red world model.".into(),
         "bump" => format!(
             "Ranks under MuJoCo and the world model; red lines change rank ({} inversions).",
             est(s.inversions)

@@ -3,6 +3,7 @@
 //! - [`gif`], [`png`]: animated GIFs and filmstrips of episodes;
 //! - [`summary`]: what a `rank` report shows, read from `results.json`;
 //! - [`plots`]: scatter, bar and bump charts (PNG + SVG, bundled font);
+//! - [`timeplot`]: score over time per policy, both branches;
 //! - [`tables`]: the LaTeX table and the summary CSV;
 //! - [`html`]: the self-contained HTML report.
 
@@ -12,3 +13,4 @@ pub mod plots;
 pub mod png;
 pub mod summary;
 pub mod tables;
+pub mod timeplot;

@@ -30,6 +30,7 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Train(TrainCommand::Policy(a)) => train_policy::run(a, cli.quiet),
         Command::Agreement(a) => agreement::run(a),
         Command::Rank(a) => crate::rank::run(a, cli.quiet),
+        Command::Merge(a) => crate::rank::merge::run(&a.shards, &a.out, a.force, a.no_report),
         Command::Report(a) => {
             let html = crate::rank::report::write_report(&a.out)?;
             println!("{}", html.display());

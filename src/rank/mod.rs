@@ -7,6 +7,7 @@
 //! already in `episodes.jsonl`; `--shard i/n` runs every n-th batch.
 
 mod media;
+pub mod merge;
 pub mod paired;
 pub mod report;
 pub mod results;
@@ -112,7 +113,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
             if todo.is_empty() {
                 continue;
             }
-            let out = pool.install(|| run_batch(policy.as_ref(), &todo, &setup, &wm, &mut timing));
+            let out = run_batch(policy.as_ref(), &todo, &setup, &wm, &mut timing);
             match out {
                 Ok(new) => {
                     // Drop half-written pairs of these seeds (from a killed run) before appending.
@@ -218,7 +219,7 @@ fn gates(a: &RankArgs, res: &Value, failed: &[Value]) -> Result<ExitCode> {
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
-fn write_csv(path: &Path, rows: &[EpisodeRow]) -> Result<()> {
+pub(crate) fn write_csv(path: &Path, rows: &[EpisodeRow]) -> Result<()> {
     let mut sorted: Vec<&EpisodeRow> = rows.iter().collect();
     sorted.sort_by(|x, y| (&x.policy, x.seed, x.branch).cmp(&(&y.policy, y.seed, y.branch)));
     let mut w = csv::Writer::from_path(path).with_context(|| format!("creating {}", path.display()))?;

@@ -47,6 +47,16 @@ pub struct Timing {
     pub frames: u64,
 }
 
+impl Timing {
+    /// Adds another split.
+    pub fn add(&mut self, o: &Timing) {
+        self.sim_s += o.sim_s;
+        self.world_model_s += o.world_model_s;
+        self.policy_s += o.policy_s;
+        self.frames += o.frames;
+    }
+}
+
 /// What a rollout needs besides the policy.
 pub struct Setup<'a> {
     /// Scenario.
@@ -60,11 +70,13 @@ pub struct Setup<'a> {
 }
 
 /// Per-episode running score.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 struct Track {
     best_reward: f64,
     max_cov: f64,
     last_cov: f64,
+    /// Score so far at the end of each action chunk.
+    trace: Vec<f64>,
 }
 
 impl Track {
@@ -72,6 +84,10 @@ impl Track {
         self.best_reward = self.best_reward.max((cov / success_cov).clamp(0.0, 1.0));
         self.max_cov = self.max_cov.max(cov);
         self.last_cov = cov;
+    }
+
+    fn end_chunk(&mut self) {
+        self.trace.push((self.best_reward * 1e6).round() / 1e6);
     }
 }
 
@@ -171,9 +187,25 @@ pub fn run_batch(
     wm: &WorldModel,
     timing: &mut Timing,
 ) -> Result<Vec<EpisodeRow>> {
-    let start = Start::new(policy.name(), seeds, s)?;
-    let wm_rows = wm_branch(policy, &start, s, wm, timing)?.rows;
-    let sim_rows = sim_branch(policy, start, s, timing)?.rows;
+    // Each branch starts from its own (identical) copy of the initial states.
+    let (start, sim_start) = (Start::new(policy.name(), seeds, s)?, Start::new(policy.name(), seeds, s)?);
+    // The branches run side by side, each on one thread with its own one-thread rayon
+    // pool: every burn kernel then runs sequentially, so its floating-point reductions
+    // are the same in every process (rayon's work-stealing splits are not), and the
+    // two cores are still both busy.
+    let one = || rayon::ThreadPoolBuilder::new().num_threads(1).build();
+    let (pool_a, pool_b) = (one()?, one()?);
+    let (mut t_wm, mut t_sim) = (Timing::default(), Timing::default());
+    let (wm_out, sim_out) = std::thread::scope(|sc| {
+        let h = sc.spawn(|| pool_a.install(|| wm_branch(policy, &start, s, wm, &mut t_wm)));
+        let sim = pool_b.install(|| sim_branch(policy, sim_start, s, &mut t_sim));
+        (h.join(), sim)
+    });
+    let wm_rows =
+        wm_out.map_err(|_| anyhow!("world-model branch of policy {} panicked", policy.name()))??.rows;
+    let sim_rows = sim_out?.rows;
+    timing.add(&t_wm);
+    timing.add(&t_sim);
     Ok(sim_rows.into_iter().zip(wm_rows).flat_map(|(a, b)| [a, b]).collect())
 }
 
@@ -242,12 +274,13 @@ pub fn sim_branch(
                 r.push(last.0.clone());
             }
         }
+        track.iter_mut().for_each(Track::end_chunk);
         timing.sim_s += ts.elapsed().as_secs_f64();
         steps += len;
     }
     let rows = (0..n)
         .map(|i| {
-            let t = track[i];
+            let t = &track[i];
             let err = scorer_err[i].0 / scorer_err[i].1.max(1) as f64;
             EpisodeRow::new(
                 &name,
@@ -261,6 +294,7 @@ pub fn sim_branch(
             )
             .with_poses(Some(start.envs[i].state().block.to_array()), start.goals[i])
             .with_scorer_error(Some(err))
+            .with_trace(t.trace.clone())
         })
         .collect();
     Ok(BranchOut { rows, frames: rec })
@@ -351,11 +385,12 @@ pub fn wm_branch(
                 r.push(last.0.clone());
             }
         }
+        track.iter_mut().for_each(Track::end_chunk);
         steps += len;
     }
     let rows = (0..n)
         .map(|i| {
-            let t = track[i];
+            let t = &track[i];
             EpisodeRow::new(
                 &name,
                 start.seeds[i],
@@ -367,6 +402,7 @@ pub fn wm_branch(
                 steps,
             )
             .with_poses(None, start.goals[i])
+            .with_trace(t.trace.clone())
         })
         .collect();
     Ok(BranchOut { rows, frames: rec })

@@ -9,7 +9,10 @@ use reports::html::{Extras, report_html};
 use reports::plots::write_plots;
 use reports::summary::Summary;
 use reports::tables::{latex_table, summary_csv};
+use reports::timeplot::{TimeSeries, band, write_time_plot};
 use serde_json::Value;
+
+use super::results::Branch;
 
 fn read_json(path: &Path) -> Result<Value> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
@@ -40,7 +43,29 @@ pub fn write_report(out: &Path) -> Result<PathBuf> {
     let summary = Summary::from_results(&results)
         .with_context(|| format!("{}: not an evalharness rank results file", results_path.display()))?;
     let config = read_json(&out.join("config.json"))?;
-    let plots = write_plots(&out.join("plots"), &summary)?;
+    let mut plots = write_plots(&out.join("plots"), &summary)?;
+    let rows = super::results::read_rows(&out.join("episodes.jsonl"))?;
+    let max_steps = results["max_steps"].as_f64().unwrap_or(300.0);
+    let series: Vec<TimeSeries> = summary
+        .policies
+        .iter()
+        .map(|p| {
+            let pick = |b: Branch| -> Vec<&[f64]> {
+                rows.iter()
+                    .filter(|r| r.policy == p.name && r.branch == b)
+                    .map(|r| r.score_trace.as_slice())
+                    .collect()
+            };
+            let (sim, wm) = (band(&pick(Branch::Sim)), band(&pick(Branch::WorldModel)));
+            let l = sim.len().max(1) as f64;
+            let steps = (1..=sim.len()).map(|k| (k as f64 * max_steps / l).round()).collect();
+            TimeSeries { policy: p.name.clone(), steps, sim, world_model: wm }
+        })
+        .filter(|t| !t.sim.is_empty() && t.sim.len() == t.world_model.len())
+        .collect();
+    if !series.is_empty() {
+        plots.push(write_time_plot(&out.join("plots"), &series)?);
+    }
     std::fs::write(out.join("table.tex"), latex_table(&summary)).context("writing table.tex")?;
     std::fs::write(out.join("summary.csv"), summary_csv(&summary)).context("writing summary.csv")?;
     let filmstrips: Vec<(PathBuf, String)> = read_json(&out.join("filmstrips/index.json"))

@@ -52,6 +52,9 @@ pub struct EpisodeRow {
     pub goal: [f64; 3],
     /// Mean |frame-scorer coverage − exact coverage| on this episode's real frames (MuJoCo rows).
     pub scorer_abs_error: Option<f64>,
+    /// Score so far (max reward) at the end of each action chunk.
+    #[serde(default)]
+    pub score_trace: Vec<f64>,
 }
 
 impl EpisodeRow {
@@ -79,7 +82,14 @@ impl EpisodeRow {
             final_block: None,
             goal: [0.0; 3],
             scorer_abs_error: None,
+            score_trace: Vec::new(),
         }
+    }
+
+    /// With the score trace.
+    pub fn with_trace(mut self, t: Vec<f64>) -> Self {
+        self.score_trace = t;
+        self
     }
 
     /// With the final block and the goal pose.
