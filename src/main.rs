@@ -4,16 +4,12 @@
 //! `main` only wires logging and maps the outcome to an exit code:
 //! 0 success, 1 an evaluation ran but a gate failed, 2 an error.
 
-mod alloc;
 mod cli;
 mod commands;
 mod output;
 mod progress;
 mod rank;
 mod scenario;
-
-#[global_allocator]
-static ALLOC: alloc::Aligned = alloc::Aligned;
 
 use std::io::IsTerminal;
 use std::process::ExitCode;
