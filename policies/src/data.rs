@@ -3,8 +3,11 @@
 //! Only episodes of the chosen behaviour (the scripted expert by default, as
 //! recorded in the dataset's attributes) are used, optionally only the first N.
 //! A sample at step t of an episode is: frames and agent positions at t−1 and t
-//! (repeating the first frame at the episode start) and actions t..t+15 (repeating
-//! the last action past the episode end), as diffusion_policy's sequence sampler pads.
+//! (repeating the first frame at the episode start) and the 16 actions from t−1
+//! (repeating the first action before the start and the last one past the end), as
+//! diffusion_policy's sequence sampler windows and pads them: the action window
+//! starts with the oldest observation, so action index `obs − 1` is the current
+//! step's — the first one the policy executes.
 
 use std::path::{Path, PathBuf};
 
@@ -119,7 +122,7 @@ impl Demos {
     pub fn sample_indices(&self, t: usize, obs: usize, horizon: usize) -> (Vec<usize>, Vec<usize>) {
         let ep = self.episodes.iter().find(|r| r.contains(&t)).cloned().unwrap_or(t..t + 1);
         let o = (0..obs).map(|k| (t + k + 1).saturating_sub(obs).max(ep.start)).collect();
-        let a = (0..horizon).map(|k| (t + k).min(ep.end - 1)).collect();
+        let a = (0..horizon).map(|k| (t + k + 1).saturating_sub(obs).max(ep.start).min(ep.end - 1)).collect();
         (o, a)
     }
 
@@ -143,8 +146,10 @@ mod tests {
             size: 1,
             episodes: vec![0..3, 3..5],
         };
-        // First step of episode 1: the observation repeats step 3; actions run past the end (4).
-        assert_eq!(d.sample_indices(3, 2, 4), (vec![3, 3], vec![3, 4, 4, 4]));
-        assert_eq!(d.sample_indices(2, 2, 2), (vec![1, 2], vec![2, 2]));
+        // First step of episode 1: the observation repeats step 3; the action window starts
+        // one step before t (clamped to 3) and runs past the end (4).
+        assert_eq!(d.sample_indices(3, 2, 4), (vec![3, 3], vec![3, 3, 4, 4]));
+        // Step 2 of episode 0: observations 1, 2; actions 1, 2 (index obs − 1 = 1 is step 2).
+        assert_eq!(d.sample_indices(2, 2, 2), (vec![1, 2], vec![1, 2]));
     }
 }
