@@ -92,23 +92,12 @@ pub fn run(a: &AgreementArgs) -> Result<ExitCode> {
         None
     };
     let names: Vec<&str> = policies.iter().map(|p| p.name.as_str()).collect();
-    let ties: Vec<[&str; 2]> = m.rank_inversions.ties.iter().map(|&(i, j)| [names[i], names[j]]).collect();
     let out = json!({
         "csv": a.csv.display().to_string(),
         "policies": policies.iter().zip(pred.iter().zip(&act)).map(|(p, (s, g))| json!({
             "name": p.name, "rows": p.predicted.len(), "predicted": s, "actual": g,
         })).collect::<Vec<_>>(),
-        "agreement": {
-            "pearson": m.pearson,
-            "spearman": m.spearman,
-            "kendall_tau_b": m.kendall_tau_b,
-            "rank_inversions": m.rank_inversions.count,
-            "rank_inversion_fraction": m.rank_inversions.fraction,
-            "ties": ties,
-            "mmrv": m.mmrv,
-            "regret_at_1": m.regret_at_1,
-            "ci95": ci,
-        },
+        "agreement": m.to_json(&names, ci.as_ref()),
         "bootstrap": {"replicates": a.bootstrap, "seed": a.seed, "scheme": "paired, stratified by policy (episodes resampled within each policy)"},
     });
     println!("{}", serde_json::to_string_pretty(&out)?);

@@ -84,20 +84,24 @@ pub(super) fn record_session(
         .collect()
 }
 
+/// Checks a training run's output folder: an existing one needs `--resume` (and then
+/// its checkpoint, `state` relative to it) or `--force` (which removes it).
+pub(super) fn prepare_out(out: &std::path::Path, resume: bool, force: bool, state: &str) -> Result<()> {
+    if out.exists() && !resume {
+        if !force {
+            bail!("{} already exists (pass --resume to continue it or --force to replace it)", out.display());
+        }
+        std::fs::remove_dir_all(out).with_context(|| format!("removing {}", out.display()))?;
+    }
+    if resume && !out.join(state).is_file() {
+        bail!("--resume: {} has no checkpoint ({state})", out.display());
+    }
+    Ok(())
+}
+
 /// `evalharness train autoencoder`.
 pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
-    if a.out.exists() && !a.resume {
-        if !a.force {
-            bail!(
-                "{} already exists (pass --resume to continue it or --force to replace it)",
-                a.out.display()
-            );
-        }
-        std::fs::remove_dir_all(&a.out).with_context(|| format!("removing {}", a.out.display()))?;
-    }
-    if a.resume && !a.out.join("state.json").is_file() {
-        bail!("--resume: {} has no checkpoint (state.json)", a.out.display());
-    }
+    prepare_out(&a.out, a.resume, a.force, "state.json")?;
     let from_step = read_step(&a.out);
     let model_cfg = AutoencoderConfig::new();
     let cfg = AeTrainConfig {

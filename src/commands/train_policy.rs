@@ -3,31 +3,20 @@
 
 use std::process::ExitCode;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use policies::data::Demos;
 use policies::diffusion::DiffusionConfig;
 use policies::net::NetConfig;
 use policies::train::{PolicyRun, PolicyTrainConfig, RunConfigs, train_policy};
 use serde_json::json;
 
-use super::train::{dataset_origin, git_commit};
+use super::train::{dataset_origin, git_commit, prepare_out};
 use crate::cli::TrainPolicyArgs;
 use crate::progress;
 
 /// `evalharness train policy`.
 pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
-    if a.out.exists() && !a.resume {
-        if !a.force {
-            bail!(
-                "{} already exists (pass --resume to continue it or --force to replace it)",
-                a.out.display()
-            );
-        }
-        std::fs::remove_dir_all(&a.out).with_context(|| format!("removing {}", a.out.display()))?;
-    }
-    if a.resume && !a.out.join(".train/state.json").is_file() {
-        bail!("--resume: {} has no training state (.train/state.json)", a.out.display());
-    }
+    prepare_out(&a.out, a.resume, a.force, ".train/state.json")?;
     if a.batch == 0 || a.epochs == Some(0) || a.save_every == 0 {
         bail!("--batch, --epochs and --save-every must be positive");
     }

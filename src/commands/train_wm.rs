@@ -15,7 +15,7 @@ use world_model::train_ae::{RunOptions, load_autoencoder};
 use world_model::train_wm::{WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
-use super::train::{dataset_origin, git_commit, read_step, record_session};
+use super::train::{dataset_origin, git_commit, prepare_out, read_step, record_session};
 use crate::cli::{ObjectiveArg, TrainWorldModelArgs};
 use crate::output::write_json;
 use crate::progress;
@@ -38,18 +38,7 @@ fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
 
 /// `evalharness train world-model`.
 pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
-    if a.out.exists() && !a.resume {
-        if !a.force {
-            bail!(
-                "{} already exists (pass --resume to continue it or --force to replace it)",
-                a.out.display()
-            );
-        }
-        std::fs::remove_dir_all(&a.out).with_context(|| format!("removing {}", a.out.display()))?;
-    }
-    if a.resume && !a.out.join("state.json").is_file() {
-        bail!("--resume: {} has no checkpoint (state.json)", a.out.display());
-    }
+    prepare_out(&a.out, a.resume, a.force, "state.json")?;
     let objective = match a.objective {
         ObjectiveArg::Drifting => Objective::Drifting,
         ObjectiveArg::Mse => Objective::Mse,

@@ -175,6 +175,27 @@ impl Start {
     }
 }
 
+/// One batched decision: the policy's chunks for every episode's history, and how many
+/// of their actions to execute (the shortest chunk, at most `left`).
+fn decide(
+    policy: &dyn Policy,
+    hist: &[VecDeque<Seen>],
+    size: usize,
+    rngs: &mut [Rng],
+    left: usize,
+    timing: &mut Timing,
+) -> Result<(Vec<ActionChunk>, usize)> {
+    let tp = Instant::now();
+    let obs: Vec<Observation> = hist.iter().map(|h| obs_of(h, size)).collect();
+    let chunks = policy.act(&obs, rngs).map_err(|e| anyhow!(e))?;
+    timing.policy_s += tp.elapsed().as_secs_f64();
+    let len = chunks.iter().map(Vec::len).min().unwrap_or(0).min(left);
+    if len == 0 {
+        bail!("policy {} returned an empty action chunk", policy.name());
+    }
+    Ok((chunks, len))
+}
+
 /// Runs both branches for `seeds`; returns one row per (seed, branch), MuJoCo first.
 ///
 /// # Errors
@@ -235,14 +256,7 @@ pub fn sim_branch(
     }
     let mut steps = 0;
     while steps < s.max_steps {
-        let tp = Instant::now();
-        let obs: Vec<Observation> = hist.iter().map(|h| obs_of(h, size)).collect();
-        let chunks: Vec<ActionChunk> = policy.act(&obs, &mut rngs).map_err(|e| anyhow!(e))?;
-        timing.policy_s += tp.elapsed().as_secs_f64();
-        let len = chunks.iter().map(Vec::len).min().unwrap_or(0).min(s.max_steps - steps);
-        if len == 0 {
-            bail!("policy {name} returned an empty action chunk");
-        }
+        let (chunks, len) = decide(policy, &hist, size, &mut rngs, s.max_steps - steps, timing)?;
         let ts = Instant::now();
         let results: Vec<ChunkResult> = start
             .envs
@@ -338,14 +352,7 @@ pub fn wm_branch(
     timing.world_model_s += tw.elapsed().as_secs_f64();
     let mut steps = 0;
     while steps < s.max_steps {
-        let tp = Instant::now();
-        let obs: Vec<Observation> = hist.iter().map(|h| obs_of(h, size)).collect();
-        let chunks: Vec<ActionChunk> = policy.act(&obs, &mut rngs).map_err(|e| anyhow!(e))?;
-        timing.policy_s += tp.elapsed().as_secs_f64();
-        let len = chunks.iter().map(Vec::len).min().unwrap_or(0).min(s.max_steps - steps);
-        if len == 0 {
-            bail!("policy {name} returned an empty action chunk");
-        }
+        let (chunks, len) = decide(policy, &hist, size, &mut rngs, s.max_steps - steps, timing)?;
         let tw = Instant::now();
         let mut done = 0;
         while done < len {

@@ -195,21 +195,7 @@ pub fn summarise(rows: &[EpisodeRow], policies: &[String], bootstrap: usize, see
     let m = agreement(&pred, &act);
     let ci = (pairs.len() >= 2 && pairs.iter().all(|(w, _)| w.len() >= 2))
         .then(|| agreement_ci(&pairs, bootstrap, seed));
-    let ties: Vec<[&str; 2]> = m.rank_inversions.ties.iter().map(|&(i, j)| [names[i], names[j]]).collect();
-    json!({
-        "policies": out,
-        "agreement": {
-            "pearson": m.pearson,
-            "spearman": m.spearman,
-            "kendall_tau_b": m.kendall_tau_b,
-            "rank_inversions": m.rank_inversions.count,
-            "rank_inversion_fraction": m.rank_inversions.fraction,
-            "ties": ties,
-            "mmrv": m.mmrv,
-            "regret_at_1": m.regret_at_1,
-            "ci95": ci,
-        },
-    })
+    json!({"policies": out, "agreement": m.to_json(&names, ci.as_ref())})
 }
 
 #[cfg(test)]

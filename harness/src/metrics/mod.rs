@@ -175,5 +175,25 @@ pub fn agreement(pred: &[f64], actual: &[f64]) -> Agreement {
     }
 }
 
+impl Agreement {
+    /// The JSON `agreement` object of `agreement` and `rank` outputs: every metric,
+    /// tied pairs by name (`names[i]` is policy i) and the 95% intervals.
+    pub fn to_json(&self, names: &[&str], ci: Option<&bootstrap::AgreementCi>) -> serde_json::Value {
+        let ties: Vec<[&str; 2]> =
+            self.rank_inversions.ties.iter().map(|&(i, j)| [names[i], names[j]]).collect();
+        serde_json::json!({
+            "pearson": self.pearson,
+            "spearman": self.spearman,
+            "kendall_tau_b": self.kendall_tau_b,
+            "rank_inversions": self.rank_inversions.count,
+            "rank_inversion_fraction": self.rank_inversions.fraction,
+            "ties": ties,
+            "mmrv": self.mmrv,
+            "regret_at_1": self.regret_at_1,
+            "ci95": ci,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests;
