@@ -228,6 +228,14 @@ pub struct TrainPolicyArgs {
     /// DDIM steps at inference.
     #[arg(long, default_value_t = 10)]
     pub inference_steps: usize,
+    /// Pre-train the frame encoder this many steps to regress the agent and block
+    /// poses, then freeze it and train the U-Net on cached features (fast on a CPU);
+    /// 0 trains end to end as Chi et al. do.
+    #[arg(long, default_value_t = 3000)]
+    pub encoder_steps: u64,
+    /// Peak learning rate of the encoder's pose pre-training.
+    #[arg(long, default_value_t = 1e-3)]
+    pub encoder_lr: f64,
     /// Seed of the weights, sample order and noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,

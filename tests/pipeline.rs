@@ -85,10 +85,15 @@ fn build(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
             "16,32",
             "--inference-steps",
             "2",
+            "--encoder-steps",
+            "3",
         ]),
         0,
     );
     assert!(stdout.contains("saved") && stdout.contains("epoch-0001"), "{stdout}");
+    // The encoder was pose-pre-trained for 3 steps, then frozen.
+    let prov = read_json(&pol.join("epoch-0001/policy.json"));
+    assert_eq!(prov["provenance"]["encoder_pretraining"]["steps"], 3, "{prov}");
     (data, wm, pol)
 }
 

@@ -31,6 +31,10 @@ pub struct Demos {
     pub frames: Vec<u8>,
     /// `n` agent positions.
     pub agent_pos: Vec<[f32; 2]>,
+    /// `n` block poses (x, y, θ), privileged: used only to pre-train the encoder.
+    pub block: Vec<[f32; 3]>,
+    /// `n` goal poses (x, y, θ; drawn in every frame), used only to pre-train the encoder.
+    pub goal: Vec<[f32; 3]>,
     /// `n` actions.
     pub actions: Vec<[f32; 2]>,
     /// Frame side.
@@ -59,10 +63,17 @@ impl Demos {
         let behaviours = r.attrs["evalharness"]["episodes"].as_array().cloned().unwrap_or_default();
         let state = r.state.read_f64().map_err(|e| err(e.to_string()))?;
         let sdim = r.state.row_len();
+        if sdim < 8 {
+            return Err(err(format!(
+                "data/state has {sdim} columns, expected agent x, y, block x, y, θ, goal x, y, θ"
+            )));
+        }
         let action = r.action.read_f64().map_err(|e| err(e.to_string()))?;
         let mut d = Demos {
             frames: Vec::new(),
             agent_pos: Vec::new(),
+            block: Vec::new(),
+            goal: Vec::new(),
             actions: Vec::new(),
             size,
             episodes: Vec::new(),
@@ -81,7 +92,10 @@ impl Demos {
             let start = d.agent_pos.len();
             d.frames.extend(r.img.read_rows(rg.start, rg.end).map_err(|e| err(e.to_string()))?);
             for t in rg.clone() {
-                d.agent_pos.push([state[t * sdim] as f32, state[t * sdim + 1] as f32]);
+                let row = &state[t * sdim..(t + 1) * sdim];
+                d.agent_pos.push([row[0] as f32, row[1] as f32]);
+                d.block.push([row[2] as f32, row[3] as f32, row[4] as f32]);
+                d.goal.push([row[5] as f32, row[6] as f32, row[7] as f32]);
                 d.actions.push([action[t * 2] as f32, action[t * 2 + 1] as f32]);
             }
             d.episodes.push(start..d.agent_pos.len());
@@ -142,6 +156,8 @@ mod tests {
         let d = Demos {
             frames: vec![],
             agent_pos: vec![[0.0; 2]; 5],
+            block: vec![[0.0; 3]; 5],
+            goal: vec![[0.0; 3]; 5],
             actions: vec![[0.0; 2]; 5],
             size: 1,
             episodes: vec![0..3, 3..5],

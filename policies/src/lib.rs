@@ -4,6 +4,7 @@
 //! - [`diffusion`]: the `diffusion` kind (DDPM training, DDIM inference) behind
 //!   [`harness::policy::Policy`];
 //! - [`data`]: demonstrations from a replay-buffer dataset;
+//! - [`pretrain`]: pose pre-training of the frame encoder and the frozen-feature cache;
 //! - [`train`]: the trainer, which saves a checkpoint every few epochs;
 //! - [`dir`]: the policy directory format and its validating loader.
 
@@ -11,4 +12,5 @@ pub mod data;
 pub mod diffusion;
 pub mod dir;
 pub mod net;
+pub mod pretrain;
 pub mod train;

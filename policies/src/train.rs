@@ -13,7 +13,7 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
@@ -26,6 +26,7 @@ use serde_json::json;
 use crate::data::Demos;
 use crate::diffusion::{DiffusionConfig, DiffusionNet, Normalisation, alphas_cumprod, frames_to_tensor};
 use crate::dir::{PolicyFile, PolicyLoadError, write_policy};
+use crate::pretrain::{Pretrain, encode_frames, pretrain_encoder};
 
 /// Training hyper-parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -48,6 +49,18 @@ pub struct PolicyTrainConfig {
     pub seed: u64,
     /// Save the training state every this many steps.
     pub checkpoint_every: u64,
+    /// Pose pre-training steps of the frame encoder ([`crate::pretrain`]). 0 trains
+    /// encoder and U-Net end to end (Chi et al.); more pre-trains the encoder, freezes
+    /// it and trains the U-Net alone on cached features.
+    #[serde(default)]
+    pub encoder_steps: u64,
+    /// Peak learning rate of the pose pre-training.
+    #[serde(default = "default_encoder_lr")]
+    pub encoder_lr: f64,
+}
+
+fn default_encoder_lr() -> f64 {
+    1e-3
 }
 
 /// How to run a session.
@@ -64,6 +77,8 @@ pub struct PolicyRun {
 /// A progress report.
 #[derive(Clone, Debug)]
 pub struct PolicyProgress {
+    /// "encoder" during pose pre-training, "policy" after.
+    pub phase: &'static str,
     /// Steps done / in total.
     pub step: u64,
     /// Steps in total.
@@ -167,11 +182,31 @@ pub fn train_policy(
         optim.save(&paths[1]).map_err(|e| PolicyLoadError::new(&paths[1], e.to_string()))?;
         std::fs::write(&paths[2], serde_json::to_string(state).unwrap_or_default()).map_err(io(&paths[2]))
     };
+    let started = Instant::now();
+    let mut provenance = configs.provenance.clone();
+    let features = if tc.encoder_steps > 0 {
+        let deadline = run.max_minutes.map(|m| started + Duration::from_secs_f64(m * 60.0));
+        let p = Pretrain { steps: tc.encoder_steps, lr: tc.encoder_lr, seed: tc.seed };
+        let total = tc.encoder_steps;
+        let (ps, probe) = pretrain_encoder(demos, &pc.net, p, &dir, deadline, &mut |step, loss| {
+            on_progress(&PolicyProgress { phase: "encoder", step, total, epoch: 0, loss });
+        })?;
+        let Some(probe) = probe else {
+            return Ok(PolicyOutcome { step: state.step, total, saved: Vec::new(), loss: f64::NAN });
+        };
+        provenance["encoder_pretraining"] = json!({"steps": ps.step, "heldout_pose_error": ps.heldout});
+        if state.step == 0 {
+            net.encoder = probe.encoder;
+        }
+        tracing::info!(frames = demos.len(), "encoding every frame with the frozen encoder");
+        Some(encode_frames(&net.encoder.valid(), demos, s, &Device::flex()))
+    } else {
+        None
+    };
     let ac = alphas_cumprod(pc.train_steps);
     let log_path = dir.join("log.jsonl");
     let mut log =
         std::fs::OpenOptions::new().create(true).append(true).open(&log_path).map_err(io(&log_path))?;
-    let started = Instant::now();
     let base = state.elapsed_s;
     let mut recent = Vec::new();
     let mut saved = Vec::new();
@@ -200,10 +235,24 @@ pub fn train_policy(
         let mut rng = Rng::new(derive(tc.seed, &[u64::MAX, state.step]));
         let t: Vec<usize> = (0..b).map(|_| rng.below(pc.train_steps as u64) as usize).collect();
         let noise = Tensor::from_data(TensorData::new(rng.normals_f32(b * h * 2), [b, h, 2]), &device);
-        let cond = net.obs_cond(
-            frames_to_tensor(&frames, s, &device),
-            Tensor::from_data(TensorData::new(pos, [b, o, 2]), &device),
-        );
+        let cond = match &features {
+            // Frozen encoder: [b, o·(f + 2)] from the cache, no gradient reaches the encoder.
+            Some(cache) => {
+                let f = pc.net.feature_dim;
+                let mut c = Vec::with_capacity(b * o * (f + 2));
+                for (k, &t) in batch.iter().enumerate() {
+                    for (j, &i) in demos.sample_indices(t, o, h).0.iter().enumerate() {
+                        c.extend_from_slice(&cache[i * f..(i + 1) * f]);
+                        c.extend_from_slice(&pos[(k * o + j) * 2..(k * o + j + 1) * 2]);
+                    }
+                }
+                Tensor::from_data(TensorData::new(c, [b, o * (f + 2)]), &device)
+            }
+            None => net.obs_cond(
+                frames_to_tensor(&frames, s, &device),
+                Tensor::from_data(TensorData::new(pos, [b, o, 2]), &device),
+            ),
+        };
         let actions = Tensor::from_data(TensorData::new(act, [b, h, 2]), &device);
         let loss = net.loss(cond, actions, noise, &t, &ac);
         let lv: f64 = loss.clone().into_scalar::<f32>().into();
@@ -227,14 +276,8 @@ pub fn train_policy(
             let done = state.step / per_epoch;
             if done.is_multiple_of(tc.save_every) || done == tc.epochs {
                 let ck = out.join(format!("epoch-{done:04}"));
-                let file = PolicyFile::diffusion(
-                    pc,
-                    &configs.normalisation,
-                    done,
-                    state.step,
-                    &configs.provenance,
-                    lv,
-                );
+                let file =
+                    PolicyFile::diffusion(pc, &configs.normalisation, done, state.step, &provenance, lv);
                 write_policy(&ck, &file, &net.valid())?;
                 saved.push(ck);
             }
@@ -242,7 +285,7 @@ pub fn train_policy(
         if state.step.is_multiple_of(tc.checkpoint_every) || state.step.is_multiple_of(per_epoch) {
             save_state(&net, &optim, &state)?;
         }
-        on_progress(&PolicyProgress { step: state.step, total, epoch: epoch + 1, loss: lv });
+        on_progress(&PolicyProgress { phase: "policy", step: state.step, total, epoch: epoch + 1, loss: lv });
     }
     save_state(&net, &optim, &state)?;
     let loss = recent.iter().sum::<f64>() / recent.len().max(1) as f64;

@@ -12,7 +12,9 @@
 //!
 //! Both branches draw the policy's sampling noise from clones of the same
 //! per-episode stream, so they are matched pairs. All episodes advance in
-//! lockstep (batched policy and world model); MuJoCo steps run on rayon.
+//! lockstep (batched policy and world model); MuJoCo steps run on rayon. An
+//! episode leaves the batch at the end of the action chunk in which it succeeded
+//! (as gym-pusht terminates at success), in each branch by that branch's score.
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -75,7 +77,10 @@ struct Track {
     best_reward: f64,
     max_cov: f64,
     last_cov: f64,
-    /// Score so far at the end of each action chunk.
+    /// Control steps executed (until success or the step limit).
+    steps: usize,
+    /// Score so far at the end of each action chunk (repeated after the episode ended,
+    /// so every trace of a batch has the same length).
     trace: Vec<f64>,
 }
 
@@ -109,6 +114,16 @@ fn push(hist: &mut VecDeque<Seen>, item: Seen, keep: usize) {
     hist.push_back(item);
     while hist.len() > keep {
         hist.pop_front();
+    }
+}
+
+/// Appends every episode's newest frame to its recording (an ended episode repeats its
+/// last one, so both branches' strips stay aligned); a no-op when not recording.
+fn record_chunk(rec: &mut [Vec<Vec<u8>>], hist: &[VecDeque<Seen>]) {
+    for (r, h) in rec.iter_mut().zip(hist) {
+        if let Some(last) = h.back() {
+            r.push(last.0.clone());
+        }
     }
 }
 
@@ -175,25 +190,38 @@ impl Start {
     }
 }
 
-/// One batched decision: the policy's chunks for every episode's history, and how many
-/// of their actions to execute (the shortest chunk, at most `left`).
+/// One batched decision for the `active` episodes: their chunks (in `active`'s order)
+/// and how many actions to execute (the shortest chunk, at most `left`). Each
+/// episode keeps its own noise stream, whichever others are still running.
 fn decide(
     policy: &dyn Policy,
     hist: &[VecDeque<Seen>],
+    active: &[usize],
     size: usize,
     rngs: &mut [Rng],
     left: usize,
     timing: &mut Timing,
 ) -> Result<(Vec<ActionChunk>, usize)> {
     let tp = Instant::now();
-    let obs: Vec<Observation> = hist.iter().map(|h| obs_of(h, size)).collect();
-    let chunks = policy.act(&obs, rngs).map_err(|e| anyhow!(e))?;
+    let obs: Vec<Observation> = active.iter().map(|&i| obs_of(&hist[i], size)).collect();
+    let mut sub: Vec<Rng> = active.iter().map(|&i| rngs[i].clone()).collect();
+    let chunks = policy.act(&obs, &mut sub).map_err(|e| anyhow!(e))?;
+    for (&i, r) in active.iter().zip(sub) {
+        rngs[i] = r;
+    }
     timing.policy_s += tp.elapsed().as_secs_f64();
     let len = chunks.iter().map(Vec::len).min().unwrap_or(0).min(left);
-    if len == 0 {
-        bail!("policy {} returned an empty action chunk", policy.name());
+    if len == 0 || chunks.len() != active.len() {
+        bail!("policy {} returned an empty action chunk or too few chunks", policy.name());
     }
     Ok((chunks, len))
+}
+
+/// Episodes still running: gym-pusht ends an episode at success, and so does each
+/// branch here, at the end of the action chunk that reached it (its score, the best
+/// reward so far, cannot change after that).
+fn still_active(active: &[usize], track: &[Track]) -> Vec<usize> {
+    active.iter().copied().filter(|&i| track[i].best_reward < 1.0).collect()
 }
 
 /// Runs both branches for `seeds`; returns one row per (seed, branch), MuJoCo first.
@@ -255,42 +283,52 @@ pub fn sim_branch(
         t.add(env.score().coverage, thr);
     }
     let mut steps = 0;
-    while steps < s.max_steps {
-        let (chunks, len) = decide(policy, &hist, size, &mut rngs, s.max_steps - steps, timing)?;
+    let mut active: Vec<usize> = (0..n).collect();
+    while steps < s.max_steps && !active.is_empty() {
+        let (chunks, len) = decide(policy, &hist, &active, size, &mut rngs, s.max_steps - steps, timing)?;
         let ts = Instant::now();
-        let results: Vec<ChunkResult> = start
+        let mut chunk_of: Vec<Option<&ActionChunk>> = vec![None; n];
+        for (&i, ch) in active.iter().zip(&chunks) {
+            chunk_of[i] = Some(ch);
+        }
+        let results: Vec<Option<ChunkResult>> = start
             .envs
             .par_iter_mut()
-            .zip(chunks.par_iter())
+            .zip(chunk_of.par_iter())
             .zip(start.scorers.par_iter())
             .map(|((env, chunk), scorer)| {
-                let (mut covs, mut frames, mut err) = (Vec::with_capacity(len), Vec::new(), 0.0);
-                for (j, a) in chunk[..len].iter().enumerate() {
-                    let sc = env.step([f64::from(a[0]), f64::from(a[1])])?;
-                    covs.push(sc.coverage);
-                    if j + o >= len {
-                        let st = env.state();
-                        let f = raster.render(&st, &env.goal());
-                        err += (scorer.coverage(&f) - sc.coverage).abs();
-                        frames.push((f, st.agent.map(|v| v as f32)));
+                let chunk = (*chunk)?;
+                let mut run = || {
+                    let (mut covs, mut frames, mut err) = (Vec::with_capacity(len), Vec::new(), 0.0);
+                    for (j, a) in chunk[..len].iter().enumerate() {
+                        let sc = env.step([f64::from(a[0]), f64::from(a[1])])?;
+                        covs.push(sc.coverage);
+                        if j + o >= len {
+                            let st = env.state();
+                            let f = raster.render(&st, &env.goal());
+                            err += (scorer.coverage(&f) - sc.coverage).abs();
+                            frames.push((f, st.agent.map(|v| v as f32)));
+                        }
                     }
-                }
-                Ok((covs, frames, err))
+                    Ok((covs, frames, err))
+                };
+                Some(run())
             })
             .collect();
         for (i, r) in results.into_iter().enumerate() {
+            let Some(r) = r else { continue };
             let (covs, frames, err) = r?;
             covs.iter().for_each(|&cv| track[i].add(cv, thr));
+            track[i].steps += len;
             scorer_err[i].0 += err;
             scorer_err[i].1 += frames.len();
             frames.into_iter().for_each(|f| push(&mut hist[i], f, o));
-            if let (Some(r), Some(last)) = (rec.get_mut(i), hist[i].back()) {
-                r.push(last.0.clone());
-            }
         }
+        record_chunk(&mut rec, &hist);
         track.iter_mut().for_each(Track::end_chunk);
         timing.sim_s += ts.elapsed().as_secs_f64();
         steps += len;
+        active = still_active(&active, &track);
     }
     let rows = (0..n)
         .map(|i| {
@@ -304,7 +342,7 @@ pub fn sim_branch(
                 t.max_cov,
                 t.last_cov,
                 thr,
-                steps,
+                t.steps,
             )
             .with_poses(Some(start.envs[i].state().block.to_array()), start.goals[i])
             .with_scorer_error(Some(err))
@@ -348,12 +386,16 @@ pub fn wm_branch(
     let refs: Vec<&[u8]> = start.first.iter().map(Vec::as_slice).collect();
     let z0 = wm.encode(policies::diffusion::frames_to_tensor(&refs, size, &device)); // [n, C, s, s]
     let [_, c, ls, _] = z0.dims();
-    let mut zh = z0.unsqueeze_dim::<5>(1).expand([n, k, c, ls, ls]); // [n, K, C, s, s]
+    // Latent histories of the active episodes, in `active`'s order.
+    let mut zh = z0.unsqueeze_dim::<5>(1).expand([n, k, c, ls, ls]); // [a, K, C, s, s]
     timing.world_model_s += tw.elapsed().as_secs_f64();
     let mut steps = 0;
-    while steps < s.max_steps {
-        let (chunks, len) = decide(policy, &hist, size, &mut rngs, s.max_steps - steps, timing)?;
+    let mut active: Vec<usize> = (0..n).collect();
+    while steps < s.max_steps && !active.is_empty() {
+        let (chunks, len) = decide(policy, &hist, &active, size, &mut rngs, s.max_steps - steps, timing)?;
         let tw = Instant::now();
+        let a = active.len();
+        let mut sub: Vec<Rng> = active.iter().map(|&i| gen_rngs[i].clone()).collect();
         let mut done = 0;
         while done < len {
             let f = f_max.min(len - done);
@@ -361,8 +403,8 @@ pub fn wm_branch(
                 .iter()
                 .flat_map(|ch| ch[done..done + f].iter().flat_map(|a| a.map(normalise_action)))
                 .collect();
-            let act = Tensor::<3>::from_data(TensorData::new(acts, [n, f, 2]), &device);
-            let pred = wm.predict(zh.clone(), act, &mut gen_rngs); // [n, f, C, s, s]
+            let act = Tensor::<3>::from_data(TensorData::new(acts, [a, f, 2]), &device);
+            let pred = wm.predict(zh.clone(), act, &mut sub); // [a, f, C, s, s]
             let check: f32 = pred.clone().abs().sum().into_scalar();
             if !check.is_finite() {
                 bail!("world model produced non-finite latents for policy {name} at step {}", steps + done);
@@ -372,28 +414,39 @@ pub fn wm_branch(
             let first_seen = len.saturating_sub(o).max(done).min(done + f) - done;
             if first_seen < f {
                 let m = f - first_seen;
-                let seen = pred.clone().narrow(1, first_seen, m).reshape([n * m, c, ls, ls]);
+                let seen = pred.clone().narrow(1, first_seen, m).reshape([a * m, c, ls, ls]);
                 let frames = tensor_to_frames(wm.decode(seen));
-                for i in 0..n {
+                for (p, &i) in active.iter().enumerate() {
                     for j in 0..m {
-                        let fr = &frames[i * m + j];
+                        let fr = &frames[p * m + j];
                         track[i].add(start.scorers[i].coverage(fr), thr);
-                        push(&mut hist[i], (fr.clone(), chunks[i][done + first_seen + j]), o);
+                        push(&mut hist[i], (fr.clone(), chunks[p][done + first_seen + j]), o);
                     }
                 }
             }
             zh = Tensor::cat(vec![zh, pred], 1).narrow(1, f, k);
-            timing.frames += (n * f) as u64;
+            timing.frames += (a * f) as u64;
             done += f;
         }
-        timing.world_model_s += tw.elapsed().as_secs_f64();
-        for (r, h) in rec.iter_mut().zip(&hist) {
-            if let Some(last) = h.back() {
-                r.push(last.0.clone());
-            }
+        for (&i, r) in active.iter().zip(sub) {
+            gen_rngs[i] = r;
+            track[i].steps += len;
         }
+        record_chunk(&mut rec, &hist);
         track.iter_mut().for_each(Track::end_chunk);
         steps += len;
+        let next = still_active(&active, &track);
+        if next.len() < active.len() && !next.is_empty() {
+            let keep: Vec<Tensor<5>> = active
+                .iter()
+                .enumerate()
+                .filter(|(_, i)| next.contains(i))
+                .map(|(p, _)| zh.clone().narrow(0, p, 1))
+                .collect();
+            zh = Tensor::cat(keep, 0);
+        }
+        active = next;
+        timing.world_model_s += tw.elapsed().as_secs_f64();
     }
     let rows = (0..n)
         .map(|i| {
@@ -406,7 +459,7 @@ pub fn wm_branch(
                 t.max_cov,
                 t.last_cov,
                 thr,
-                steps,
+                t.steps,
             )
             .with_poses(None, start.goals[i])
             .with_trace(t.trace.clone())

@@ -1,0 +1,79 @@
+//! Model throughput benchmarks (criterion): a policy decision and a world-model
+//! chunk at batch 1 and batch 100, on the shipped checkpoints.
+//!
+//! `cargo bench --bench models`; results are recorded in BENCHMARKS.md. The
+//! checkpoints are read from `checkpoints/pusht/` (override with
+//! `BENCH_POLICY=DIR` and `BENCH_WORLD_MODEL=DIR`).
+
+// criterion_group! generates undocumented functions.
+#![allow(missing_docs)]
+
+use std::hint::black_box;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use harness::policy::Observation;
+use harness::rng::Rng;
+use policies::dir::{Expectations, checkpoint_dirs, load_policy};
+use world_model::model::WorldModel;
+
+const BATCHES: [usize; 2] = [1, 100];
+
+fn path(var: &str, default: &str) -> PathBuf {
+    std::env::var_os(var).map_or_else(|| PathBuf::from(default), PathBuf::from)
+}
+
+/// A grey 96 × 96 observation history of two frames.
+fn observation() -> Observation {
+    Observation { frames: vec![vec![200u8; 96 * 96 * 3]; 2], agent_pos: vec![[256.0, 256.0]; 2], size: 96 }
+}
+
+fn policy(c: &mut Criterion) {
+    let dir = path("BENCH_POLICY", "checkpoints/pusht/policies");
+    let first = checkpoint_dirs(&dir).ok().and_then(|d| d.into_iter().next()).unwrap_or(dir);
+    let device = Device::flex();
+    let p = load_policy(&first, Expectations { image_size: 96, action_dim: 2 }, &device)
+        .unwrap_or_else(|e| panic!("benchmark needs a policy checkpoint: {e}"));
+    let mut g = c.benchmark_group("policy_decision");
+    g.sample_size(10).measurement_time(Duration::from_secs(20));
+    for b in BATCHES {
+        let obs = vec![observation(); b];
+        let mut rngs: Vec<Rng> = (0..b as u64).map(Rng::new).collect();
+        g.bench_with_input(BenchmarkId::from_parameter(b), &b, |bench, _| {
+            bench.iter(|| black_box(p.act(&obs, &mut rngs).expect("policy acts")))
+        });
+    }
+    g.finish();
+}
+
+fn world_model(c: &mut Criterion) {
+    let dir = path("BENCH_WORLD_MODEL", "checkpoints/pusht/world_model");
+    let device = Device::flex();
+    let wm = WorldModel::load(&dir, &device)
+        .unwrap_or_else(|e| panic!("benchmark needs a world-model checkpoint: {e}"));
+    let mut g = c.benchmark_group("world_model_chunk");
+    g.sample_size(10).measurement_time(Duration::from_secs(20));
+    for b in BATCHES {
+        // One chunk: encode nothing (latent history given), predict 4 frames, decode 2
+        // (what a policy with obs horizon 2 sees per chunk in `rank`).
+        let frames = Tensor::<4>::zeros([b, 3, 96, 96], &device);
+        let z = wm.encode(frames); // [b, C, s, s]
+        let [_, ch, s, _] = z.dims();
+        let history = z.reshape([b, 1, ch, s, s]).repeat_dim(1, 4); // [b, 4, C, s, s]
+        let actions = Tensor::<3>::from_data(TensorData::new(vec![0f32; b * 4 * 2], [b, 4, 2]), &device);
+        let mut rngs: Vec<Rng> = (0..b as u64).map(Rng::new).collect();
+        g.bench_with_input(BenchmarkId::new("predict_4_decode_2", b), &b, |bench, _| {
+            bench.iter(|| {
+                let out = wm.predict(history.clone(), actions.clone(), &mut rngs); // [b, 4, C, s, s]
+                let last = out.slice([0..b, 2..4]).reshape([b * 2, ch, s, s]);
+                black_box(wm.decode(last).into_data())
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, policy, world_model);
+criterion_main!(benches);
