@@ -236,18 +236,16 @@ pub struct TrainPolicyArgs {
     /// Peak learning rate of the encoder's pose pre-training.
     #[arg(long, default_value_t = 1e-3)]
     pub encoder_lr: f64,
+    /// Start from the pose-pre-trained encoder of another run's folder (its
+    /// `.train/encoder*`), e.g. to train several U-Nets on one encoder.
+    #[arg(long)]
+    pub encoder_from: Option<PathBuf>,
     /// Seed of the weights, sample order and noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Stop (with a saved state) after this many minutes; `--resume` continues.
-    #[arg(long)]
-    pub max_minutes: Option<f64>,
-    /// Continue the run in `--out`.
-    #[arg(long)]
-    pub resume: bool,
-    /// Replace an existing `--out` (without `--resume`).
-    #[arg(long)]
-    pub force: bool,
+    /// Session control.
+    #[command(flatten)]
+    pub session: SessionArgs,
 }
 
 /// The world model's training objective.
@@ -303,15 +301,9 @@ pub struct TrainWorldModelArgs {
     /// Checkpoint interval (steps).
     #[arg(long, default_value_t = 50)]
     pub checkpoint_every: u64,
-    /// Stop (with a checkpoint) after this many minutes; `--resume` continues.
-    #[arg(long)]
-    pub max_minutes: Option<f64>,
-    /// Continue the run in `--out` from its last checkpoint (its config wins).
-    #[arg(long)]
-    pub resume: bool,
-    /// Replace an existing `--out` (without `--resume`).
-    #[arg(long)]
-    pub force: bool,
+    /// Session control.
+    #[command(flatten)]
+    pub session: SessionArgs,
 }
 
 /// `evalharness train autoencoder`.
@@ -341,6 +333,14 @@ pub struct TrainAutoencoderArgs {
     /// Checkpoint interval (steps).
     #[arg(long, default_value_t = 100)]
     pub checkpoint_every: u64,
+    /// Session control.
+    #[command(flatten)]
+    pub session: SessionArgs,
+}
+
+/// Session control shared by the trainers.
+#[derive(Debug, Args)]
+pub struct SessionArgs {
     /// Stop (with a checkpoint) after this many minutes; `--resume` continues.
     #[arg(long)]
     pub max_minutes: Option<f64>,

@@ -59,6 +59,20 @@ pub fn least_squares(pts: &[(f64, f64)]) -> Option<(f64, f64)> {
     Some((my - b * mx, b))
 }
 
+/// The series legend, upper left, in the house style.
+fn legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+) -> Res {
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK.mix(0.3))
+        .label_font(("sans-serif", 12))
+        .draw()
+        .map_err(e)
+}
+
 fn caption(s: &Summary) -> String {
     let f = |x: Option<crate::summary::Est>| x.map_or("n/a".into(), |v| v.fmt(2));
     format!("r = {}   ρ = {}   τ = {}", f(s.pearson), f(s.spearman), f(s.kendall))
@@ -120,14 +134,7 @@ fn scatter<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, s: &Summary) -> Re
             .draw_series([Text::new(p.name.clone(), (x + 0.012, y + 0.012), ("sans-serif", 12))])
             .map_err(e)?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .label_font(("sans-serif", 12))
-        .draw()
-        .map_err(e)?;
+    legend(&mut chart)?;
     root.present().map_err(e)
 }
 
@@ -191,14 +198,7 @@ fn bars<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, s: &Summary) -> Res {
             .label(label)
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.mix(0.75).filled()));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .label_font(("sans-serif", 12))
-        .draw()
-        .map_err(e)?;
+    legend(&mut chart)?;
     root.present().map_err(e)
 }
 

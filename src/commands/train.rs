@@ -99,9 +99,20 @@ pub(super) fn prepare_out(out: &std::path::Path, resume: bool, force: bool, stat
     Ok(())
 }
 
+/// The `data` entry of a world-model or autoencoder provenance file.
+pub fn data_provenance(path: &std::path::Path, episodes: usize, frames: usize) -> serde_json::Value {
+    json!({
+        "path": path.display().to_string(),
+        "episodes": episodes,
+        "frames": frames,
+        "held_out": "episodes with index % 10 == 9",
+        "collected_with": dataset_origin(path),
+    })
+}
+
 /// `evalharness train autoencoder`.
 pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
-    prepare_out(&a.out, a.resume, a.force, "state.json")?;
+    prepare_out(&a.out, a.session.resume, a.session.force, "state.json")?;
     let from_step = read_step(&a.out);
     let model_cfg = AutoencoderConfig::new();
     let cfg = AeTrainConfig {
@@ -117,7 +128,11 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     let data = EpisodeData::load(&a.data, model_cfg.image_size)?;
     tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");
     let pb = progress::bar(cfg.steps, "autoencoder", quiet);
-    let run = RunOptions { resume: a.resume, extend: a.steps.is_some(), max_minutes: a.max_minutes };
+    let run = RunOptions {
+        resume: a.session.resume,
+        extend: a.steps.is_some(),
+        max_minutes: a.session.max_minutes,
+    };
     let outcome = train_autoencoder(&data, &a.out, &model_cfg, &cfg, run, &mut |p| {
         pb.set_position(p.step);
         match p.psnr {
@@ -142,13 +157,7 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
             "sessions": sessions,
             "seed": a.seed,
             "commit": git_commit(),
-            "data": {
-                "path": a.data.display().to_string(),
-                "episodes": data.episodes.len(),
-                "frames": data.len(),
-                "held_out": "episodes with index % 10 == 9",
-                "collected_with": dataset_origin(&a.data),
-            },
+            "data": data_provenance(&a.data, data.episodes.len(), data.len()),
             "steps": outcome.step,
             "finished": outcome.finished,
             "elapsed_s": outcome.elapsed_s,

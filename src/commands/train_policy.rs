@@ -3,7 +3,7 @@
 
 use std::process::ExitCode;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use policies::data::Demos;
 use policies::diffusion::DiffusionConfig;
 use policies::net::NetConfig;
@@ -16,7 +16,7 @@ use crate::progress;
 
 /// `evalharness train policy`.
 pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
-    prepare_out(&a.out, a.resume, a.force, ".train/state.json")?;
+    prepare_out(&a.out, a.session.resume, a.session.force, ".train/state.json")?;
     if a.batch == 0 || a.epochs == Some(0) || a.save_every == 0 {
         bail!("--batch, --epochs and --save-every must be positive");
     }
@@ -55,11 +55,21 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
                 "samples": demos.len(),
                 "collected_with": dataset_origin(&a.data),
             },
+            "encoder_from": a.encoder_from.as_ref().map(|p| p.display().to_string()),
         }),
         policy,
     };
+    if let Some(from) = a.encoder_from.as_ref().filter(|_| !a.session.resume) {
+        let dst = a.out.join(".train");
+        std::fs::create_dir_all(&dst).with_context(|| format!("creating {}", dst.display()))?;
+        for f in ["encoder.bpk", "encoder_optimizer.bpk", "encoder_state.json"] {
+            let src = from.join(".train").join(f);
+            std::fs::copy(&src, dst.join(f))
+                .with_context(|| format!("--encoder-from: copying {}", src.display()))?;
+        }
+    }
     let pb = progress::bar(1, "policy", quiet);
-    let run = PolicyRun { resume: a.resume, epochs: a.epochs, max_minutes: a.max_minutes };
+    let run = PolicyRun { resume: a.session.resume, epochs: a.epochs, max_minutes: a.session.max_minutes };
     let outcome = train_policy(&demos, &a.out, &configs, run, &mut |p| {
         pb.set_length(p.total);
         pb.set_position(p.step);

@@ -15,7 +15,7 @@ use world_model::train_ae::{RunOptions, load_autoencoder};
 use world_model::train_wm::{WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
-use super::train::{dataset_origin, git_commit, prepare_out, read_step, record_session};
+use super::train::{data_provenance, git_commit, prepare_out, read_step, record_session};
 use crate::cli::{ObjectiveArg, TrainWorldModelArgs};
 use crate::output::write_json;
 use crate::progress;
@@ -38,7 +38,7 @@ fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
 
 /// `evalharness train world-model`.
 pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
-    prepare_out(&a.out, a.resume, a.force, "state.json")?;
+    prepare_out(&a.out, a.session.resume, a.session.force, "state.json")?;
     let objective = match a.objective {
         ObjectiveArg::Drifting => Objective::Drifting,
         ObjectiveArg::Mse => Objective::Mse,
@@ -67,7 +67,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             "--samples: drifting needs at least 2 samples per context (the other samples are the negatives)"
         );
     }
-    let model_cfg = if a.resume {
+    let model_cfg = if a.session.resume {
         None // the saved config wins
     } else {
         tracing::info!("measuring latent statistics");
@@ -95,7 +95,11 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         }
     };
     let pb = progress::bar(cfg.steps, objective.name(), quiet);
-    let run = RunOptions { resume: a.resume, extend: a.steps.is_some(), max_minutes: a.max_minutes };
+    let run = RunOptions {
+        resume: a.session.resume,
+        extend: a.steps.is_some(),
+        max_minutes: a.session.max_minutes,
+    };
     let outcome = train_world_model(&data, &ae, &a.out, model_cfg_ref, &cfg, run, &mut |p| {
         pb.set_length(p.total);
         pb.set_position(p.step);
@@ -116,13 +120,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             "seed": a.seed,
             "commit": git_commit(),
             "autoencoder": saved.autoencoder,
-            "data": {
-                "path": a.data.display().to_string(),
-                "episodes": data.episodes.len(),
-                "frames": data.len(),
-                "held_out": "episodes with index % 10 == 9",
-                "collected_with": dataset_origin(&a.data),
-            },
+            "data": data_provenance(&a.data, data.episodes.len(), data.len()),
             "steps": outcome.step,
             "finished": outcome.finished,
             "elapsed_s": outcome.elapsed_s,

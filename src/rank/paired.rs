@@ -467,3 +467,24 @@ pub fn wm_branch(
         .collect();
     Ok(BranchOut { rows, frames: rec })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn succeeded_episodes_leave_the_batch_and_keep_their_trace() {
+        let mut track = vec![Track::default(); 3];
+        // Success coverage 0.95: coverage 0.95 gives reward 1 (ends), 0.5 gives 0.526.
+        track[0].add(0.5, 0.95);
+        track[1].add(0.95, 0.95);
+        track[2].add(0.2, 0.95);
+        assert_eq!(still_active(&[0, 1, 2], &track), vec![0, 2]);
+        // A finished episode is not revived, and its trace keeps the batch's length.
+        assert_eq!(still_active(&[0, 2], &track), vec![0, 2]);
+        track.iter_mut().for_each(Track::end_chunk);
+        track.iter_mut().for_each(Track::end_chunk);
+        assert_eq!(track[1].trace, vec![1.0, 1.0]);
+        assert_eq!(track[0].trace, vec![0.526316, 0.526316]);
+    }
+}

@@ -113,10 +113,45 @@ pub(crate) struct State {
     pub(crate) elapsed_s: f64,
 }
 
-#[derive(Serialize, Deserialize)]
-struct Configs {
-    model: AutoencoderConfig,
-    train: AeTrainConfig,
+/// What a trainer's `config.json` holds: the model's and the training's configs.
+#[derive(Clone, Serialize, Deserialize)]
+pub(crate) struct Configs<M, T> {
+    pub(crate) model: M,
+    pub(crate) train: T,
+}
+
+/// The configs of a run in `out`: written fresh, or read back when resuming (the
+/// saved ones win), with the step total (`steps` picks it) replaced when extending.
+pub(crate) fn run_configs<M, T>(
+    out: &Path,
+    fresh: Configs<M, T>,
+    run: RunOptions,
+    steps: fn(&mut T) -> &mut u64,
+) -> Result<(M, T), WorldModelError>
+where
+    M: Serialize + serde::de::DeserializeOwned,
+    T: Serialize + serde::de::DeserializeOwned,
+{
+    let cfg_path = out.join("config.json");
+    let write = |c: &Configs<M, T>| {
+        std::fs::write(&cfg_path, serde_json::to_string_pretty(c).unwrap_or_default()).map_err(io(&cfg_path))
+    };
+    let c = if run.resume {
+        let text = std::fs::read_to_string(&cfg_path).map_err(|e| ckpt(&cfg_path, e))?;
+        let mut c: Configs<M, T> = serde_json::from_str(&text).map_err(|e| ckpt(&cfg_path, e))?;
+        let mut want = fresh.train;
+        let want = *steps(&mut want);
+        if run.extend && *steps(&mut c.train) != want {
+            *steps(&mut c.train) = want;
+            write(&c)?;
+        }
+        c
+    } else {
+        std::fs::create_dir_all(out).map_err(io(out))?;
+        write(&fresh)?;
+        fresh
+    };
+    Ok((c.model, c.train))
 }
 
 pub(crate) fn io(path: &Path) -> impl FnOnce(std::io::Error) -> WorldModelError + '_ {
@@ -128,7 +163,7 @@ pub(crate) fn ckpt(path: &Path, e: impl std::fmt::Display) -> WorldModelError {
 }
 
 /// Reads a run's `config.json`.
-fn read_configs(path: &Path) -> Result<Configs, WorldModelError> {
+fn read_configs(path: &Path) -> Result<Configs<AutoencoderConfig, AeTrainConfig>, WorldModelError> {
     let text = std::fs::read_to_string(path).map_err(|e| ckpt(path, e))?;
     serde_json::from_str(&text).map_err(|e| ckpt(path, e))
 }
@@ -194,25 +229,11 @@ pub fn train_autoencoder(
     run: RunOptions,
     on_progress: &mut dyn FnMut(&AeProgress),
 ) -> Result<AeOutcome, WorldModelError> {
-    let RunOptions { resume, extend, max_minutes } = run;
+    let RunOptions { resume, max_minutes, .. } = run;
     let device = Device::flex().autodiff();
     device.seed(cfg.seed);
-    let cfg_path = out.join("config.json");
-    let (model_cfg, cfg) = if resume {
-        let mut c = read_configs(&cfg_path)?;
-        if extend && c.train.steps != cfg.steps {
-            c.train.steps = cfg.steps;
-            std::fs::write(&cfg_path, serde_json::to_string_pretty(&c).unwrap_or_default())
-                .map_err(io(&cfg_path))?;
-        }
-        (c.model, c.train)
-    } else {
-        std::fs::create_dir_all(out).map_err(io(out))?;
-        let c = Configs { model: model_cfg.clone(), train: cfg.clone() };
-        std::fs::write(&cfg_path, serde_json::to_string_pretty(&c).unwrap_or_default())
-            .map_err(io(&cfg_path))?;
-        (c.model, c.train)
-    };
+    let fresh = Configs { model: model_cfg.clone(), train: cfg.clone() };
+    let (model_cfg, cfg) = run_configs(out, fresh, run, |t: &mut AeTrainConfig| &mut t.steps)?;
     let mut model = model_cfg.init(&device);
     let mut optim = AdamWConfig::new().with_beta_1(0.9).with_beta_2(0.95).with_weight_decay(0.01).init();
     let mut state = State { step: 0, elapsed_s: 0.0 };

@@ -30,7 +30,7 @@ use crate::error::WorldModelError;
 use crate::latents::{Latents, Window, window, window_starts};
 use crate::model::{Objective, WorldModel, WorldModelConfig, alpha_bar};
 use crate::optim::{Ema, clip_global_norm, warmup_lr};
-use crate::train_ae::{RunOptions, State, ckpt, io};
+use crate::train_ae::{Configs, RunOptions, State, ckpt, io, run_configs};
 use crate::unet::UNet;
 
 /// Training hyper-parameters.
@@ -115,12 +115,6 @@ pub struct WmOutcome {
     pub elapsed_s: f64,
 }
 
-#[derive(Serialize, Deserialize)]
-struct Configs {
-    model: WorldModelConfig,
-    train: WmTrainConfig,
-}
-
 /// Stacked windows: `[b·K]` history and `[b·F]` target indices, `[b, F, 2]` actions.
 fn stack(windows: &[Window], repeat: usize, device: &Device) -> (Vec<usize>, Vec<usize>, Tensor<3>) {
     let mut hist = Vec::new();
@@ -168,23 +162,8 @@ pub fn train_world_model(
 ) -> Result<WmOutcome, WorldModelError> {
     let device = Device::flex().autodiff();
     let inner = Device::flex();
-    let cfg_path = out.join("config.json");
-    let (model_cfg, cfg) = if run.resume {
-        let text = std::fs::read_to_string(&cfg_path).map_err(|e| ckpt(&cfg_path, e))?;
-        let mut c: Configs = serde_json::from_str(&text).map_err(|e| ckpt(&cfg_path, e))?;
-        if run.extend && c.train.steps != cfg.steps {
-            c.train.steps = cfg.steps;
-            std::fs::write(&cfg_path, serde_json::to_string_pretty(&c).unwrap_or_default())
-                .map_err(io(&cfg_path))?;
-        }
-        (c.model, c.train)
-    } else {
-        std::fs::create_dir_all(out).map_err(io(out))?;
-        let c = Configs { model: model_cfg.clone(), train: cfg.clone() };
-        std::fs::write(&cfg_path, serde_json::to_string_pretty(&c).unwrap_or_default())
-            .map_err(io(&cfg_path))?;
-        (c.model, c.train)
-    };
+    let fresh = Configs { model: model_cfg.clone(), train: cfg.clone() };
+    let (model_cfg, cfg) = run_configs(out, fresh, run, |t: &mut WmTrainConfig| &mut t.steps)?;
     let objective = model_cfg.objective;
     let (k, f) = (model_cfg.unet.history, model_cfg.future);
     let starts = window_starts(data, Split::Train, f);
