@@ -1,4 +1,4 @@
-//! `evalharness train autoencoder` on a tiny dataset: outputs, resume, bad input.
+//! `evalharness train autoencoder` and `train policy` on a tiny dataset: outputs, resume, bad input.
 
 use std::path::Path;
 
@@ -89,4 +89,46 @@ fn autoencoder_rejects_a_dataset_of_the_wrong_image_size() {
     ];
     let (_, err) = expect_code(&run(&args), 2);
     assert!(err.contains("tiny.zarr") && err.contains("64x64") && err.contains("96x96"), "{err}");
+}
+
+/// A policy run stopped during the encoder's pose pre-training resumes from there.
+#[test]
+fn policy_stopped_during_encoder_pretraining_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = tiny_dataset(dir.path(), None);
+    let out = dir.path().join("pol");
+    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+    let base = [
+        "train",
+        "policy",
+        "--data",
+        d,
+        "--out",
+        o,
+        "--behaviour",
+        "all",
+        "--epochs",
+        "1",
+        "--batch",
+        "40",
+        "--encoder-width",
+        "8",
+        "--down-dims",
+        "16,32",
+        "--encoder-steps",
+        "2",
+    ];
+    let mut first = base.to_vec();
+    first.extend(["--max-minutes", "0"]);
+    let (stdout, _) = expect_code(&run(&first), 0);
+    assert!(stdout.contains("step 0/1 (stopped early"), "{stdout}");
+    assert!(!out.join("epoch-0001").exists());
+    let mut again = base.to_vec();
+    again.push("--resume");
+    let (stdout, _) = expect_code(&run(&again), 0);
+    assert!(stdout.contains("step 1/1") && stdout.contains("epoch-0001"), "{stdout}");
+    let state = read_json(&out.join(".train/encoder_state.json"));
+    assert_eq!(state["step"], 2);
+    let file = read_json(&out.join("epoch-0001/policy.json"));
+    assert_eq!(file["provenance"]["encoder_pretraining"]["steps"], 2, "{file}");
 }

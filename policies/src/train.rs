@@ -74,11 +74,20 @@ pub struct PolicyRun {
     pub max_minutes: Option<f64>,
 }
 
+/// What a training run is doing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Phase {
+    /// Pose pre-training of the frame encoder.
+    Encoder,
+    /// Training the policy (the U-Net, and the encoder when end to end).
+    Policy,
+}
+
 /// A progress report.
 #[derive(Clone, Debug)]
 pub struct PolicyProgress {
-    /// "encoder" during pose pre-training, "policy" after.
-    pub phase: &'static str,
+    /// The phase `step` and `total` count.
+    pub phase: Phase,
     /// Steps done / in total.
     pub step: u64,
     /// Steps in total.
@@ -187,11 +196,13 @@ pub fn train_policy(
     let features = if tc.encoder_steps > 0 {
         let deadline = run.max_minutes.map(|m| started + Duration::from_secs_f64(m * 60.0));
         let p = Pretrain { steps: tc.encoder_steps, lr: tc.encoder_lr, seed: tc.seed };
-        let total = tc.encoder_steps;
+        let enc_total = tc.encoder_steps;
         let (ps, probe) = pretrain_encoder(demos, &pc.net, p, &dir, deadline, &mut |step, loss| {
-            on_progress(&PolicyProgress { phase: "encoder", step, total, epoch: 0, loss });
+            on_progress(&PolicyProgress { phase: Phase::Encoder, step, total: enc_total, epoch: 0, loss });
         })?;
         let Some(probe) = probe else {
+            // Stopped during pre-training: the run's own state is what `--resume` looks for.
+            save_state(&net, &optim, &state)?;
             return Ok(PolicyOutcome { step: state.step, total, saved: Vec::new(), loss: f64::NAN });
         };
         provenance["encoder_pretraining"] = json!({"steps": ps.step, "heldout_pose_error": ps.heldout});
@@ -222,11 +233,12 @@ pub fn train_policy(
         let k = (state.step % per_epoch) as usize * tc.batch;
         let batch = &order.1[k..(k + tc.batch).min(n)];
         let b = batch.len();
-        let mut frames = Vec::with_capacity(b * o);
+        // Observation steps of the batch, `o` per sample (oldest first).
+        let mut obs = Vec::with_capacity(b * o);
         let (mut pos, mut act) = (Vec::with_capacity(b * o * 2), Vec::with_capacity(b * h * 2));
         for &t in batch {
             let (oi, ai) = demos.sample_indices(t, o, h);
-            frames.extend(oi.iter().map(|&i| demos.frame(i)));
+            obs.extend_from_slice(&oi);
             pos.extend(
                 oi.iter().flat_map(|&i| configs.normalisation.agent_pos.normalise(demos.agent_pos[i])),
             );
@@ -240,18 +252,19 @@ pub fn train_policy(
             Some(cache) => {
                 let f = pc.net.feature_dim;
                 let mut c = Vec::with_capacity(b * o * (f + 2));
-                for (k, &t) in batch.iter().enumerate() {
-                    for (j, &i) in demos.sample_indices(t, o, h).0.iter().enumerate() {
-                        c.extend_from_slice(&cache[i * f..(i + 1) * f]);
-                        c.extend_from_slice(&pos[(k * o + j) * 2..(k * o + j + 1) * 2]);
-                    }
+                for (j, &i) in obs.iter().enumerate() {
+                    c.extend_from_slice(&cache[i * f..(i + 1) * f]);
+                    c.extend_from_slice(&pos[j * 2..j * 2 + 2]);
                 }
                 Tensor::from_data(TensorData::new(c, [b, o * (f + 2)]), &device)
             }
-            None => net.obs_cond(
-                frames_to_tensor(&frames, s, &device),
-                Tensor::from_data(TensorData::new(pos, [b, o, 2]), &device),
-            ),
+            None => {
+                let frames: Vec<&[u8]> = obs.iter().map(|&i| demos.frame(i)).collect();
+                net.obs_cond(
+                    frames_to_tensor(&frames, s, &device),
+                    Tensor::from_data(TensorData::new(pos, [b, o, 2]), &device),
+                )
+            }
         };
         let actions = Tensor::from_data(TensorData::new(act, [b, h, 2]), &device);
         let loss = net.loss(cond, actions, noise, &t, &ac);
@@ -285,7 +298,13 @@ pub fn train_policy(
         if state.step.is_multiple_of(tc.checkpoint_every) || state.step.is_multiple_of(per_epoch) {
             save_state(&net, &optim, &state)?;
         }
-        on_progress(&PolicyProgress { phase: "policy", step: state.step, total, epoch: epoch + 1, loss: lv });
+        on_progress(&PolicyProgress {
+            phase: Phase::Policy,
+            step: state.step,
+            total,
+            epoch: epoch + 1,
+            loss: lv,
+        });
     }
     save_state(&net, &optim, &state)?;
     let loss = recent.iter().sum::<f64>() / recent.len().max(1) as f64;

@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use policies::data::Demos;
 use policies::diffusion::DiffusionConfig;
 use policies::net::NetConfig;
-use policies::train::{PolicyRun, PolicyTrainConfig, RunConfigs, train_policy};
+use policies::train::{Phase, PolicyRun, PolicyTrainConfig, RunConfigs, train_policy};
 use serde_json::json;
 
 use super::train::{dataset_origin, git_commit, prepare_out};
@@ -74,8 +74,8 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         pb.set_length(p.total);
         pb.set_position(p.step);
         pb.set_message(match p.phase {
-            "encoder" => format!("encoder pose pre-training, loss {:.4}", p.loss),
-            _ => format!("epoch {} loss {:.4}", p.epoch, p.loss),
+            Phase::Encoder => format!("encoder pose pre-training, loss {:.4}", p.loss),
+            Phase::Policy => format!("epoch {} loss {:.4}", p.epoch, p.loss),
         });
     })?;
     pb.finish_and_clear();

@@ -124,7 +124,7 @@ pub(crate) struct Configs<M, T> {
 /// saved ones win), with the step total (`steps` picks it) replaced when extending.
 pub(crate) fn run_configs<M, T>(
     out: &Path,
-    fresh: Configs<M, T>,
+    mut fresh: Configs<M, T>,
     run: RunOptions,
     steps: fn(&mut T) -> &mut u64,
 ) -> Result<(M, T), WorldModelError>
@@ -139,8 +139,7 @@ where
     let c = if run.resume {
         let text = std::fs::read_to_string(&cfg_path).map_err(|e| ckpt(&cfg_path, e))?;
         let mut c: Configs<M, T> = serde_json::from_str(&text).map_err(|e| ckpt(&cfg_path, e))?;
-        let mut want = fresh.train;
-        let want = *steps(&mut want);
+        let want = *steps(&mut fresh.train);
         if run.extend && *steps(&mut c.train) != want {
             *steps(&mut c.train) = want;
             write(&c)?;
