@@ -437,4 +437,17 @@ pub enum DatasetCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Concatenate datasets (same image size, dims, extras and scenario) into one,
+    /// episodes in argument order; each keeps its seed, behaviour and source.
+    Merge {
+        /// The input zarr dataset folders (at least two).
+        #[arg(required = true, num_args = 2..)]
+        inputs: Vec<PathBuf>,
+        /// Output zarr folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Replace the output if it exists.
+        #[arg(long)]
+        force: bool,
+    },
 }

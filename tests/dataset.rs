@@ -69,3 +69,37 @@ fn bad_mix_is_rejected_before_any_work() {
     assert!(err.contains("teleop"), "{err}");
     assert!(!o.exists());
 }
+
+#[test]
+fn merge_concatenates_episodes_and_keeps_their_origin() {
+    use harness::replay::ReplayReader;
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b, m) = (dir.path().join("a.zarr"), dir.path().join("b.zarr"), dir.path().join("m.zarr"));
+    collect(&a, "2");
+    let args = ["collect", "--episodes", "2", "--seed-start", "10", "--max-steps", "20", "--mix", "expert=1"];
+    expect_code(&run(&[&args[..], &["--noise", "30", "--out", b.to_str().unwrap()]].concat()), 0);
+    let (ps, pb, pm) = (a.to_str().unwrap(), b.to_str().unwrap(), m.to_str().unwrap());
+    let (stdout, _) = expect_code(&run(&["dataset", "merge", ps, pb, "--out", pm]), 0);
+    assert!(stdout.contains("6 episodes"), "{stdout}");
+
+    let (ra, rb, rm) =
+        (ReplayReader::open(&a).unwrap(), ReplayReader::open(&b).unwrap(), ReplayReader::open(&m).unwrap());
+    assert_eq!(rm.steps(), ra.steps() + rb.steps());
+    assert_eq!(rm.spec().unwrap(), ra.spec().unwrap());
+    let extras = ["coverage".to_string()];
+    // Episode 4 of the merge is episode 0 of b, byte for byte.
+    let (got, want) = (rm.read_episode(4, &extras).unwrap(), rb.read_episode(0, &extras).unwrap());
+    assert_eq!(
+        (got.img, got.action, got.state, got.extras),
+        (want.img, want.action, want.state, want.extras)
+    );
+    let eps = rm.attrs["evalharness"]["episodes"].as_array().unwrap().clone();
+    assert_eq!(eps.iter().map(|e| e["source"].as_u64().unwrap()).collect::<Vec<_>>(), [0, 0, 0, 0, 1, 1]);
+    assert_eq!(eps[4]["seed"], 10);
+    // Noisy experts are labelled as such, so `train policy --behaviour expert` skips them.
+    assert_eq!(eps[4]["behaviour"], "expert+noise30");
+    assert_eq!(rm.attrs["evalharness"]["merged_from"][1]["attrs"]["noise"], 30.0);
+
+    let (_, err) = expect_code(&run(&["dataset", "merge", ps, dir.path().to_str().unwrap(), "--out", pm]), 2);
+    assert!(err.contains(dir.path().to_str().unwrap()), "{err}");
+}

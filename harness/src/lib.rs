@@ -4,6 +4,7 @@
 //! - [`image`]: PSNR and SSIM as scikit-image computes them on 8-bit frames;
 //! - [`seed`]: deterministic seed derivation (episode RNGs never depend on thread order);
 //! - [`metrics`]: agreement metrics between predicted and true policy scores, with CIs;
+//! - [`runfile`]: a training run's config, written at the start and read back on resume;
 //! - [`zarr`] and [`replay`]: the diffusion_policy / GPC replay-buffer dataset layout.
 
 pub mod blosc;
@@ -12,5 +13,6 @@ pub mod metrics;
 pub mod policy;
 pub mod replay;
 pub mod rng;
+pub mod runfile;
 pub mod seed;
 pub mod zarr;

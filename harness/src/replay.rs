@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use crate::zarr::{ArrayReader, ArrayWriter, DType, ZarrError, read_attrs, write_group};
+use crate::zarr::{ArrayReader, ArrayWriter, DType, ZarrError, bytes_to_f64, read_attrs, write_group};
 
 /// Errors of dataset reading and writing, naming the dataset.
 #[derive(Debug, thiserror::Error)]
@@ -278,6 +278,65 @@ impl ReplayReader {
             });
         }
         Ok(Some(v))
+    }
+
+    /// The names of the optional per-step arrays under `data/` (sorted).
+    ///
+    /// # Errors
+    /// [`ReplayError::Io`] if `data/` cannot be listed.
+    pub fn extra_names(&self) -> Result<Vec<String>, ReplayError> {
+        let dir = self.path.join("data");
+        let entries = fs::read_dir(&dir).map_err(|source| ReplayError::Io { path: dir.clone(), source })?;
+        let mut names: Vec<String> = entries
+            .filter_map(Result::ok)
+            .filter(|e| e.path().join(".zarray").is_file())
+            .filter_map(|e| e.file_name().into_string().ok())
+            .filter(|n| !["img", "action", "state"].contains(&n.as_str()))
+            .collect();
+        names.sort();
+        Ok(names)
+    }
+
+    /// The shapes of this dataset's arrays, its extras included.
+    ///
+    /// # Errors
+    /// As [`Self::extra_names`].
+    pub fn spec(&self) -> Result<ReplaySpec, ReplayError> {
+        let s = &self.img.meta.shape;
+        Ok(ReplaySpec {
+            image_hw: [s[1], s[2]],
+            action_dim: self.action.row_len(),
+            state_dim: self.state.row_len(),
+            extras: self.extra_names()?,
+        })
+    }
+
+    /// Episode `i`'s arrays, with the named extras in the given order.
+    ///
+    /// # Errors
+    /// [`ReplayError`] for unreadable chunks or a missing extra.
+    pub fn read_episode(&self, i: usize, extras: &[String]) -> Result<EpisodeArrays, ReplayError> {
+        let rg = self.episode_range(i);
+        let floats = |a: &ArrayReader| -> Result<Vec<f32>, ReplayError> {
+            Ok(bytes_to_f64(&a.read_rows(rg.start, rg.end)?, a.dtype).into_iter().map(|v| v as f32).collect())
+        };
+        let mut ep = EpisodeArrays {
+            img: self.img.read_rows(rg.start, rg.end)?,
+            action: floats(&self.action)?,
+            state: floats(&self.state)?,
+            extras: Vec::with_capacity(extras.len()),
+        };
+        for name in extras {
+            let p = self.path.join("data").join(name);
+            if !p.join(".zarray").is_file() {
+                return Err(ReplayError::Layout {
+                    path: self.path.clone(),
+                    reason: format!("missing array data/{name}"),
+                });
+            }
+            ep.extras.push(floats(&ArrayReader::open(&p)?)?);
+        }
+        Ok(ep)
     }
 }
 

@@ -150,22 +150,13 @@ pub fn train_policy(
 ) -> Result<PolicyOutcome, PolicyLoadError> {
     let dir = out.join(".train");
     let cfg_path = dir.join("config.json");
-    let configs: RunConfigs = if run.resume {
-        let text = std::fs::read_to_string(&cfg_path).map_err(io(&cfg_path))?;
-        let mut c: RunConfigs =
-            serde_json::from_str(&text).map_err(|e| PolicyLoadError::new(&cfg_path, e.to_string()))?;
-        if let Some(e) = run.epochs.filter(|&e| e != c.train.epochs) {
-            c.train.epochs = e;
-            std::fs::write(&cfg_path, serde_json::to_string_pretty(&c).unwrap_or_default())
-                .map_err(io(&cfg_path))?;
-        }
-        c
-    } else {
-        std::fs::create_dir_all(&dir).map_err(io(&dir))?;
-        std::fs::write(&cfg_path, serde_json::to_string_pretty(configs).unwrap_or_default())
-            .map_err(io(&cfg_path))?;
-        configs.clone()
-    };
+    let configs =
+        harness::runfile::resume_or_start(&cfg_path, configs.clone(), run.resume, |c: &mut RunConfigs| {
+            let extend = run.epochs.filter(|&e| e != c.train.epochs);
+            c.train.epochs = extend.unwrap_or(c.train.epochs);
+            extend.is_some()
+        })
+        .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
     let (pc, tc) = (&configs.policy, &configs.train);
     let device = Device::flex().autodiff();
     let (o, h, s) = (pc.net.obs_horizon, pc.horizon, pc.net.image_size);

@@ -3,12 +3,14 @@
 //! - [`gif`], [`png`]: animated GIFs and filmstrips of episodes;
 //! - [`summary`]: what a `rank` report shows, read from `results.json`;
 //! - [`plots`]: scatter, bar and bump charts (PNG + SVG, bundled font);
+//! - [`labels`]: scatter-label placement without overprinting;
 //! - [`timeplot`]: score over time per policy, both branches;
 //! - [`tables`]: the LaTeX table and the summary CSV;
 //! - [`html`]: the self-contained HTML report.
 
 pub mod gif;
 pub mod html;
+pub mod labels;
 pub mod plots;
 pub mod png;
 pub mod summary;

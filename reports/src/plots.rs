@@ -16,6 +16,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::{FontStyle, register_font};
 
+use crate::labels::{self, Rect};
 use crate::summary::Summary;
 
 static FONT: Once = Once::new();
@@ -130,12 +131,49 @@ fn scatter<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, s: &Summary) -> Re
             chart.draw_series([ErrorBar::new_horizontal(y, lo, x, hi, style, 6)]).map_err(e)?;
         }
         chart.draw_series([Circle::new((x, y), 4, SIM.filled())]).map_err(e)?;
-        chart
-            .draw_series([Text::new(p.name.clone(), (x + 0.012, y + 0.012), ("sans-serif", 12))])
-            .map_err(e)?;
     }
+    point_labels(root, &chart, s)?;
     legend(&mut chart)?;
     root.present().map_err(e)
+}
+
+/// The policies' names beside their points, placed so that they never overprint
+/// (see [`crate::labels`]); a label moved away from its point gets a leader line.
+fn point_labels<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    chart: &ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    s: &Summary,
+) -> Res {
+    let font: TextStyle = ("sans-serif", 12).into();
+    let (bx, by) = root.get_base_pixel();
+    let (xr, yr) = chart.plotting_area().get_pixel_range();
+    let area = Rect { x: xr.start - bx, y: yr.start - by, w: xr.end - xr.start, h: yr.end - yr.start };
+    let points: Vec<(i32, i32)> = s
+        .policies
+        .iter()
+        .map(|p| chart.backend_coord(&(p.sim.mean.value, p.world_model.mean.value)))
+        .map(|(x, y)| (x - bx, y - by))
+        .collect();
+    let sizes = s
+        .policies
+        .iter()
+        .map(|p| root.estimate_text_size(&p.name, &font).map(|(w, h)| (w as i32, h as i32)))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(e)?;
+    for ((p, &(px, py)), l) in s.policies.iter().zip(&points).zip(labels::place(&points, &sizes, area)) {
+        let r = l.rect;
+        if l.leader {
+            // From the point to the nearer vertical edge of the label, at its middle.
+            let ex = if r.x > px { r.x - 1 } else { r.x + r.w + 1 };
+            root.draw(&PathElement::new([(px, py), (ex, r.y + r.h / 2)], BLACK.mix(0.4))).map_err(e)?;
+        }
+        root.draw(&Text::new(p.name.clone(), (r.x, r.y), font.clone())).map_err(e)?;
+    }
+    Ok(())
 }
 
 /// Policy indices sorted by MuJoCo mean score, ascending.

@@ -55,6 +55,7 @@ fn panel<DB: DrawingBackend>(
     let mut chart = ChartBuilder::on(area)
         .caption(&ts.policy, ("sans-serif", 13))
         .margin(6)
+        .margin_right(14)
         .x_label_area_size(26)
         .y_label_area_size(34)
         .build_cartesian_2d(0f64..max_step, 0f64..1f64)
@@ -62,6 +63,7 @@ fn panel<DB: DrawingBackend>(
     chart
         .configure_mesh()
         .x_labels(4)
+        .x_label_formatter(&|x| format!("{x:.0}"))
         .y_labels(3)
         .light_line_style(WHITE.mix(0.0))
         .label_style(("sans-serif", 10))

@@ -13,7 +13,7 @@ use harness::replay::{EpisodeArrays, ReplaySpec, ReplayWriter};
 use harness::seed::{derive, fnv1a};
 use serde_json::json;
 
-use super::episodes::{BehaviourKind, FrameSpec, Perturbation, RendererKind, Runner};
+use super::episodes::{BehaviourKind, FrameSpec, Perturbation, RendererKind, Runner, behaviour_label};
 use crate::cli::CollectArgs;
 use crate::progress;
 use crate::scenario::load_pusht;
@@ -62,7 +62,8 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
     let mix = parse_mix(&args.mix)?;
     let cfg = load_pusht(&c.scenario)?;
-    let runner = Runner::new(cfg, c.jobs, c.max_steps, Perturbation { noise: c.noise, lag: c.lag })?;
+    let perturbation = Perturbation { noise: c.noise, lag: c.lag };
+    let runner = Runner::new(cfg, c.jobs, c.max_steps, perturbation)?;
     let size = runner.cfg.render.size as usize;
     let spec =
         ReplaySpec { image_hw: [size, size], action_dim: 2, state_dim: 8, extras: vec!["coverage".into()] };
@@ -92,7 +93,7 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
             writer.append(&arrays)?;
             episodes.push(json!({
                 "seed": ep.seed,
-                "behaviour": work[i].1.name(),
+                "behaviour": behaviour_label(work[i].1, perturbation),
                 "steps": steps,
                 "score": ep.score,
                 "success": ep.success,

@@ -57,6 +57,22 @@ pub struct Perturbation {
     pub lag: usize,
 }
 
+/// How a dataset names an episode's behaviour: a perturbed expert is not an expert
+/// demonstration (`expert+noise80+lag2`), so consumers that want clean demonstrations
+/// (the policy trainer's `--behaviour expert`) can tell them apart.
+pub fn behaviour_label(kind: BehaviourKind, p: Perturbation) -> String {
+    let mut label = kind.name().to_string();
+    if kind == BehaviourKind::Expert {
+        if p.noise > 0.0 {
+            label.push_str(&format!("+noise{}", p.noise));
+        }
+        if p.lag > 0 {
+            label.push_str(&format!("+lag{}", p.lag));
+        }
+    }
+    label
+}
+
 /// Builds the behaviour of one episode; its randomness derives from the seed only.
 fn behaviour(kind: BehaviourKind, env: &PushTEnv, seed: u64, p: Perturbation) -> Box<dyn Behaviour> {
     match kind {

@@ -3,6 +3,7 @@
 mod agreement;
 mod collect;
 mod dataset;
+mod dataset_merge;
 mod episodes;
 mod simulate;
 mod simulate_policy;
@@ -25,6 +26,9 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Simulate(a) => simulate::run(a, cli.quiet),
         Command::Collect(a) => collect::run(a, cli.quiet),
         Command::Dataset(DatasetCommand::Info { path, json }) => dataset::info(path, *json),
+        Command::Dataset(DatasetCommand::Merge { inputs, out, force }) => {
+            dataset_merge::run(inputs, out, *force, cli.quiet)
+        }
         Command::Train(TrainCommand::Autoencoder(a)) => train::autoencoder(a, cli.quiet),
         Command::Train(TrainCommand::WorldModel(a)) => train_wm::run(a, cli.quiet),
         Command::Train(TrainCommand::Policy(a)) => train_policy::run(a, cli.quiet),

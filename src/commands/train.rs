@@ -34,14 +34,28 @@ pub(super) fn git_commit() -> String {
 }
 
 /// How an evalharness dataset was collected (from its attributes), to regenerate it:
-/// `collect` is deterministic, so the same arguments give the same bytes.
+/// `collect` is deterministic, so the same arguments give the same bytes. A merged
+/// dataset lists the origin of each of its inputs, in order.
 pub(super) fn dataset_origin(data: &std::path::Path) -> serde_json::Value {
     let attrs = harness::zarr::read_attrs(data).unwrap_or_default();
-    let e = &attrs["evalharness"];
+    origin_of(&attrs["evalharness"], None)
+}
+
+/// [`dataset_origin`] from a dataset's `evalharness` attributes; `episodes` overrides
+/// the count (a merge input's attributes no longer list its episodes).
+fn origin_of(e: &serde_json::Value, episodes: Option<u64>) -> serde_json::Value {
     if e.is_null() {
         return serde_json::Value::Null;
     }
-    let episodes = e["episodes"].as_array().map_or(0, Vec::len);
+    if let Some(parts) = e["merged_from"].as_array() {
+        let paths: Vec<&str> = parts.iter().filter_map(|p| p["path"].as_str()).collect();
+        return json!({
+            "command": format!("evalharness dataset merge {} --out DATASET", paths.join(" ")),
+            "inputs": parts.iter().map(|p| origin_of(&p["attrs"], p["episodes"].as_u64())).collect::<Vec<_>>(),
+            "evalharness_version": e["version"],
+        });
+    }
+    let episodes = episodes.unwrap_or_else(|| e["episodes"].as_array().map_or(0, |l| l.len() as u64));
     json!({
         "command": format!(
             "evalharness collect --episodes {episodes} --seed-start {} --mix {} --noise {} --lag {} --max-steps {}",

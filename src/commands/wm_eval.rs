@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use burn::tensor::Device;
 use serde_json::json;
 use world_model::data::{EpisodeData, Split};
-use world_model::eval::evaluate;
+use world_model::eval::{evaluate, persistence};
 use world_model::model::WorldModel;
 
 use crate::cli::WmEvalArgs;
@@ -67,6 +67,16 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             println!(
                 "{name:<20} {:<9} episode:  MSE {:.5} PSNR {:.2} SSIM {:.4} ({:.1} ms/frame)",
                 row.objective, row.mse, row.psnr, row.ssim, row.ms_per_frame
+            );
+            rows.push(row);
+        }
+    }
+    for (starts, horizon) in [(&short, "64"), (&full, "episode")] {
+        if !starts.is_empty() {
+            let row = persistence(&data, starts, k, horizon);
+            println!(
+                "{:<30} {horizon:>7}: MSE {:.5} PSNR {:.2} SSIM {:.4} (reference: nothing moves)",
+                "persistence", row.mse, row.psnr, row.ssim
             );
             rows.push(row);
         }

@@ -102,6 +102,64 @@ fn frame_metrics(real: &[u8], generated: &[u8], size: usize) -> (f64, f64, f64) 
     (mse, psnr(real, generated).min(100.0), ssim(real, generated, size, size, 3).unwrap_or(0.0))
 }
 
+/// Per-video metric sums, averaged into an [`EvalRow`].
+#[derive(Default)]
+struct Tally {
+    sums: [f64; 3],
+    frames: usize,
+    videos: usize,
+}
+
+impl Tally {
+    /// Adds one video: per-frame metrics averaged over its frames.
+    fn add(&mut self, real: &[Vec<u8>], generated: &[Vec<u8>], size: usize) {
+        let mut v = [0.0f64; 3];
+        for (r, x) in real.iter().zip(generated) {
+            let (m, p, q) = frame_metrics(r, x, size);
+            v[0] += m;
+            v[1] += p;
+            v[2] += q;
+        }
+        for (acc, x) in self.sums.iter_mut().zip(v) {
+            *acc += x / real.len().max(1) as f64;
+        }
+        self.frames += real.len();
+        self.videos += 1;
+    }
+
+    fn row(&self, name: &str, objective: &str, horizon: &str, secs: f64) -> EvalRow {
+        let n = self.videos.max(1) as f64;
+        EvalRow {
+            name: name.to_string(),
+            objective: objective.to_string(),
+            horizon: horizon.to_string(),
+            mse: self.sums[0] / n,
+            psnr: self.sums[1] / n,
+            ssim: self.sums[2] / n,
+            ms_per_frame: 1e3 * secs / self.frames.max(1) as f64,
+            frames: self.frames,
+            videos: self.videos,
+        }
+    }
+}
+
+/// Real frames `t + k .. t + k + len` of a video whose context starts at `t`.
+fn real_frames(data: &EpisodeData, t: usize, k: usize, len: usize) -> Vec<Vec<u8>> {
+    (0..len).map(|j| data.frame(t + k + j).to_vec()).collect()
+}
+
+/// The reference every world model must beat: "nothing moves", the last context
+/// frame repeated for the whole video (no model, no cost). A model scoring below it
+/// predicts motion worse than not predicting any.
+pub fn persistence(data: &EpisodeData, starts: &[(usize, usize)], k: usize, horizon: &str) -> EvalRow {
+    let mut tally = Tally::default();
+    for &(t, len) in starts {
+        let last = data.frame(t + k - 1).to_vec();
+        tally.add(&real_frames(data, t, k, len), &vec![last; len], data.size);
+    }
+    tally.row("persistence", "last context frame", horizon, 0.0)
+}
+
 /// Evaluates `wm` on videos starting at `starts`, each `len` generated frames long
 /// (or to its episode's end when `len` is `None`), in batches of `batch`.
 pub fn evaluate(
@@ -114,7 +172,7 @@ pub fn evaluate(
     seed: u64,
 ) -> (EvalRow, Vec<Video>) {
     let k = wm.cfg.unet.history;
-    let (mut sums, mut frames, mut secs) = ([0.0f64; 3], 0usize, 0.0);
+    let (mut tally, mut secs) = (Tally::default(), 0.0);
     let mut videos = Vec::new();
     // Group videos of equal length so that each batch rolls out the same number of frames.
     let mut order: Vec<(usize, usize)> = starts.to_vec();
@@ -126,33 +184,32 @@ pub fn evaluate(
             let (videos_gen, s) = rollout(wm, data, &st, len, seed);
             secs += s;
             for (&t, g) in st.iter().zip(videos_gen) {
-                let real: Vec<Vec<u8>> = (0..len).map(|j| data.frame(t + k + j).to_vec()).collect();
-                let mut v = [0.0f64; 3];
-                for (r, x) in real.iter().zip(&g) {
-                    let (m, p, q) = frame_metrics(r, x, data.size);
-                    v[0] += m;
-                    v[1] += p;
-                    v[2] += q;
-                }
-                for (acc, x) in sums.iter_mut().zip(v) {
-                    *acc += x / len as f64;
-                }
-                frames += len;
+                let real = real_frames(data, t, k, len);
+                tally.add(&real, &g, data.size);
                 videos.push(Video { real, generated: g });
             }
         }
     }
-    let n = videos.len().max(1) as f64;
-    let row = EvalRow {
-        name: name.to_string(),
-        objective: wm.cfg.objective.name().to_string(),
-        horizon: horizon.to_string(),
-        mse: sums[0] / n,
-        psnr: sums[1] / n,
-        ssim: sums[2] / n,
-        ms_per_frame: 1e3 * secs / frames.max(1) as f64,
-        frames,
-        videos: videos.len(),
-    };
-    (row, videos)
+    (tally.row(name, wm.cfg.objective.name(), horizon, secs), videos)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn persistence_compares_the_last_context_frame_with_the_future() {
+        // One episode of 6 frames of 8x8: frames 0–4 all 100, frame 5 all 110.
+        let px = 8 * 8 * 3;
+        let mut frames = vec![100u8; 6 * px];
+        frames[5 * px..].fill(110);
+        let data = EpisodeData { frames, actions: vec![0.0; 12], size: 8, episodes: vec![0..6] };
+        // Context 0..4, last context frame 3; video = frames 4 and 5.
+        let row = persistence(&data, &[(0, 2)], 4, "64");
+        // MSE: frame 4: 0; frame 5: (10 / 127.5)² = 0.0061515; mean 0.0030757.
+        assert!((row.mse - 0.5 * (10.0f64 / 127.5).powi(2)).abs() < 1e-9, "{}", row.mse);
+        // PSNR: frame 4: capped at 100; frame 5: 10·log10(255² / 10²) = 28.1308; mean 64.0654.
+        assert!((row.psnr - 0.5 * (100.0 + 20.0 * (25.5f64).log10())).abs() < 1e-6, "{}", row.psnr);
+        assert_eq!((row.frames, row.videos), (2, 1));
+    }
 }

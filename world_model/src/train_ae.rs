@@ -132,24 +132,15 @@ where
     M: Serialize + serde::de::DeserializeOwned,
     T: Serialize + serde::de::DeserializeOwned,
 {
-    let cfg_path = out.join("config.json");
-    let write = |c: &Configs<M, T>| {
-        std::fs::write(&cfg_path, serde_json::to_string_pretty(c).unwrap_or_default()).map_err(io(&cfg_path))
-    };
-    let c = if run.resume {
-        let text = std::fs::read_to_string(&cfg_path).map_err(|e| ckpt(&cfg_path, e))?;
-        let mut c: Configs<M, T> = serde_json::from_str(&text).map_err(|e| ckpt(&cfg_path, e))?;
-        let want = *steps(&mut fresh.train);
-        if run.extend && *steps(&mut c.train) != want {
+    let want = *steps(&mut fresh.train);
+    let c = harness::runfile::resume_or_start(&out.join("config.json"), fresh, run.resume, |c| {
+        let changed = run.extend && *steps(&mut c.train) != want;
+        if changed {
             *steps(&mut c.train) = want;
-            write(&c)?;
         }
-        c
-    } else {
-        std::fs::create_dir_all(out).map_err(io(out))?;
-        write(&fresh)?;
-        fresh
-    };
+        changed
+    })
+    .map_err(|e| ckpt(&e.path, e.message))?;
     Ok((c.model, c.train))
 }
 

@@ -81,3 +81,23 @@ fn blosc_lz4_fixture_from_zarr_python_reads() {
     let img = r.img.read_rows(0, r.steps()).unwrap();
     assert!(img.iter().enumerate().all(|(i, &v)| v == (i % 7) as u8));
 }
+
+#[test]
+fn episodes_and_spec_read_back_as_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("d.zarr");
+    let mut w = ReplayWriter::create(&path, spec(), false).unwrap();
+    let (a, b) = (episode(150, 0.0), episode(7, 1000.0));
+    w.append(&a).unwrap();
+    w.append(&b).unwrap();
+    w.finish(&json!({})).unwrap();
+    let r = ReplayReader::open(&path).unwrap();
+    assert_eq!(r.spec().unwrap(), spec());
+    let got = r.read_episode(1, &["coverage".into()]).unwrap();
+    assert_eq!(got.img, b.img);
+    assert_eq!(got.action, b.action);
+    assert_eq!(got.state, b.state);
+    assert_eq!(got.extras, b.extras);
+    let err = r.read_episode(0, &["reward".into()]).err().unwrap().to_string();
+    assert!(err.contains("data/reward"), "{err}");
+}
