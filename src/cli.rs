@@ -286,6 +286,14 @@ pub struct TrainWorldModelArgs {
     /// Generated samples per context (drifting negatives; default 8).
     #[arg(long)]
     pub samples: Option<usize>,
+    /// Drift problems (drifting): one per whole frame, or one per latent cell
+    /// (DriftWorld's latent family).
+    #[arg(long, value_enum, default_value_t = FieldArg::Frame)]
+    pub field: FieldArg,
+    /// Start from another world-model run's EMA weights (same U-Net and autoencoder;
+    /// its latent statistics are reused).
+    #[arg(long)]
+    pub init_from: Option<PathBuf>,
     /// Peak learning rate (after a 500-step warm-up).
     #[arg(long, default_value_t = 2e-4)]
     pub lr: f64,
@@ -424,6 +432,15 @@ pub struct CollectArgs {
     /// Output zarr folder (diffusion_policy / GPC replay-buffer layout).
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// `--field` of `train world-model`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FieldArg {
+    /// One drift problem per future frame.
+    Frame,
+    /// One drift problem per latent cell of each future frame.
+    Token,
 }
 
 /// `evalharness dataset ...`.

@@ -132,3 +132,37 @@ fn policy_stopped_during_encoder_pretraining_resumes() {
     let file = read_json(&out.join("epoch-0001/policy.json"));
     assert_eq!(file["provenance"]["encoder_pretraining"]["steps"], 2, "{file}");
 }
+
+#[test]
+fn an_interrupted_run_saves_and_resumes() {
+    use std::process::Stdio;
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    let data = tiny_dataset(dir.path(), None);
+    let out = dir.path().join("ae");
+    let (d, o) = (data.to_str().unwrap(), out.to_str().unwrap());
+    let args = ["train", "autoencoder", "--data", d, "--out", o, "--batch", "2", "--steps", "100000"];
+    let child = crate::util::evalharness()
+        .args(args)
+        .args(["--eval-every", "100000", "--checkpoint-every", "1000"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until training has started (the log gets its first line), then press Ctrl-C.
+    let t0 = Instant::now();
+    while std::fs::read_to_string(out.join("train_log.jsonl")).map_or(true, |t| t.is_empty()) {
+        assert!(t0.elapsed() < Duration::from_secs(300), "training never started");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let status = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(status.success());
+    let (stdout, _) = expect_code(&child.wait_with_output().unwrap(), 0);
+    assert!(stdout.contains("stopped early; --resume continues"), "{stdout}");
+    // The step in progress was finished and saved, though no periodic checkpoint was due.
+    let prov = read_json(&out.join("provenance.json"));
+    assert_eq!(prov["finished"], false);
+    let steps = prov["steps"].as_u64().unwrap();
+    assert!((1..100_000).contains(&steps), "{steps}");
+    assert_eq!(read_json(&out.join("state.json"))["step"].as_u64().unwrap(), steps);
+}

@@ -5,6 +5,7 @@
 //! - [`seed`]: deterministic seed derivation (episode RNGs never depend on thread order);
 //! - [`metrics`]: agreement metrics between predicted and true policy scores, with CIs;
 //! - [`runfile`]: a training run's config, written at the start and read back on resume;
+//! - [`stop`]: Ctrl-C / SIGTERM as a cooperative stop that trainers poll between steps;
 //! - [`zarr`] and [`replay`]: the diffusion_policy / GPC replay-buffer dataset layout.
 
 pub mod blosc;
@@ -15,4 +16,5 @@ pub mod replay;
 pub mod rng;
 pub mod runfile;
 pub mod seed;
+pub mod stop;
 pub mod zarr;

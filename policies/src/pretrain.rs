@@ -228,7 +228,7 @@ pub fn pretrain_encoder(
     let base = state.elapsed_s;
     let s = cfg.image_size;
     while state.step < p.steps {
-        if deadline.is_some_and(|d| Instant::now() >= d) {
+        if deadline.is_some_and(|d| Instant::now() >= d) || harness::stop::requested() {
             save(&probe, &optim, &state)?;
             return Ok((state, None));
         }

@@ -214,7 +214,9 @@ pub fn train_policy(
     let mut saved = Vec::new();
     let mut order: (u64, Vec<usize>) = (u64::MAX, Vec::new());
     while state.step < total {
-        if run.max_minutes.is_some_and(|m| started.elapsed().as_secs_f64() >= m * 60.0) {
+        if run.max_minutes.is_some_and(|m| started.elapsed().as_secs_f64() >= m * 60.0)
+            || harness::stop::requested()
+        {
             break;
         }
         let epoch = state.step / per_epoch;

@@ -29,9 +29,14 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Dataset(DatasetCommand::Merge { inputs, out, force }) => {
             dataset_merge::run(inputs, out, *force, cli.quiet)
         }
-        Command::Train(TrainCommand::Autoencoder(a)) => train::autoencoder(a, cli.quiet),
-        Command::Train(TrainCommand::WorldModel(a)) => train_wm::run(a, cli.quiet),
-        Command::Train(TrainCommand::Policy(a)) => train_policy::run(a, cli.quiet),
+        Command::Train(t) => {
+            train::stop_on_signals();
+            match t {
+                TrainCommand::Autoencoder(a) => train::autoencoder(a, cli.quiet),
+                TrainCommand::WorldModel(a) => train_wm::run(a, cli.quiet),
+                TrainCommand::Policy(a) => train_policy::run(a, cli.quiet),
+            }
+        }
         Command::Agreement(a) => agreement::run(a),
         Command::Rank(a) => crate::rank::run(a, cli.quiet),
         Command::Merge(a) => crate::rank::merge::run(&a.shards, &a.out, a.force, a.no_report),

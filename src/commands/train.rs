@@ -65,6 +65,22 @@ fn origin_of(e: &serde_json::Value, episodes: Option<u64>) -> serde_json::Value 
     })
 }
 
+/// Ctrl-C / SIGTERM during training: the first asks the trainer to stop after the
+/// step in progress (it saves its checkpoint and provenance; `--resume` continues);
+/// a second one exits at once with code 2.
+pub(super) fn stop_on_signals() {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    let flag = harness::stop::flag();
+    for sig in [SIGINT, SIGTERM] {
+        // The conditional shutdown runs first and exits only if the flag is already set.
+        let registered = signal_hook::flag::register_conditional_shutdown(sig, 2, flag.clone())
+            .and_then(|_| signal_hook::flag::register(sig, flag.clone()));
+        if let Err(e) = registered {
+            tracing::warn!(signal = sig, error = %e, "cannot catch the signal; an interrupt loses the steps since the last checkpoint");
+        }
+    }
+}
+
 /// The step of the checkpoint in `out`, 0 if none.
 pub(super) fn read_step(out: &std::path::Path) -> u64 {
     std::fs::read_to_string(out.join("state.json"))

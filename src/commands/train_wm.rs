@@ -9,14 +9,14 @@ use anyhow::{Context, Result, bail};
 use burn::tensor::Device;
 use serde_json::json;
 use world_model::data::EpisodeData;
-use world_model::latents::Latents;
+use world_model::latents::{LatentStats, Latents};
 use world_model::model::{Objective, WorldModelConfig};
 use world_model::train_ae::{RunOptions, load_autoencoder};
-use world_model::train_wm::{WmTrainConfig, train_world_model};
+use world_model::train_wm::{FieldKind, WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
 use super::train::{data_provenance, git_commit, prepare_out, read_step, record_session};
-use crate::cli::{ObjectiveArg, TrainWorldModelArgs};
+use crate::cli::{FieldArg, ObjectiveArg, TrainWorldModelArgs};
 use crate::output::write_json;
 use crate::progress;
 
@@ -60,6 +60,11 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         seed: a.seed,
         eval_every: a.eval_every.max(1),
         checkpoint_every: a.checkpoint_every.max(1),
+        field: match a.field {
+            FieldArg::Frame => FieldKind::Frame,
+            FieldArg::Token => FieldKind::Token,
+        },
+        init_from: a.init_from.clone(),
         ..defaults
     };
     if objective == Objective::Drifting && cfg.samples < 2 {
@@ -70,12 +75,17 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     let model_cfg = if a.session.resume {
         None // the saved config wins
     } else {
-        tracing::info!("measuring latent statistics");
-        let stats = Latents::measure_stats(&data, &ae, 2048, &inner);
         let unet = UNetConfig {
             model_channels: a.base_channels,
             timestep_embedding: objective == Objective::Diffusion,
             ..UNetConfig::pusht_latent(ae_cfg.latent_channels)
+        };
+        let stats = match &a.init_from {
+            Some(dir) => warm_start_stats(dir, &unet, &a.autoencoder)?,
+            None => {
+                tracing::info!("measuring latent statistics");
+                Latents::measure_stats(&data, &ae, 2048, &inner)
+            }
         };
         Some(WorldModelConfig {
             objective,
@@ -140,6 +150,31 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
 }
 
 /// The "model" entry of a run's `config.json`.
+/// The latent statistics of the run `dir` that `--init-from` starts from, after
+/// checking that its U-Net and autoencoder are the ones this run uses.
+fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: &Path) -> Result<LatentStats> {
+    let from = saved_model_config(dir).context("--init-from")?;
+    if &from.unet != unet {
+        bail!(
+            "--init-from {}: its U-Net config differs from this run's ({:?} vs {:?})",
+            dir.display(),
+            from.unet,
+            unet
+        );
+    }
+    let (theirs, ours) = (dir.join(&from.autoencoder), autoencoder);
+    let same = theirs.canonicalize().ok().zip(ours.canonicalize().ok()).is_some_and(|(x, y)| x == y);
+    if !same {
+        bail!(
+            "--init-from {}: it was trained on the autoencoder {}, not {}",
+            dir.display(),
+            theirs.display(),
+            ours.display()
+        );
+    }
+    Ok(from.latents)
+}
+
 fn saved_model_config(out: &Path) -> Result<WorldModelConfig> {
     let path = out.join("config.json");
     let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;

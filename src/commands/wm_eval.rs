@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use burn::tensor::Device;
 use serde_json::json;
 use world_model::data::{EpisodeData, Split};
-use world_model::eval::{evaluate, persistence};
+use world_model::eval::{EvalRow, evaluate, persistence};
 use world_model::model::WorldModel;
 
 use crate::cli::WmEvalArgs;
@@ -15,6 +15,15 @@ use crate::output::{Staged, write_json};
 
 /// Frames shown per filmstrip row (every 4th generated frame).
 const STRIP_EVERY: usize = 4;
+
+/// One line of the text summary.
+fn print_row(row: &EvalRow, note: &str) {
+    let horizon = if row.horizon == "64" { "64-frame:" } else { "episode: " };
+    println!(
+        "{:<20} {:<9} {horizon} MSE {:.5} PSNR {:.2} SSIM {:.4} ({:.1} ms/frame){note}",
+        row.name, row.objective, row.mse, row.psnr, row.ssim, row.ms_per_frame
+    );
+}
 
 /// `evalharness wm eval`.
 pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
@@ -56,28 +65,19 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             strip_rows.push(videos[0].real.iter().step_by(STRIP_EVERY).cloned().collect());
         }
         strip_rows.push(videos[0].generated.iter().step_by(STRIP_EVERY).cloned().collect());
-        println!(
-            "{name:<20} {:<9} 64-frame: MSE {:.5} PSNR {:.2} SSIM {:.4} ({:.1} ms/frame)",
-            row.objective, row.mse, row.psnr, row.ssim, row.ms_per_frame
-        );
+        print_row(&row, "");
         rows.push(row);
         if !full.is_empty() {
             tracing::info!(model = %name, videos = full.len(), "full-episode rollouts");
             let (row, _) = evaluate(wm, name, &data, &full, "episode", a.batch, a.seed);
-            println!(
-                "{name:<20} {:<9} episode:  MSE {:.5} PSNR {:.2} SSIM {:.4} ({:.1} ms/frame)",
-                row.objective, row.mse, row.psnr, row.ssim, row.ms_per_frame
-            );
+            print_row(&row, "");
             rows.push(row);
         }
     }
     for (starts, horizon) in [(&short, "64"), (&full, "episode")] {
         if !starts.is_empty() {
             let row = persistence(&data, starts, k, horizon);
-            println!(
-                "{:<30} {horizon:>7}: MSE {:.5} PSNR {:.2} SSIM {:.4} (reference: nothing moves)",
-                "persistence", row.mse, row.psnr, row.ssim
-            );
+            print_row(&row, " (reference: nothing moves)");
             rows.push(row);
         }
     }

@@ -157,7 +157,7 @@ pub fn persistence(data: &EpisodeData, starts: &[(usize, usize)], k: usize, hori
         let last = data.frame(t + k - 1).to_vec();
         tally.add(&real_frames(data, t, k, len), &vec![last; len], data.size);
     }
-    tally.row("persistence", "last context frame", horizon, 0.0)
+    tally.row("persistence", "none", horizon, 0.0)
 }
 
 /// Evaluates `wm` on videos starting at `starts`, each `len` generated frames long

@@ -261,7 +261,7 @@ pub fn train_autoencoder(
         std::fs::write(&state_path, serde_json::to_string(state).unwrap_or_default()).map_err(io(&state_path))
     };
     while state.step < cfg.steps {
-        if deadline.is_some_and(|d| started.elapsed().as_secs_f64() >= d) {
+        if deadline.is_some_and(|d| started.elapsed().as_secs_f64() >= d) || harness::stop::requested() {
             break;
         }
         let step = state.step;

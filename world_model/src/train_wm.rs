@@ -3,8 +3,9 @@
 //! time-boxed like the autoencoder's trainer (spec §6).
 //!
 //! One drifting step: B contexts, each repeated N times with fresh noise; the U-Net
-//! predicts F frames per clip in one pass; each (context, future frame) is its own
-//! drift problem with the N generated frames as negatives and the true frame as the
+//! predicts F frames per clip in one pass; each (context, future frame) — or, with
+//! [`FieldKind::Token`], each (context, future frame, latent cell) — is its own
+//! drift problem with the N generated samples as negatives and the truth as the
 //! single positive. AdamW β = (0.9, 0.95), weight decay 0.01, linear warm-up then a
 //! constant rate, global grad-norm clip, EMA of the weights (all sampling uses it).
 //!
@@ -61,6 +62,51 @@ pub struct WmTrainConfig {
     pub eval_windows: usize,
     /// Checkpoint every this many steps.
     pub checkpoint_every: u64,
+    /// How generated latents are cut into drift problems (runs saved before this
+    /// option existed used whole frames).
+    #[serde(default)]
+    pub field: FieldKind,
+    /// A world-model folder whose EMA weights initialise this run (same U-Net).
+    #[serde(default)]
+    pub init_from: Option<std::path::PathBuf>,
+}
+
+/// The unit of the drifting loss (spec §2): one drift problem per frame, or one per
+/// latent cell ("token").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FieldKind {
+    /// Each future frame is one flat vector (C·s·s dims), as the pixel-space Push-T
+    /// model matches whole frames.
+    #[default]
+    Frame,
+    /// Each latent cell of each future frame is its own problem (C dims, own scale
+    /// and normalisation), as DriftWorld's latent family matches `latent_spatial`
+    /// tokens: many low-dimensional problems instead of one 1152-dimensional one.
+    Token,
+}
+
+impl FieldKind {
+    /// Cuts generated latents `[b n, C, F, s, s]` (n samples per context) and the
+    /// positives `[b, F, C, s, s]` into drift problems: `([p, n, d], [p, 1, d])`.
+    pub fn problems(self, generated: Tensor<5>, pos: Tensor<5>, b: usize) -> (Tensor<3>, Tensor<3>) {
+        let [bn, c, f, s, _] = generated.dims();
+        let n = bn / b;
+        let generated = generated.reshape([b, n, c, f, s * s]);
+        let pos = pos.reshape([b, f, c, s * s]);
+        match self {
+            // [b, n, C, F, ss] -> [b, F, n, C, ss] -> [b F, n, C ss]
+            Self::Frame => (
+                generated.permute([0, 3, 1, 2, 4]).reshape([b * f, n, c * s * s]),
+                pos.reshape([b * f, 1, c * s * s]),
+            ),
+            // [b, n, C, F, ss] -> [b, F, ss, n, C] -> [b F ss, n, C]
+            Self::Token => (
+                generated.permute([0, 3, 4, 1, 2]).reshape([b * f * s * s, n, c]),
+                pos.permute([0, 1, 3, 2]).reshape([b * f * s * s, 1, c]),
+            ),
+        }
+    }
 }
 
 impl WmTrainConfig {
@@ -81,6 +127,8 @@ impl WmTrainConfig {
             eval_every: 250,
             eval_windows: 32,
             checkpoint_every: 50,
+            field: FieldKind::Frame,
+            init_from: None,
         }
     }
 }
@@ -183,6 +231,12 @@ pub fn train_world_model(
     let mut ema = Ema::new(&unet, cfg.ema_decay);
     let mut state = State { step: 0, elapsed_s: 0.0 };
     let paths = ["model.bpk", "ema.bpk", "optimizer.bpk", "state.json"].map(|p| out.join(p));
+    if let Some(dir) = cfg.init_from.as_ref().filter(|_| !run.resume) {
+        // Warm start: both the trained and the EMA weights start from the other run's EMA.
+        let path = dir.join("ema.bpk");
+        ema.module = model_cfg.unet.init(&inner).try_load_file(&path).map_err(|e| ckpt(&path, e))?;
+        unet = model_cfg.unet.init(&device).try_load_file(&path).map_err(|e| ckpt(&path, e))?;
+    }
     if run.resume {
         unet = unet.try_load_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;
         ema.module = model_cfg.unet.init(&inner).try_load_file(&paths[1]).map_err(|e| ckpt(&paths[1], e))?;
@@ -208,7 +262,7 @@ pub fn train_world_model(
     let mut last_eval = None;
     let (c, s) = (model_cfg.latents.channels, model_cfg.latents.size);
     while state.step < cfg.steps {
-        if deadline.is_some_and(|d| started.elapsed().as_secs_f64() >= d) {
+        if deadline.is_some_and(|d| started.elapsed().as_secs_f64() >= d) || harness::stop::requested() {
             break;
         }
         let step = state.step;
@@ -230,11 +284,10 @@ pub fn train_world_model(
             Objective::Drifting => {
                 let noise = Tensor::<5>::random([b * n, c, f, s, s], Distribution::Normal(0.0, 1.0), &device);
                 let out = unet.forward(noise, hist, act, None); // [b n, C, F, s, s]
-                let out =
-                    out.reshape([b, n, c, f, s * s]).permute([0, 3, 1, 2, 4]).reshape([b * f, n, c * s * s]);
                 let pos_idx: Vec<usize> = windows.iter().flat_map(|w| w.targets.iter().copied()).collect();
-                let pos = latents.tensor(&pos_idx, f, &device).reshape([b * f, 1, c * s * s]);
-                let (loss, field) = drift_loss(out, None, &pos, &cfg.temperatures);
+                let pos = latents.tensor(&pos_idx, f, &device); // [b, F, C, s, s]
+                let (generated, pos) = cfg.field.problems(out, pos, b);
+                let (loss, field) = drift_loss(generated, None, &pos, &cfg.temperatures);
                 loss_r = field.loss_r;
                 loss
             }
@@ -325,4 +378,74 @@ pub fn train_world_model(
         eval_mse,
         elapsed_s: state.elapsed_s,
     })
+}
+
+#[cfg(test)]
+mod field_tests {
+    use super::*;
+
+    /// Generated `[b n, C, F, s, s]` with value 1000·ctx + 100·sample + 10·c + f + cell/100.
+    fn tagged(b: usize, n: usize, c: usize, f: usize, s: usize) -> Tensor<5> {
+        let mut v = Vec::new();
+        for (bi, ni, ci, fi, cell) in all_indices(b, n, c, f, s * s) {
+            v.push((1000 * bi + 100 * ni + 10 * ci + fi) as f32 + cell as f32 / 100.0);
+        }
+        Tensor::from_data(TensorData::new(v, [b * n, c, f, s, s]), &Device::flex())
+    }
+
+    fn all_indices(
+        b: usize,
+        n: usize,
+        c: usize,
+        f: usize,
+        cells: usize,
+    ) -> impl Iterator<Item = (usize, usize, usize, usize, usize)> {
+        (0..b).flat_map(move |bi| {
+            (0..n).flat_map(move |ni| {
+                (0..c).flat_map(move |ci| {
+                    (0..f).flat_map(move |fi| (0..cells).map(move |x| (bi, ni, ci, fi, x)))
+                })
+            })
+        })
+    }
+
+    #[test]
+    fn token_problems_hold_one_cell_of_one_frame_of_one_context() {
+        let (b, n, c, f, s) = (2, 3, 2, 4, 2);
+        let generated = tagged(b, n, c, f, s);
+        // Positives [b, F, C, s, s] tagged 1000·ctx + 10·c + f + cell/100.
+        let pos: Vec<f32> = (0..b)
+            .flat_map(|bi| {
+                (0..f).flat_map(move |fi| {
+                    (0..c).flat_map(move |ci| {
+                        (0..s * s).map(move |x| (1000 * bi + 10 * ci + fi) as f32 + x as f32 / 100.0)
+                    })
+                })
+            })
+            .collect();
+        let pos = Tensor::<5>::from_data(TensorData::new(pos, [b, f, c, s, s]), &Device::flex());
+        let (g, p) = FieldKind::Token.problems(generated, pos, b);
+        assert_eq!(g.dims(), [b * f * s * s, n, c]);
+        assert_eq!(p.dims(), [b * f * s * s, 1, c]);
+        let g: Vec<f32> = g.into_data().try_into_vec::<f32>().unwrap();
+        let p: Vec<f32> = p.into_data().try_into_vec::<f32>().unwrap();
+        // Problem index ((ctx·F + f)·cells + cell); take ctx 1, frame 2, cell 3: index (1·4 + 2)·4 + 3 = 27.
+        // Its sample 2, channel 1 is 1000 + 200 + 10 + 2 + 0.03 = 1212.03.
+        let at = |prob: usize, sample: usize, ch: usize| g[(prob * n + sample) * c + ch];
+        assert!((at(27, 2, 1) - 1212.03).abs() < 1e-3, "{}", at(27, 2, 1));
+        // Its positive, channel 0: 1000 + 0 + 2 + 0.03.
+        assert!((p[27 * c] - 1002.03).abs() < 1e-3, "{}", p[27 * c]);
+    }
+
+    #[test]
+    fn frame_problems_hold_one_whole_frame() {
+        let (b, n, c, f, s) = (2, 3, 2, 4, 2);
+        let pos = Tensor::<5>::zeros([b, f, c, s, s], &Device::flex());
+        let (g, p) = FieldKind::Frame.problems(tagged(b, n, c, f, s), pos, b);
+        assert_eq!((g.dims(), p.dims()), ([b * f, n, c * s * s], [b * f, 1, c * s * s]));
+        let g: Vec<f32> = g.into_data().try_into_vec::<f32>().unwrap();
+        // Problem (ctx 1, frame 3) = 7, sample 1, element (channel 1, cell 2) = 1·4 + 2 = 6:
+        // 1000 + 100 + 10 + 3 + 0.02.
+        assert!((g[(7 * n + 1) * c * s * s + 6] - 1113.02).abs() < 1e-3);
+    }
 }
