@@ -77,10 +77,10 @@ pub fn report_html(s: &Summary, x: &Extras) -> String {
         s.seed_start + s.episodes.saturating_sub(1)
     ));
     h.push_str("<div class=\"cards\">");
-    for (label, e) in s.metrics() {
+    for (label, e, d) in s.metrics() {
         let (v, ci) = match e {
-            Some(Est { value, ci: Some([a, b]) }) => (format!("{value:.3}"), format!("[{a:.3}, {b:.3}]")),
-            Some(Est { value, ci: None }) => (format!("{value:.3}"), String::new()),
+            Some(Est { value, ci: Some([a, b]) }) => (format!("{value:.d$}"), format!("[{a:.d$}, {b:.d$}]")),
+            Some(Est { value, ci: None }) => (format!("{value:.d$}"), String::new()),
             None => ("n/a".into(), String::new()),
         };
         h.push_str(&format!(
@@ -157,7 +157,7 @@ fn plot_caption(name: &str, s: &Summary) -> String {
         "score_over_time" => "Score so far across episodes (mean and 95% band) at the end of each action chunk, per policy; blue MuJoCo, red world model.".into(),
         "bump" => format!(
             "Ranks under MuJoCo and the world model; red lines change rank ({} inversions).",
-            est(s.inversions)
+            s.inversions.map_or("n/a".into(), |e| e.fmt(0))
         ),
         other => other.into(),
     }

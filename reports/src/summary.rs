@@ -135,15 +135,16 @@ impl Summary {
         })
     }
 
-    /// The agreement metrics as (label, estimate) pairs, for tables and captions.
-    pub fn metrics(&self) -> Vec<(&'static str, Option<Est>)> {
+    /// The agreement metrics as (label, estimate, decimals) for tables and captions;
+    /// rank inversions are a count, shown (with their CI) as whole numbers.
+    pub fn metrics(&self) -> Vec<(&'static str, Option<Est>, usize)> {
         vec![
-            ("Pearson r", self.pearson),
-            ("Spearman ρ", self.spearman),
-            ("Kendall τ_b", self.kendall),
-            ("Rank inversions", self.inversions),
-            ("MMRV", self.mmrv),
-            ("Regret@1", self.regret),
+            ("Pearson r", self.pearson, 3),
+            ("Spearman ρ", self.spearman, 3),
+            ("Kendall τ_b", self.kendall, 3),
+            ("Rank inversions", self.inversions, 0),
+            ("MMRV", self.mmrv, 3),
+            ("Regret@1", self.regret, 3),
         ]
     }
 }

@@ -21,9 +21,15 @@ pub fn latex_escape(s: &str) -> String {
 }
 
 fn tex_est(e: &Est) -> String {
+    tex_est_digits(e, 3)
+}
+
+/// `value {\scriptsize [lo, hi]}` with `d` decimals (at most 2 for the CI).
+fn tex_est_digits(e: &Est, d: usize) -> String {
+    let c = d.min(2);
     match e.ci {
-        Some([a, b]) => format!("{:.3} {{\\scriptsize [{a:.2}, {b:.2}]}}", e.value),
-        None => format!("{:.3}", e.value),
+        Some([a, b]) => format!("{:.d$} {{\\scriptsize [{a:.c$}, {b:.c$}]}}", e.value),
+        None => format!("{:.d$}", e.value),
     }
 }
 
@@ -48,8 +54,8 @@ pub fn latex_table(s: &Summary) -> String {
     }
     t.push_str("\\midrule\n");
     let tex_label = |l: &str| l.replace('ρ', "$\\rho$").replace("τ_b", "$\\tau_b$").replace(" r", " $r$");
-    for (label, e) in s.metrics() {
-        let v = e.map_or("n/a".to_string(), |e| tex_est(&e));
+    for (label, e, d) in s.metrics() {
+        let v = e.map_or("n/a".to_string(), |e| tex_est_digits(&e, d));
         t.push_str(&format!(
             "\\multicolumn{{2}}{{l}}{{{}}} & \\multicolumn{{3}}{{l}}{{{v}}} \\\\\n",
             tex_label(label)
