@@ -166,3 +166,54 @@ fn an_interrupted_run_saves_and_resumes() {
     assert!((1..100_000).contains(&steps), "{steps}");
     assert_eq!(read_json(&out.join("state.json"))["step"].as_u64().unwrap(), steps);
 }
+
+#[test]
+fn world_model_loss_variants_train_and_warm_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = tiny_dataset(dir.path(), None);
+    let ae = dir.path().join("ae");
+    let (d, a) = (data.to_str().unwrap(), ae.to_str().unwrap());
+    expect_code(&run(&["train", "autoencoder", "--data", d, "--out", a, "--steps", "1", "--batch", "2"]), 0);
+    // The tiny dataset has 4-step episodes: one chunk of F = 4 needs 5 frames, so use a
+    // longer one for two self-forcing chunks (8 targets).
+    let long = dir.path().join("long.zarr");
+    let args = ["collect", "--episodes", "10", "--max-steps", "12", "--mix", "explore=1", "--out"];
+    expect_code(&run(&[&args[..], &[long.to_str().unwrap()]].concat()), 0);
+    let wm_with = |out: &Path, channels: &str, extra: &[&str]| {
+        let base = ["train", "world-model", "--data", long.to_str().unwrap(), "--autoencoder", a];
+        let tiny = ["--base-channels", channels, "--contexts", "2", "--samples", "2", "--eval-every", "1"];
+        run(&[&base[..], &["--out", out.to_str().unwrap()], &tiny[..], extra].concat())
+    };
+    let wm = |out: &Path, extra: &[&str]| wm_with(out, "16", extra);
+    let first = dir.path().join("wm_token");
+    let (stdout, _) = expect_code(
+        &wm(&first, &["--steps", "2", "--field", "token", "--motion-weighting", "--self-forcing", "2"]),
+        0,
+    );
+    assert!(stdout.contains("step 2/2"), "{stdout}");
+    let cfg = read_json(&first.join("config.json"));
+    assert_eq!(cfg["train"]["field"], "token");
+    assert_eq!(cfg["train"]["chunks"], 2);
+    assert_eq!(cfg["train"]["motion"]["lambda"], 12.0);
+    assert!(
+        read_json(&first.join("provenance.json"))["metrics"]["held_out_one_chunk_latent_mse"]
+            .as_f64()
+            .unwrap()
+            .is_finite()
+    );
+
+    // A warm start reuses the first run's latent statistics.
+    let second = dir.path().join("wm_warm");
+    let from = first.to_str().unwrap();
+    expect_code(&wm(&second, &["--steps", "1", "--init-from", from, "--warmup", "1"]), 0);
+    assert_eq!(read_json(&second.join("config.json"))["model"]["latents"], cfg["model"]["latents"]);
+    // ... and refuses a different U-Net.
+    let third = dir.path().join("wm_wide");
+    let (_, err) = expect_code(&wm_with(&third, "32", &["--steps", "1", "--init-from", from]), 2);
+    assert!(err.contains("U-Net config differs"), "{err}");
+    // Motion weighting and self-forcing belong to the drifting loss.
+    let (_, err) = expect_code(&wm(&third, &["--objective", "mse", "--self-forcing", "2"]), 2);
+    assert!(err.contains("--self-forcing"), "{err}");
+    let (_, err) = expect_code(&wm(&third, &["--motion-weighting"]), 2);
+    assert!(err.contains("--field token"), "{err}");
+}

@@ -9,10 +9,12 @@ use anyhow::{Context, Result, bail};
 use burn::tensor::Device;
 use serde_json::json;
 use world_model::data::EpisodeData;
+use world_model::drift_step::FieldKind;
 use world_model::latents::{LatentStats, Latents};
 use world_model::model::{Objective, WorldModelConfig};
+use world_model::motion::MotionWeighting;
 use world_model::train_ae::{RunOptions, load_autoencoder};
-use world_model::train_wm::{FieldKind, WmTrainConfig, train_world_model};
+use world_model::train_wm::{WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
 use super::train::{data_provenance, git_commit, prepare_out, read_step, record_session};
@@ -38,25 +40,18 @@ fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
 
 /// `evalharness train world-model`.
 pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
-    prepare_out(&a.out, a.session.resume, a.session.force, "state.json")?;
     let objective = match a.objective {
         ObjectiveArg::Drifting => Objective::Drifting,
         ObjectiveArg::Mse => Objective::Mse,
         ObjectiveArg::Diffusion => Objective::Diffusion,
     };
-    let from_step = read_step(&a.out);
-    let inner = Device::flex();
-    let (ae, ae_cfg) = load_autoencoder(&a.autoencoder, &inner)?;
-    tracing::info!(data = %a.data.display(), "loading frames");
-    let data = EpisodeData::load(&a.data, ae_cfg.image_size)?;
-    tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let defaults = WmTrainConfig::for_objective(objective);
     let cfg = WmTrainConfig {
         steps: a.steps.unwrap_or(defaults.steps),
         contexts: a.contexts.unwrap_or(defaults.contexts),
         samples: if objective == Objective::Drifting { a.samples.unwrap_or(defaults.samples) } else { 1 },
         lr: a.lr,
+        warmup: a.warmup,
         seed: a.seed,
         eval_every: a.eval_every.max(1),
         checkpoint_every: a.checkpoint_every.max(1),
@@ -65,13 +60,31 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             FieldArg::Token => FieldKind::Token,
         },
         init_from: a.init_from.clone(),
+        motion: a.motion_weighting.then(MotionWeighting::default),
+        chunks: a.self_forcing,
         ..defaults
     };
+    if a.self_forcing == 0 || (a.self_forcing > 1 && objective != Objective::Drifting) {
+        bail!("--self-forcing: needs a chunk count >= 1, and more than 1 only with --objective drifting");
+    }
+    if cfg.motion.is_some() && (objective != Objective::Drifting || cfg.field != FieldKind::Token) {
+        bail!(
+            "--motion-weighting weighs per-token drifting losses: it needs --objective drifting --field token"
+        );
+    }
     if objective == Objective::Drifting && cfg.samples < 2 {
         bail!(
             "--samples: drifting needs at least 2 samples per context (the other samples are the negatives)"
         );
     }
+    prepare_out(&a.out, a.session.resume, a.session.force, "state.json")?;
+    let from_step = read_step(&a.out);
+    let inner = Device::flex();
+    let (ae, ae_cfg) = load_autoencoder(&a.autoencoder, &inner)?;
+    tracing::info!(data = %a.data.display(), "loading frames");
+    let data = EpisodeData::load(&a.data, ae_cfg.image_size)?;
+    tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let model_cfg = if a.session.resume {
         None // the saved config wins
     } else {

@@ -107,10 +107,29 @@ pub fn drift_loss(
     y_pos: &Tensor<3>,
     temps: &[f32],
 ) -> (Tensor<1>, DriftField) {
+    drift_loss_weighted(x, neg, y_pos, temps, None)
+}
+
+/// [`drift_loss`] with a weight per problem `b` (`[b]`, e.g. motion weighting, spec
+/// §4): `mean_b w_b · mean_{i,d} (x_i/σ − sg(x̃_i + V_i))²`. The field is unchanged.
+pub fn drift_loss_weighted(
+    x: Tensor<3>,
+    neg: Option<&Negatives>,
+    y_pos: &Tensor<3>,
+    temps: &[f32],
+    weights: Option<Tensor<1>>,
+) -> (Tensor<1>, DriftField) {
     let field = drift_field(&x, neg, y_pos, temps);
     let x_scaled = x / field.sigma.clone().detach(); // [b, g, s]
     let goal = (x_scaled.clone().detach() + field.v.clone()).detach();
-    let loss = (x_scaled - goal).powf_scalar(2.0).mean();
+    let per = (x_scaled - goal).powf_scalar(2.0); // [b, g, s]
+    let loss = match weights {
+        Some(w) => {
+            let [b, _, _] = per.dims();
+            (per.mean_dims(&[1, 2]).reshape([b]) * w.detach()).mean()
+        }
+        None => per.mean(),
+    };
     (loss, field)
 }
 

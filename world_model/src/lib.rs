@@ -2,7 +2,8 @@
 //! drifting loss (Lu, Chen, Ye, Du 2026), so that it predicts a chunk of future
 //! frames in one forward pass.
 //!
-//! - [`drift`]: the drifting loss; [`unet`]: the action-conditioned U-Net;
+//! - [`drift`]: the drifting loss; [`drift_step`]: a batch's drifting loss (fields,
+//!   self-forcing); [`motion`]: its motion weighting; [`unet`]: the action-conditioned U-Net;
 //! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer;
 //! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
 //!   (drifting, MSE and diffusion objectives);
@@ -12,10 +13,12 @@
 pub mod autoencoder;
 pub mod data;
 pub mod drift;
+pub mod drift_step;
 pub mod error;
 pub mod eval;
 pub mod latents;
 pub mod model;
+pub mod motion;
 pub mod optim;
 pub mod train_ae;
 pub mod train_wm;

@@ -26,10 +26,11 @@ use serde_json::json;
 
 use crate::autoencoder::Autoencoder;
 use crate::data::{EpisodeData, Split};
-use crate::drift::drift_loss;
+use crate::drift_step::{DriftSetup, FieldKind, drifting_loss};
 use crate::error::WorldModelError;
 use crate::latents::{Latents, Window, window, window_starts};
 use crate::model::{Objective, WorldModel, WorldModelConfig, alpha_bar};
+use crate::motion::MotionWeighting;
 use crate::optim::{Ema, clip_global_norm, warmup_lr};
 use crate::train_ae::{Configs, RunOptions, State, ckpt, io, run_configs};
 use crate::unet::UNet;
@@ -69,44 +70,17 @@ pub struct WmTrainConfig {
     /// A world-model folder whose EMA weights initialise this run (same U-Net).
     #[serde(default)]
     pub init_from: Option<std::path::PathBuf>,
+    /// Motion weighting of the per-token losses (spec §4; needs [`FieldKind::Token`]).
+    #[serde(default)]
+    pub motion: Option<MotionWeighting>,
+    /// Chunks per training rollout (drifting): 1 = phase 1 (true history); L > 1 =
+    /// self-forcing over L chunks (spec §7).
+    #[serde(default = "one")]
+    pub chunks: usize,
 }
 
-/// The unit of the drifting loss (spec §2): one drift problem per frame, or one per
-/// latent cell ("token").
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum FieldKind {
-    /// Each future frame is one flat vector (C·s·s dims), as the pixel-space Push-T
-    /// model matches whole frames.
-    #[default]
-    Frame,
-    /// Each latent cell of each future frame is its own problem (C dims, own scale
-    /// and normalisation), as DriftWorld's latent family matches `latent_spatial`
-    /// tokens: many low-dimensional problems instead of one 1152-dimensional one.
-    Token,
-}
-
-impl FieldKind {
-    /// Cuts generated latents `[b n, C, F, s, s]` (n samples per context) and the
-    /// positives `[b, F, C, s, s]` into drift problems: `([p, n, d], [p, 1, d])`.
-    pub fn problems(self, generated: Tensor<5>, pos: Tensor<5>, b: usize) -> (Tensor<3>, Tensor<3>) {
-        let [bn, c, f, s, _] = generated.dims();
-        let n = bn / b;
-        let generated = generated.reshape([b, n, c, f, s * s]);
-        let pos = pos.reshape([b, f, c, s * s]);
-        match self {
-            // [b, n, C, F, ss] -> [b, F, n, C, ss] -> [b F, n, C ss]
-            Self::Frame => (
-                generated.permute([0, 3, 1, 2, 4]).reshape([b * f, n, c * s * s]),
-                pos.reshape([b * f, 1, c * s * s]),
-            ),
-            // [b, n, C, F, ss] -> [b, F, ss, n, C] -> [b F ss, n, C]
-            Self::Token => (
-                generated.permute([0, 3, 4, 1, 2]).reshape([b * f * s * s, n, c]),
-                pos.permute([0, 1, 3, 2]).reshape([b * f * s * s, 1, c]),
-            ),
-        }
-    }
+fn one() -> usize {
+    1
 }
 
 impl WmTrainConfig {
@@ -129,6 +103,8 @@ impl WmTrainConfig {
             checkpoint_every: 50,
             field: FieldKind::Frame,
             init_from: None,
+            motion: None,
+            chunks: 1,
         }
     }
 }
@@ -214,7 +190,9 @@ pub fn train_world_model(
     let (model_cfg, cfg) = run_configs(out, fresh, run, |t: &mut WmTrainConfig| &mut t.steps)?;
     let objective = model_cfg.objective;
     let (k, f) = (model_cfg.unet.history, model_cfg.future);
-    let starts = window_starts(data, Split::Train, f);
+    // Training windows hold every chunk of a self-forcing rollout; evaluation windows one.
+    let chunks = if objective == Objective::Drifting { cfg.chunks.max(1) } else { 1 };
+    let starts = window_starts(data, Split::Train, f * chunks);
     let held = window_starts(data, Split::HeldOut, f);
     if starts.is_empty() || held.is_empty() {
         return Err(WorldModelError::Data {
@@ -270,7 +248,7 @@ pub fn train_world_model(
         let windows: Vec<Window> = (0..cfg.contexts)
             .map(|_| {
                 rng = splitmix64(rng);
-                window(data, starts[(rng % starts.len() as u64) as usize], k, f)
+                window(data, starts[(rng % starts.len() as u64) as usize], k, f * chunks)
             })
             .collect();
         let n = if objective == Objective::Drifting { cfg.samples } else { 1 };
@@ -282,13 +260,14 @@ pub fn train_world_model(
         let mut loss_r = Vec::new();
         let loss = match objective {
             Objective::Drifting => {
-                let noise = Tensor::<5>::random([b * n, c, f, s, s], Distribution::Normal(0.0, 1.0), &device);
-                let out = unet.forward(noise, hist, act, None); // [b n, C, F, s, s]
-                let pos_idx: Vec<usize> = windows.iter().flat_map(|w| w.targets.iter().copied()).collect();
-                let pos = latents.tensor(&pos_idx, f, &device); // [b, F, C, s, s]
-                let (generated, pos) = cfg.field.problems(out, pos, b);
-                let (loss, field) = drift_loss(generated, None, &pos, &cfg.temperatures);
-                loss_r = field.loss_r;
+                let setup = DriftSetup {
+                    field: cfg.field,
+                    temperatures: &cfg.temperatures,
+                    motion: cfg.motion.as_ref(),
+                    chunks,
+                };
+                let (loss, r) = drifting_loss(&unet, &latents, &windows, hist, act, &setup);
+                loss_r = r;
                 loss
             }
             Objective::Mse => {
@@ -378,74 +357,4 @@ pub fn train_world_model(
         eval_mse,
         elapsed_s: state.elapsed_s,
     })
-}
-
-#[cfg(test)]
-mod field_tests {
-    use super::*;
-
-    /// Generated `[b n, C, F, s, s]` with value 1000·ctx + 100·sample + 10·c + f + cell/100.
-    fn tagged(b: usize, n: usize, c: usize, f: usize, s: usize) -> Tensor<5> {
-        let mut v = Vec::new();
-        for (bi, ni, ci, fi, cell) in all_indices(b, n, c, f, s * s) {
-            v.push((1000 * bi + 100 * ni + 10 * ci + fi) as f32 + cell as f32 / 100.0);
-        }
-        Tensor::from_data(TensorData::new(v, [b * n, c, f, s, s]), &Device::flex())
-    }
-
-    fn all_indices(
-        b: usize,
-        n: usize,
-        c: usize,
-        f: usize,
-        cells: usize,
-    ) -> impl Iterator<Item = (usize, usize, usize, usize, usize)> {
-        (0..b).flat_map(move |bi| {
-            (0..n).flat_map(move |ni| {
-                (0..c).flat_map(move |ci| {
-                    (0..f).flat_map(move |fi| (0..cells).map(move |x| (bi, ni, ci, fi, x)))
-                })
-            })
-        })
-    }
-
-    #[test]
-    fn token_problems_hold_one_cell_of_one_frame_of_one_context() {
-        let (b, n, c, f, s) = (2, 3, 2, 4, 2);
-        let generated = tagged(b, n, c, f, s);
-        // Positives [b, F, C, s, s] tagged 1000·ctx + 10·c + f + cell/100.
-        let pos: Vec<f32> = (0..b)
-            .flat_map(|bi| {
-                (0..f).flat_map(move |fi| {
-                    (0..c).flat_map(move |ci| {
-                        (0..s * s).map(move |x| (1000 * bi + 10 * ci + fi) as f32 + x as f32 / 100.0)
-                    })
-                })
-            })
-            .collect();
-        let pos = Tensor::<5>::from_data(TensorData::new(pos, [b, f, c, s, s]), &Device::flex());
-        let (g, p) = FieldKind::Token.problems(generated, pos, b);
-        assert_eq!(g.dims(), [b * f * s * s, n, c]);
-        assert_eq!(p.dims(), [b * f * s * s, 1, c]);
-        let g: Vec<f32> = g.into_data().try_into_vec::<f32>().unwrap();
-        let p: Vec<f32> = p.into_data().try_into_vec::<f32>().unwrap();
-        // Problem index ((ctx·F + f)·cells + cell); take ctx 1, frame 2, cell 3: index (1·4 + 2)·4 + 3 = 27.
-        // Its sample 2, channel 1 is 1000 + 200 + 10 + 2 + 0.03 = 1212.03.
-        let at = |prob: usize, sample: usize, ch: usize| g[(prob * n + sample) * c + ch];
-        assert!((at(27, 2, 1) - 1212.03).abs() < 1e-3, "{}", at(27, 2, 1));
-        // Its positive, channel 0: 1000 + 0 + 2 + 0.03.
-        assert!((p[27 * c] - 1002.03).abs() < 1e-3, "{}", p[27 * c]);
-    }
-
-    #[test]
-    fn frame_problems_hold_one_whole_frame() {
-        let (b, n, c, f, s) = (2, 3, 2, 4, 2);
-        let pos = Tensor::<5>::zeros([b, f, c, s, s], &Device::flex());
-        let (g, p) = FieldKind::Frame.problems(tagged(b, n, c, f, s), pos, b);
-        assert_eq!((g.dims(), p.dims()), ([b * f, n, c * s * s], [b * f, 1, c * s * s]));
-        let g: Vec<f32> = g.into_data().try_into_vec::<f32>().unwrap();
-        // Problem (ctx 1, frame 3) = 7, sample 1, element (channel 1, cell 2) = 1·4 + 2 = 6:
-        // 1000 + 100 + 10 + 3 + 0.02.
-        assert!((g[(7 * n + 1) * c * s * s + 6] - 1113.02).abs() < 1e-3);
-    }
 }

@@ -229,3 +229,25 @@ fn samples_at_the_positive_feel_no_field() {
         assert!(*a < 1e-6 * b, "at the positive {a}, displaced {b}");
     }
 }
+
+#[test]
+fn problem_weights_scale_each_problem_s_loss() {
+    // Two problems of 3 samples in 2 dims, one positive each.
+    let x = t3(vec![0.1, 0.2, -0.3, 0.4, 0.5, -0.6, 1.0, 0.0, 0.2, 0.9, -0.4, 0.3], [2, 3, 2]);
+    let pos = t3(vec![0.0, 0.0, 1.0, 1.0], [2, 1, 2]);
+    let temps = [0.02, 0.05, 0.2];
+    let loss = |w: Option<Vec<f32>>| {
+        let w = w.map(|v| Tensor::<1>::from_floats(v.as_slice(), &device()));
+        drift_loss_weighted(x.clone(), None, &pos, &temps, w).0.into_scalar::<f32>()
+    };
+    // Each problem's own loss, from single-problem calls.
+    let single = |i: usize| {
+        let xi = x.clone().narrow(0, i, 1);
+        drift_loss(xi, None, &pos.clone().narrow(0, i, 1), &temps).0.into_scalar::<f32>()
+    };
+    let (l0, l1) = (single(0), single(1));
+    // Unit weights are the plain mean; weights (3, 1) give (3·l0 + l1) / 2.
+    assert!((loss(Some(vec![1.0, 1.0])) - loss(None)).abs() < 1e-6);
+    assert!((loss(None) - (l0 + l1) / 2.0).abs() < 1e-5);
+    assert!((loss(Some(vec![3.0, 1.0])) - (3.0 * l0 + l1) / 2.0).abs() < 1e-5);
+}

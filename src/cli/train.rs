@@ -1,0 +1,205 @@
+//! `evalharness train ...` arguments: the three trainers and the session flags
+//! they share.
+
+use std::path::PathBuf;
+
+use clap::{Args, Subcommand};
+
+/// `evalharness train ...`.
+#[derive(Debug, Subcommand)]
+pub enum TrainCommand {
+    /// The frame autoencoder whose latent space the world model works in.
+    Autoencoder(TrainAutoencoderArgs),
+    /// The DriftWorld U-Net (or a baseline) on the autoencoder's latents.
+    WorldModel(TrainWorldModelArgs),
+    /// A diffusion policy; checkpoints every few epochs form a graded policy set.
+    Policy(TrainPolicyArgs),
+}
+
+/// `evalharness train policy`.
+#[derive(Debug, Args)]
+pub struct TrainPolicyArgs {
+    /// Demonstration dataset (zarr replay buffer).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output folder: `epoch-NNNN/` checkpoints and the resumable `.train/` state.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Epochs (passes over the demonstration samples); with `--resume`, the new total.
+    #[arg(long)]
+    pub epochs: Option<u64>,
+    /// Save a policy checkpoint every this many epochs.
+    #[arg(long, default_value_t = 1)]
+    pub save_every: u64,
+    /// Use only episodes of this behaviour (as recorded by `collect`); "all" for every episode.
+    #[arg(long, default_value = "expert")]
+    pub behaviour: String,
+    /// Use at most this many episodes (after the behaviour filter).
+    #[arg(long)]
+    pub episodes: Option<usize>,
+    /// Samples per step.
+    #[arg(long, default_value_t = 64)]
+    pub batch: usize,
+    /// Learning rate (after a 200-step warm-up).
+    #[arg(long, default_value_t = 3e-4)]
+    pub lr: f64,
+    /// Frame-encoder width.
+    #[arg(long, default_value_t = 16)]
+    pub encoder_width: usize,
+    /// U-Net channels per level, comma-separated.
+    #[arg(long, default_value = "32,64,128", value_delimiter = ',')]
+    pub down_dims: Vec<usize>,
+    /// DDIM steps at inference.
+    #[arg(long, default_value_t = 10)]
+    pub inference_steps: usize,
+    /// Pre-train the frame encoder this many steps to regress the agent and block
+    /// poses, then freeze it and train the U-Net on cached features (fast on a CPU);
+    /// 0 trains end to end as Chi et al. do.
+    #[arg(long, default_value_t = 3000)]
+    pub encoder_steps: u64,
+    /// Peak learning rate of the encoder's pose pre-training.
+    #[arg(long, default_value_t = 1e-3)]
+    pub encoder_lr: f64,
+    /// Start from the pose-pre-trained encoder of another run's folder (its
+    /// `.train/encoder*`), e.g. to train several U-Nets on one encoder.
+    #[arg(long)]
+    pub encoder_from: Option<PathBuf>,
+    /// Seed of the weights, sample order and noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Session control.
+    #[command(flatten)]
+    pub session: SessionArgs,
+}
+
+/// The world model's training objective.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ObjectiveArg {
+    /// DriftWorld's drifting loss (one pass per chunk).
+    Drifting,
+    /// One-step MSE regression baseline.
+    Mse,
+    /// Multi-step diffusion baseline (DDIM sampling with `--sample-steps`).
+    Diffusion,
+}
+
+/// `evalharness train world-model`.
+#[derive(Debug, Args)]
+pub struct TrainWorldModelArgs {
+    /// Training dataset (zarr replay buffer); every 10th episode is held out.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Trained autoencoder folder (from `train autoencoder`).
+    #[arg(long)]
+    pub autoencoder: PathBuf,
+    /// Training objective.
+    #[arg(long, value_enum, default_value_t = ObjectiveArg::Drifting)]
+    pub objective: ObjectiveArg,
+    /// Output folder (checkpoints, logs, provenance).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Optimizer steps in total (default 6000); with `--resume`, extends or shortens the run.
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// U-Net base channels.
+    #[arg(long, default_value_t = 32)]
+    pub base_channels: usize,
+    /// Contexts per step (default 4 for drifting, 32 for the baselines).
+    #[arg(long)]
+    pub contexts: Option<usize>,
+    /// Generated samples per context (drifting negatives; default 8).
+    #[arg(long)]
+    pub samples: Option<usize>,
+    /// Drift problems (drifting): one per whole frame, or one per latent cell
+    /// (DriftWorld's latent family).
+    #[arg(long, value_enum, default_value_t = FieldArg::Frame)]
+    pub field: FieldArg,
+    /// Learning-rate warm-up steps (linear from 1e-6); a warm start (`--init-from`)
+    /// needs fewer.
+    #[arg(long, default_value_t = 500)]
+    pub warmup: u64,
+    /// Self-forcing (spec §7, drifting): train on rollouts of L chunks in which each
+    /// sample's history is its own detached predictions; 1 = true history only.
+    #[arg(long, default_value_t = 1)]
+    pub self_forcing: usize,
+    /// Weight each latent cell's loss by how much it moves (spec §4; with `--field token`).
+    #[arg(long)]
+    pub motion_weighting: bool,
+    /// Start from another world-model run's EMA weights (same U-Net and autoencoder;
+    /// its latent statistics are reused).
+    #[arg(long)]
+    pub init_from: Option<PathBuf>,
+    /// Peak learning rate (after a 500-step warm-up).
+    #[arg(long, default_value_t = 2e-4)]
+    pub lr: f64,
+    /// DDIM steps per generated chunk (diffusion).
+    #[arg(long, default_value_t = 10)]
+    pub sample_steps: usize,
+    /// Seed of the weights, windows and noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Held-out evaluation interval (steps).
+    #[arg(long, default_value_t = 250)]
+    pub eval_every: u64,
+    /// Checkpoint interval (steps).
+    #[arg(long, default_value_t = 50)]
+    pub checkpoint_every: u64,
+    /// Session control.
+    #[command(flatten)]
+    pub session: SessionArgs,
+}
+
+/// `evalharness train autoencoder`.
+#[derive(Debug, Args)]
+pub struct TrainAutoencoderArgs {
+    /// Training dataset (zarr replay buffer); every 10th episode is held out.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output folder (checkpoints, logs, provenance).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Optimizer steps in total (default 4000); with `--resume`, extends or shortens the run.
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Frames per step.
+    #[arg(long, default_value_t = 16)]
+    pub batch: usize,
+    /// Peak learning rate (after a 200-step warm-up).
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Seed of the weights and batches.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Held-out evaluation interval (steps).
+    #[arg(long, default_value_t = 250)]
+    pub eval_every: u64,
+    /// Checkpoint interval (steps).
+    #[arg(long, default_value_t = 100)]
+    pub checkpoint_every: u64,
+    /// Session control.
+    #[command(flatten)]
+    pub session: SessionArgs,
+}
+
+/// Session control shared by the trainers.
+#[derive(Debug, Args)]
+pub struct SessionArgs {
+    /// Stop (with a checkpoint) after this many minutes; `--resume` continues.
+    #[arg(long)]
+    pub max_minutes: Option<f64>,
+    /// Continue the run in `--out` from its last checkpoint (its config wins).
+    #[arg(long)]
+    pub resume: bool,
+    /// Replace an existing `--out` (without `--resume`).
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// `--field` of `train world-model`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FieldArg {
+    /// One drift problem per future frame.
+    Frame,
+    /// One drift problem per latent cell of each future frame.
+    Token,
+}
