@@ -121,9 +121,14 @@ fn pipeline_end_to_end() {
     ];
     expect_code(&run(&args), 0);
     let e = read_json(&ev.join("eval.json"));
-    assert_eq!(e["models"].as_array().unwrap().len(), 2);
+    // The model's two rows, then the persistence reference on the same videos.
+    assert_eq!(e["models"].as_array().unwrap().len(), 4);
     assert_eq!(e["models"][0]["frames"], 60);
     assert_eq!(e["models"][1]["frames"], 64); // the whole 68-step episode after 4 context frames
+    for (row, frames) in [(2, 60), (3, 64)] {
+        assert_eq!(e["models"][row]["name"], "persistence");
+        assert_eq!(e["models"][row]["frames"], frames);
+    }
     let ssim = e["models"][0]["ssim"].as_f64().unwrap();
     assert!((-1.0..=1.0).contains(&ssim), "{ssim}");
     assert!(ev.join("filmstrip.png").is_file());
