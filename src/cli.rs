@@ -50,6 +50,29 @@ pub enum Command {
     Wm(WmCommand),
     /// Rank policy checkpoints in the world model, checked against MuJoCo (paired episodes).
     Rank(RankArgs),
+    /// Write scripted-policy checkpoints: the expert acting from frames, with action
+    /// noise and lag, one per combination — a graded policy set without training.
+    Scripted(ScriptedArgs),
+}
+
+/// `evalharness scripted`.
+#[derive(Debug, Args)]
+pub struct ScriptedArgs {
+    /// Output folder (one `noiseNNN-lagK/` checkpoint per combination).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Action noise standard deviations (world units), comma-separated.
+    #[arg(long, default_value = "0", value_delimiter = ',')]
+    pub noise: Vec<f64>,
+    /// Control steps each decision holds still before the plan, comma-separated.
+    #[arg(long, default_value = "0", value_delimiter = ',')]
+    pub lag: Vec<usize>,
+    /// Actions per decision.
+    #[arg(long, default_value_t = 8)]
+    pub action_horizon: usize,
+    /// Replace an existing `--out`.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `evalharness agreement`.

@@ -106,3 +106,41 @@ fn diverging_simulation_names_seed_and_step() {
     assert!(err.contains("seed 11") && err.contains("step"), "{err}");
     assert!(!o.exists(), "no complete-looking output after an error");
 }
+
+#[test]
+fn scripted_policies_act_from_frames_and_grade_with_noise() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("scripted");
+    let s = set.to_str().unwrap();
+    let (stdout, _) = expect_code(&run(&["scripted", "--out", s, "--noise", "0,200", "--lag", "0"]), 0);
+    assert_eq!(stdout.lines().count(), 2, "{stdout}");
+    let file = read_json(&set.join("noise200-lag0/policy.json"));
+    assert_eq!(file["kind"], "scripted");
+    assert_eq!(file["config"]["noise"], 200.0);
+    // Writing over it needs --force.
+    expect_code(&run(&["scripted", "--out", s, "--noise", "0"]), 2);
+
+    let out = dir.path().join("sim");
+    let o = out.to_str().unwrap();
+    let args =
+        ["simulate", "--policy", s, "--episodes", "2", "--seed-start", "3", "--max-steps", "80", "--out", o];
+    expect_code(&run(&args), 0);
+    let summary = read_json(&out.join("summary.json"));
+    let mean = |i: usize| summary["policies"][i]["mujoco"]["mean"].as_f64().unwrap();
+    assert_eq!(summary["policies"][0]["name"], "noise000-lag0");
+    // The noiseless expert, reading block and goal from the frames, pushes the T most of
+    // the way in 80 steps; with σ = 200 units of action noise it barely gets anywhere.
+    assert!(mean(0) > 0.5 && mean(0) > mean(1) + 0.2, "{} vs {}", mean(0), mean(1));
+
+    // A config that leaves no action is named with its file.
+    std::fs::write(
+        set.join("noise200-lag0/policy.json"),
+        r#"{"kind": "scripted", "config": {"noise": 0, "lag": 8, "action_horizon": 8}}"#,
+    )
+    .unwrap();
+    let args = ["simulate", "--policy", s, "--episodes", "1", "--max-steps", "8", "--out", o, "--force"];
+    expect_code(&run(&args), 1);
+    let summary = read_json(&out.join("summary.json"));
+    let err = summary["policies"][1]["error"].as_str().unwrap();
+    assert!(err.contains("noise200-lag0") && err.contains("\"lag\" (8)"), "{err}");
+}

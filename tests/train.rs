@@ -131,6 +131,18 @@ fn policy_stopped_during_encoder_pretraining_resumes() {
     assert_eq!(state["step"], 2);
     let file = read_json(&out.join("epoch-0001/policy.json"));
     assert_eq!(file["provenance"]["encoder_pretraining"]["steps"], 2, "{file}");
+    // Checkpoints come from the weights' moving average (on by default), kept with the state.
+    assert_eq!(file["provenance"]["weights"]["ema_decay"], 0.999, "{file}");
+    assert_eq!(file["provenance"]["weights"]["ema_updates"], 1, "{file}");
+    assert!(out.join(".train/ema.bpk").is_file());
+    // Extending the run with the EMA switched off saves the raw weights, and says so.
+    let mut args: Vec<&str> = base.iter().copied().filter(|a| *a != "--epochs" && *a != "1").collect();
+    args.extend(["--resume", "--epochs", "2", "--ema", "0"]);
+    let (stdout, _) = expect_code(&run(&args), 0);
+    assert!(stdout.contains("epoch-0002"), "{stdout}");
+    let file = read_json(&out.join("epoch-0002/policy.json"));
+    assert_eq!(file["provenance"]["weights"], "raw", "{file}");
+    assert!(file["provenance"]["resumed_with"].as_str().unwrap().contains("--ema 0"), "{file}");
 }
 
 #[test]

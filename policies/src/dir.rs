@@ -168,7 +168,7 @@ pub fn load_policy(
                 .map_err(|e| err(format!("model.bpk: {e}")))?;
             Ok(Box::new(DiffusionPolicy::new(name, cfg, file.normalisation, net, device)))
         }
-        other => Err(err(format!("unknown policy kind \"{other}\" (known: diffusion)"))),
+        other => Err(err(format!("unknown policy kind \"{other}\" (known: diffusion, scripted)"))),
     }
 }
 

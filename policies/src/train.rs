@@ -6,7 +6,8 @@
 //! Output folder:
 //! - `epoch-NNNN/`: a loadable policy checkpoint (`policy.json` + `model.bpk`);
 //! - `.train/`: the resumable training state (`config.json`, `model.bpk`,
-//!   `optimizer.bpk`, `state.json`, `log.jsonl`); hidden so that policy loaders skip it.
+//!   `ema.bpk`, `optimizer.bpk`, `state.json`, `log.jsonl`); hidden so that policy
+//!   loaders skip it.
 //!
 //! An epoch is one pass over every sample in a permutation that is a function of
 //! (seed, epoch), so a resumed run visits exactly the samples an uninterrupted one would.
@@ -27,6 +28,7 @@ use crate::data::Demos;
 use crate::diffusion::{DiffusionConfig, DiffusionNet, Normalisation, alphas_cumprod, frames_to_tensor};
 use crate::dir::{PolicyFile, PolicyLoadError, write_policy};
 use crate::pretrain::{Pretrain, encode_frames, pretrain_encoder};
+use world_model::optim::Ema;
 
 /// Training hyper-parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -57,6 +59,11 @@ pub struct PolicyTrainConfig {
     /// Peak learning rate of the pose pre-training.
     #[serde(default = "default_encoder_lr")]
     pub encoder_lr: f64,
+    /// Decay of the exponential moving average of the weights that checkpoints are
+    /// saved from (Chi et al. sample from EMA weights); 0 saves the raw weights. The
+    /// effective decay warms up as `min(ema, (1 + k) / (10 + k))` after k updates.
+    #[serde(default)]
+    pub ema: f64,
 }
 
 fn default_encoder_lr() -> f64 {
@@ -72,6 +79,9 @@ pub struct PolicyRun {
     pub epochs: Option<u64>,
     /// Stop (with a saved state) after this many minutes.
     pub max_minutes: Option<f64>,
+    /// When resuming, use this EMA decay from now on (an EMA started mid-run begins
+    /// at the current weights).
+    pub ema: Option<f64>,
 }
 
 /// What a training run is doing.
@@ -103,6 +113,9 @@ pub struct PolicyProgress {
 struct State {
     step: u64,
     elapsed_s: f64,
+    /// EMA updates so far (they start when `ema` is first set, possibly mid-run).
+    #[serde(default)]
+    ema_updates: u64,
 }
 
 /// Saved configs of a run.
@@ -150,13 +163,17 @@ pub fn train_policy(
 ) -> Result<PolicyOutcome, PolicyLoadError> {
     let dir = out.join(".train");
     let cfg_path = dir.join("config.json");
+    let configs_fresh_command = configs.provenance["command"].clone();
     let configs =
         harness::runfile::resume_or_start(&cfg_path, configs.clone(), run.resume, |c: &mut RunConfigs| {
             let extend = run.epochs.filter(|&e| e != c.train.epochs);
             c.train.epochs = extend.unwrap_or(c.train.epochs);
-            extend.is_some()
+            let ema = run.ema.filter(|&d| d != c.train.ema);
+            c.train.ema = ema.unwrap_or(c.train.ema);
+            extend.is_some() || ema.is_some()
         })
         .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
+    let fresh_command = configs_fresh_command;
     let (pc, tc) = (&configs.policy, &configs.train);
     let device = Device::flex().autodiff();
     let (o, h, s) = (pc.net.obs_horizon, pc.horizon, pc.net.image_size);
@@ -169,7 +186,7 @@ pub fn train_policy(
         .with_beta_2(0.999)
         .with_weight_decay(tc.weight_decay as f32)
         .init();
-    let paths = ["model.bpk", "optimizer.bpk", "state.json"].map(|p| dir.join(p));
+    let paths = ["model.bpk", "optimizer.bpk", "state.json", "ema.bpk"].map(|p| dir.join(p));
     let mut state = State::default();
     if run.resume {
         net = net.try_load_file(&paths[0]).map_err(|e| PolicyLoadError::new(&paths[0], e.to_string()))?;
@@ -177,13 +194,30 @@ pub fn train_policy(
         let text = std::fs::read_to_string(&paths[2]).map_err(io(&paths[2]))?;
         state = serde_json::from_str(&text).map_err(|e| PolicyLoadError::new(&paths[2], e.to_string()))?;
     }
-    let save_state = |net: &DiffusionNet, optim: &burn::optim::ModuleOptimizer, state: &State| {
-        net.clone().save_file(&paths[0]).map_err(|e| PolicyLoadError::new(&paths[0], e.to_string()))?;
-        optim.save(&paths[1]).map_err(|e| PolicyLoadError::new(&paths[1], e.to_string()))?;
-        std::fs::write(&paths[2], serde_json::to_string(state).unwrap_or_default()).map_err(io(&paths[2]))
-    };
+    let mut ema = Ema::new(&net, tc.ema);
+    if tc.ema > 0.0 && state.ema_updates > 0 {
+        let module = ema.module.clone();
+        ema.module =
+            module.try_load_file(&paths[3]).map_err(|e| PolicyLoadError::new(&paths[3], e.to_string()))?;
+    }
+    let save_state =
+        |net: &DiffusionNet, ema: &Ema<DiffusionNet>, optim: &burn::optim::ModuleOptimizer, state: &State| {
+            net.clone().save_file(&paths[0]).map_err(|e| PolicyLoadError::new(&paths[0], e.to_string()))?;
+            optim.save(&paths[1]).map_err(|e| PolicyLoadError::new(&paths[1], e.to_string()))?;
+            if state.ema_updates > 0 {
+                ema.module
+                    .clone()
+                    .save_file(&paths[3])
+                    .map_err(|e| PolicyLoadError::new(&paths[3], e.to_string()))?;
+            }
+            std::fs::write(&paths[2], serde_json::to_string(state).unwrap_or_default()).map_err(io(&paths[2]))
+        };
     let started = Instant::now();
     let mut provenance = configs.provenance.clone();
+    if run.resume {
+        // The saved provenance holds the command that started the run; add this session's.
+        provenance["resumed_with"] = fresh_command;
+    }
     let features = if tc.encoder_steps > 0 {
         let deadline = run.max_minutes.map(|m| started + Duration::from_secs_f64(m * 60.0));
         let p = Pretrain { steps: tc.encoder_steps, lr: tc.encoder_lr, seed: tc.seed };
@@ -193,12 +227,13 @@ pub fn train_policy(
         })?;
         let Some(probe) = probe else {
             // Stopped during pre-training: the run's own state is what `--resume` looks for.
-            save_state(&net, &optim, &state)?;
+            save_state(&net, &ema, &optim, &state)?;
             return Ok(PolicyOutcome { step: state.step, total, saved: Vec::new(), loss: f64::NAN });
         };
         provenance["encoder_pretraining"] = json!({"steps": ps.step, "heldout_pose_error": ps.heldout});
         if state.step == 0 {
             net.encoder = probe.encoder;
+            ema = Ema::new(&net, tc.ema);
         }
         tracing::info!(frames = demos.len(), "encoding every frame with the frozen encoder");
         Some(encode_frames(&net.encoder.valid(), demos, s, &Device::flex()))
@@ -271,6 +306,12 @@ pub fn train_policy(
         let grads = GradientsParams::from_grads(loss.backward(), &net);
         net = optim.step(lr_at(state.step, tc), net, grads);
         state.step += 1;
+        if tc.ema > 0.0 {
+            let k = state.ema_updates as f64;
+            ema.decay = tc.ema.min((1.0 + k) / (10.0 + k));
+            ema.update(&net);
+            state.ema_updates += 1;
+        }
         state.elapsed_s = base + started.elapsed().as_secs_f64();
         recent.push(lv);
         if recent.len() > 50 {
@@ -282,14 +323,20 @@ pub fn train_policy(
             let done = state.step / per_epoch;
             if done.is_multiple_of(tc.save_every) || done == tc.epochs {
                 let ck = out.join(format!("epoch-{done:04}"));
-                let file =
-                    PolicyFile::diffusion(pc, &configs.normalisation, done, state.step, &provenance, lv);
-                write_policy(&ck, &file, &net.valid())?;
+                let mut prov = provenance.clone();
+                prov["weights"] = if tc.ema > 0.0 {
+                    json!({"ema_decay": tc.ema, "ema_updates": state.ema_updates})
+                } else {
+                    json!("raw")
+                };
+                let file = PolicyFile::diffusion(pc, &configs.normalisation, done, state.step, &prov, lv);
+                let weights = if tc.ema > 0.0 { ema.module.clone() } else { net.valid() };
+                write_policy(&ck, &file, &weights)?;
                 saved.push(ck);
             }
         }
         if state.step.is_multiple_of(tc.checkpoint_every) || state.step.is_multiple_of(per_epoch) {
-            save_state(&net, &optim, &state)?;
+            save_state(&net, &ema, &optim, &state)?;
         }
         on_progress(&PolicyProgress {
             phase: Phase::Policy,
@@ -299,7 +346,7 @@ pub fn train_policy(
             loss: lv,
         });
     }
-    save_state(&net, &optim, &state)?;
+    save_state(&net, &ema, &optim, &state)?;
     let loss = recent.iter().sum::<f64>() / recent.len().max(1) as f64;
     Ok(PolicyOutcome { step: state.step, total, saved, loss })
 }

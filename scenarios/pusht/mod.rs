@@ -14,9 +14,11 @@ pub mod geometry;
 #[cfg(feature = "mujoco-render")]
 pub mod mj_render;
 pub mod path;
+pub mod perceive;
 pub mod physics;
 pub mod render;
 pub mod rollout;
+pub mod scripted;
 
 use std::sync::Arc;
 
@@ -164,6 +166,11 @@ impl PushTEnv {
     /// Overwrites the simulator state (for planners that imagine with the simulator).
     pub fn set_state(&mut self, state: &PushTState) {
         self.physics.set_state(state);
+    }
+
+    /// Overwrites the goal (for planners that act on an estimated scene).
+    pub fn set_goal(&mut self, goal: Pose2) {
+        self.goal = goal;
     }
 
     /// The goal pose of this episode.

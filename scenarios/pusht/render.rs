@@ -207,18 +207,12 @@ impl Rasterizer {
             if outside < EDGE_HALF + h {
                 return true;
             }
-        } else if self.within_inside(b, EDGE_HALF + h) {
+        } else if within_inside(&self.shape, b, EDGE_HALF + h) {
             return true;
         }
         let g = goal.to_body(cx, cy);
         let outside = self.shape.distance(g);
-        if outside > 0.0 { outside < h } else { self.within_inside(g, h) }
-    }
-
-    /// Whether an inside body-frame point lies within `e` of the T's boundary
-    /// (the square test of [`Rasterizer::near_edge_inside`] with half side `e`).
-    fn within_inside(&self, b: [f64; 2], e: f64) -> bool {
-        [[-e, -e], [e, -e], [e, e], [-e, e]].iter().any(|o| !self.shape.contains([b[0] + o[0], b[1] + o[1]]))
+        if outside > 0.0 { outside < h } else { within_inside(&self.shape, g, h) }
     }
 
     /// The world-space bounding box of the T at `pose`, inflated by `pad`.
@@ -247,12 +241,8 @@ impl Rasterizer {
         if d <= self.agent_radius {
             return AGENT;
         }
-        let b = block.to_body(wx, wy);
-        if self.shape.contains(b) {
-            return if self.near_edge_inside(b) { BLOCK_EDGE } else { BLOCK };
-        }
-        if self.shape.distance(b) <= EDGE_HALF {
-            return BLOCK_EDGE;
+        if let Some(c) = block_colour(&self.shape, block.to_body(wx, wy)) {
+            return c;
         }
         if self.shape.contains(goal.to_body(wx, wy)) {
             return GOAL;
@@ -263,14 +253,6 @@ impl Rasterizer {
         BACKGROUND
     }
 
-    /// Whether an inside point is within [`EDGE_HALF`] of the T's boundary. The T is
-    /// a union of axis-aligned rectangles in its body frame, so a point is deep inside
-    /// iff all four corners of the square of half side `EDGE_HALF` around it are inside.
-    fn near_edge_inside(&self, b: [f64; 2]) -> bool {
-        let e = EDGE_HALF;
-        [[-e, -e], [e, -e], [e, e], [-e, e]].iter().any(|o| !self.shape.contains([b[0] + o[0], b[1] + o[1]]))
-    }
-
     /// Whether a point lies on one of the four wall segments (drawn 2 x wall_radius thick).
     fn on_wall(&self, wx: f64, wy: f64) -> bool {
         let (lo, hi, h) = (self.wall_lo, self.wall_hi, self.wall_half);
@@ -278,6 +260,22 @@ impl Rasterizer {
         ((wx - lo).abs() <= h || (wx - hi).abs() <= h) && within(wy)
             || ((wy - lo).abs() <= h || (wy - hi).abs() <= h) && within(wx)
     }
+}
+
+/// The colour of the block (fill or outline) at a body-frame point, `None` off
+/// the block. The outline is [`EDGE_HALF`] wide on either side of the boundary.
+pub fn block_colour(shape: &TShape, b: [f64; 2]) -> Option<Rgb> {
+    if shape.contains(b) {
+        return Some(if within_inside(shape, b, EDGE_HALF) { BLOCK_EDGE } else { BLOCK });
+    }
+    (shape.distance(b) <= EDGE_HALF).then_some(BLOCK_EDGE)
+}
+
+/// Whether an inside body-frame point lies within `e` of the T's boundary: a point
+/// is deeper iff all four corners of the square of half side `e` around it are
+/// inside (the T is a union of axis-aligned rectangles in its body frame).
+fn within_inside(shape: &TShape, b: [f64; 2], e: f64) -> bool {
+    [[-e, -e], [e, -e], [e, e], [-e, e]].iter().any(|o| !shape.contains([b[0] + o[0], b[1] + o[1]]))
 }
 
 #[cfg(test)]

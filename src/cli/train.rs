@@ -64,6 +64,11 @@ pub struct TrainPolicyArgs {
     /// `.train/encoder*`), e.g. to train several U-Nets on one encoder.
     #[arg(long)]
     pub encoder_from: Option<PathBuf>,
+    /// Decay of the weights' moving average that checkpoints are saved from (0: raw
+    /// weights); 0.999 for a new run. With `--resume`, switches the EMA on (from the
+    /// current weights) or changes its decay.
+    #[arg(long)]
+    pub ema: Option<f64>,
     /// Seed of the weights, sample order and noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,

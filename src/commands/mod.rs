@@ -5,6 +5,7 @@ mod collect;
 mod dataset;
 mod dataset_merge;
 mod episodes;
+mod scripted;
 mod simulate;
 mod simulate_policy;
 mod train;
@@ -46,5 +47,6 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Wm(WmCommand::Eval(a)) => wm_eval::run(a),
+        Command::Scripted(a) => scripted::run(a),
     }
 }

@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use burn::tensor::Device;
-use policies::dir::{Expectations, checkpoint_dirs, load_policy};
+use policies::dir::{Expectations, checkpoint_dirs};
 use scenarios::pusht::PushTPhysics;
 use serde_json::{Value, json};
 
@@ -43,7 +43,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
             d.file_name().map_or_else(|| d.display().to_string(), |n| n.to_string_lossy().into_owned());
         let started = Instant::now();
         let rows: Result<Vec<EpisodeRow>> = (|| {
-            let policy = load_policy(d, expect, &device)?;
+            let policy = crate::policy_kinds::load_any(d, expect, &device, &cfg, &model)?;
             let mut timing = Timing::default();
             let mut rows = Vec::new();
             for batch in seeds.chunks(100) {

@@ -20,6 +20,9 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
     if a.batch == 0 || a.epochs == Some(0) || a.save_every == 0 {
         bail!("--batch, --epochs and --save-every must be positive");
     }
+    if a.ema.is_some_and(|d| !(0.0..1.0).contains(&d)) {
+        bail!("--ema must be in [0, 1), got {}", a.ema.unwrap_or_default());
+    }
     let policy = DiffusionConfig {
         net: NetConfig::new().with_encoder_width(a.encoder_width).with_down_dims(a.down_dims.clone()),
         inference_steps: a.inference_steps,
@@ -42,6 +45,7 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
             checkpoint_every: 50,
             encoder_steps: a.encoder_steps,
             encoder_lr: a.encoder_lr,
+            ema: a.ema.unwrap_or(0.999),
         },
         normalisation: demos.normalisation(),
         provenance: json!({
@@ -69,7 +73,12 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         }
     }
     let pb = progress::bar(1, "policy", quiet);
-    let run = PolicyRun { resume: a.session.resume, epochs: a.epochs, max_minutes: a.session.max_minutes };
+    let run = PolicyRun {
+        resume: a.session.resume,
+        epochs: a.epochs,
+        max_minutes: a.session.max_minutes,
+        ema: a.ema,
+    };
     let outcome = train_policy(&demos, &a.out, &configs, run, &mut |p| {
         pb.set_length(p.total);
         pb.set_position(p.step);

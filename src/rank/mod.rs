@@ -18,7 +18,9 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use burn::tensor::Device;
-use policies::dir::{Expectations, checkpoint_dirs, load_policy};
+use policies::dir::{Expectations, checkpoint_dirs};
+
+use crate::policy_kinds::load_any;
 use scenarios::pusht::PushTPhysics;
 use serde_json::{Value, json};
 use world_model::model::WorldModel;
@@ -90,7 +92,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         let name =
             dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
         names.push(name.clone());
-        let policy = match load_policy(dir, expect, &device) {
+        let policy = match load_any(dir, expect, &device, &cfg, &model) {
             Ok(p) => p,
             Err(e) => {
                 tracing::error!("{e}; continuing with the other policies");
@@ -183,7 +185,7 @@ fn rollouts(
         if failed.contains(&name.as_str()) {
             continue;
         }
-        let Ok(policy) = load_policy(d, expect, &device) else { continue };
+        let Ok(policy) = load_any(d, expect, &device, setup.cfg, setup.model) else { continue };
         let picks = media::pick_seeds(rows, &name);
         let strips = pool.install(|| media::write_rollouts(&dir, policy.as_ref(), &picks, setup, wm, 4))?;
         for (png, caption) in strips {
