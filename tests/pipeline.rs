@@ -197,6 +197,10 @@ fn pipeline_end_to_end() {
     assert_eq!(res["policies"][0]["sim"]["episodes"], 3);
     let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
     assert_eq!(rows.lines().count(), 2 * 3 * 2); // policies x seeds x branches
+    // The parquet table holds the same rows, typed.
+    let table = reports::episodes::read_episodes_parquet(&out.join("episodes.parquet")).unwrap();
+    assert_eq!(table.height(), 12);
+    let parquet = std::fs::read(out.join("episodes.parquet")).unwrap();
 
     // --resume redoes nothing: the rows stay exactly the same.
     let mut again = args.clone();
@@ -210,6 +214,7 @@ fn pipeline_end_to_end() {
     args1.extend(["--out", s(&out1), "--jobs", "1"]);
     expect_code(&run(&args1), 1);
     assert_eq!(std::fs::read_to_string(out1.join("episodes.jsonl")).unwrap(), rows);
+    assert_eq!(std::fs::read(out1.join("episodes.parquet")).unwrap(), parquet);
     let strip = |mut v: serde_json::Value| {
         v.as_object_mut().unwrap().remove("timing");
         v
@@ -230,6 +235,7 @@ fn pipeline_end_to_end() {
     let args = ["merge", s(&shard_dirs[0]), s(&shard_dirs[1]), "--out", s(&merged), "--no-report"];
     expect_code(&run(&args), 0);
     assert_eq!(std::fs::read_to_string(merged.join("episodes.jsonl")).unwrap(), rows);
+    assert_eq!(std::fs::read(merged.join("episodes.parquet")).unwrap(), parquet);
     assert_eq!(strip(read_json(&merged.join("results.json"))), strip(read_json(&out1.join("results.json"))));
 
     // Without the corrupt checkpoint the run passes, unless a gate fails.

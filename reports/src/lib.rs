@@ -1,6 +1,7 @@
 //! evalharness media and reports.
 //!
 //! - [`gif`], [`png`]: animated GIFs and filmstrips of episodes;
+//! - [`episodes`]: the per-episode table as parquet (polars);
 //! - [`summary`]: what a `rank` report shows, read from `results.json`;
 //! - [`plots`]: scatter, bar and bump charts (PNG + SVG, bundled font);
 //! - [`labels`]: scatter-label placement without overprinting;
@@ -8,6 +9,7 @@
 //! - [`tables`]: the LaTeX table and the summary CSV;
 //! - [`html`]: the self-contained HTML report.
 
+pub mod episodes;
 pub mod gif;
 pub mod html;
 pub mod labels;

@@ -107,7 +107,7 @@ pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Resu
     cfg["shard"] = json!([0, 1]);
     cfg["merged_from"] = json!(shards);
     write_json(&out.join("config.json"), &cfg)?;
-    super::write_csv(&out.join("episodes.csv"), &rows)?;
+    super::write_tables(out, &rows)?;
     if !no_report {
         super::report::write_report(out)?;
     }

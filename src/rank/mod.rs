@@ -3,7 +3,8 @@
 //! with CIs and how well the world model's ranking agrees with MuJoCo's.
 //!
 //! Output folder: `config.json` (resolved arguments), `episodes.jsonl` (appended
-//! as batches finish), `episodes.csv`, `results.json`. `--resume` skips episodes
+//! as batches finish), `episodes.csv` and `episodes.parquet` (the same rows, sorted),
+//! `results.json`. `--resume` skips episodes
 //! already in `episodes.jsonl`; `--shard i/n` runs every n-th batch.
 
 mod media;
@@ -19,6 +20,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use burn::tensor::Device;
 use policies::dir::{Expectations, checkpoint_dirs};
+use reports::episodes::{EpisodeRecord, write_episodes_parquet};
 
 use crate::policy_kinds::load_any;
 use scenarios::pusht::PushTPhysics;
@@ -153,7 +155,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         "note": "this session only (a resumed run times its own part)",
     });
     write_json(&a.out.join("results.json"), &res)?;
-    write_csv(&a.out.join("episodes.csv"), &rows)?;
+    write_tables(&a.out, &rows)?;
     if !a.no_report {
         if shards == 1 {
             rollouts(a, &dirs, &rows, &failed_names, &setup, &wm, &pool)?;
@@ -221,9 +223,33 @@ fn gates(a: &RankArgs, res: &Value, failed: &[Value]) -> Result<ExitCode> {
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
-pub(crate) fn write_csv(path: &Path, rows: &[EpisodeRow]) -> Result<()> {
+/// Writes `episodes.csv` and `episodes.parquet` into `out`: the rows sorted by
+/// (policy, seed, branch).
+pub(crate) fn write_tables(out: &Path, rows: &[EpisodeRow]) -> Result<()> {
     let mut sorted: Vec<&EpisodeRow> = rows.iter().collect();
     sorted.sort_by(|x, y| (&x.policy, x.seed, x.branch).cmp(&(&y.policy, y.seed, y.branch)));
+    write_csv(&out.join("episodes.csv"), &sorted)?;
+    let records: Vec<EpisodeRecord> = sorted
+        .iter()
+        .map(|r| EpisodeRecord {
+            policy: r.policy.clone(),
+            seed: r.seed,
+            branch: r.branch.as_str().to_string(),
+            score: r.score,
+            max_coverage: r.max_coverage,
+            final_coverage: r.final_coverage,
+            success: r.success,
+            steps: r.steps as u32,
+            final_block: r.final_block,
+            goal: r.goal,
+            scorer_abs_error: r.scorer_abs_error,
+        })
+        .collect();
+    write_episodes_parquet(&out.join("episodes.parquet"), &records)?;
+    Ok(())
+}
+
+fn write_csv(path: &Path, sorted: &[&EpisodeRow]) -> Result<()> {
     let mut w = csv::Writer::from_path(path).with_context(|| format!("creating {}", path.display()))?;
     w.write_record([
         "policy",
@@ -236,7 +262,7 @@ pub(crate) fn write_csv(path: &Path, rows: &[EpisodeRow]) -> Result<()> {
         "steps",
     ])?;
     for r in sorted {
-        let branch = serde_json::to_value(r.branch)?.as_str().unwrap_or("").to_string();
+        let branch = r.branch.as_str().to_string();
         w.write_record([
             r.policy.clone(),
             r.seed.to_string(),

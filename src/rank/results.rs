@@ -26,6 +26,16 @@ pub enum Branch {
     WorldModel,
 }
 
+impl Branch {
+    /// The name in every output file (`sim`, `world_model`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Branch::Sim => "sim",
+            Branch::WorldModel => "world_model",
+        }
+    }
+}
+
 /// One (policy, seed, branch) episode.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
