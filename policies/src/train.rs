@@ -163,7 +163,8 @@ pub fn train_policy(
 ) -> Result<PolicyOutcome, PolicyLoadError> {
     let dir = out.join(".train");
     let cfg_path = dir.join("config.json");
-    let configs_fresh_command = configs.provenance["command"].clone();
+    // This session's command, recorded when resuming (the saved provenance holds the first).
+    let session_command = configs.provenance["command"].clone();
     let configs =
         harness::runfile::resume_or_start(&cfg_path, configs.clone(), run.resume, |c: &mut RunConfigs| {
             let extend = run.epochs.filter(|&e| e != c.train.epochs);
@@ -173,7 +174,6 @@ pub fn train_policy(
             extend.is_some() || ema.is_some()
         })
         .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
-    let fresh_command = configs_fresh_command;
     let (pc, tc) = (&configs.policy, &configs.train);
     let device = Device::flex().autodiff();
     let (o, h, s) = (pc.net.obs_horizon, pc.horizon, pc.net.image_size);
@@ -215,8 +215,7 @@ pub fn train_policy(
     let started = Instant::now();
     let mut provenance = configs.provenance.clone();
     if run.resume {
-        // The saved provenance holds the command that started the run; add this session's.
-        provenance["resumed_with"] = fresh_command;
+        provenance["resumed_with"] = session_command;
     }
     let features = if tc.encoder_steps > 0 {
         let deadline = run.max_minutes.map(|m| started + Duration::from_secs_f64(m * 60.0));

@@ -87,12 +87,13 @@ impl Perceiver {
         }
         let maps = self.maps(frame);
         let block0 = self.moments(&maps.block, |_| true, self.area_px / 3.0)?;
-        let block = self.fit(block0, |p, w| self.error(p, &maps.block, &maps.block_known, w));
+        let window = self.window(&block0);
+        let block = fit(block0, |p| self.error(p, &maps.block, &maps.block_known, window));
         let known = |i: usize| maps.goal_known[i];
         // Too little goal in view for moments: it is (nearly) under the block.
         let g0 = self.moments(&maps.goal, known, self.area_px / 20.0).unwrap_or(block);
         let scene = self.goal_scene(frame, &block, agent, self.window(&g0));
-        let goal = self.fit(g0, |p, _| scene.error(p, frame, self));
+        let goal = fit(g0, |p| scene.error(p, frame, self));
         Some(Perceived { block, goal })
     }
 
@@ -227,30 +228,6 @@ impl Perceiver {
         }
         scene
     }
-
-    /// Pattern search from the best few of 24 orientations at `init`'s position
-    /// (one of them `init`'s own); the best fit under `error(pose, window)`.
-    fn fit(&self, init: Pose2, error: impl Fn(&Pose2, [usize; 4]) -> f64) -> Pose2 {
-        let window = self.window(&init);
-        let err = |p: &Pose2| error(p, window);
-        let mut starts: Vec<(f64, Pose2)> = (0..24)
-            .map(|k| {
-                let p = Pose2::new(
-                    init.x,
-                    init.y,
-                    wrap_angle(init.theta + k as f64 * std::f64::consts::TAU / 24.0),
-                );
-                (err(&p), p)
-            })
-            .collect();
-        starts.sort_by(|a, b| a.0.total_cmp(&b.0));
-        starts
-            .iter()
-            .take(3)
-            .map(|&(_, p)| search(&err, p))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map_or(init, |(p, _)| p)
-    }
 }
 
 /// Sample offsets within a pixel: the rasteriser's 4 x 4 grid.
@@ -305,6 +282,25 @@ impl GoalScene {
         }
         e
     }
+}
+
+/// Pattern search from the best few of 24 orientations at `init`'s position
+/// (one of them `init`'s own); the best fit under `err`.
+fn fit(init: Pose2, err: impl Fn(&Pose2) -> f64) -> Pose2 {
+    let mut starts: Vec<(f64, Pose2)> = (0..24)
+        .map(|k| {
+            let p =
+                Pose2::new(init.x, init.y, wrap_angle(init.theta + k as f64 * std::f64::consts::TAU / 24.0));
+            (err(&p), p)
+        })
+        .collect();
+    starts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    starts
+        .iter()
+        .take(3)
+        .map(|&(_, p)| search(&err, p))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(init, |(p, _)| p)
 }
 
 /// Pattern search over (x, y, θ) from `init`: steps of 8 units and 0.16 rad, halved

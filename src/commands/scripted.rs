@@ -2,7 +2,6 @@
 //! acting from frames with a given action noise and lag — one per combination,
 //! so a graded policy set exists without any training.
 
-use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
@@ -11,6 +10,7 @@ use serde_json::json;
 
 use super::train::git_commit;
 use crate::cli::ScriptedArgs;
+use crate::output::{Staged, write_json};
 
 /// The checkpoint folder name of a combination: `noise030-lag2`.
 fn folder(noise: f64, lag: usize) -> String {
@@ -25,38 +25,31 @@ pub fn run(a: &ScriptedArgs) -> Result<ExitCode> {
     if a.action_horizon == 0 || a.lag.iter().any(|&l| l >= a.action_horizon) {
         bail!("--lag values must be below --action-horizon ({}), which must be positive", a.action_horizon);
     }
-    if a.out.exists() && !a.force {
-        bail!("{} exists; pass --force to replace it", a.out.display());
-    }
-    if a.force && a.out.exists() {
-        std::fs::remove_dir_all(&a.out).with_context(|| format!("removing {}", a.out.display()))?;
-    }
-    let command: Vec<String> = std::env::args().collect();
-    let mut names = Vec::new();
-    for &noise in &a.noise {
-        for &lag in &a.lag {
-            let name = folder(noise, lag);
-            if names.contains(&name) {
-                bail!("--noise {noise} rounds to a folder that already exists ({name})");
-            }
-            let file = ScriptedFile {
-                kind: "scripted".into(),
-                config: ScriptedConfig { noise, lag, action_horizon: a.action_horizon },
-                provenance: json!({"command": command.join(" "), "commit": git_commit()}),
-            };
-            write(&a.out.join(&name), &file)?;
-            println!("{}", a.out.join(&name).display());
-            names.push(name);
+    let combos: Vec<(String, f64, usize)> =
+        a.noise.iter().flat_map(|&n| a.lag.iter().map(move |&l| (folder(n, l), n, l))).collect();
+    for (i, (name, noise, _)) in combos.iter().enumerate() {
+        if combos[..i].iter().any(|c| &c.0 == name) {
+            bail!("--noise {noise} rounds to a folder that already exists ({name})");
         }
     }
+    let out = Staged::new(&a.out, a.force)?;
+    let command: Vec<String> = std::env::args().collect();
+    let provenance = json!({"command": command.join(" "), "commit": git_commit()});
+    for (name, noise, lag) in &combos {
+        let file = ScriptedFile {
+            kind: "scripted".into(),
+            config: ScriptedConfig { noise: *noise, lag: *lag, action_horizon: a.action_horizon },
+            provenance: provenance.clone(),
+        };
+        let dir = out.file(name);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        write_json(&dir.join("policy.json"), &serde_json::to_value(&file)?)?;
+    }
+    let root = out.commit()?;
+    for (name, _, _) in &combos {
+        println!("{}", root.join(name).display());
+    }
     Ok(ExitCode::SUCCESS)
-}
-
-fn write(dir: &Path, file: &ScriptedFile) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let path = dir.join("policy.json");
-    let text = serde_json::to_string_pretty(file)? + "\n";
-    std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
 }
 
 #[cfg(test)]
