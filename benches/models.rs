@@ -1,9 +1,12 @@
 //! Model throughput benchmarks (criterion): a policy decision and a world-model
-//! chunk at batch 1 and batch 100, on the shipped checkpoints.
+//! chunk at batch 1 and batch 100, on the shipped checkpoints; and one chunk of
+//! the paper's pixel-space U-Net (random weights: the cost does not depend on them).
 //!
 //! `cargo bench --bench models`; results are recorded in BENCHMARKS.md. The
 //! checkpoints are read from `checkpoints/pusht/` (override with
-//! `BENCH_POLICY=DIR` and `BENCH_WORLD_MODEL=DIR`).
+//! `BENCH_POLICY=DIR` and `BENCH_WORLD_MODEL=DIR`). The pixel model runs at batch
+//! 1 only unless `BENCH_PIXEL_BATCHES=1,100` asks for more (batch 100 is minutes per
+//! iteration on a CPU). The device is `EVALHARNESS_DEVICE` (see `world_model::device`).
 
 // criterion_group! generates undocumented functions.
 #![allow(missing_docs)]
@@ -12,12 +15,15 @@ use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Tensor, TensorData};
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use harness::policy::Observation;
 use harness::rng::Rng;
 use policies::dir::{Expectations, checkpoint_dirs, load_policy};
-use world_model::model::WorldModel;
+use world_model::codec::FrameCodec;
+use world_model::latents::LatentStats;
+use world_model::model::{Objective, WorldModel, WorldModelConfig};
+use world_model::unet::UNetConfig;
 
 const BATCHES: [usize; 2] = [1, 100];
 
@@ -33,7 +39,7 @@ fn observation() -> Observation {
 fn policy(c: &mut Criterion) {
     let dir = path("BENCH_POLICY", "checkpoints/pusht/policies");
     let first = checkpoint_dirs(&dir).ok().and_then(|d| d.into_iter().next()).unwrap_or(dir);
-    let device = Device::flex();
+    let device = world_model::device::selected().expect("EVALHARNESS_DEVICE");
     let p = load_policy(&first, Expectations { image_size: 96, action_dim: 2 }, &device)
         .unwrap_or_else(|e| panic!("benchmark needs a policy checkpoint: {e}"));
     let mut g = c.benchmark_group("policy_decision");
@@ -50,12 +56,37 @@ fn policy(c: &mut Criterion) {
 
 fn world_model(c: &mut Criterion) {
     let dir = path("BENCH_WORLD_MODEL", "checkpoints/pusht/world_model");
-    let device = Device::flex();
+    let device = world_model::device::selected().expect("EVALHARNESS_DEVICE");
     let wm = WorldModel::load(&dir, &device)
         .unwrap_or_else(|e| panic!("benchmark needs a world-model checkpoint: {e}"));
-    let mut g = c.benchmark_group("world_model_chunk");
+    chunk(c, "world_model_chunk", &wm, &BATCHES);
+}
+
+/// The paper's pixel-space Push-T model (8,375,201 parameters), drifting, one pass per chunk.
+fn pixel_world_model(c: &mut Criterion) {
+    let device = world_model::device::selected().expect("EVALHARNESS_DEVICE");
+    let unet = UNetConfig::pusht_pixel();
+    let cfg = WorldModelConfig {
+        objective: Objective::Drifting,
+        latents: LatentStats { channels: 3, size: 96, mean: vec![0.0; 3], std: vec![1.0; 3] },
+        autoencoder: None,
+        future: 4,
+        sample_steps: 1,
+        unet: unet.clone(),
+    };
+    let wm = WorldModel::from_parts(cfg, FrameCodec::pixels(96), unet.init(&device), &device);
+    let batches: Vec<usize> = std::env::var("BENCH_PIXEL_BATCHES")
+        .ok()
+        .map(|v| v.split(',').filter_map(|b| b.trim().parse().ok()).collect())
+        .unwrap_or_else(|| vec![1]);
+    chunk(c, "world_model_pixel_chunk", &wm, &batches);
+}
+
+fn chunk(c: &mut Criterion, group: &str, wm: &WorldModel, batches: &[usize]) {
+    let device = wm.device().clone();
+    let mut g = c.benchmark_group(group);
     g.sample_size(10).measurement_time(Duration::from_secs(20));
-    for b in BATCHES {
+    for &b in batches {
         // One chunk: encode nothing (latent history given), predict 4 frames, decode 2
         // (what a policy with obs horizon 2 sees per chunk in `rank`).
         let frames = Tensor::<4>::zeros([b, 3, 96, 96], &device);
@@ -75,5 +106,5 @@ fn world_model(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, policy, world_model);
+criterion_group!(benches, policy, world_model, pixel_world_model);
 criterion_main!(benches);

@@ -53,6 +53,32 @@ pub enum Command {
     /// Write scripted-policy checkpoints: the expert acting from frames, with action
     /// noise and lag, one per combination — a graded policy set without training.
     Scripted(ScriptedArgs),
+    /// Copy diffusion-policy checkpoints (e.g. chosen epochs of a training run) into a
+    /// policy set, optionally with other inference settings; weights are copied as they are.
+    ExportPolicies(ExportPoliciesArgs),
+}
+
+/// `evalharness export-policies`.
+#[derive(Debug, Args)]
+pub struct ExportPoliciesArgs {
+    /// A checkpoint or a folder of them (a `train policy --out` folder, or a set).
+    #[arg(long)]
+    pub from: PathBuf,
+    /// Training epochs to export, comma-separated (default: every checkpoint).
+    #[arg(long, value_delimiter = ',')]
+    pub epochs: Vec<u64>,
+    /// Predicted actions executed per decision (the rest are re-planned).
+    #[arg(long)]
+    pub action_horizon: Option<usize>,
+    /// DDIM steps per decision.
+    #[arg(long)]
+    pub inference_steps: Option<usize>,
+    /// Output folder (one sub-folder per checkpoint, named as in `--from`).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Replace an existing `--out`.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `evalharness scripted`.

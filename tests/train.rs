@@ -1,4 +1,4 @@
-//! `evalharness train autoencoder` and `train policy` on a tiny dataset: outputs, resume, bad input.
+//! `evalharness train autoencoder`, `train world-model` and `train policy` on tiny datasets: outputs, resume, bad input.
 
 use std::path::Path;
 
@@ -143,6 +143,35 @@ fn policy_stopped_during_encoder_pretraining_resumes() {
     let file = read_json(&out.join("epoch-0002/policy.json"));
     assert_eq!(file["provenance"]["weights"], "raw", "{file}");
     assert!(file["provenance"]["resumed_with"].as_str().unwrap().contains("--ema 0"), "{file}");
+
+    // export-policies: chosen epochs into a set, with other inference settings.
+    let set = dir.path().join("set");
+    let export = ["export-policies", "--from", o, "--out", set.to_str().unwrap()];
+    let (stdout, _) =
+        expect_code(&run(&[&export[..], &["--epochs", "2", "--action-horizon", "4"]].concat()), 0);
+    assert!(stdout.trim().ends_with("epoch-0002"), "{stdout}");
+    assert!(!set.join("epoch-0001").exists());
+    let copy = read_json(&set.join("epoch-0002/policy.json"));
+    assert_eq!(copy["config"]["action_horizon"], 4);
+    assert_eq!(copy["provenance"]["exported"][0]["changed"]["action_horizon"], serde_json::json!([8, 4]));
+    let weights = |d: &Path| std::fs::read(d.join("epoch-0002/model.bpk")).unwrap();
+    assert_eq!(weights(&set), weights(&out));
+    // The copy runs; bad requests name the problem.
+    let sim = ["simulate", "--policy", set.to_str().unwrap(), "--episodes", "1", "--max-steps", "8"];
+    let sim_out = dir.path().join("sim");
+    expect_code(&run(&[&sim[..], &["--record-scores", "--out", sim_out.to_str().unwrap()]].concat()), 0);
+    // Re-exporting unchanged keeps the measured score and the export history.
+    let again = dir.path().join("again");
+    let (a, s) = (again.to_str().unwrap(), set.to_str().unwrap());
+    expect_code(&run(&["export-policies", "--from", s, "--out", a, "--action-horizon", "4"]), 0);
+    let prov = read_json(&again.join("epoch-0002/provenance.json"));
+    assert!(prov["mujoco_score"]["mean"].is_number(), "{prov}");
+    assert_eq!(prov["training"]["exported"].as_array().unwrap().len(), 2, "{prov}");
+    assert_eq!(prov["training"]["exported"][1]["changed"], serde_json::json!({}), "{prov}");
+    let (_, err) = expect_code(&run(&[&export[..], &["--force", "--epochs", "7"]].concat()), 2);
+    assert!(err.contains("no checkpoint of epoch 7"), "{err}");
+    let (_, err) = expect_code(&run(&[&export[..], &["--force", "--action-horizon", "16"]].concat()), 2);
+    assert!(err.contains("--action-horizon 16 must be 1..=15"), "{err}");
 }
 
 #[test]
@@ -228,4 +257,56 @@ fn world_model_loss_variants_train_and_warm_start() {
     assert!(err.contains("--self-forcing"), "{err}");
     let (_, err) = expect_code(&wm(&third, &["--motion-weighting"]), 2);
     assert!(err.contains("--field token"), "{err}");
+}
+
+#[test]
+fn pixel_space_world_model_trains_resumes_and_rolls_out() {
+    let dir = tempfile::tempdir().unwrap();
+    // 70-step episodes: wm eval's 64-frame rollouts need 4 context frames + 60.
+    let data = dir.path().join("long.zarr");
+    let d = data.to_str().unwrap();
+    let collect = ["collect", "--episodes", "10", "--max-steps", "70", "--mix", "explore=1", "--out", d];
+    expect_code(&run(&collect), 0);
+    let out = dir.path().join("pix");
+    let o = out.to_str().unwrap();
+    // The paper's family with a narrow U-Net (base 32 instead of 96) to stay fast on a CPU.
+    let args = ["train", "world-model", "--config", "pusht-pixel", "--data", d, "--out", o];
+    let tiny = ["--base-channels", "32", "--contexts", "1", "--samples", "2", "--eval-windows", "2"];
+    let (stdout, _) = expect_code(&run(&[&args[..], &tiny[..], &["--steps", "1"]].concat()), 0);
+    assert!(stdout.contains("step 1/1"), "{stdout}");
+    let cfg = read_json(&out.join("config.json"));
+    assert_eq!(cfg["model"]["autoencoder"], serde_json::Value::Null);
+    assert_eq!(cfg["model"]["unet"]["frame_channels"], 3);
+    assert_eq!(cfg["model"]["unet"]["channel_mult"], serde_json::json!([1, 1, 1, 1]));
+    assert_eq!(cfg["model"]["latents"]["size"], 96);
+    assert!(read_json(&out.join("provenance.json"))["what"].as_str().unwrap().ends_with("on pixels"));
+
+    // Resuming keeps the pixel config; an autoencoder cannot be slipped in.
+    let resume = ["--resume", "--steps", "2"];
+    expect_code(&run(&[&args[..], &tiny[..], &resume[..]].concat()), 0);
+    assert_eq!(read_json(&out.join("state.json"))["step"], 2);
+    let (_, err) = expect_code(&run(&[&args[..], &resume[..], &["--autoencoder", d]].concat()), 2);
+    assert!(err.contains("pixel-space model, it takes no --autoencoder"), "{err}");
+    // The two families need (or refuse) an autoencoder.
+    let fresh = dir.path().join("other");
+    let f = fresh.to_str().unwrap();
+    let (_, err) = expect_code(&run(&["train", "world-model", "--data", d, "--out", f]), 2);
+    assert!(err.contains("pass --autoencoder DIR"), "{err}");
+    let (_, err) = expect_code(&run(&[&args[..6], &["--out", f, "--autoencoder", d]].concat()), 2);
+    assert!(err.contains("takes no --autoencoder"), "{err}");
+
+    // A pixel model rolls out like a latent one: wm eval on one held-out episode.
+    let ev = dir.path().join("eval");
+    let eval = ["wm", "eval", "--world-model", o, "--data", d, "--episodes", "1", "--full-episodes", "0"];
+    let eval = [&eval[..], &["--out", ev.to_str().unwrap()]].concat();
+    expect_code(&run(&eval), 0);
+    let e = read_json(&ev.join("eval.json"));
+    assert_eq!(e["models"][0]["frames"], 60);
+    assert!(e["models"][0]["psnr"].as_f64().unwrap().is_finite());
+    // A GPU request on a CPU-only build is an error that says how to build one.
+    if cfg!(not(feature = "cuda")) {
+        let out = crate::util::evalharness().args(&eval).env("EVALHARNESS_DEVICE", "cuda").output().unwrap();
+        let (_, err) = expect_code(&out, 2);
+        assert!(err.contains("EVALHARNESS_DEVICE=cuda") && err.contains("--features cuda"), "{err}");
+    }
 }

@@ -191,11 +191,12 @@ pub fn pretrain_encoder(
     p: Pretrain,
     dir: &Path,
     deadline: Option<Instant>,
+    inner: &Device,
     on_step: &mut dyn FnMut(u64, f64),
 ) -> Result<(PretrainState, Option<PoseProbe>), PolicyLoadError> {
     let files = ["encoder.bpk", "encoder_optimizer.bpk", "encoder_state.json"].map(|f| dir.join(f));
     let err = |path: &Path, e: String| PolicyLoadError::new(path, e);
-    let device = Device::flex().autodiff();
+    let device = inner.clone().autodiff();
     let mut probe = PoseProbe::new(cfg, &device);
     let mut optim = AdamWConfig::new().with_weight_decay(1e-6).init();
     let mut state = PretrainState::default();

@@ -149,7 +149,8 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> PolicyLoadError + '_ {
     move |e| PolicyLoadError::new(path, e.to_string())
 }
 
-/// Trains (or resumes) a diffusion policy into `out`.
+/// Trains (or resumes) a diffusion policy into `out` on `inner` (its autodiff
+/// wrapper for the gradients; see `world_model::device`).
 ///
 /// # Errors
 /// [`PolicyLoadError`] naming the file for unreadable state or I/O failures, or a
@@ -159,6 +160,7 @@ pub fn train_policy(
     out: &Path,
     configs: &RunConfigs,
     run: PolicyRun,
+    inner: &Device,
     on_progress: &mut dyn FnMut(&PolicyProgress),
 ) -> Result<PolicyOutcome, PolicyLoadError> {
     let dir = out.join(".train");
@@ -175,7 +177,7 @@ pub fn train_policy(
         })
         .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
     let (pc, tc) = (&configs.policy, &configs.train);
-    let device = Device::flex().autodiff();
+    let device = inner.clone().autodiff();
     let (o, h, s) = (pc.net.obs_horizon, pc.horizon, pc.net.image_size);
     let n = demos.len();
     let per_epoch = n.div_ceil(tc.batch.max(1)) as u64;
@@ -221,7 +223,7 @@ pub fn train_policy(
         let deadline = run.max_minutes.map(|m| started + Duration::from_secs_f64(m * 60.0));
         let p = Pretrain { steps: tc.encoder_steps, lr: tc.encoder_lr, seed: tc.seed };
         let enc_total = tc.encoder_steps;
-        let (ps, probe) = pretrain_encoder(demos, &pc.net, p, &dir, deadline, &mut |step, loss| {
+        let (ps, probe) = pretrain_encoder(demos, &pc.net, p, &dir, deadline, inner, &mut |step, loss| {
             on_progress(&PolicyProgress { phase: Phase::Encoder, step, total: enc_total, epoch: 0, loss });
         })?;
         let Some(probe) = probe else {
@@ -235,7 +237,7 @@ pub fn train_policy(
             ema = Ema::new(&net, tc.ema);
         }
         tracing::info!(frames = demos.len(), "encoding every frame with the frozen encoder");
-        Some(encode_frames(&net.encoder.valid(), demos, s, &Device::flex()))
+        Some(encode_frames(&net.encoder.valid(), demos, s, inner))
     } else {
         None
     };

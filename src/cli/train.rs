@@ -88,15 +88,32 @@ pub enum ObjectiveArg {
     Diffusion,
 }
 
+/// Which space the world model works in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum WmConfigArg {
+    /// 12x12x8 latents of a trained frame autoencoder (the CPU default; needs
+    /// `--autoencoder`).
+    PushtLatent,
+    /// The paper's pixel-space Push-T model: 96x96 RGB, 96 base channels, 8,375,201
+    /// parameters (a GPU job: build with `--features cuda`, run with
+    /// `EVALHARNESS_DEVICE=cuda`).
+    PushtPixel,
+}
+
 /// `evalharness train world-model`.
 #[derive(Debug, Args)]
 pub struct TrainWorldModelArgs {
     /// Training dataset (zarr replay buffer); every 10th episode is held out.
     #[arg(long)]
     pub data: PathBuf,
-    /// Trained autoencoder folder (from `train autoencoder`).
+    /// Model family: autoencoder latents or pixels (ignored with `--resume`: the
+    /// saved config wins).
+    #[arg(long, value_enum, default_value_t = WmConfigArg::PushtLatent)]
+    pub config: WmConfigArg,
+    /// Trained autoencoder folder (from `train autoencoder`); required by
+    /// `--config pusht-latent`, refused by `--config pusht-pixel`.
     #[arg(long)]
-    pub autoencoder: PathBuf,
+    pub autoencoder: Option<PathBuf>,
     /// Training objective.
     #[arg(long, value_enum, default_value_t = ObjectiveArg::Drifting)]
     pub objective: ObjectiveArg,
@@ -106,9 +123,9 @@ pub struct TrainWorldModelArgs {
     /// Optimizer steps in total (default 6000); with `--resume`, extends or shortens the run.
     #[arg(long)]
     pub steps: Option<u64>,
-    /// U-Net base channels.
-    #[arg(long, default_value_t = 32)]
-    pub base_channels: usize,
+    /// U-Net base channels (default 32 in latent space, the paper's 96 in pixel space).
+    #[arg(long)]
+    pub base_channels: Option<usize>,
     /// Contexts per step (default 4 for drifting, 32 for the baselines).
     #[arg(long)]
     pub contexts: Option<usize>,
@@ -146,6 +163,9 @@ pub struct TrainWorldModelArgs {
     /// Held-out evaluation interval (steps).
     #[arg(long, default_value_t = 250)]
     pub eval_every: u64,
+    /// Held-out windows in each evaluation (one chunk each, fixed noise).
+    #[arg(long, default_value_t = 32)]
+    pub eval_windows: usize,
     /// Checkpoint interval (steps).
     #[arg(long, default_value_t = 50)]
     pub checkpoint_every: u64,

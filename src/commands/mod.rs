@@ -5,6 +5,7 @@ mod collect;
 mod dataset;
 mod dataset_merge;
 mod episodes;
+mod export_policies;
 mod scripted;
 mod simulate;
 mod simulate_policy;
@@ -48,5 +49,6 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         }
         Command::Wm(WmCommand::Eval(a)) => wm_eval::run(a),
         Command::Scripted(a) => scripted::run(a),
+        Command::ExportPolicies(a) => export_policies::run(a),
     }
 }

@@ -6,7 +6,6 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use burn::tensor::Device;
 use policies::dir::{Expectations, checkpoint_dirs};
 use scenarios::pusht::PushTPhysics;
 use serde_json::{Value, json};
@@ -27,7 +26,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let model = PushTPhysics::compile(&cfg)?;
     let max_steps = c.max_steps.map_or(cfg.task.max_steps as usize, |m| m as usize);
     let setup = Setup { cfg: &cfg, model: &model, master_seed: 0, max_steps };
-    let device = Device::flex();
+    let device = world_model::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
     let out = Staged::new(&args.out, c.force)?;
     let expect = Expectations { image_size: cfg.render.size as usize, action_dim: 2 };

@@ -1,6 +1,7 @@
 //! `evalharness train world-model`: trains the DriftWorld U-Net (or the MSE or
-//! diffusion baseline) on a trained autoencoder's latents, and writes the run's
-//! provenance.
+//! diffusion baseline) on a trained autoencoder's latents (`--config
+//! pusht-latent`, the default) or on pixels (`--config pusht-pixel`, the paper's
+//! model), and writes the run's provenance.
 
 use std::path::{Component, Path, PathBuf};
 use std::process::ExitCode;
@@ -8,17 +9,18 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use burn::tensor::Device;
 use serde_json::json;
+use world_model::codec::FrameCodec;
 use world_model::data::EpisodeData;
 use world_model::drift_step::FieldKind;
 use world_model::latents::{LatentStats, Latents};
 use world_model::model::{Objective, WorldModelConfig};
 use world_model::motion::MotionWeighting;
-use world_model::train_ae::{RunOptions, load_autoencoder};
-use world_model::train_wm::{WmTrainConfig, train_world_model};
+use world_model::train_ae::RunOptions;
+use world_model::train_wm::{TrainingFrames, WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
 use super::train::{data_provenance, git_commit, prepare_out, read_step, record_session};
-use crate::cli::{FieldArg, ObjectiveArg, TrainWorldModelArgs};
+use crate::cli::{FieldArg, ObjectiveArg, TrainWorldModelArgs, WmConfigArg};
 use crate::output::write_json;
 use crate::progress;
 
@@ -54,6 +56,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         warmup: a.warmup,
         seed: a.seed,
         eval_every: a.eval_every.max(1),
+        eval_windows: a.eval_windows.max(1),
         checkpoint_every: a.checkpoint_every.max(1),
         field: match a.field {
             FieldArg::Frame => FieldKind::Frame,
@@ -79,42 +82,51 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     }
     prepare_out(&a.out, a.session.resume, a.session.force, "state.json")?;
     let from_step = read_step(&a.out);
-    let inner = Device::flex();
-    let (ae, ae_cfg) = load_autoencoder(&a.autoencoder, &inner)?;
+    let inner = world_model::device::selected()?;
+    // A resumed run keeps its saved config (and so its codec); a fresh one builds it.
+    let saved = if a.session.resume { Some(saved_model_config(&a.out)?) } else { None };
+    let codec = match &saved {
+        Some(saved) => resumed_codec(a, saved, &inner)?,
+        None => fresh_codec(a, &inner)?,
+    };
     tracing::info!(data = %a.data.display(), "loading frames");
-    let data = EpisodeData::load(&a.data, ae_cfg.image_size)?;
+    let data = EpisodeData::load(&a.data, codec.image_size())?;
     tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let model_cfg = if a.session.resume {
-        None // the saved config wins
-    } else {
-        let unet = UNetConfig {
-            model_channels: a.base_channels,
-            timestep_embedding: objective == Objective::Diffusion,
-            ..UNetConfig::pusht_latent(ae_cfg.latent_channels)
-        };
-        let stats = match &a.init_from {
-            Some(dir) => warm_start_stats(dir, &unet, &a.autoencoder)?,
-            None => {
-                tracing::info!("measuring latent statistics");
-                Latents::measure_stats(&data, &ae, 2048, &inner)
-            }
-        };
-        Some(WorldModelConfig {
-            objective,
-            unet,
-            latents: stats,
-            autoencoder: relative_to(&a.out, &a.autoencoder)?,
-            future: 4,
-            sample_steps: if objective == Objective::Diffusion { a.sample_steps.max(1) } else { 1 },
-        })
-    };
-    let placeholder_cfg;
-    let model_cfg_ref = match &model_cfg {
-        Some(c) => c,
+    let model_cfg = match saved {
+        Some(saved) => saved,
         None => {
-            placeholder_cfg = saved_model_config(&a.out)?;
-            &placeholder_cfg
+            let family = match a.config {
+                WmConfigArg::PushtLatent => UNetConfig::pusht_latent(codec.channels()),
+                WmConfigArg::PushtPixel => UNetConfig::pusht_pixel(),
+            };
+            let unet = UNetConfig {
+                model_channels: a.base_channels.unwrap_or(match a.config {
+                    WmConfigArg::PushtLatent => 32,
+                    WmConfigArg::PushtPixel => family.model_channels,
+                }),
+                timestep_embedding: objective == Objective::Diffusion,
+                ..family
+            };
+            let stats = match &a.init_from {
+                Some(dir) => warm_start_stats(dir, &unet, a.autoencoder.as_deref())?,
+                None => {
+                    tracing::info!("measuring the encoded frames' statistics");
+                    Latents::measure_stats(&data, &codec, 2048, &inner)
+                }
+            };
+            let autoencoder = match &a.autoencoder {
+                Some(ae) => Some(relative_to(&a.out, ae)?),
+                None => None,
+            };
+            WorldModelConfig {
+                objective,
+                unet,
+                latents: stats,
+                autoencoder,
+                future: 4,
+                sample_steps: if objective == Objective::Diffusion { a.sample_steps.max(1) } else { 1 },
+            }
         }
     };
     let pb = progress::bar(cfg.steps, objective.name(), quiet);
@@ -123,13 +135,21 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         extend: a.steps.is_some(),
         max_minutes: a.session.max_minutes,
     };
-    let outcome = train_world_model(&data, &ae, &a.out, model_cfg_ref, &cfg, run, &mut |p| {
-        pb.set_length(p.total);
-        pb.set_position(p.step);
-        let lr: Vec<String> = p.loss_r.iter().map(|v| format!("{v:.3}")).collect();
-        let eval = p.eval_mse.map_or(String::new(), |m| format!(" eval {m:.4}"));
-        pb.set_message(format!("loss {:.4} loss_R [{}]{eval}", p.loss, lr.join(" ")));
-    })?;
+    let outcome = train_world_model(
+        TrainingFrames { data: &data, codec: &codec },
+        &a.out,
+        &model_cfg,
+        &cfg,
+        run,
+        &inner,
+        &mut |p| {
+            pb.set_length(p.total);
+            pb.set_position(p.step);
+            let lr: Vec<String> = p.loss_r.iter().map(|v| format!("{v:.3}")).collect();
+            let eval = p.eval_mse.map_or(String::new(), |m| format!(" eval {m:.4}"));
+            pb.set_message(format!("loss {:.4} loss_R [{}]{eval}", p.loss, lr.join(" ")));
+        },
+    )?;
     pb.finish_and_clear();
     let args: Vec<String> = std::env::args().collect();
     let sessions = record_session(&a.out, &args.join(" "), from_step, outcome.step, outcome.elapsed_s)?;
@@ -137,7 +157,11 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     write_json(
         &a.out.join("provenance.json"),
         &json!({
-            "what": format!("world model U-Net, objective {}, on {} latents", saved.objective.name(), a.autoencoder.display()),
+            "what": format!(
+                "world model U-Net, objective {}, on {}",
+                saved.objective.name(),
+                saved.autoencoder.as_ref().map_or("pixels".into(), |ae| format!("the latents of {}", ae.display()))
+            ),
             "command": args.join(" "),
             "sessions": sessions,
             "seed": a.seed,
@@ -162,10 +186,48 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// The "model" entry of a run's `config.json`.
+/// The codec of a fresh run: `--config` and `--autoencoder` must agree.
+fn fresh_codec(a: &TrainWorldModelArgs, device: &Device) -> Result<FrameCodec> {
+    match (a.config, &a.autoencoder) {
+        (WmConfigArg::PushtLatent, Some(ae)) => Ok(FrameCodec::autoencoder(ae, device)?),
+        (WmConfigArg::PushtLatent, None) => {
+            bail!("--config pusht-latent trains on autoencoder latents: pass --autoencoder DIR")
+        }
+        (WmConfigArg::PushtPixel, None) => Ok(FrameCodec::pixels(96)),
+        (WmConfigArg::PushtPixel, Some(_)) => {
+            bail!("--config pusht-pixel trains on pixels: it takes no --autoencoder")
+        }
+    }
+}
+
+/// The codec of a resumed run: its saved one, which `--autoencoder` (if given) must name.
+fn resumed_codec(a: &TrainWorldModelArgs, saved: &WorldModelConfig, device: &Device) -> Result<FrameCodec> {
+    let theirs = saved.autoencoder.as_ref().map(|p| a.out.join(p));
+    match (&theirs, &a.autoencoder) {
+        (Some(t), Some(o)) if !same_folder(t, o) => bail!(
+            "--resume: {} was trained on the autoencoder {}, not {}",
+            a.out.display(),
+            t.display(),
+            o.display()
+        ),
+        (None, Some(o)) => bail!(
+            "--resume: {} is a pixel-space model, it takes no --autoencoder (got {})",
+            a.out.display(),
+            o.display()
+        ),
+        _ => {}
+    }
+    saved.codec(&a.out, device).with_context(|| format!("--resume {}", a.out.display()))
+}
+
+/// Whether two paths name the same existing folder.
+fn same_folder(x: &Path, y: &Path) -> bool {
+    x.canonicalize().ok().zip(y.canonicalize().ok()).is_some_and(|(x, y)| x == y)
+}
+
 /// The latent statistics of the run `dir` that `--init-from` starts from, after
 /// checking that its U-Net and autoencoder are the ones this run uses.
-fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: &Path) -> Result<LatentStats> {
+fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: Option<&Path>) -> Result<LatentStats> {
     let from = saved_model_config(dir).context("--init-from")?;
     if &from.unet != unet {
         bail!(
@@ -175,19 +237,26 @@ fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: &Path) -> Result
             unet
         );
     }
-    let (theirs, ours) = (dir.join(&from.autoencoder), autoencoder);
-    let same = theirs.canonicalize().ok().zip(ours.canonicalize().ok()).is_some_and(|(x, y)| x == y);
+    let theirs = from.autoencoder.as_ref().map(|p| dir.join(p));
+    let same = match (&theirs, autoencoder) {
+        (Some(t), Some(o)) => same_folder(t, o),
+        (None, None) => true,
+        _ => false,
+    };
     if !same {
+        let name =
+            |p: Option<&Path>| p.map_or("pixels".to_string(), |p| format!("autoencoder {}", p.display()));
         bail!(
-            "--init-from {}: it was trained on the autoencoder {}, not {}",
+            "--init-from {}: it was trained on {}, this run on {}",
             dir.display(),
-            theirs.display(),
-            ours.display()
+            name(theirs.as_deref()),
+            name(autoencoder)
         );
     }
     Ok(from.latents)
 }
 
+/// The "model" entry of a run's `config.json`.
 fn saved_model_config(out: &Path) -> Result<WorldModelConfig> {
     let path = out.join("config.json");
     let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;

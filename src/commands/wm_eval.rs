@@ -4,7 +4,6 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use burn::tensor::Device;
 use serde_json::json;
 use world_model::data::{EpisodeData, Split};
 use world_model::eval::{EvalRow, evaluate, persistence};
@@ -27,7 +26,7 @@ fn print_row(row: &EvalRow, note: &str) {
 
 /// `evalharness wm eval`.
 pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
-    let device = Device::flex();
+    let device = world_model::device::selected()?;
     let models: Vec<(String, WorldModel)> = a
         .world_models
         .iter()

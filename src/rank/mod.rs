@@ -18,7 +18,6 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use burn::tensor::Device;
 use policies::dir::{Expectations, checkpoint_dirs};
 use reports::episodes::{EpisodeRecord, write_episodes_parquet};
 
@@ -63,7 +62,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let cfg = crate::scenario::load_pusht(&a.scenario)?;
     let model = PushTPhysics::compile(&cfg)?;
-    let device = Device::flex();
+    let device = world_model::device::selected()?;
     let wm = WorldModel::load(&a.world_model, &device)
         .with_context(|| format!("loading world model {}", a.world_model.display()))?;
     let dirs = checkpoint_dirs(&a.policies)?;
@@ -178,7 +177,7 @@ fn rollouts(
     pool: &rayon::ThreadPool,
 ) -> Result<()> {
     let dir = a.out.join("filmstrips");
-    let device = Device::flex();
+    let device = wm.device().clone();
     let expect = Expectations { image_size: setup.cfg.render.size as usize, action_dim: 2 };
     let mut index = Vec::new();
     for d in dirs {

@@ -1,10 +1,12 @@
-//! Autoencoder latents of a dataset and the training windows cut from them.
+//! Encoded frames of a dataset (autoencoder latents or pixels) and the training
+//! windows cut from them.
 //!
-//! The world model works on normalised latents `(z - mean_c) / std_c` (per latent
+//! The world model works on normalised frames `(z - mean_c) / std_c` (per
 //! channel), so that every objective (drifting, MSE, diffusion) sees unit-scale
-//! data. Frames are encoded lazily, the first time a window needs them, and kept
+//! data. Latents are encoded lazily, the first time a window needs them, and kept
 //! (81k Push-T frames are 370 MB of f32 latents), so that training starts at once
-//! and no frame is encoded twice.
+//! and no frame is encoded twice. Pixels are not cached (the same frames would be
+//! 9 GB of f32): they are normalised from the dataset's bytes on every read.
 //!
 //! A window starting at step t of an episode is: history o_{t-3..t}, targets
 //! o_{t+1..t+4} and actions a_t..a_{t+3} (a_k is executed after observing o_k,
@@ -15,20 +17,20 @@
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
-use crate::autoencoder::Autoencoder;
+use crate::codec::FrameCodec;
 use crate::data::{EpisodeData, Split};
 
-/// Per-channel latent normalisation, stored with the world model.
+/// Per-channel normalisation of the encoded frames, stored with the world model.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LatentStats {
-    /// Latent channels C.
+    /// Channels C of an encoded frame (3 in pixel space).
     pub channels: usize,
-    /// Latent side (image / 8).
+    /// Side of an encoded frame (image / 8 for latents, the image for pixels).
     pub size: usize,
-    /// Per-channel mean of the raw latents.
+    /// Per-channel mean of the raw encoded frames.
     pub mean: Vec<f32>,
-    /// Per-channel standard deviation of the raw latents.
+    /// Per-channel standard deviation of the raw encoded frames.
     pub std: Vec<f32>,
 }
 
@@ -37,19 +39,21 @@ pub fn normalise_action(a: f32) -> f32 {
     2.0 * a / 511.0 - 1.0
 }
 
-/// Lazily encoded, normalised latents of every frame of a dataset.
+/// Lazily encoded, normalised latents (or normalised pixels) of every frame of a dataset.
 pub struct Latents<'a> {
     data: &'a EpisodeData,
     stats: LatentStats,
     z: Vec<f32>,
     done: Vec<bool>,
+    pixels: bool,
 }
 
 impl<'a> Latents<'a> {
-    /// Latent statistics measured on up to `frames` evenly spaced training frames.
+    /// Statistics of the encoded frames, measured on up to `frames` evenly spaced
+    /// training frames.
     pub fn measure_stats(
         data: &EpisodeData,
-        ae: &Autoencoder,
+        codec: &FrameCodec,
         frames: usize,
         device: &Device,
     ) -> LatentStats {
@@ -59,7 +63,7 @@ impl<'a> Latents<'a> {
         let (mut sum, mut sq, mut n) = (Vec::new(), Vec::new(), 0usize);
         let (mut channels, mut size) = (0, 0);
         for chunk in idx.chunks(64) {
-            let z = ae.encode(data.frames_tensor(chunk, device)); // [b, C, s, s]
+            let z = codec.encode(data.frames_tensor(chunk, device)); // [b, C, s, s]
             let [b, c, s, _] = z.dims();
             (channels, size) = (c, s);
             sum.resize(c, 0f64);
@@ -79,10 +83,12 @@ impl<'a> Latents<'a> {
         LatentStats { channels, size, mean, std }
     }
 
-    /// An empty cache over `data`.
-    pub fn new(data: &'a EpisodeData, stats: LatentStats) -> Self {
+    /// An empty cache over `data` for frames encoded by `codec`.
+    pub fn new(data: &'a EpisodeData, stats: LatentStats, codec: &FrameCodec) -> Self {
+        let pixels = codec.is_pixels();
+        let n = if pixels { 0 } else { data.len() };
         let per = stats.channels * stats.size * stats.size;
-        Self { data, z: vec![0.0; data.len() * per], done: vec![false; data.len()], stats }
+        Self { data, z: vec![0.0; n * per], done: vec![false; n], stats, pixels }
     }
 
     /// The normalisation in use.
@@ -95,14 +101,17 @@ impl<'a> Latents<'a> {
         self.stats.channels * self.stats.size * self.stats.size
     }
 
-    /// Encodes the frames of `idx` that are not cached yet.
-    pub fn ensure(&mut self, idx: &[usize], ae: &Autoencoder, device: &Device) {
+    /// Encodes the frames of `idx` that are not cached yet (pixels need nothing).
+    pub fn ensure(&mut self, idx: &[usize], codec: &FrameCodec, device: &Device) {
+        if self.pixels {
+            return;
+        }
         let mut missing: Vec<usize> = idx.iter().copied().filter(|&i| !self.done[i]).collect();
         missing.sort_unstable();
         missing.dedup();
         let (per, plane) = (self.per(), self.stats.size * self.stats.size);
         for chunk in missing.chunks(64) {
-            let z = ae.encode(self.data.frames_tensor(chunk, device));
+            let z = codec.encode(self.data.frames_tensor(chunk, device));
             let v = z.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
             for (k, &i) in chunk.iter().enumerate() {
                 let dst = &mut self.z[i * per..(i + 1) * per];
@@ -121,11 +130,27 @@ impl<'a> Latents<'a> {
         let per = self.per();
         let mut v = Vec::with_capacity(idx.len() * per);
         for &i in idx {
-            debug_assert!(self.done[i], "frame {i} not encoded");
-            v.extend_from_slice(&self.z[i * per..(i + 1) * per]);
+            if self.pixels {
+                self.push_pixels(i, &mut v);
+            } else {
+                debug_assert!(self.done[i], "frame {i} not encoded");
+                v.extend_from_slice(&self.z[i * per..(i + 1) * per]);
+            }
         }
         let s = self.stats.size;
         Tensor::from_data(TensorData::new(v, [idx.len() / f, f, self.stats.channels, s, s]), device)
+    }
+}
+
+impl Latents<'_> {
+    /// Appends frame `i`'s normalised pixels, channel-major (`[3, s, s]`).
+    fn push_pixels(&self, i: usize, v: &mut Vec<f32>) {
+        let src = self.data.frame(i); // [s, s, 3] bytes
+        let plane = self.stats.size * self.stats.size;
+        for c in 0..3 {
+            let (m, s) = (self.stats.mean[c], self.stats.std[c]);
+            v.extend((0..plane).map(|p| (f32::from(src[p * 3 + c]) / 127.5 - 1.0 - m) / s));
+        }
     }
 }
 
@@ -187,5 +212,29 @@ mod tests {
         assert_eq!(w.actions[1], 1.0);
         // A window in the second episode repeats that episode's first frame.
         assert_eq!(window(&d, 7, 4, 1).history, vec![6, 6, 6, 7]);
+    }
+
+    #[test]
+    fn pixel_frames_are_read_normalised_from_the_bytes() {
+        // 2x2 frames: byte b maps to b/127.5 - 1, then (x - mean_c) / std_c.
+        let d = EpisodeData {
+            frames: (0..3 * 4 * 3).map(|i| (i * 20) as u8).collect(),
+            actions: vec![0.0; 6],
+            size: 2,
+            episodes: vec![0..3],
+        };
+        let stats =
+            LatentStats { channels: 3, size: 2, mean: vec![0.0, 0.5, -0.5], std: vec![1.0, 2.0, 0.5] };
+        let mut lat = Latents::new(&d, stats, &FrameCodec::pixels(2));
+        let device = burn::tensor::Device::flex();
+        lat.ensure(&[2, 1], &FrameCodec::pixels(2), &device);
+        let v = lat.tensor(&[2, 1], 2, &device).into_data().try_to_vec::<f32>().unwrap();
+        assert_eq!(v.len(), 2 * 3 * 4);
+        // Frame 2, channel 1, pixel 0 is byte index 2·12 + 1 = 25 → 500 % 256 = 244:
+        // (244/127.5 − 1 − 0.5) / 2 = 0.206863.
+        assert!((v[4] - 0.206_863).abs() < 1e-5, "{}", v[4]);
+        // Frame 1, channel 2, pixel 3 is byte 12 + 9 + 2 = 23 → 460 % 256 = 204:
+        // (204/127.5 − 1 + 0.5) / 0.5 = 2.2.
+        assert!((v[12 + 8 + 3] - 2.2).abs() < 1e-5, "{}", v[23]);
     }
 }

@@ -4,14 +4,17 @@
 //!
 //! - [`drift`]: the drifting loss; [`drift_step`]: a batch's drifting loss (fields,
 //!   self-forcing); [`motion`]: its motion weighting; [`unet`]: the action-conditioned U-Net;
-//! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer;
+//! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer; [`codec`]:
+//!   autoencoder latents or pixels, the space the U-Net works in;
 //! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
 //!   (drifting, MSE and diffusion objectives);
 //! - [`model`]: a trained world model for inference; [`eval`]: video-quality metrics;
 //! - [`data`]: datasets with a held-out split.
 
 pub mod autoencoder;
+pub mod codec;
 pub mod data;
+pub mod device;
 pub mod drift;
 pub mod drift_step;
 pub mod error;

@@ -1,5 +1,6 @@
-//! A trained world model for inference: the frame autoencoder, the (EMA) U-Net
-//! and the sampler of its objective, behind one "predict the next F frames" call.
+//! A trained world model for inference: the frame codec (autoencoder latents or
+//! pixels), the (EMA) U-Net and the sampler of its objective, behind one
+//! "predict the next F frames" call.
 //!
 //! - `drifting` and `mse`: one U-Net pass maps noise + history + actions to F frames.
 //! - `diffusion`: v-prediction with a cosine schedule, sampled with K deterministic
@@ -15,10 +16,10 @@ use burn::tensor::{Device, Tensor, TensorData};
 use harness::rng::Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::autoencoder::Autoencoder;
+use crate::codec::FrameCodec;
 use crate::error::WorldModelError;
 use crate::latents::LatentStats;
-use crate::train_ae::{ckpt, load_autoencoder};
+use crate::train_ae::ckpt;
 use crate::unet::{UNet, UNetConfig};
 
 /// The training objective, which also decides how frames are sampled.
@@ -52,14 +53,29 @@ pub struct WorldModelConfig {
     pub objective: Objective,
     /// U-Net hyper-parameters.
     pub unet: UNetConfig,
-    /// Latent normalisation.
+    /// Per-channel normalisation of the encoded frames.
     pub latents: LatentStats,
-    /// The autoencoder folder, relative to the world-model folder.
-    pub autoencoder: PathBuf,
+    /// The autoencoder folder, relative to the world-model folder; `null` for a
+    /// pixel-space model (`--config pusht-pixel`).
+    pub autoencoder: Option<PathBuf>,
     /// Future frames per pass F.
     pub future: usize,
     /// DDIM steps per chunk (diffusion only).
     pub sample_steps: usize,
+}
+
+impl WorldModelConfig {
+    /// The frame codec of a model stored in `dir`: its autoencoder (a path relative
+    /// to `dir`) or, without one, pixels of `latents.size`.
+    ///
+    /// # Errors
+    /// [`WorldModelError::Checkpoint`] naming the autoencoder file at fault.
+    pub fn codec(&self, dir: &Path, device: &Device) -> Result<FrameCodec, WorldModelError> {
+        match &self.autoencoder {
+            Some(ae) => FrameCodec::autoencoder(&dir.join(ae), device),
+            None => Ok(FrameCodec::pixels(self.latents.size)),
+        }
+    }
 }
 
 /// ᾱ(t) of the cosine schedule (Nichol & Dhariwal), t ∈ [0, 1].
@@ -73,7 +89,7 @@ pub fn alpha_bar(t: f64) -> f64 {
 pub struct WorldModel {
     /// Its configuration.
     pub cfg: WorldModelConfig,
-    ae: Autoencoder,
+    codec: FrameCodec,
     unet: UNet,
     device: Device,
 }
@@ -84,7 +100,7 @@ pub fn row_noise(rngs: &mut [Rng], per: usize) -> Vec<f32> {
 }
 
 impl WorldModel {
-    /// Loads `dir/config.json` and `dir/ema.bpk`, and the autoencoder it names.
+    /// Loads `dir/config.json` and `dir/ema.bpk`, and the autoencoder it names (if any).
     ///
     /// # Errors
     /// [`WorldModelError::Checkpoint`] naming the file that is missing, unreadable or
@@ -97,16 +113,25 @@ impl WorldModel {
             .map_err(|e| ckpt(&cfg_path, format!("\"model\": {e}")))?;
         let weights = dir.join("ema.bpk");
         let unet = cfg.unet.init(device).try_load_file(&weights).map_err(|e| ckpt(&weights, e))?;
-        let (ae, ae_cfg) = load_autoencoder(&dir.join(&cfg.autoencoder), device)?;
-        if ae_cfg.latent_channels != cfg.latents.channels || ae_cfg.latent_size() != cfg.latents.size {
-            return Err(ckpt(&cfg_path, "latent shape differs from the autoencoder's"));
+        let codec = cfg.codec(dir, device)?;
+        if codec.channels() != cfg.latents.channels || codec.size() != cfg.latents.size {
+            let what = if codec.is_pixels() { "the U-Net's frames" } else { "the autoencoder's latents" };
+            return Err(ckpt(&cfg_path, format!("\"latents\" shape differs from {what}")));
         }
-        Ok(Self { cfg, ae, unet, device: device.clone() })
+        if codec.channels() != cfg.unet.frame_channels {
+            return Err(ckpt(&cfg_path, "\"unet.frame_channels\" differs from the encoded frames' channels"));
+        }
+        Ok(Self { cfg, codec, unet, device: device.clone() })
     }
 
     /// Builds a model from parts (used by the trainer's evaluation).
-    pub fn from_parts(cfg: WorldModelConfig, ae: Autoencoder, unet: UNet, device: &Device) -> Self {
-        Self { cfg, ae, unet, device: device.clone() }
+    pub fn from_parts(cfg: WorldModelConfig, codec: FrameCodec, unet: UNet, device: &Device) -> Self {
+        Self { cfg, codec, unet, device: device.clone() }
+    }
+
+    /// The RGB frames' side the model reads and writes.
+    pub fn image_size(&self) -> usize {
+        self.codec.image_size()
     }
 
     /// The device it runs on.
@@ -124,7 +149,7 @@ impl WorldModel {
     /// # Shapes
     /// `[b, 3, H, W] -> [b, C, s, s]`
     pub fn encode(&self, frames: Tensor<4>) -> Tensor<4> {
-        let z = self.ae.encode(frames);
+        let z = self.codec.encode(frames);
         let (m, s) = self.stat_tensors();
         (z - m) / s
     }
@@ -135,7 +160,7 @@ impl WorldModel {
     /// `[b, C, s, s] -> [b, 3, H, W]`
     pub fn decode(&self, z: Tensor<4>) -> Tensor<4> {
         let (m, s) = self.stat_tensors();
-        self.ae.decode(z * s + m)
+        self.codec.decode(z * s + m)
     }
 
     fn stat_tensors(&self) -> (Tensor<4>, Tensor<4>) {

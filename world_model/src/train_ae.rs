@@ -203,7 +203,7 @@ fn evaluate(
     (psnr_sum / n, mse_sum / n, samples)
 }
 
-/// Trains (or resumes training) into `out`; stops at the configured steps or after
+/// Trains (or resumes training) into `out` on `device`; stops at the configured steps or after
 /// `max_minutes`, whichever comes first, with a checkpoint either way. When
 /// resuming, the saved configs win, except that `cfg.steps` replaces the saved
 /// total if `extend` is set (to continue a finished run further).
@@ -217,10 +217,11 @@ pub fn train_autoencoder(
     model_cfg: &AutoencoderConfig,
     cfg: &AeTrainConfig,
     run: RunOptions,
+    device: &Device,
     on_progress: &mut dyn FnMut(&AeProgress),
 ) -> Result<AeOutcome, WorldModelError> {
     let RunOptions { resume, max_minutes, .. } = run;
-    let device = Device::flex().autodiff();
+    let device = device.clone().autodiff();
     device.seed(cfg.seed);
     let fresh = Configs { model: model_cfg.clone(), train: cfg.clone() };
     let (model_cfg, cfg) = run_configs(out, fresh, run, |t: &mut AeTrainConfig| &mut t.steps)?;

@@ -24,7 +24,7 @@ use harness::seed::{derive, splitmix64};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use crate::autoencoder::Autoencoder;
+use crate::codec::FrameCodec;
 use crate::data::{EpisodeData, Split};
 use crate::drift_step::{DriftSetup, FieldKind, drifting_loss};
 use crate::error::WorldModelError;
@@ -139,6 +139,15 @@ pub struct WmOutcome {
     pub elapsed_s: f64,
 }
 
+/// The episodes to train on and the codec that maps their frames to the U-Net's space.
+#[derive(Clone, Copy)]
+pub struct TrainingFrames<'a> {
+    /// Frames, actions and episode boundaries.
+    pub data: &'a EpisodeData,
+    /// Autoencoder or pixels, as the model config names.
+    pub codec: &'a FrameCodec,
+}
+
 /// Stacked windows: `[b·K]` history and `[b·F]` target indices, `[b, F, 2]` actions.
 fn stack(windows: &[Window], repeat: usize, device: &Device) -> (Vec<usize>, Vec<usize>, Tensor<3>) {
     let mut hist = Vec::new();
@@ -157,35 +166,37 @@ fn stack(windows: &[Window], repeat: usize, device: &Device) -> (Vec<usize>, Vec
 }
 
 /// Held-out one-chunk latent MSE of `model` on `windows` (fixed noise seeds).
-fn evaluate(model: &WorldModel, latents: &mut Latents, ae: &Autoencoder, windows: &[Window]) -> f64 {
+fn evaluate(model: &WorldModel, latents: &mut Latents, codec: &FrameCodec, windows: &[Window]) -> f64 {
     let device = model.device().clone();
     let (k, f) = (windows[0].history.len(), windows[0].targets.len());
     let (hist, targets, act) = stack(windows, 1, &device);
-    latents.ensure(&hist, ae, &device);
-    latents.ensure(&targets, ae, &device);
+    latents.ensure(&hist, codec, &device);
+    latents.ensure(&targets, codec, &device);
     let mut rngs: Vec<Rng> = (0..windows.len()).map(|i| Rng::new(i as u64)).collect();
     let pred = model.predict(latents.tensor(&hist, k, &device), act, &mut rngs);
     let truth = latents.tensor(&targets, f, &device);
     (pred - truth).powf_scalar(2.0).mean().into_scalar::<f32>().into()
 }
 
-/// Trains (or resumes) into `out`. `ae` must be the autoencoder at
-/// `out/model.autoencoder` (loaded on the plain CPU device).
+/// Trains (or resumes) into `out` on `device` (see [`crate::device`]). The codec of
+/// `frames` must be the one `model_cfg` names (the autoencoder at
+/// `out/model.autoencoder`, or pixels), loaded on the same device.
 ///
 /// # Errors
 /// [`WorldModelError`] for unreadable checkpoints, I/O failures or a non-finite loss
 /// (naming the step).
 pub fn train_world_model(
-    data: &EpisodeData,
-    ae: &Autoencoder,
+    frames: TrainingFrames,
     out: &Path,
     model_cfg: &WorldModelConfig,
     cfg: &WmTrainConfig,
     run: RunOptions,
+    device: &Device,
     on_progress: &mut dyn FnMut(&WmProgress),
 ) -> Result<WmOutcome, WorldModelError> {
-    let device = Device::flex().autodiff();
-    let inner = Device::flex();
+    let TrainingFrames { data, codec } = frames;
+    let inner = device.clone();
+    let device = inner.clone().autodiff();
     let fresh = Configs { model: model_cfg.clone(), train: cfg.clone() };
     let (model_cfg, cfg) = run_configs(out, fresh, run, |t: &mut WmTrainConfig| &mut t.steps)?;
     let objective = model_cfg.objective;
@@ -203,7 +214,7 @@ pub fn train_world_model(
     let stride = (held.len() / cfg.eval_windows.max(1)).max(1);
     let eval_windows: Vec<Window> =
         held.iter().step_by(stride).take(cfg.eval_windows).map(|&t| window(data, t, k, f)).collect();
-    let mut latents = Latents::new(data, model_cfg.latents.clone());
+    let mut latents = Latents::new(data, model_cfg.latents.clone(), codec);
     let mut unet: UNet = model_cfg.unet.init(&device);
     let mut optim = AdamWConfig::new().with_beta_1(0.9).with_beta_2(0.95).with_weight_decay(0.01).init();
     let mut ema = Ema::new(&unet, cfg.ema_decay);
@@ -236,7 +247,8 @@ pub fn train_world_model(
     let started = Instant::now();
     let base_elapsed = state.elapsed_s;
     let deadline = run.max_minutes.map(|m| m * 60.0);
-    let eval_model = |ema: &UNet| WorldModel::from_parts(model_cfg.clone(), ae.clone(), ema.clone(), &inner);
+    let eval_model =
+        |ema: &UNet| WorldModel::from_parts(model_cfg.clone(), codec.clone(), ema.clone(), &inner);
     let mut last_eval = None;
     let (c, s) = (model_cfg.latents.channels, model_cfg.latents.size);
     while state.step < cfg.steps {
@@ -253,8 +265,8 @@ pub fn train_world_model(
             .collect();
         let n = if objective == Objective::Drifting { cfg.samples } else { 1 };
         let (hist_idx, target_idx, act) = stack(&windows, n, &device);
-        latents.ensure(&hist_idx, ae, &inner);
-        latents.ensure(&target_idx, ae, &inner);
+        latents.ensure(&hist_idx, codec, &inner);
+        latents.ensure(&target_idx, codec, &inner);
         let hist = latents.tensor(&hist_idx, k, &device).swap_dims(1, 2); // [b n, C, K, s, s]
         let b = windows.len();
         let mut loss_r = Vec::new();
@@ -318,7 +330,7 @@ pub fn train_world_model(
         state.step += 1;
         state.elapsed_s = base_elapsed + started.elapsed().as_secs_f64();
         if state.step.is_multiple_of(cfg.eval_every) || state.step == cfg.steps {
-            let mse = evaluate(&eval_model(&ema.module), &mut latents, ae, &eval_windows);
+            let mse = evaluate(&eval_model(&ema.module), &mut latents, codec, &eval_windows);
             if !mse.is_finite() {
                 return Err(WorldModelError::NonFinite {
                     what: "generated frames".into(),
@@ -349,7 +361,7 @@ pub fn train_world_model(
         });
     }
     save(&unet, &ema.module, &optim, &state)?;
-    let eval_mse = evaluate(&eval_model(&ema.module), &mut latents, ae, &eval_windows);
+    let eval_mse = evaluate(&eval_model(&ema.module), &mut latents, codec, &eval_windows);
     Ok(WmOutcome {
         step: state.step,
         total: cfg.steps,

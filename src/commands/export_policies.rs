@@ -1,0 +1,134 @@
+//! `evalharness export-policies`: assembles a policy set from diffusion-policy
+//! checkpoints — typically chosen epochs of one `train policy` run — optionally
+//! with other inference settings (executed actions per decision, DDIM steps).
+//!
+//! Weights are copied byte for byte; `policy.json` keeps everything but the
+//! changed settings and appends to `provenance.exported` (command, commit, source
+//! folder, each change as `[before, after]`; one entry per export, oldest first). A checkpoint's `provenance.json`
+//! (its measured MuJoCo score) is carried over only when no inference setting
+//! changed: a score measured with other settings would be wrong for the copy.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use policies::diffusion::DiffusionConfig;
+use policies::dir::{PolicyFile, checkpoint_dirs};
+use serde_json::{Map, Value, json};
+
+use super::train::git_commit;
+use crate::cli::ExportPoliciesArgs;
+use crate::output::{Staged, write_json};
+
+/// A checkpoint to export: its folder, file and the settings changed.
+struct Export {
+    dir: PathBuf,
+    name: String,
+    file: PolicyFile,
+    changes: Map<String, Value>,
+}
+
+/// `evalharness export-policies`.
+pub fn run(a: &ExportPoliciesArgs) -> Result<ExitCode> {
+    let mut picked = Vec::new();
+    for dir in checkpoint_dirs(&a.from)? {
+        let file = read_policy(&dir)?;
+        if a.epochs.is_empty() || a.epochs.contains(&file.epoch) {
+            picked.push(prepare(&dir, file, a)?);
+        }
+    }
+    let missing: Vec<String> =
+        a.epochs.iter().filter(|e| !picked.iter().any(|p| p.file.epoch == **e)).map(u64::to_string).collect();
+    if !missing.is_empty() {
+        bail!("{}: no checkpoint of epoch {}", a.from.display(), missing.join(", "));
+    }
+    let out = Staged::new(&a.out, a.force)?;
+    let command: Vec<String> = std::env::args().collect();
+    for p in &mut picked {
+        let dst = out.file(&p.name);
+        std::fs::create_dir_all(&dst).with_context(|| format!("creating {}", dst.display()))?;
+        let (from, to) = (p.dir.join("model.bpk"), dst.join("model.bpk"));
+        std::fs::copy(&from, &to)
+            .with_context(|| format!("copying {} to {}", from.display(), to.display()))?;
+        let exported = json!({
+            "command": command.join(" "),
+            "commit": git_commit(),
+            "from": p.dir.display().to_string(),
+            "changed": p.changes,
+        });
+        append(&mut p.file.provenance["exported"], exported.clone());
+        write_json(&dst.join("policy.json"), &serde_json::to_value(&p.file)?)?;
+        let scores = p.dir.join("provenance.json");
+        if p.changes.is_empty() && scores.is_file() {
+            let mut v = read_json(&scores)?;
+            append(&mut v["training"]["exported"], exported);
+            write_json(&dst.join("provenance.json"), &v)?;
+        }
+    }
+    let root = out.commit()?;
+    for p in &picked {
+        println!("{}", root.join(&p.name).display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Checks the kind and applies the requested settings to `file`'s config.
+fn prepare(dir: &Path, mut file: PolicyFile, a: &ExportPoliciesArgs) -> Result<Export> {
+    let path = dir.join("policy.json");
+    if file.kind != "diffusion" {
+        bail!("{}: kind \"{}\": only diffusion checkpoints are exported", path.display(), file.kind);
+    }
+    let mut cfg: DiffusionConfig = serde_json::from_value(file.config.clone())
+        .with_context(|| format!("{}: \"config\"", path.display()))?;
+    let mut changes = Map::new();
+    if let Some(k) = a.action_horizon.filter(|&k| k != cfg.action_horizon) {
+        changes.insert("action_horizon".into(), json!([cfg.action_horizon, k]));
+        cfg.action_horizon = k;
+    }
+    if let Some(s) = a.inference_steps.filter(|&s| s != cfg.inference_steps) {
+        changes.insert("inference_steps".into(), json!([cfg.inference_steps, s]));
+        cfg.inference_steps = s;
+    }
+    let room = cfg.horizon + 1 - cfg.net.obs_horizon;
+    if cfg.action_horizon == 0 || cfg.action_horizon > room {
+        bail!(
+            "{}: --action-horizon {} must be 1..={room} (horizon {} minus obs horizon {} plus 1)",
+            dir.display(),
+            cfg.action_horizon,
+            cfg.horizon,
+            cfg.net.obs_horizon
+        );
+    }
+    if cfg.inference_steps == 0 || cfg.inference_steps > cfg.train_steps {
+        bail!(
+            "{}: --inference-steps {} must be 1..={} (the training schedule's steps)",
+            dir.display(),
+            cfg.inference_steps,
+            cfg.train_steps
+        );
+    }
+    file.config = serde_json::to_value(&cfg)?;
+    let name =
+        dir.file_name().map_or_else(|| format!("epoch-{:04}", file.epoch), |n| n.to_string_lossy().into());
+    Ok(Export { dir: dir.to_path_buf(), name, file, changes })
+}
+
+/// Appends an export record to the list at `slot` (created if absent).
+fn append(slot: &mut Value, record: Value) {
+    match slot {
+        Value::Array(list) => list.push(record),
+        Value::Null => *slot = Value::Array(vec![record]),
+        other => *other = Value::Array(vec![other.take(), record]),
+    }
+}
+
+fn read_json(path: &Path) -> Result<Value> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+}
+
+fn read_policy(dir: &Path) -> Result<PolicyFile> {
+    let path = dir.join("policy.json");
+    serde_json::from_value(read_json(&path)?)
+        .with_context(|| format!("{}: not a policy file", path.display()))
+}
