@@ -172,6 +172,11 @@ fn policy_stopped_during_encoder_pretraining_resumes() {
     assert!(err.contains("no checkpoint of epoch 7"), "{err}");
     let (_, err) = expect_code(&run(&[&export[..], &["--force", "--action-horizon", "16"]].concat()), 2);
     assert!(err.contains("--action-horizon 16 must be 1..=15"), "{err}");
+    let scripted = dir.path().join("scripted");
+    expect_code(&run(&["scripted", "--out", scripted.to_str().unwrap()]), 0);
+    let (_, err) =
+        expect_code(&run(&["export-policies", "--from", scripted.to_str().unwrap(), "--out", a]), 2);
+    assert!(err.contains("kind \"scripted\": only diffusion checkpoints"), "{err}");
 }
 
 #[test]

@@ -75,9 +75,6 @@ pub fn run(a: &ExportPoliciesArgs) -> Result<ExitCode> {
 /// Checks the kind and applies the requested settings to `file`'s config.
 fn prepare(dir: &Path, mut file: PolicyFile, a: &ExportPoliciesArgs) -> Result<Export> {
     let path = dir.join("policy.json");
-    if file.kind != "diffusion" {
-        bail!("{}: kind \"{}\": only diffusion checkpoints are exported", path.display(), file.kind);
-    }
     let mut cfg: DiffusionConfig = serde_json::from_value(file.config.clone())
         .with_context(|| format!("{}: \"config\"", path.display()))?;
     let mut changes = Map::new();
@@ -127,8 +124,12 @@ fn read_json(path: &Path) -> Result<Value> {
     serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
 }
 
+/// A diffusion checkpoint's `policy.json` (other kinds are named and refused).
 fn read_policy(dir: &Path) -> Result<PolicyFile> {
     let path = dir.join("policy.json");
-    serde_json::from_value(read_json(&path)?)
-        .with_context(|| format!("{}: not a policy file", path.display()))
+    let v = read_json(&path)?;
+    if v["kind"] != "diffusion" {
+        bail!("{}: kind {}: only diffusion checkpoints are exported", path.display(), v["kind"]);
+    }
+    serde_json::from_value(v).with_context(|| format!("{}: not a diffusion policy file", path.display()))
 }
