@@ -62,6 +62,14 @@ pub struct DiffusionConfig {
     pub inference_steps: usize,
 }
 
+impl DiffusionConfig {
+    /// The most actions a decision can execute: the predicted window starts at the
+    /// oldest observed step, so `horizon - obs_horizon + 1` of them lie ahead.
+    pub fn max_action_horizon(&self) -> usize {
+        (self.horizon + 1).saturating_sub(self.net.obs_horizon)
+    }
+}
+
 impl Default for DiffusionConfig {
     fn default() -> Self {
         Self { net: NetConfig::new(), horizon: 16, action_horizon: 8, train_steps: 100, inference_steps: 10 }

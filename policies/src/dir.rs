@@ -157,7 +157,7 @@ pub fn load_policy(
                     cfg.net.action_dim, expect.action_dim
                 )));
             }
-            if cfg.action_horizon == 0 || cfg.action_horizon + cfg.net.obs_horizon - 1 > cfg.horizon {
+            if cfg.action_horizon == 0 || cfg.action_horizon > cfg.max_action_horizon() {
                 return Err(err(format!(
                     "action horizon {} does not fit horizon {}",
                     cfg.action_horizon, cfg.horizon

@@ -18,7 +18,7 @@ use serde_json::{Map, Value, json};
 
 use super::train::git_commit;
 use crate::cli::ExportPoliciesArgs;
-use crate::output::{Staged, write_json};
+use crate::output::{Staged, read_json, write_json};
 
 /// A checkpoint to export: its folder, file and the settings changed.
 struct Export {
@@ -44,6 +44,7 @@ pub fn run(a: &ExportPoliciesArgs) -> Result<ExitCode> {
     }
     let out = Staged::new(&a.out, a.force)?;
     let command: Vec<String> = std::env::args().collect();
+    let (command, commit) = (command.join(" "), git_commit());
     for p in &mut picked {
         let dst = out.file(&p.name);
         std::fs::create_dir_all(&dst).with_context(|| format!("creating {}", dst.display()))?;
@@ -51,8 +52,8 @@ pub fn run(a: &ExportPoliciesArgs) -> Result<ExitCode> {
         std::fs::copy(&from, &to)
             .with_context(|| format!("copying {} to {}", from.display(), to.display()))?;
         let exported = json!({
-            "command": command.join(" "),
-            "commit": git_commit(),
+            "command": command,
+            "commit": commit,
             "from": p.dir.display().to_string(),
             "changed": p.changes,
         });
@@ -86,7 +87,7 @@ fn prepare(dir: &Path, mut file: PolicyFile, a: &ExportPoliciesArgs) -> Result<E
         changes.insert("inference_steps".into(), json!([cfg.inference_steps, s]));
         cfg.inference_steps = s;
     }
-    let room = cfg.horizon + 1 - cfg.net.obs_horizon;
+    let room = cfg.max_action_horizon();
     if cfg.action_horizon == 0 || cfg.action_horizon > room {
         bail!(
             "{}: --action-horizon {} must be 1..={room} (horizon {} minus obs horizon {} plus 1)",
@@ -117,11 +118,6 @@ fn append(slot: &mut Value, record: Value) {
         Value::Null => *slot = Value::Array(vec![record]),
         other => *other = Value::Array(vec![other.take(), record]),
     }
-}
-
-fn read_json(path: &Path) -> Result<Value> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
 }
 
 /// A diffusion checkpoint's `policy.json` (other kinds are named and refused).

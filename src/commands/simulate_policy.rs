@@ -12,7 +12,7 @@ use serde_json::{Value, json};
 
 use super::train::git_commit;
 use crate::cli::SimulateArgs;
-use crate::output::{Staged, write_json};
+use crate::output::{Staged, read_json, write_json};
 use crate::progress;
 use crate::rank::paired::{Setup, Start, Timing, sim_branch};
 use crate::rank::results::{EpisodeRow, append_rows, branch_stats};
@@ -96,8 +96,7 @@ fn record(
     max_steps: usize,
 ) -> Result<()> {
     let pj = dir.join("policy.json");
-    let text = std::fs::read_to_string(&pj).with_context(|| format!("reading {}", pj.display()))?;
-    let file: Value = serde_json::from_str(&text).with_context(|| format!("parsing {}", pj.display()))?;
+    let file = read_json(&pj)?;
     let args: Vec<String> = std::env::args().collect();
     write_json(
         &dir.join("provenance.json"),

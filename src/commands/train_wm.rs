@@ -21,7 +21,7 @@ use world_model::unet::UNetConfig;
 
 use super::train::{data_provenance, git_commit, prepare_out, read_step, record_session};
 use crate::cli::{FieldArg, ObjectiveArg, TrainWorldModelArgs, WmConfigArg};
-use crate::output::write_json;
+use crate::output::{read_json, write_json};
 use crate::progress;
 
 /// `target` relative to the folder `base` (both must exist), e.g. `../autoencoder`.
@@ -259,8 +259,6 @@ fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: Option<&Path>) -
 /// The "model" entry of a run's `config.json`.
 fn saved_model_config(out: &Path) -> Result<WorldModelConfig> {
     let path = out.join("config.json");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    let v = read_json(&path)?;
     serde_json::from_value(v["model"].clone()).with_context(|| format!("{}: \"model\"", path.display()))
 }

@@ -9,12 +9,7 @@ use anyhow::{Context, Result, bail};
 use serde_json::{Value, json};
 
 use super::results::{EpisodeRow, append_rows, read_rows, summarise};
-use crate::output::write_json;
-
-fn read_json(path: &Path) -> Result<Value> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
-}
+use crate::output::{read_json, write_json};
 
 /// The run-defining part of a config (everything but the shard and the command).
 fn run_key(cfg: &Value) -> Value {

@@ -13,11 +13,7 @@ use reports::timeplot::{TimeSeries, band, write_time_plot};
 use serde_json::Value;
 
 use super::results::Branch;
-
-fn read_json(path: &Path) -> Result<Value> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
-}
+use crate::output::read_json;
 
 /// A checkpoint's provenance: `provenance.json` if present, else `policy.json`'s entry.
 fn provenance(dir: &Path) -> String {

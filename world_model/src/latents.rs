@@ -127,30 +127,20 @@ impl<'a> Latents<'a> {
     /// Normalised latents of `idx` (already encoded) as a `[b, F, C, s, s]` tensor,
     /// where `idx` holds `b·F` frame indices, frame-major within each row.
     pub fn tensor(&self, idx: &[usize], f: usize, device: &Device) -> Tensor<5> {
+        let (c, s) = (self.stats.channels, self.stats.size);
+        if self.pixels {
+            let stat = |v: &[f32]| Tensor::<1>::from_floats(v, device).reshape([1, c, 1, 1]);
+            let x = self.data.frames_tensor(idx, device); // [b F, 3, s, s] in [-1, 1]
+            let x = (x - stat(&self.stats.mean)) / stat(&self.stats.std);
+            return x.reshape([idx.len() / f, f, c, s, s]);
+        }
         let per = self.per();
         let mut v = Vec::with_capacity(idx.len() * per);
         for &i in idx {
-            if self.pixels {
-                self.push_pixels(i, &mut v);
-            } else {
-                debug_assert!(self.done[i], "frame {i} not encoded");
-                v.extend_from_slice(&self.z[i * per..(i + 1) * per]);
-            }
+            debug_assert!(self.done[i], "frame {i} not encoded");
+            v.extend_from_slice(&self.z[i * per..(i + 1) * per]);
         }
-        let s = self.stats.size;
-        Tensor::from_data(TensorData::new(v, [idx.len() / f, f, self.stats.channels, s, s]), device)
-    }
-}
-
-impl Latents<'_> {
-    /// Appends frame `i`'s normalised pixels, channel-major (`[3, s, s]`).
-    fn push_pixels(&self, i: usize, v: &mut Vec<f32>) {
-        let src = self.data.frame(i); // [s, s, 3] bytes
-        let plane = self.stats.size * self.stats.size;
-        for c in 0..3 {
-            let (m, s) = (self.stats.mean[c], self.stats.std[c]);
-            v.extend((0..plane).map(|p| (f32::from(src[p * 3 + c]) / 127.5 - 1.0 - m) / s));
-        }
+        Tensor::from_data(TensorData::new(v, [idx.len() / f, f, c, s, s]), device)
     }
 }
 
