@@ -253,6 +253,26 @@ fn world_model_loss_variants_train_and_warm_start() {
     let from = first.to_str().unwrap();
     expect_code(&wm(&second, &["--steps", "1", "--init-from", from, "--warmup", "1"]), 0);
     assert_eq!(read_json(&second.join("config.json"))["model"]["latents"], cfg["model"]["latents"]);
+    // Its provenance nests the source's, snapshotted next to it.
+    let prov = read_json(&second.join("provenance.json"));
+    assert_eq!(prov["init_from"]["path"], from);
+    assert_eq!(prov["init_from"]["provenance"]["steps"], 2);
+    assert_eq!(read_json(&second.join("init_from_provenance.json"))["steps"], 2);
+    assert_eq!(read_json(&first.join("provenance.json"))["init_from"], serde_json::Value::Null);
+    // A warm start may add action maps (zero-initialised input channel); the run resumes
+    // with them, and a run without maps cannot start from it.
+    let maps = dir.path().join("wm_maps");
+    expect_code(&wm(&maps, &["--steps", "1", "--init-from", from, "--warmup", "1", "--action-maps"]), 0);
+    assert_eq!(read_json(&maps.join("config.json"))["model"]["unet"]["action_maps"], true);
+    assert_eq!(cfg["model"]["unet"]["action_maps"], serde_json::Value::Null);
+    expect_code(&wm(&maps, &["--steps", "2", "--resume", "--ema-decay", "0.99"]), 0);
+    assert_eq!(read_json(&maps.join("config.json"))["train"]["ema_decay"], 0.99);
+    let (_, err) = expect_code(&wm(&maps, &["--steps", "3", "--resume", "--ema-decay", "1.5"]), 2);
+    assert!(err.contains("--ema-decay"), "{err}");
+    assert_eq!(read_json(&maps.join("state.json"))["step"], 2);
+    let back = dir.path().join("wm_back");
+    let (_, err) = expect_code(&wm(&back, &["--steps", "1", "--init-from", maps.to_str().unwrap()]), 2);
+    assert!(err.contains("U-Net config differs"), "{err}");
     // ... and refuses a different U-Net.
     let third = dir.path().join("wm_wide");
     let (_, err) = expect_code(&wm_with(&third, "32", &["--steps", "1", "--init-from", from]), 2);

@@ -337,7 +337,7 @@ mod tests {
             goal: vec![[0.0, 256.0, std::f32::consts::PI]],
             actions: vec![[0.0; 2]],
             size: 1,
-            episodes: vec![0..1],
+            episodes: std::iter::once(0..1).collect(),
         };
         // 256/256 − 1 = 0, 384/256 − 1 = 0.5, 128/256 − 1 = −0.5, 512/256 − 1 = 1; θ = π/2;
         // goal 0/256 − 1 = −1, 256/256 − 1 = 0, θ = π (cos −1, sin 0).

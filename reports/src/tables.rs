@@ -1,6 +1,8 @@
 //! The paper table (`table.tex`, booktabs) and `summary.csv`.
 
-use crate::summary::{Est, Summary};
+use polars::prelude::*;
+
+use crate::summary::{Est, PolicyScores, Summary};
 
 /// Escapes LaTeX special characters in a name.
 pub fn latex_escape(s: &str) -> String {
@@ -73,32 +75,47 @@ pub fn latex_table(s: &Summary) -> String {
     t
 }
 
-/// One CSV row per policy: means, CIs and success rates of both branches.
-pub fn summary_csv(s: &Summary) -> String {
-    let mut t = String::from(
-        "policy,episodes,sim_mean,sim_ci_lo,sim_ci_hi,sim_success,wm_mean,wm_ci_lo,wm_ci_hi,wm_success\n",
-    );
-    let ci = |e: &Est| {
-        e.ci.map_or((String::new(), String::new()), |[a, b]| (format!("{a:.6}"), format!("{b:.6}")))
+/// The per-policy table as a polars frame: one row per policy with the means,
+/// CI bounds (null when a branch has no interval) and success rates of both
+/// branches — `summary.csv`'s columns, and a frame a user can join or filter.
+///
+/// # Errors
+/// A polars error if the columns cannot be assembled (not expected for any summary).
+pub fn summary_frame(s: &Summary) -> PolarsResult<DataFrame> {
+    let ps = &s.policies;
+    let num = |name: &str, f: fn(&PolicyScores) -> f64| {
+        Column::new(name.into(), ps.iter().map(f).collect::<Vec<f64>>())
     };
-    for p in &s.policies {
-        let (sl, sh) = ci(&p.sim.mean);
-        let (wl, wh) = ci(&p.world_model.mean);
-        let name = if p.name.contains([',', '"']) {
-            format!("\"{}\"", p.name.replace('"', "\"\""))
-        } else {
-            p.name.clone()
-        };
-        t.push_str(&format!(
-            "{name},{},{:.6},{sl},{sh},{:.6},{:.6},{wl},{wh},{:.6}\n",
-            p.episodes,
-            p.sim.mean.value,
-            p.sim.success.value,
-            p.world_model.mean.value,
-            p.world_model.success.value
-        ));
-    }
-    t
+    let ci = |name: &str, e: fn(&PolicyScores) -> &Est, k: usize| {
+        Column::new(name.into(), ps.iter().map(|p| e(p).ci.map(|c| c[k])).collect::<Vec<Option<f64>>>())
+    };
+    DataFrame::new(
+        ps.len(),
+        vec![
+            Column::new("policy".into(), ps.iter().map(|p| p.name.as_str()).collect::<Vec<_>>()),
+            Column::new("episodes".into(), ps.iter().map(|p| p.episodes).collect::<Vec<u64>>()),
+            num("sim_mean", |p| p.sim.mean.value),
+            ci("sim_ci_lo", |p| &p.sim.mean, 0),
+            ci("sim_ci_hi", |p| &p.sim.mean, 1),
+            num("sim_success", |p| p.sim.success.value),
+            num("wm_mean", |p| p.world_model.mean.value),
+            ci("wm_ci_lo", |p| &p.world_model.mean, 0),
+            ci("wm_ci_hi", |p| &p.world_model.mean, 1),
+            num("wm_success", |p| p.world_model.success.value),
+        ],
+    )
+}
+
+/// `summary.csv`: [`summary_frame`] written by polars' CSV writer, floats with 6
+/// decimals, names quoted where they need it, an empty field for a missing CI.
+///
+/// # Errors
+/// A polars error if the frame cannot be built or written.
+pub fn summary_csv(s: &Summary) -> PolarsResult<String> {
+    let mut df = summary_frame(s)?;
+    let mut buf = Vec::new();
+    CsvWriter::new(&mut buf).with_float_precision(Some(6)).finish(&mut df)?;
+    String::from_utf8(buf).map_err(|e| PolarsError::ComputeError(e.to_string().into()))
 }
 
 #[cfg(test)]
@@ -130,10 +147,33 @@ mod tests {
         ] {
             assert!(t.contains(needle), "missing {needle} in\n{t}");
         }
-        let csv = summary_csv(&s);
+        let csv = summary_csv(&s).unwrap();
+        assert_eq!(
+            csv.lines().next(),
+            Some(
+                "policy,episodes,sim_mean,sim_ci_lo,sim_ci_hi,sim_success,wm_mean,wm_ci_lo,wm_ci_hi,wm_success"
+            )
+        );
         assert_eq!(
             csv.lines().nth(1),
             Some("epoch_1,100,0.500000,0.400000,0.600000,0.500000,0.400000,0.300000,0.500000,0.000000")
+        );
+    }
+
+    #[test]
+    fn csv_quotes_awkward_names_and_leaves_missing_intervals_empty() {
+        let r = serde_json::json!({
+            "scenario": "pusht", "episodes": 1, "seed_start": 0,
+            "policies": [{"name": "noise \"50\", lag 2",
+                "sim": {"mean": 0.25, "ci95": null, "success_rate": 0.0, "success_ci95": null, "episodes": 1},
+                "world_model": {"mean": 0.125, "ci95": null, "success_rate": 1.0, "success_ci95": null}}],
+            "agreement": {},
+        });
+        let csv = summary_csv(&Summary::from_results(&r).unwrap()).unwrap();
+        // RFC 4180: a field with a comma or quote is quoted, inner quotes doubled.
+        assert_eq!(
+            csv.lines().nth(1),
+            Some("\"noise \"\"50\"\", lag 2\",1,0.250000,,,0.000000,0.125000,,,1.000000")
         );
     }
 }

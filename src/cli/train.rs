@@ -147,6 +147,11 @@ pub struct TrainWorldModelArgs {
     /// Weight each latent cell's loss by how much it moves (spec §4; with `--field token`).
     #[arg(long)]
     pub motion_weighting: bool,
+    /// Also give the U-Net each future frame's action as a Gaussian map at its
+    /// position (an input channel; not in the paper). With `--init-from` a model
+    /// without maps, the new channel starts at zero weight.
+    #[arg(long)]
+    pub action_maps: bool,
     /// Start from another world-model run's EMA weights (same U-Net and autoencoder;
     /// its latent statistics are reused).
     #[arg(long)]
@@ -154,6 +159,11 @@ pub struct TrainWorldModelArgs {
     /// Peak learning rate (after a 500-step warm-up).
     #[arg(long, default_value_t = 2e-4)]
     pub lr: f64,
+    /// Decay of the weights' moving average that sampling uses (default 0.999). With
+    /// `--resume`, changes it for the rest of the run (recorded in `config.json`),
+    /// e.g. 0.99 so a short warm-started fine-tune's EMA catches up with its weights.
+    #[arg(long)]
+    pub ema_decay: Option<f64>,
     /// DDIM steps per generated chunk (diffusion).
     #[arg(long, default_value_t = 10)]
     pub sample_steps: usize,

@@ -65,8 +65,12 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         init_from: a.init_from.clone(),
         motion: a.motion_weighting.then(MotionWeighting::default),
         chunks: a.self_forcing,
+        ema_decay: a.ema_decay.unwrap_or(defaults.ema_decay),
         ..defaults
     };
+    if !(0.0..1.0).contains(&cfg.ema_decay) {
+        bail!("--ema-decay: needs a value in [0, 1), got {}", cfg.ema_decay);
+    }
     if a.self_forcing == 0 || (a.self_forcing > 1 && objective != Objective::Drifting) {
         bail!("--self-forcing: needs a chunk count >= 1, and more than 1 only with --objective drifting");
     }
@@ -82,6 +86,9 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     }
     prepare_out(&a.out, a.session.resume, a.session.force, "state.json")?;
     let from_step = read_step(&a.out);
+    if let (true, Some(decay)) = (a.session.resume, a.ema_decay) {
+        set_saved_ema_decay(&a.out, decay)?;
+    }
     let inner = world_model::device::selected()?;
     // A resumed run keeps its saved config (and so its codec); a fresh one builds it.
     let saved = if a.session.resume { Some(saved_model_config(&a.out)?) } else { None };
@@ -106,6 +113,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
                     WmConfigArg::PushtPixel => family.model_channels,
                 }),
                 timestep_embedding: objective == Objective::Diffusion,
+                action_maps: a.action_maps.then_some(true),
                 ..family
             };
             let stats = match &a.init_from {
@@ -172,6 +180,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             "finished": outcome.finished,
             "elapsed_s": outcome.elapsed_s,
             "metrics": {"held_out_one_chunk_latent_mse": outcome.eval_mse},
+            "init_from": warm_start_record(&a.out)?,
         }),
     )?;
     println!(
@@ -229,7 +238,8 @@ fn same_folder(x: &Path, y: &Path) -> bool {
 /// checking that its U-Net and autoencoder are the ones this run uses.
 fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: Option<&Path>) -> Result<LatentStats> {
     let from = saved_model_config(dir).context("--init-from")?;
-    if &from.unet != unet {
+    // The one difference a warm start bridges: adding action maps.
+    if &from.unet != unet && from.unet.clone().with_action_maps(Some(true)) != *unet {
         bail!(
             "--init-from {}: its U-Net config differs from this run's ({:?} vs {:?})",
             dir.display(),
@@ -254,6 +264,42 @@ fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: Option<&Path>) -
         );
     }
     Ok(from.latents)
+}
+
+/// Where a warm-started run came from: `{"path", "provenance"}` with the source
+/// run's provenance as it was when this run first recorded it (snapshotted into
+/// `OUT/init_from_provenance.json`, since the source may go on training), so a
+/// shipped model's lineage nests all the way back; `null` for a cold start.
+fn warm_start_record(out: &Path) -> Result<serde_json::Value> {
+    let cfg = read_json(&out.join("config.json"))?;
+    let Some(src) = cfg["train"]["init_from"].as_str() else {
+        return Ok(serde_json::Value::Null);
+    };
+    let snapshot = out.join("init_from_provenance.json");
+    if !snapshot.exists() {
+        match read_json(&Path::new(src).join("provenance.json")) {
+            Ok(v) => write_json(&snapshot, &v)?,
+            Err(e) => {
+                tracing::warn!("--init-from {src}: no provenance to record ({e:#})");
+                return Ok(json!({"path": src, "provenance": null}));
+            }
+        }
+    }
+    Ok(json!({"path": src, "provenance": read_json(&snapshot)?}))
+}
+
+/// `--resume --ema-decay D`: the run goes on with decay D (its EMA weights as
+/// they are), written into its `config.json` so the change is on record.
+fn set_saved_ema_decay(out: &Path, decay: f64) -> Result<()> {
+    let path = out.join("config.json");
+    let mut v = read_json(&path)?;
+    let before = v["train"]["ema_decay"].as_f64();
+    if before != Some(decay) {
+        tracing::info!(?before, after = decay, "changing the EMA decay");
+        v["train"]["ema_decay"] = json!(decay);
+        write_json(&path, &v)?;
+    }
+    Ok(())
 }
 
 /// The "model" entry of a run's `config.json`.

@@ -63,7 +63,8 @@ pub fn write_report(out: &Path) -> Result<PathBuf> {
         plots.push(write_time_plot(&out.join("plots"), &series)?);
     }
     std::fs::write(out.join("table.tex"), latex_table(&summary)).context("writing table.tex")?;
-    std::fs::write(out.join("summary.csv"), summary_csv(&summary)).context("writing summary.csv")?;
+    let csv = summary_csv(&summary).context("building summary.csv")?;
+    std::fs::write(out.join("summary.csv"), csv).context("writing summary.csv")?;
     let filmstrips: Vec<(PathBuf, String)> = read_json(&out.join("filmstrips/index.json"))
         .ok()
         .and_then(|v| v.as_array().cloned())

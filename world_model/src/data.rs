@@ -144,7 +144,7 @@ mod tests {
             frames: (0..2 * 4 * 4 * 3).map(|i| (i * 5 % 256) as u8).collect(),
             actions: vec![0.0; 4],
             size: 4,
-            episodes: vec![0..2],
+            episodes: std::iter::once(0..2).collect(),
         };
         let t = data.frames_tensor(&[1, 0], &Device::flex());
         let back = tensor_to_frames(t);

@@ -203,7 +203,12 @@ mod tests {
         let px = 8 * 8 * 3;
         let mut frames = vec![100u8; 6 * px];
         frames[5 * px..].fill(110);
-        let data = EpisodeData { frames, actions: vec![0.0; 12], size: 8, episodes: vec![0..6] };
+        let data = EpisodeData {
+            frames,
+            actions: vec![0.0; 12],
+            size: 8,
+            episodes: std::iter::once(0..6).collect(),
+        };
         // Context 0..4, last context frame 3; video = frames 4 and 5.
         let row = persistence(&data, &[(0, 2)], 4, "64");
         // MSE: frame 4: 0; frame 5: (10 / 127.5)² = 0.0061515; mean 0.0030757.

@@ -211,7 +211,7 @@ mod tests {
             frames: (0..3 * 4 * 3).map(|i| (i * 20) as u8).collect(),
             actions: vec![0.0; 6],
             size: 2,
-            episodes: vec![0..3],
+            episodes: std::iter::once(0..3).collect(),
         };
         let stats =
             LatentStats { channels: 3, size: 2, mean: vec![0.0, 0.5, -0.5], std: vec![1.0, 2.0, 0.5] };

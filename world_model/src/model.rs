@@ -65,6 +65,17 @@ pub struct WorldModelConfig {
 }
 
 impl WorldModelConfig {
+    /// The `"model"` entry of `dir/config.json`.
+    ///
+    /// # Errors
+    /// [`WorldModelError::Checkpoint`] naming the file when it is missing or malformed.
+    pub fn read(dir: &Path) -> Result<Self, WorldModelError> {
+        let path = dir.join("config.json");
+        let text = std::fs::read_to_string(&path).map_err(|e| ckpt(&path, e))?;
+        let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| ckpt(&path, e))?;
+        serde_json::from_value(v["model"].clone()).map_err(|e| ckpt(&path, format!("\"model\": {e}")))
+    }
+
     /// The frame codec of a model stored in `dir`: its autoencoder (a path relative
     /// to `dir`) or, without one, pixels of `latents.size`.
     ///
@@ -107,10 +118,7 @@ impl WorldModel {
     /// does not match its config.
     pub fn load(dir: &Path, device: &Device) -> Result<Self, WorldModelError> {
         let cfg_path = dir.join("config.json");
-        let text = std::fs::read_to_string(&cfg_path).map_err(|e| ckpt(&cfg_path, e))?;
-        let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| ckpt(&cfg_path, e))?;
-        let cfg: WorldModelConfig = serde_json::from_value(v["model"].clone())
-            .map_err(|e| ckpt(&cfg_path, format!("\"model\": {e}")))?;
+        let cfg = WorldModelConfig::read(dir)?;
         let weights = dir.join("ema.bpk");
         let unet = cfg.unet.init(device).try_load_file(&weights).map_err(|e| ckpt(&weights, e))?;
         let codec = cfg.codec(dir, device)?;

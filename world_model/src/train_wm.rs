@@ -221,10 +221,19 @@ pub fn train_world_model(
     let mut state = State { step: 0, elapsed_s: 0.0 };
     let paths = ["model.bpk", "ema.bpk", "optimizer.bpk", "state.json"].map(|p| out.join(p));
     if let Some(dir) = cfg.init_from.as_ref().filter(|_| !run.resume) {
-        // Warm start: both the trained and the EMA weights start from the other run's EMA.
+        // Warm start: both the trained and the EMA weights start from the other run's EMA;
+        // a run with action maps may start from one without (the new input's weights zero).
+        let source = WorldModelConfig::read(dir)?.unet;
+        if source != model_cfg.unet && source.clone().with_action_maps(Some(true)) != model_cfg.unet {
+            return Err(ckpt(&dir.join("config.json"), "its U-Net config differs from this run's"));
+        }
         let path = dir.join("ema.bpk");
-        ema.module = model_cfg.unet.init(&inner).try_load_file(&path).map_err(|e| ckpt(&path, e))?;
-        unet = model_cfg.unet.init(&device).try_load_file(&path).map_err(|e| ckpt(&path, e))?;
+        let load = |d: &Device| -> Result<UNet, WorldModelError> {
+            let u: UNet = source.init(d).try_load_file(&path).map_err(|e| ckpt(&path, e))?;
+            Ok(if model_cfg.unet.uses_action_maps() { u.with_action_maps() } else { u })
+        };
+        ema.module = load(&inner)?;
+        unet = load(&device)?;
     }
     if run.resume {
         unet = unet.try_load_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;

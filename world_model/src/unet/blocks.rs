@@ -55,6 +55,17 @@ impl Conv3dF {
         Self { spatial, temporal }
     }
 
+    /// The same convolution reading `extra` more input channels (appended last)
+    /// with zero weights, so its output is unchanged.
+    pub fn with_extra_inputs(mut self, extra: usize) -> Self {
+        let w = self.spatial.weight.val(); // [cout, cin, k, k]
+        let [co, _, kh, kw] = w.dims();
+        let zeros = Tensor::<4>::zeros([co, extra, kh, kw], &w.device());
+        // Detached: a fresh leaf, so it can be a trainable parameter on an autodiff device.
+        self.spatial.weight = Param::from_tensor(Tensor::cat(vec![w, zeros], 1).detach());
+        self
+    }
+
     /// # Shapes
     /// `[b, cin, f, h, w] -> [b, cout, f, h/stride, w/stride]`
     pub fn forward(&self, x: Tensor<5>) -> Tensor<5> {

@@ -6,6 +6,10 @@
 //! f gets its own action embedding `e_f = MLP(a_f)`, applied by FiLM in every
 //! residual block. There is no timestep input for the drifting objective; the
 //! diffusion baseline adds a sinusoidal timestep embedding to `e_f`.
+//! With `action_maps` (not in the paper) each future frame also gets one more
+//! input channel: a Gaussian bump at its action's position in the frame, so the
+//! convolutions see *where* the agent is driven, which FiLM (a per-channel
+//! scale and shift) can only convey indirectly.
 //! Skips follow the ADM layout: one after `conv_in`, one after every residual
 //! block (with its attention) and one after every downsampling.
 
@@ -52,9 +56,19 @@ pub struct UNetConfig {
     /// Add a diffusion timestep embedding (the multi-step baseline).
     #[config(default = false)]
     pub timestep_embedding: bool,
+    /// Feed each future frame's action as a Gaussian map at its position too
+    /// (one more input channel; not in the paper). An option so that configs
+    /// written before it existed still load (missing = none).
+    #[config(default = "None")]
+    pub action_maps: Option<bool>,
 }
 
 impl UNetConfig {
+    /// Whether the U-Net reads action maps.
+    pub fn uses_action_maps(&self) -> bool {
+        self.action_maps == Some(true)
+    }
+
     /// The paper's pixel-space Push-T model: 96x96 RGB, 96 channels, 4 levels,
     /// attention at 24² and 12² (8,375,201 parameters).
     pub fn pusht_pixel() -> Self {
@@ -70,7 +84,7 @@ impl UNetConfig {
     pub fn init(&self, device: &Device) -> UNet {
         let (e, g) = (self.emb_dim, self.groups);
         let mc = self.model_channels;
-        let in_ch = self.frame_channels * (1 + self.history);
+        let in_ch = self.frame_channels * (1 + self.history) + usize::from(self.uses_action_maps());
         let mut chans = vec![mc]; // channels of every skip, in push order
         let mut enc = Vec::new();
         let mut downs = Vec::new();
@@ -136,6 +150,7 @@ impl UNetConfig {
             conv_out: Conv3dF::new(c, self.frame_channels, 3, 1, device),
             res_blocks: self.res_blocks,
             emb_dim: e,
+            action_maps: self.uses_action_maps(),
         }
     }
 }
@@ -182,6 +197,7 @@ pub struct UNet {
     conv_out: Conv3dF,
     res_blocks: usize,
     emb_dim: usize,
+    action_maps: bool,
 }
 
 impl UNet {
@@ -203,7 +219,11 @@ impl UNet {
         let [b, cf, f, h, w] = noise.dims();
         let [_, _, k, _, _] = history.dims();
         let hist = history.swap_dims(1, 2).reshape([b, k * cf, 1, h, w]).expand([b, k * cf, f, h, w]); // k-major
-        let x = Tensor::cat(vec![noise, hist], 1); // [b, cf (1 + K), F, h, w]
+        let mut parts = vec![noise, hist]; // [b, cf, F, h, w], [b, cf K, F, h, w]
+        if self.action_maps {
+            parts.push(action_maps(actions.clone(), h, w)); // [b, 1, F, h, w]
+        }
+        let x = Tensor::cat(parts, 1); // [b, cf (1 + K) (+ 1), F, h, w]
         let mut emb = self.act2.forward(silu(self.act1.forward(actions))); // [b, F, e]
         if let (Some(mlp), Some(t)) = (&self.time, timestep) {
             let te = mlp.l2.forward(silu(mlp.l1.forward(sinusoidal(t, self.emb_dim)))); // [b, e]
@@ -238,11 +258,49 @@ impl UNet {
         self.conv_out.forward(silu(group_norm(&self.norm_out, hcur)))
     }
 
+    /// The same network with an action-map input channel added, its weights
+    /// zero: it computes exactly what it did before, and training can then learn
+    /// to use the maps (warm-starting an `action_maps` run from one without).
+    pub fn with_action_maps(mut self) -> Self {
+        if !self.action_maps {
+            self.conv_in = self.conv_in.with_extra_inputs(1);
+            self.action_maps = true;
+        }
+        self
+    }
+
     /// Nearest-neighbour 2x upsampling in space.
     fn up2(&self, x: Tensor<5>) -> Tensor<5> {
         let [b, c, f, h, w] = x.dims();
         self.upsample.forward(x.reshape([b, c * f, h, w])).reshape([b, c, f, 2 * h, 2 * w])
     }
+}
+
+/// Standard deviation of an action map's bump, in world units (the world is
+/// 512 wide; the agent's radius is 15).
+pub const ACTION_MAP_SIGMA: f32 = 24.0;
+
+/// A Gaussian bump per frame at the action's position, on an `h × w` grid over
+/// the 512-unit world (row = y, column = x, as the renderer draws it). Actions
+/// are normalised as `a' = 2a/511 − 1`.
+///
+/// # Shapes
+/// `[b, F, 2] -> [b, 1, F, h, w]`
+pub fn action_maps(actions: Tensor<3>, h: usize, w: usize) -> Tensor<5> {
+    let [b, f, _] = actions.dims();
+    let device = actions.device();
+    let world = (actions + 1.0) * (511.0 / 2.0); // [b, F, 2] world units
+    let axis = |n: usize, dim: usize| {
+        let cells = n as f32 / 512.0; // grid cells per world unit
+        let centre = world.clone().narrow(2, dim, 1).reshape([b, 1, f, 1, 1]) * cells; // [b, 1, F, 1, 1]
+        let grid: Vec<f32> = (0..n).map(|j| j as f32 + 0.5).collect();
+        let grid = Tensor::<1>::from_floats(grid.as_slice(), &device);
+        let shape = if dim == 0 { [1, 1, 1, 1, n] } else { [1, 1, 1, n, 1] };
+        let d = (grid.reshape(shape) - centre) / (ACTION_MAP_SIGMA * cells); // in sigmas
+        d.clone() * d
+    };
+    let (dx, dy) = (axis(w, 0), axis(h, 1)); // [b, 1, F, 1, w], [b, 1, F, h, 1]
+    (dx.expand([b, 1, f, h, w]) + dy.expand([b, 1, f, h, w])).mul_scalar(-0.5).exp()
 }
 
 /// Sinusoidal embedding of t ∈ [0, 1] (scaled by 1000), `[b] -> [b, dim]`.
@@ -293,6 +351,59 @@ mod tests {
         let y2 = unet.forward(noise, hist, a + 0.5, None);
         let diff: f32 = (y1 - y2).abs().mean().into_scalar();
         assert!(diff > 1e-4, "actions have no effect ({diff})");
+    }
+}
+
+#[cfg(test)]
+mod action_map_tests {
+    use super::*;
+
+    #[test]
+    fn action_map_peaks_at_the_actions_cell() {
+        let device = Device::flex();
+        // World (416, 96) on an 8x8 grid (64 units per cell): column 416/64 - 0.5 = 6,
+        // row 96/64 - 0.5 = 1, both at a cell centre, so the bump is exactly 1 there.
+        // Normalised: 2·416/511 − 1 and 2·96/511 − 1.
+        let a = [2.0 * 416.0 / 511.0 - 1.0, 2.0 * 96.0 / 511.0 - 1.0];
+        let act = Tensor::<1>::from_floats(a.as_slice(), &device).reshape([1, 1, 2]);
+        let map: Vec<f32> = action_maps(act, 8, 8).into_data().try_to_vec::<f32>().unwrap();
+        assert_eq!(map.len(), 64);
+        assert!((map[8 + 6] - 1.0).abs() < 1e-5, "{}", map[8 + 6]);
+        // One cell (64 units) to the right: exp(−(64/24)²/2) = exp(−3.556) = 0.0286.
+        assert!((map[8 + 7] - 0.0286).abs() < 1e-3, "{}", map[8 + 7]);
+        // One cell down is the same distance; one diagonal is exp(−7.111) = 0.00082.
+        assert!((map[2 * 8 + 6] - 0.0286).abs() < 1e-3);
+        assert!((map[2 * 8 + 7] - 0.00082).abs() < 1e-4);
+        let max = map.iter().cloned().fold(f32::MIN, f32::max);
+        assert_eq!(max, map[8 + 6]);
+    }
+
+    #[test]
+    fn adding_action_maps_keeps_the_output_then_lets_actions_move_it() {
+        let device = Device::flex();
+        let cfg = UNetConfig { model_channels: 32, ..UNetConfig::pusht_latent(4) };
+        let unet = cfg.init(&device);
+        let rand = |s: [usize; 5]| Tensor::<5>::random(s, burn::tensor::Distribution::Default, &device);
+        let (noise, hist) = (rand([1, 4, 4, 8, 8]), rand([1, 4, 4, 8, 8]));
+        let a = Tensor::<3>::zeros([1, 4, 2], &device);
+        let before = unet.forward(noise.clone(), hist.clone(), a.clone(), None);
+        let widened = unet.with_action_maps();
+        let after = widened.forward(noise.clone(), hist.clone(), a.clone(), None);
+        let diff: f32 = (before - after.clone()).abs().max().into_scalar();
+        assert!(diff < 1e-5, "widening changed the output by {diff}");
+        // On an autodiff device the widened weight is a trainable leaf.
+        let ad = device.clone().autodiff();
+        let trained = cfg.init(&ad).with_action_maps();
+        let y = trained.forward(noise.clone(), hist.clone(), a.clone(), None);
+        let grads = burn::optim::GradientsParams::from_grads(y.sum().backward(), &trained);
+        assert!(!grads.is_empty());
+        // A fresh action-map model has the extra channel and reacts to it.
+        let fresh = UNetConfig { action_maps: Some(true), ..cfg }.init(&device);
+        assert_eq!(fresh.num_params(), widened.num_params());
+        let y1 = fresh.forward(noise.clone(), hist.clone(), a.clone(), None);
+        let y2 = fresh.forward(noise, hist, a + 0.5, None);
+        let moved: f32 = (y1 - y2).abs().mean().into_scalar();
+        assert!(moved > 1e-4, "actions have no effect ({moved})");
     }
 }
 
