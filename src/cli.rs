@@ -25,6 +25,27 @@ pub struct Cli {
     pub command: Command,
 }
 
+/// The ids of the arguments given on this process's command line (not defaulted)
+/// of the subcommand at `path`, e.g. `["train", "world-model"]`: re-parses
+/// `std::env::args_os()`, so a `--resume` can tell a flag the user typed from a default.
+pub fn given_on_command_line(path: &[&str]) -> Vec<String> {
+    use clap::CommandFactory;
+    use clap::parser::ValueSource;
+    let Ok(mut m) = Cli::command().try_get_matches_from(std::env::args_os()) else {
+        return Vec::new();
+    };
+    for name in path {
+        match m.subcommand_matches(name) {
+            Some(sub) => m = sub.clone(),
+            None => return Vec::new(),
+        }
+    }
+    m.ids()
+        .filter(|id| m.value_source(id.as_str()) == Some(ValueSource::CommandLine))
+        .map(|id| id.to_string())
+        .collect()
+}
+
 /// evalharness commands.
 #[derive(Debug, Subcommand)]
 pub enum Command {

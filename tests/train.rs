@@ -69,6 +69,10 @@ fn autoencoder_trains_checkpoints_and_resumes() {
         .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["step"].as_u64().unwrap())
         .collect();
     assert_eq!(steps, vec![1, 2, 3]);
+    // A flag that contradicts the saved run is refused rather than ignored.
+    let batch: Vec<&str> = again.iter().map(|&a| if a == "2" { "8" } else { a }).collect();
+    let (_, err) = expect_code(&run(&batch), 2);
+    assert!(err.contains("--batch (saved: 2)"), "{err}");
 }
 
 #[test]
@@ -143,6 +147,10 @@ fn policy_stopped_during_encoder_pretraining_resumes() {
     let file = read_json(&out.join("epoch-0002/policy.json"));
     assert_eq!(file["provenance"]["weights"], "raw", "{file}");
     assert!(file["provenance"]["resumed_with"].as_str().unwrap().contains("--ema 0"), "{file}");
+    // Changing the network on --resume is refused, naming the flag and the saved value.
+    let wider: Vec<&str> = args.iter().map(|&a| if a == "8" { "12" } else { a }).collect();
+    let (_, err) = expect_code(&run(&wider), 2);
+    assert!(err.contains("--encoder-width (saved: 8)"), "{err}");
 
     // export-policies: chosen epochs into a set, with other inference settings.
     let set = dir.path().join("set");
@@ -269,6 +277,13 @@ fn world_model_loss_variants_train_and_warm_start() {
     assert_eq!(read_json(&maps.join("config.json"))["train"]["ema_decay"], 0.99);
     let (_, err) = expect_code(&wm(&maps, &["--steps", "3", "--resume", "--ema-decay", "1.5"]), 2);
     assert!(err.contains("--ema-decay"), "{err}");
+    // Model and loss flags that contradict the saved run are refused, not ignored
+    // (the ones equal to it, from `wm`'s own arguments, are accepted above).
+    let resume = ["--steps", "3", "--resume", "--self-forcing", "3", "--warmup", "1"];
+    let (_, err) = expect_code(&wm_with(&maps, "24", &resume), 2);
+    assert!(err.contains("--self-forcing (saved: 1)"), "{err}");
+    assert!(err.contains("--base-channels (saved: 16)"), "{err}");
+    assert!(!err.contains("--warmup"), "{err}");
     assert_eq!(read_json(&maps.join("state.json"))["step"], 2);
     let back = dir.path().join("wm_back");
     let (_, err) = expect_code(&wm(&back, &["--steps", "1", "--init-from", maps.to_str().unwrap()]), 2);

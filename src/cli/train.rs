@@ -106,8 +106,8 @@ pub struct TrainWorldModelArgs {
     /// Training dataset (zarr replay buffer); every 10th episode is held out.
     #[arg(long)]
     pub data: PathBuf,
-    /// Model family: autoencoder latents or pixels (ignored with `--resume`: the
-    /// saved config wins).
+    /// Model family: autoencoder latents or pixels. With `--resume` the saved config
+    /// holds; model and loss flags that contradict it are refused.
     #[arg(long, value_enum, default_value_t = WmConfigArg::PushtLatent)]
     pub config: WmConfigArg,
     /// Trained autoencoder folder (from `train autoencoder`); required by

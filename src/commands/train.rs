@@ -114,6 +114,46 @@ pub(super) fn record_session(
         .collect()
 }
 
+/// A setting `--resume` cannot change: the flag's clap id, the value this command
+/// line gives it and the run's saved value.
+pub(super) type FixedFlag = (&'static str, serde_json::Value, serde_json::Value);
+
+/// `(id, fresh[key], saved[key])` for each `(id, key)`: fields of two serialised configs.
+pub(super) fn fixed_fields(
+    fresh: &serde_json::Value,
+    saved: &serde_json::Value,
+    ids_keys: &[(&'static str, &str)],
+) -> Vec<FixedFlag> {
+    ids_keys.iter().map(|&(id, key)| (id, fresh[key].clone(), saved[key].clone())).collect()
+}
+
+/// `--resume` continues a run with the settings saved in `saved` (its config file).
+/// A flag typed on this `train <subcommand>` command line whose value differs from the
+/// saved one would be silently ignored, so the run is refused, naming each such flag
+/// with its saved value (flags left at their defaults are not compared).
+pub(super) fn refuse_contradicting_flags(
+    saved: &std::path::Path,
+    subcommand: &str,
+    fixed: &[FixedFlag],
+) -> Result<()> {
+    let given = crate::cli::given_on_command_line(&["train", subcommand]);
+    let conflicts: Vec<String> = fixed
+        .iter()
+        .filter(|(id, ours, theirs)| given.iter().any(|g| g == id) && ours != theirs)
+        .map(|(id, _, theirs)| format!("--{} (saved: {theirs})", id.replace('_', "-")))
+        .collect();
+    if conflicts.is_empty() {
+        return Ok(());
+    }
+    bail!(
+        "--resume continues the run with the settings saved in {}, which {} contradict: {}; \
+         drop them, or start a new run",
+        saved.display(),
+        if conflicts.len() == 1 { "this flag would" } else { "these flags would" },
+        conflicts.join(", ")
+    )
+}
+
 /// Checks a training run's output folder: an existing one needs `--resume` (and then
 /// its checkpoint, `state` relative to it) or `--force` (which removes it).
 pub(super) fn prepare_out(out: &std::path::Path, resume: bool, force: bool, state: &str) -> Result<()> {
@@ -154,6 +194,13 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
         checkpoint_every: a.checkpoint_every.max(1),
         ..AeTrainConfig::default()
     };
+    if a.session.resume {
+        let path = a.out.join("config.json");
+        let saved = crate::output::read_json(&path)?;
+        let keys = ["batch", "lr", "seed", "eval_every", "checkpoint_every"].map(|k| (k, k));
+        let fixed = fixed_fields(&serde_json::to_value(&cfg)?, &saved["train"], &keys);
+        refuse_contradicting_flags(&path, "autoencoder", &fixed)?;
+    }
     tracing::info!(data = %a.data.display(), "loading frames");
     let data = EpisodeData::load(&a.data, model_cfg.image_size)?;
     tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");

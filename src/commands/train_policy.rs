@@ -10,7 +10,7 @@ use policies::net::NetConfig;
 use policies::train::{Phase, PolicyRun, PolicyTrainConfig, RunConfigs, train_policy};
 use serde_json::json;
 
-use super::train::{dataset_origin, git_commit, prepare_out};
+use super::train::{dataset_origin, fixed_fields, git_commit, prepare_out, refuse_contradicting_flags};
 use crate::cli::TrainPolicyArgs;
 use crate::progress;
 
@@ -63,6 +63,9 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         }),
         policy,
     };
+    if a.session.resume {
+        check_resume_flags(&a.out.join(".train").join("config.json"), &configs)?;
+    }
     if let Some(from) = a.encoder_from.as_ref().filter(|_| !a.session.resume) {
         let dst = a.out.join(".train");
         std::fs::create_dir_all(&dst).with_context(|| format!("creating {}", dst.display()))?;
@@ -100,6 +103,27 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         a.out.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// `--resume` continues a run with its saved `.train/config.json`: the model, data and
+/// optimiser flags typed on this command line must agree with it (`--epochs`, `--ema`
+/// and the session flags may change; see [`refuse_contradicting_flags`]).
+fn check_resume_flags(path: &std::path::Path, fresh: &RunConfigs) -> Result<()> {
+    let saved = crate::output::read_json(path)?;
+    let ours = serde_json::to_value(fresh)?;
+    let keys = ["save_every", "batch", "lr", "seed", "encoder_steps", "encoder_lr"].map(|k| (k, k));
+    let mut fixed = fixed_fields(&ours["train"], &saved["train"], &keys);
+    let net = [("encoder_width", "encoder_width"), ("down_dims", "down_dims")];
+    fixed.extend(fixed_fields(&ours["policy"]["net"], &saved["policy"]["net"], &net));
+    fixed.extend(fixed_fields(&ours["policy"], &saved["policy"], &[("inference_steps", "inference_steps")]));
+    fixed.extend(fixed_fields(
+        &ours["provenance"],
+        &saved["provenance"],
+        &[("encoder_from", "encoder_from")],
+    ));
+    let data = [("behaviour", "behaviour"), ("episodes", "episodes")];
+    fixed.extend(fixed_fields(&ours["provenance"]["data"], &saved["provenance"]["data"], &data));
+    refuse_contradicting_flags(path, "policy", &fixed)
 }
 
 #[cfg(test)]

@@ -19,7 +19,10 @@ use world_model::train_ae::RunOptions;
 use world_model::train_wm::{TrainingFrames, WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
-use super::train::{data_provenance, git_commit, prepare_out, read_step, record_session};
+use super::train::{
+    data_provenance, fixed_fields, git_commit, prepare_out, read_step, record_session,
+    refuse_contradicting_flags,
+};
 use crate::cli::{FieldArg, ObjectiveArg, TrainWorldModelArgs, WmConfigArg};
 use crate::output::{read_json, write_json};
 use crate::progress;
@@ -42,11 +45,7 @@ fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
 
 /// `evalharness train world-model`.
 pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
-    let objective = match a.objective {
-        ObjectiveArg::Drifting => Objective::Drifting,
-        ObjectiveArg::Mse => Objective::Mse,
-        ObjectiveArg::Diffusion => Objective::Diffusion,
-    };
+    let objective = fresh_objective(a.objective);
     let defaults = WmTrainConfig::for_objective(objective);
     let cfg = WmTrainConfig {
         steps: a.steps.unwrap_or(defaults.steps),
@@ -86,6 +85,9 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     }
     prepare_out(&a.out, a.session.resume, a.session.force, "state.json")?;
     let from_step = read_step(&a.out);
+    if a.session.resume {
+        check_resume_flags(a, &cfg)?;
+    }
     if let (true, Some(decay)) = (a.session.resume, a.ema_decay) {
         set_saved_ema_decay(&a.out, decay)?;
     }
@@ -195,6 +197,15 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The objective `--objective` names.
+fn fresh_objective(o: ObjectiveArg) -> Objective {
+    match o {
+        ObjectiveArg::Drifting => Objective::Drifting,
+        ObjectiveArg::Mse => Objective::Mse,
+        ObjectiveArg::Diffusion => Objective::Diffusion,
+    }
+}
+
 /// The codec of a fresh run: `--config` and `--autoencoder` must agree.
 fn fresh_codec(a: &TrainWorldModelArgs, device: &Device) -> Result<FrameCodec> {
     match (a.config, &a.autoencoder) {
@@ -300,6 +311,37 @@ fn set_saved_ema_decay(out: &Path, decay: f64) -> Result<()> {
         write_json(&path, &v)?;
     }
     Ok(())
+}
+
+/// `--resume` continues a run with its saved `config.json`: the model and loss flags
+/// typed on this command line must agree with it (`--steps`, `--ema-decay` and the
+/// session flags may change; see [`refuse_contradicting_flags`]).
+fn check_resume_flags(a: &TrainWorldModelArgs, fresh: &WmTrainConfig) -> Result<()> {
+    let path = a.out.join("config.json");
+    let model = saved_model_config(&a.out)?;
+    let train: WmTrainConfig = serde_json::from_value(read_json(&path)?["train"].clone())
+        .with_context(|| format!("{}: \"train\"", path.display()))?;
+    let (ours, theirs) = (serde_json::to_value(fresh)?, serde_json::to_value(&train)?);
+    let keys = ["contexts", "samples", "field", "warmup", "lr", "seed", "eval_every", "eval_windows"];
+    let keys = keys.map(|k| (k, k));
+    let more = [("checkpoint_every", "checkpoint_every"), ("self_forcing", "chunks")];
+    let mut fixed = fixed_fields(&ours, &theirs, &[&keys[..], &more[..]].concat());
+    let init_from = match (&fresh.init_from, &train.init_from) {
+        (Some(x), Some(y)) if x == y || same_folder(x, y) => theirs["init_from"].clone(),
+        _ => ours["init_from"].clone(),
+    };
+    let name = |o: Objective| json!(o.name());
+    let family = |pixels: bool| json!(if pixels { "pusht-pixel" } else { "pusht-latent" });
+    fixed.extend([
+        ("motion_weighting", json!(a.motion_weighting), json!(train.motion.is_some())),
+        ("init_from", init_from, theirs["init_from"].clone()),
+        ("objective", name(fresh_objective(a.objective)), name(model.objective)),
+        ("config", family(matches!(a.config, WmConfigArg::PushtPixel)), family(model.autoencoder.is_none())),
+        ("base_channels", json!(a.base_channels), json!(model.unet.model_channels)),
+        ("action_maps", json!(a.action_maps), json!(model.unet.uses_action_maps())),
+        ("sample_steps", json!(a.sample_steps), json!(model.sample_steps)),
+    ]);
+    refuse_contradicting_flags(&path, "world-model", &fixed)
 }
 
 /// The "model" entry of a run's `config.json`.
