@@ -6,7 +6,11 @@
 //! checkpoints are read from `checkpoints/pusht/` (override with
 //! `BENCH_POLICY=DIR` and `BENCH_WORLD_MODEL=DIR`). The pixel model runs at batch
 //! 1 only unless `BENCH_PIXEL_BATCHES=1,100` asks for more (batch 100 is minutes per
-//! iteration on a CPU). The device is `EVALHARNESS_DEVICE` (see `world_model::device`).
+//! iteration on a CPU). `world_model_objectives` times one chunk's U-Net passes of the
+//! shipped model's architecture as DriftWorld (one pass) and as the K-step diffusion
+//! baseline (`BENCH_DIFFUSION_STEPS`, default 10), random weights, at batch 1 unless
+//! `BENCH_OBJECTIVE_BATCHES=1,100`. The device is `EVALHARNESS_DEVICE` (see
+//! `world_model::device`).
 
 // criterion_group! generates undocumented functions.
 #![allow(missing_docs)]
@@ -75,11 +79,48 @@ fn pixel_world_model(c: &mut Criterion) {
         unet: unet.clone(),
     };
     let wm = WorldModel::from_parts(cfg, FrameCodec::pixels(96), unet.init(&device), &device);
-    let batches: Vec<usize> = std::env::var("BENCH_PIXEL_BATCHES")
+    chunk(c, "world_model_pixel_chunk", &wm, &env_batches("BENCH_PIXEL_BATCHES", &[1]));
+}
+
+/// Batch sizes from a comma-separated environment variable, else `default`.
+fn env_batches(var: &str, default: &[usize]) -> Vec<usize> {
+    std::env::var(var)
         .ok()
         .map(|v| v.split(',').filter_map(|b| b.trim().parse().ok()).collect())
-        .unwrap_or_else(|| vec![1]);
-    chunk(c, "world_model_pixel_chunk", &wm, &batches);
+        .unwrap_or_else(|| default.to_vec())
+}
+
+/// DriftWorld's one pass per chunk against the K-step diffusion baseline on the same U-Net
+/// (the shipped model's configuration plus the diffusion baseline's timestep embedding).
+/// Only the U-Net passes are timed: decoding costs the same for both.
+fn objectives(c: &mut Criterion) {
+    let dir = path("BENCH_WORLD_MODEL", "checkpoints/pusht/world_model");
+    let device = world_model::device::selected().expect("EVALHARNESS_DEVICE");
+    let shipped =
+        WorldModelConfig::read(&dir).unwrap_or_else(|e| panic!("benchmark needs a world-model config: {e}"));
+    let steps: usize = std::env::var("BENCH_DIFFUSION_STEPS").ok().and_then(|v| v.parse().ok()).unwrap_or(10);
+    let batches = env_batches("BENCH_OBJECTIVE_BATCHES", &[1]);
+    let mut g = c.benchmark_group("world_model_objectives");
+    g.sample_size(10).measurement_time(Duration::from_secs(20));
+    for (name, objective, sample_steps) in
+        [("drifting", Objective::Drifting, 1), ("diffusion", Objective::Diffusion, steps)]
+    {
+        let mut unet = shipped.unet.clone();
+        unet.timestep_embedding = objective == Objective::Diffusion;
+        let cfg = WorldModelConfig { objective, sample_steps, unet: unet.clone(), ..shipped.clone() };
+        let (ch, s) = (cfg.latents.channels, cfg.latents.size);
+        let wm = WorldModel::from_parts(cfg, FrameCodec::pixels(s), unet.init(&device), &device);
+        for &b in &batches {
+            let history = Tensor::<5>::zeros([b, 4, ch, s, s], &device); // [b, 4, C, s, s]
+            let actions = Tensor::<3>::zeros([b, 4, 2], &device); // [b, F, 2]
+            let mut rngs: Vec<Rng> = (0..b as u64).map(Rng::new).collect();
+            let id = BenchmarkId::new(format!("{name}_{sample_steps}_passes"), b);
+            g.bench_with_input(id, &b, |bench, _| {
+                bench.iter(|| black_box(wm.predict(history.clone(), actions.clone(), &mut rngs).into_data()))
+            });
+        }
+    }
+    g.finish();
 }
 
 fn chunk(c: &mut Criterion, group: &str, wm: &WorldModel, batches: &[usize]) {
@@ -106,5 +147,5 @@ fn chunk(c: &mut Criterion, group: &str, wm: &WorldModel, batches: &[usize]) {
     g.finish();
 }
 
-criterion_group!(benches, policy, world_model, pixel_world_model);
+criterion_group!(benches, policy, world_model, objectives, pixel_world_model);
 criterion_main!(benches);
