@@ -6,6 +6,9 @@
 //! started, except for its length, which `--steps`/`--epochs` may extend or
 //! shorten (the caller's `adjust` applies it; the file is rewritten when it
 //! changes anything).
+//!
+//! Its log resumes with it: [`open_log`] drops the lines a killed run wrote after
+//! its last checkpoint, which the resumed run logs again.
 
 use std::path::{Path, PathBuf};
 
@@ -57,6 +60,37 @@ pub fn resume_or_start<C: Serialize + DeserializeOwned>(
     Ok(saved)
 }
 
+/// Opens a run's JSON-lines log (one object with a `"step"` per line) for
+/// appending, first dropping the lines of steps after `step`, the checkpoint the
+/// run resumes from. A run killed between checkpoints logged steps that the
+/// resumed run repeats; keeping both would give the log two histories for the
+/// same steps. Lines without a step are kept. The file is rewritten (through a
+/// temporary file and a rename) only when a line is dropped.
+///
+/// # Errors
+/// [`RunFileError`] naming `path` when it cannot be read, rewritten or opened.
+pub fn open_log(path: &Path, step: u64) -> Result<std::fs::File, RunFileError> {
+    let err = |m: String| RunFileError { path: path.to_path_buf(), message: m };
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
+        Err(e) => return Err(err(e.to_string())),
+    };
+    let later = |line: &str| {
+        serde_json::from_str::<serde_json::Value>(line)
+            .ok()
+            .and_then(|v| v["step"].as_u64())
+            .is_some_and(|s| s > step)
+    };
+    if text.lines().any(later) {
+        let kept: String = text.lines().filter(|l| !later(l)).flat_map(|l| [l, "\n"]).collect();
+        let tmp = path.with_extension("jsonl.partial");
+        std::fs::write(&tmp, kept).map_err(|e| err(e.to_string()))?;
+        std::fs::rename(&tmp, path).map_err(|e| err(e.to_string()))?;
+    }
+    std::fs::OpenOptions::new().create(true).append(true).open(path).map_err(|e| err(e.to_string()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -95,5 +129,27 @@ mod tests {
         std::fs::write(&path, "{\"lr\": 1.0}").unwrap();
         let err = resume_or_start(&path, Cfg { lr: 1.0, steps: 1 }, true, |_| false).unwrap_err();
         assert!(err.message.contains("steps"), "{}", err.message);
+    }
+
+    #[test]
+    fn a_resumed_log_drops_the_steps_after_its_checkpoint() {
+        use std::io::Write;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("train_log.jsonl");
+        // A fresh run: no file yet.
+        writeln!(open_log(&path, 0).unwrap(), "{{\"step\":1}}").unwrap();
+        // The run went on to step 4, was checkpointed at step 2 and killed.
+        let mut log = open_log(&path, 1).unwrap();
+        for s in 2..=4 {
+            writeln!(log, "{{\"step\":{s},\"loss\":0.5}}").unwrap();
+        }
+        writeln!(log, "not json").unwrap();
+        drop(log);
+        writeln!(open_log(&path, 2).unwrap(), "{{\"step\":3,\"loss\":0.4}}").unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(text, "{\"step\":1}\n{\"step\":2,\"loss\":0.5}\nnot json\n{\"step\":3,\"loss\":0.4}\n");
+        assert!(!dir.path().join("train_log.jsonl.partial").exists());
+        let bad = dir.path().join("missing/dir/log.jsonl");
+        assert_eq!(open_log(&bad, 0).unwrap_err().path, bad);
     }
 }

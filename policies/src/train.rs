@@ -243,8 +243,8 @@ pub fn train_policy(
     };
     let ac = alphas_cumprod(pc.train_steps);
     let log_path = dir.join("log.jsonl");
-    let mut log =
-        std::fs::OpenOptions::new().create(true).append(true).open(&log_path).map_err(io(&log_path))?;
+    let mut log = harness::runfile::open_log(&log_path, state.step)
+        .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
     let base = state.elapsed_s;
     let mut recent = Vec::new();
     let mut saved = Vec::new();

@@ -23,12 +23,17 @@ pub fn wilson(k: usize, n: usize, z: f64) -> (f64, f64) {
     if n == 0 {
         return (0.0, 1.0);
     }
-    let (n, p) = (n as f64, k as f64 / n as f64);
+    let (k, n) = (k as f64, n as f64);
+    let p = k / n;
     let z2 = z * z;
     let centre = p + z2 / (2.0 * n);
     let half = z * (p * (1.0 - p) / n + z2 / (4.0 * n * n)).sqrt();
     let d = 1.0 + z2 / n;
-    (((centre - half) / d).max(0.0), ((centre + half) / d).min(1.0))
+    // At k = 0 (k = n) the lower (upper) bound is exactly 0 (1); the formula leaves
+    // rounding residue there (2e-17 at 0 of 12), which reports would print.
+    let lo = if k == 0.0 { 0.0 } else { ((centre - half) / d).max(0.0) };
+    let hi = if k == n { 1.0 } else { ((centre + half) / d).min(1.0) };
+    (lo, hi)
 }
 
 /// The `q`-quantile (0..=1) of `v` with linear interpolation (numpy's default); `None` if empty.
@@ -149,6 +154,11 @@ mod tests {
         assert_eq!(lo, 0.0);
         assert!((hi - 0.2775).abs() < 1e-4); // 0/10 -> [0, 0.2775]
         assert_eq!(wilson(0, 0, 1.96), (0.0, 1.0));
+        // 0 of 12 and 12 of 12 are exact at their closed end (rank printed 2.1e-17 before).
+        assert_eq!(wilson(0, 12, 1.96).0, 0.0);
+        assert_eq!(wilson(12, 12, 1.96).1, 1.0);
+        let (lo, hi) = wilson(12, 12, 1.96);
+        assert!((lo - 0.7575).abs() < 1e-4 && hi == 1.0); // 12/12 -> [0.7575, 1]
     }
 
     #[test]
