@@ -82,10 +82,11 @@ pub fn open_log(path: &Path, step: u64) -> Result<std::fs::File, RunFileError> {
             .and_then(|v| v["step"].as_u64())
             .is_some_and(|s| s > step)
     };
-    if text.lines().any(later) {
-        let kept: String = text.lines().filter(|l| !later(l)).flat_map(|l| [l, "\n"]).collect();
+    let kept: Vec<&str> = text.lines().filter(|l| !later(l)).collect();
+    if kept.len() < text.lines().count() {
         let tmp = path.with_extension("jsonl.partial");
-        std::fs::write(&tmp, kept).map_err(|e| err(e.to_string()))?;
+        std::fs::write(&tmp, kept.iter().flat_map(|l| [*l, "\n"]).collect::<String>())
+            .map_err(|e| err(e.to_string()))?;
         std::fs::rename(&tmp, path).map_err(|e| err(e.to_string()))?;
     }
     std::fs::OpenOptions::new().create(true).append(true).open(path).map_err(|e| err(e.to_string()))
