@@ -2,6 +2,8 @@
 
 use std::path::Path;
 
+use serde_json::json;
+
 use crate::util::{expect_code, read_json, run, scenario_variant};
 
 /// 10 short explorer episodes (episode 9 is the held-out one).
@@ -229,9 +231,9 @@ fn world_model_loss_variants_train_and_warm_start() {
     let (d, a) = (data.to_str().unwrap(), ae.to_str().unwrap());
     expect_code(&run(&["train", "autoencoder", "--data", d, "--out", a, "--steps", "1", "--batch", "2"]), 0);
     // The tiny dataset has 4-step episodes: one chunk of F = 4 needs 5 frames, so use a
-    // longer one for two self-forcing chunks (8 targets).
+    // longer one for two self-forcing chunks (8 targets) and wm eval (4 + 60 frames).
     let long = dir.path().join("long.zarr");
-    let args = ["collect", "--episodes", "10", "--max-steps", "12", "--mix", "explore=1", "--out"];
+    let args = ["collect", "--episodes", "10", "--max-steps", "70", "--mix", "explore=1", "--out"];
     expect_code(&run(&[&args[..], &[long.to_str().unwrap()]].concat()), 0);
     let wm_with = |out: &Path, channels: &str, extra: &[&str]| {
         let base = ["train", "world-model", "--data", long.to_str().unwrap(), "--autoencoder", a];
@@ -292,6 +294,27 @@ fn world_model_loss_variants_train_and_warm_start() {
     let third = dir.path().join("wm_wide");
     let (_, err) = expect_code(&wm_with(&third, "32", &["--steps", "1", "--init-from", from]), 2);
     assert!(err.contains("U-Net config differs"), "{err}");
+    // The x0-predicting diffusion baseline starts from a one-pass model (its timestep
+    // embedding added with zero output); `--prediction` belongs to diffusion, and a
+    // resume that names the other parameterisation is refused.
+    let diff = dir.path().join("wm_diff");
+    let m = maps.to_str().unwrap();
+    let x0 = ["--objective", "diffusion", "--prediction", "x0", "--sample-steps", "2", "--action-maps"];
+    expect_code(&wm(&diff, &[&x0[..], &["--steps", "1", "--init-from", m, "--warmup", "1"]].concat()), 0);
+    let model = &read_json(&diff.join("config.json"))["model"];
+    assert_eq!((&model["prediction"], &model["unet"]["timestep_embedding"]), (&json!("x0"), &json!(true)));
+    assert_eq!(read_json(&maps.join("config.json"))["model"].get("prediction"), None);
+    let ev = dir.path().join("eval_diff");
+    let args = ["wm", "eval", "--world-model", diff.to_str().unwrap(), "--data", long.to_str().unwrap()];
+    let few = ["--episodes", "1", "--full-episodes", "0", "--out", ev.to_str().unwrap()];
+    expect_code(&run(&[&args[..], &few[..]].concat()), 0);
+    let models = read_json(&ev.join("eval.json"))["models"].clone();
+    assert_eq!(models[0]["objective"], "diffusion");
+    assert!(models[0]["ssim"].as_f64().unwrap().is_finite(), "{models}");
+    let (_, err) = expect_code(&wm(&diff, &["--steps", "2", "--resume", "--prediction", "v"]), 2);
+    assert!(err.contains("--prediction (saved: \"x0\")"), "{err}");
+    let (_, err) = expect_code(&wm(&third, &["--prediction", "x0"]), 2);
+    assert!(err.contains("--prediction") && err.contains("--objective diffusion"), "{err}");
     // Motion weighting and self-forcing belong to the drifting loss.
     let (_, err) = expect_code(&wm(&third, &["--objective", "mse", "--self-forcing", "2"]), 2);
     assert!(err.contains("--self-forcing"), "{err}");

@@ -88,6 +88,15 @@ pub enum ObjectiveArg {
     Diffusion,
 }
 
+/// The diffusion baseline's parameterisation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PredictionArg {
+    /// v = √ᾱ·ε − √(1−ᾱ)·x0.
+    V,
+    /// The clean frames.
+    X0,
+}
+
 /// Which space the world model works in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum WmConfigArg {
@@ -167,6 +176,11 @@ pub struct TrainWorldModelArgs {
     /// DDIM steps per generated chunk (diffusion).
     #[arg(long, default_value_t = 10)]
     pub sample_steps: usize,
+    /// What the diffusion U-Net predicts: v, or the clean frames x0 (which lets
+    /// `--init-from` start it from a drifting or MSE model: its timestep embedding is
+    /// added with zero output).
+    #[arg(long, value_enum, default_value_t = PredictionArg::V)]
+    pub prediction: PredictionArg,
     /// Seed of the weights, windows and noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

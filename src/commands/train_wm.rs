@@ -13,7 +13,7 @@ use world_model::codec::FrameCodec;
 use world_model::data::EpisodeData;
 use world_model::drift_step::FieldKind;
 use world_model::latents::{LatentStats, Latents};
-use world_model::model::{Objective, WorldModelConfig};
+use world_model::model::{Objective, Prediction, WorldModelConfig};
 use world_model::motion::MotionWeighting;
 use world_model::train_ae::RunOptions;
 use world_model::train_wm::{TrainingFrames, WmTrainConfig, train_world_model};
@@ -23,7 +23,7 @@ use super::train::{
     data_provenance, fixed_fields, git_commit, prepare_out, read_step, record_session,
     refuse_contradicting_flags,
 };
-use crate::cli::{FieldArg, ObjectiveArg, TrainWorldModelArgs, WmConfigArg};
+use crate::cli::{FieldArg, ObjectiveArg, PredictionArg, TrainWorldModelArgs, WmConfigArg};
 use crate::output::{read_json, write_json};
 use crate::progress;
 
@@ -77,6 +77,9 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         bail!(
             "--motion-weighting weighs per-token drifting losses: it needs --objective drifting --field token"
         );
+    }
+    if !a.session.resume && a.prediction != PredictionArg::V && objective != Objective::Diffusion {
+        bail!("--prediction chooses the diffusion baseline's output: it needs --objective diffusion");
     }
     if objective == Objective::Drifting && cfg.samples < 2 {
         bail!(
@@ -136,6 +139,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
                 autoencoder,
                 future: 4,
                 sample_steps: if objective == Objective::Diffusion { a.sample_steps.max(1) } else { 1 },
+                prediction: fresh_prediction(a),
             }
         }
     };
@@ -197,6 +201,19 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The diffusion parameterisation `--prediction` names.
+fn prediction(a: &TrainWorldModelArgs) -> Prediction {
+    match a.prediction {
+        PredictionArg::V => Prediction::V,
+        PredictionArg::X0 => Prediction::X0,
+    }
+}
+
+/// What a fresh run records: the parameterisation for diffusion, none otherwise.
+fn fresh_prediction(a: &TrainWorldModelArgs) -> Option<Prediction> {
+    (a.objective == ObjectiveArg::Diffusion).then_some(prediction(a))
+}
+
 /// The objective `--objective` names.
 fn fresh_objective(o: ObjectiveArg) -> Objective {
     match o {
@@ -249,8 +266,8 @@ fn same_folder(x: &Path, y: &Path) -> bool {
 /// checking that its U-Net and autoencoder are the ones this run uses.
 fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: Option<&Path>) -> Result<LatentStats> {
     let from = saved_model_config(dir).context("--init-from")?;
-    // The one difference a warm start bridges: adding action maps.
-    if &from.unet != unet && from.unet.clone().with_action_maps(Some(true)) != *unet {
+    // The differences a warm start bridges: adding action maps or a timestep embedding.
+    if !unet.can_start_from(&from.unet) {
         bail!(
             "--init-from {}: its U-Net config differs from this run's ({:?} vs {:?})",
             dir.display(),
@@ -340,6 +357,7 @@ fn check_resume_flags(a: &TrainWorldModelArgs, fresh: &WmTrainConfig) -> Result<
         ("base_channels", json!(a.base_channels), json!(model.unet.model_channels)),
         ("action_maps", json!(a.action_maps), json!(model.unet.uses_action_maps())),
         ("sample_steps", json!(a.sample_steps), json!(model.sample_steps)),
+        ("prediction", json!(prediction(a)), json!(model.prediction.unwrap_or_default())),
     ]);
     refuse_contradicting_flags(&path, "world-model", &fixed)
 }

@@ -3,8 +3,8 @@
 //! "predict the next F frames" call.
 //!
 //! - `drifting` and `mse`: one U-Net pass maps noise + history + actions to F frames.
-//! - `diffusion`: v-prediction with a cosine schedule, sampled with K deterministic
-//!   DDIM steps (K U-Net passes per chunk) — the multi-step baseline.
+//! - `diffusion`: v- (or x0-) prediction with a cosine schedule, sampled with K
+//!   deterministic DDIM steps (K U-Net passes per chunk) — the multi-step baseline.
 //!
 //! Sampling noise comes from per-row RNGs the caller owns, so a row's frames
 //! never depend on the batch it runs in.
@@ -30,7 +30,7 @@ pub enum Objective {
     Drifting,
     /// One-step regression baseline, one pass per chunk.
     Mse,
-    /// Multi-step diffusion baseline (v-prediction, DDIM sampling).
+    /// Multi-step diffusion baseline (v- or x0-prediction, DDIM sampling).
     Diffusion,
 }
 
@@ -43,6 +43,18 @@ impl Objective {
             Objective::Diffusion => "diffusion",
         }
     }
+}
+
+/// What the diffusion baseline's U-Net outputs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Prediction {
+    /// v = √ᾱ·ε − √(1−ᾱ)·x0 (Salimans & Ho).
+    #[default]
+    V,
+    /// The clean frames x0 — what a one-pass model outputs, so a diffusion baseline
+    /// can start from a drifting or MSE model's weights.
+    X0,
 }
 
 /// Everything needed to rebuild a world model (its `config.json` "model" entry).
@@ -62,6 +74,9 @@ pub struct WorldModelConfig {
     pub future: usize,
     /// DDIM steps per chunk (diffusion only).
     pub sample_steps: usize,
+    /// The diffusion U-Net's output (absent: v, and for the one-pass objectives).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prediction: Option<Prediction>,
 }
 
 impl WorldModelConfig {
@@ -196,7 +211,8 @@ impl WorldModel {
         out.swap_dims(1, 2) // [b, F, C, s, s]
     }
 
-    /// Deterministic DDIM from t = 1 to 0 in `sample_steps` steps (v-prediction).
+    /// Deterministic DDIM from t = 1 to 0 in `sample_steps` steps. Every t < 1 step
+    /// has ᾱ(t) < 1, so recovering ε from an x0 prediction never divides by zero.
     fn ddim(&self, mut x: Tensor<5>, hist: Tensor<5>, actions: Tensor<3>) -> Tensor<5> {
         let k = self.cfg.sample_steps.max(1);
         let b = x.dims()[0];
@@ -204,9 +220,17 @@ impl WorldModel {
             let (t, t_next) = (1.0 - i as f64 / k as f64, 1.0 - (i + 1) as f64 / k as f64);
             let (a, a_next) = (alpha_bar(t), alpha_bar(t_next));
             let tt = Tensor::<1>::from_floats(vec![t as f32; b].as_slice(), &self.device);
-            let v = self.unet.forward(x.clone(), hist.clone(), actions.clone(), Some(tt));
-            let x0 = x.clone() * a.sqrt() - v.clone() * (1.0 - a).sqrt();
-            let eps = x * (1.0 - a).sqrt() + v * a.sqrt();
+            let out = self.unet.forward(x.clone(), hist.clone(), actions.clone(), Some(tt));
+            let (x0, eps) = match self.cfg.prediction.unwrap_or_default() {
+                Prediction::V => {
+                    let x0 = x.clone() * a.sqrt() - out.clone() * (1.0 - a).sqrt();
+                    (x0, x * (1.0 - a).sqrt() + out * a.sqrt())
+                }
+                Prediction::X0 => {
+                    let eps = (x - out.clone() * a.sqrt()) / (1.0 - a).sqrt();
+                    (out, eps)
+                }
+            };
             x = x0 * a_next.sqrt() + eps * (1.0 - a_next).sqrt();
         }
         x
@@ -216,6 +240,48 @@ impl WorldModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn one_ddim_step_of_an_x0_model_is_its_one_pass_prediction() {
+        // K = 1 goes from t = 1 to 0 and ᾱ(0) = 1, so x ← √1·x0 + √0·ε: the U-Net's x0
+        // output. With a zero-output timestep embedding that is exactly what the
+        // one-pass model it was warm-started from predicts from the same noise.
+        let device = Device::flex();
+        let unet_cfg = UNetConfig { model_channels: 32, ..UNetConfig::pusht_latent(3) };
+        let latents = LatentStats { channels: 3, size: 8, mean: vec![0.0; 3], std: vec![1.0; 3] };
+        let one_pass = WorldModelConfig {
+            objective: Objective::Drifting,
+            unet: unet_cfg.clone(),
+            latents,
+            autoencoder: None,
+            future: 4,
+            sample_steps: 1,
+            prediction: None,
+        };
+        let diffusion = WorldModelConfig {
+            objective: Objective::Diffusion,
+            unet: UNetConfig { timestep_embedding: true, ..unet_cfg.clone() },
+            prediction: Some(Prediction::X0),
+            ..one_pass.clone()
+        };
+        let unet = unet_cfg.init(&device);
+        let timed = unet.clone().with_timestep_embedding(&device);
+        let a = WorldModel::from_parts(one_pass, FrameCodec::pixels(8), unet, &device);
+        let mut b = WorldModel::from_parts(diffusion, FrameCodec::pixels(8), timed, &device);
+        let hist = Tensor::<5>::random([2, 4, 3, 8, 8], burn::tensor::Distribution::Default, &device);
+        let act = Tensor::<3>::zeros([2, 4, 2], &device);
+        let rngs = || (0..2).map(Rng::new).collect::<Vec<_>>();
+        let ya = a.predict(hist.clone(), act.clone(), &mut rngs());
+        let yb = b.predict(hist.clone(), act.clone(), &mut rngs());
+        let diff: f32 = (ya.clone() - yb).abs().max().into_scalar();
+        assert!(diff < 1e-5, "one x0 DDIM step differs from the one-pass output by {diff}");
+        // More steps re-noise and denoise again: a different, finite sample.
+        b.cfg.sample_steps = 4;
+        let y4 = b.predict(hist, act, &mut rngs());
+        let moved: f32 = (ya - y4.clone()).abs().mean().into_scalar();
+        assert!(moved > 1e-4, "{moved}");
+        assert!(y4.into_data().try_to_vec::<f32>().unwrap().iter().all(|v| v.is_finite()));
+    }
 
     #[test]
     fn cosine_schedule_ends() {

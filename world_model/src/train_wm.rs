@@ -29,7 +29,7 @@ use crate::data::{EpisodeData, Split};
 use crate::drift_step::{DriftSetup, FieldKind, drifting_loss};
 use crate::error::WorldModelError;
 use crate::latents::{Latents, Window, window, window_starts};
-use crate::model::{Objective, WorldModel, WorldModelConfig, alpha_bar};
+use crate::model::{Objective, Prediction, WorldModel, WorldModelConfig, alpha_bar};
 use crate::motion::MotionWeighting;
 use crate::optim::{Ema, clip_global_norm, warmup_lr};
 use crate::train_ae::{Configs, RunOptions, State, ckpt, io, run_configs};
@@ -222,18 +222,20 @@ pub fn train_world_model(
     let paths = ["model.bpk", "ema.bpk", "optimizer.bpk", "state.json"].map(|p| out.join(p));
     if let Some(dir) = cfg.init_from.as_ref().filter(|_| !run.resume) {
         // Warm start: both the trained and the EMA weights start from the other run's EMA;
-        // a run with action maps may start from one without (the new input's weights zero).
+        // a run may add action maps or a timestep embedding (new layers with zero output).
         let source = WorldModelConfig::read(dir)?.unet;
-        if source != model_cfg.unet && source.clone().with_action_maps(Some(true)) != model_cfg.unet {
+        if !model_cfg.unet.can_start_from(&source) {
             return Err(ckpt(&dir.join("config.json"), "its U-Net config differs from this run's"));
         }
         let path = dir.join("ema.bpk");
-        let load = |d: &Device| -> Result<UNet, WorldModelError> {
-            let u: UNet = source.init(d).try_load_file(&path).map_err(|e| ckpt(&path, e))?;
-            Ok(if model_cfg.unet.uses_action_maps() { u.with_action_maps() } else { u })
-        };
-        ema.module = load(&inner)?;
-        unet = load(&device)?;
+        unet = source.init(&device).try_load_file(&path).map_err(|e| ckpt(&path, e))?;
+        if model_cfg.unet.uses_action_maps() {
+            unet = unet.with_action_maps();
+        }
+        if model_cfg.unet.timestep_embedding {
+            unet = unet.with_timestep_embedding(&device);
+        }
+        ema.module = unet.valid(); // the same draw of any new (zero-output) layers
     }
     if run.resume {
         unet = unet.try_load_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;
@@ -310,9 +312,12 @@ pub fn train_world_model(
                 };
                 let (sa, sb) = (coef(&|a| a.sqrt()), coef(&|a| (1.0 - a).sqrt()));
                 let xt = x0.clone() * sa.clone() + eps.clone() * sb.clone();
-                let v = eps * sa - x0 * sb; // v-prediction target
+                let target = match model_cfg.prediction.unwrap_or_default() {
+                    Prediction::V => eps * sa - x0 * sb,
+                    Prediction::X0 => x0,
+                };
                 let tt = Tensor::<1>::from_floats(t.as_slice(), &device);
-                (unet.forward(xt, hist, act, Some(tt)) - v).powf_scalar(2.0).mean()
+                (unet.forward(xt, hist, act, Some(tt)) - target).powf_scalar(2.0).mean()
             }
         };
         let loss_value: f64 = loss.clone().into_scalar::<f32>().into();

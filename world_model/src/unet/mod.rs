@@ -14,11 +14,14 @@
 //! block (with its attention) and one after every downsampling.
 
 pub mod blocks;
+mod maps;
+
+pub use maps::{ACTION_MAP_SIGMA, action_maps};
 
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::interpolate::{Interpolate2d, Interpolate2dConfig, InterpolateMode};
-use burn::nn::{GroupNorm, GroupNormConfig, Linear, LinearConfig};
+use burn::nn::{GroupNorm, GroupNormConfig, Initializer, Linear, LinearConfig};
 use burn::tensor::activation::silu;
 use burn::tensor::{Device, Tensor};
 
@@ -67,6 +70,20 @@ impl UNetConfig {
     /// Whether the U-Net reads action maps.
     pub fn uses_action_maps(&self) -> bool {
         self.action_maps == Some(true)
+    }
+
+    /// Whether a run with this config can start from `source`'s weights: the same
+    /// U-Net, or one that lacks only action maps and/or the timestep embedding
+    /// (added with zero weights by [`UNet::with_action_maps`] and
+    /// [`UNet::with_timestep_embedding`], so the warm-started network computes
+    /// exactly what its source did).
+    pub fn can_start_from(&self, source: &UNetConfig) -> bool {
+        let mut bridged = source.clone();
+        if self.uses_action_maps() {
+            bridged.action_maps = Some(true);
+        }
+        bridged.timestep_embedding |= self.timestep_embedding;
+        source == self || bridged == *self
     }
 
     /// The paper's pixel-space Push-T model: 96x96 RGB, 96 channels, 4 levels,
@@ -269,38 +286,24 @@ impl UNet {
         self
     }
 
+    /// The same network with a timestep embedding added whose output layer is
+    /// zero: it computes exactly what it did before at every t, and training can
+    /// then learn to use t (warm-starting the diffusion baseline from a one-pass
+    /// model).
+    pub fn with_timestep_embedding(mut self, device: &Device) -> Self {
+        if self.time.is_none() {
+            let e = self.emb_dim;
+            let zero = LinearConfig::new(e, e).with_initializer(Initializer::Zeros).init(device);
+            self.time = Some(TimeMlp { l1: LinearConfig::new(e, e).init(device), l2: zero });
+        }
+        self
+    }
+
     /// Nearest-neighbour 2x upsampling in space.
     fn up2(&self, x: Tensor<5>) -> Tensor<5> {
         let [b, c, f, h, w] = x.dims();
         self.upsample.forward(x.reshape([b, c * f, h, w])).reshape([b, c, f, 2 * h, 2 * w])
     }
-}
-
-/// Standard deviation of an action map's bump, in world units (the world is
-/// 512 wide; the agent's radius is 15).
-pub const ACTION_MAP_SIGMA: f32 = 24.0;
-
-/// A Gaussian bump per frame at the action's position, on an `h × w` grid over
-/// the 512-unit world (row = y, column = x, as the renderer draws it). Actions
-/// are normalised as `a' = 2a/511 − 1`.
-///
-/// # Shapes
-/// `[b, F, 2] -> [b, 1, F, h, w]`
-pub fn action_maps(actions: Tensor<3>, h: usize, w: usize) -> Tensor<5> {
-    let [b, f, _] = actions.dims();
-    let device = actions.device();
-    let world = (actions + 1.0) * (511.0 / 2.0); // [b, F, 2] world units
-    let axis = |n: usize, dim: usize| {
-        let cells = n as f32 / 512.0; // grid cells per world unit
-        let centre = world.clone().narrow(2, dim, 1).reshape([b, 1, f, 1, 1]) * cells; // [b, 1, F, 1, 1]
-        let grid: Vec<f32> = (0..n).map(|j| j as f32 + 0.5).collect();
-        let grid = Tensor::<1>::from_floats(grid.as_slice(), &device);
-        let shape = if dim == 0 { [1, 1, 1, 1, n] } else { [1, 1, 1, n, 1] };
-        let d = (grid.reshape(shape) - centre) / (ACTION_MAP_SIGMA * cells); // in sigmas
-        d.clone() * d
-    };
-    let (dx, dy) = (axis(w, 0), axis(h, 1)); // [b, 1, F, 1, w], [b, 1, F, h, 1]
-    (dx.expand([b, 1, f, h, w]) + dy.expand([b, 1, f, h, w])).mul_scalar(-0.5).exp()
 }
 
 /// Sinusoidal embedding of t ∈ [0, 1] (scaled by 1000), `[b] -> [b, dim]`.
@@ -341,6 +344,31 @@ mod tests {
     }
 
     #[test]
+    fn warm_starts_bridge_action_maps_and_the_timestep_embedding() {
+        let plain = UNetConfig { model_channels: 32, ..UNetConfig::pusht_latent(4) };
+        let timed = UNetConfig { timestep_embedding: true, ..plain.clone() };
+        let both = UNetConfig { action_maps: Some(true), ..timed.clone() };
+        assert!(both.can_start_from(&plain) && both.can_start_from(&timed) && both.can_start_from(&both));
+        assert!(!plain.can_start_from(&timed), "a warm start adds layers, never drops them");
+        assert!(!both.can_start_from(&UNetConfig { model_channels: 64, ..plain.clone() }));
+        // The added embedding's output layer is zero: the same output at every t.
+        let device = Device::flex();
+        let unet = plain.init(&device);
+        let rand = |s: [usize; 5]| Tensor::<5>::random(s, burn::tensor::Distribution::Default, &device);
+        let (noise, hist) = (rand([2, 4, 4, 8, 8]), rand([2, 4, 4, 8, 8]));
+        let a = Tensor::<3>::zeros([2, 4, 2], &device);
+        let before = unet.forward(noise.clone(), hist.clone(), a.clone(), None);
+        let with_t = unet.with_timestep_embedding(&device);
+        assert_eq!(with_t.num_params(), timed.init(&device).num_params());
+        for t in [0.0, 0.37, 1.0] {
+            let t = Tensor::<1>::from_floats([t, t].as_slice(), &device);
+            let after = with_t.forward(noise.clone(), hist.clone(), a.clone(), Some(t));
+            let diff: f32 = (before.clone() - after).abs().max().into_scalar();
+            assert!(diff < 1e-5, "the zero-output embedding changed the output by {diff}");
+        }
+    }
+
+    #[test]
     fn actions_condition_the_output() {
         let device = Device::flex();
         let unet = UNetConfig { model_channels: 32, ..UNetConfig::pusht_latent(4) }.init(&device);
@@ -351,59 +379,6 @@ mod tests {
         let y2 = unet.forward(noise, hist, a + 0.5, None);
         let diff: f32 = (y1 - y2).abs().mean().into_scalar();
         assert!(diff > 1e-4, "actions have no effect ({diff})");
-    }
-}
-
-#[cfg(test)]
-mod action_map_tests {
-    use super::*;
-
-    #[test]
-    fn action_map_peaks_at_the_actions_cell() {
-        let device = Device::flex();
-        // World (416, 96) on an 8x8 grid (64 units per cell): column 416/64 - 0.5 = 6,
-        // row 96/64 - 0.5 = 1, both at a cell centre, so the bump is exactly 1 there.
-        // Normalised: 2·416/511 − 1 and 2·96/511 − 1.
-        let a = [2.0 * 416.0 / 511.0 - 1.0, 2.0 * 96.0 / 511.0 - 1.0];
-        let act = Tensor::<1>::from_floats(a.as_slice(), &device).reshape([1, 1, 2]);
-        let map: Vec<f32> = action_maps(act, 8, 8).into_data().try_to_vec::<f32>().unwrap();
-        assert_eq!(map.len(), 64);
-        assert!((map[8 + 6] - 1.0).abs() < 1e-5, "{}", map[8 + 6]);
-        // One cell (64 units) to the right: exp(−(64/24)²/2) = exp(−3.556) = 0.0286.
-        assert!((map[8 + 7] - 0.0286).abs() < 1e-3, "{}", map[8 + 7]);
-        // One cell down is the same distance; one diagonal is exp(−7.111) = 0.00082.
-        assert!((map[2 * 8 + 6] - 0.0286).abs() < 1e-3);
-        assert!((map[2 * 8 + 7] - 0.00082).abs() < 1e-4);
-        let max = map.iter().cloned().fold(f32::MIN, f32::max);
-        assert_eq!(max, map[8 + 6]);
-    }
-
-    #[test]
-    fn adding_action_maps_keeps_the_output_then_lets_actions_move_it() {
-        let device = Device::flex();
-        let cfg = UNetConfig { model_channels: 32, ..UNetConfig::pusht_latent(4) };
-        let unet = cfg.init(&device);
-        let rand = |s: [usize; 5]| Tensor::<5>::random(s, burn::tensor::Distribution::Default, &device);
-        let (noise, hist) = (rand([1, 4, 4, 8, 8]), rand([1, 4, 4, 8, 8]));
-        let a = Tensor::<3>::zeros([1, 4, 2], &device);
-        let before = unet.forward(noise.clone(), hist.clone(), a.clone(), None);
-        let widened = unet.with_action_maps();
-        let after = widened.forward(noise.clone(), hist.clone(), a.clone(), None);
-        let diff: f32 = (before - after.clone()).abs().max().into_scalar();
-        assert!(diff < 1e-5, "widening changed the output by {diff}");
-        // On an autodiff device the widened weight is a trainable leaf.
-        let ad = device.clone().autodiff();
-        let trained = cfg.init(&ad).with_action_maps();
-        let y = trained.forward(noise.clone(), hist.clone(), a.clone(), None);
-        let grads = burn::optim::GradientsParams::from_grads(y.sum().backward(), &trained);
-        assert!(!grads.is_empty());
-        // A fresh action-map model has the extra channel and reacts to it.
-        let fresh = UNetConfig { action_maps: Some(true), ..cfg }.init(&device);
-        assert_eq!(fresh.num_params(), widened.num_params());
-        let y1 = fresh.forward(noise.clone(), hist.clone(), a.clone(), None);
-        let y2 = fresh.forward(noise, hist, a + 0.5, None);
-        let moved: f32 = (y1 - y2).abs().mean().into_scalar();
-        assert!(moved > 1e-4, "actions have no effect ({moved})");
     }
 }
 
