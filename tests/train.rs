@@ -269,6 +269,13 @@ fn world_model_loss_variants_train_and_warm_start() {
     assert_eq!(prov["init_from"]["provenance"]["steps"], 2);
     assert_eq!(read_json(&second.join("init_from_provenance.json"))["steps"], 2);
     assert_eq!(read_json(&first.join("provenance.json"))["init_from"], serde_json::Value::Null);
+    // The commit is the one the binary was built from (this checkout's HEAD).
+    let head = std::process::Command::new("git").args(["rev-parse", "HEAD"]).output().unwrap();
+    let commit = prov["commit"].as_str().unwrap().to_string();
+    match String::from_utf8(head.stdout).unwrap().trim() {
+        "" => assert_eq!(commit, "unknown"),
+        head => assert!(commit == head || commit == format!("{head}+dirty"), "{commit} vs {head}"),
+    }
     // A warm start may add action maps (zero-initialised input channel); the run resumes
     // with them, and a run without maps cannot start from it.
     let maps = dir.path().join("wm_maps");

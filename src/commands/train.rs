@@ -16,21 +16,10 @@ use crate::cli::TrainAutoencoderArgs;
 use crate::output::write_json;
 use crate::progress;
 
-/// The commit of the working tree, or "unknown" outside a git checkout.
+/// The commit this binary was built from (`+dirty` if tracked files differed from it;
+/// "unknown" when built outside a git checkout), recorded by `build.rs`.
 pub(super) fn git_commit() -> String {
-    let out = std::process::Command::new("git").args(["rev-parse", "HEAD"]).output();
-    let dirty =
-        std::process::Command::new("git").args(["status", "--porcelain", "--untracked-files=no"]).output();
-    match out {
-        Ok(o) if o.status.success() => {
-            let mut c = String::from_utf8_lossy(&o.stdout).trim().to_string();
-            if dirty.is_ok_and(|d| !d.stdout.is_empty()) {
-                c.push_str("+dirty");
-            }
-            c
-        }
-        _ => "unknown".into(),
-    }
+    env!("EVALHARNESS_BUILD_COMMIT").to_string()
 }
 
 /// How an evalharness dataset was collected (from its attributes), to regenerate it:
