@@ -141,6 +141,23 @@ pub struct AgreementArgs {
 pub enum WmCommand {
     /// Video quality (MSE, PSNR, SSIM, ms/frame) of world models on held-out episodes.
     Eval(WmEvalArgs),
+    /// Copy a training run's inference files (EMA weights, config, logs, provenance)
+    /// into a folder to ship, its autoencoder path rewritten.
+    Export(WmExportArgs),
+}
+
+/// `evalharness wm export`.
+#[derive(Debug, Args)]
+pub struct WmExportArgs {
+    /// The training run's folder (`train world-model --out`).
+    #[arg(long)]
+    pub from: PathBuf,
+    /// The new world-model folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Replace an existing output folder.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `evalharness wm eval`.

@@ -318,6 +318,28 @@ fn world_model_loss_variants_train_and_warm_start() {
     let models = read_json(&ev.join("eval.json"))["models"].clone();
     assert_eq!(models[0]["objective"], "diffusion");
     assert!(models[0]["ssim"].as_f64().unwrap().is_finite(), "{models}");
+    // `wm export` makes a folder to ship: EMA weights, logs, provenance with an
+    // `exported` entry, the autoencoder path rewritten for the new depth; no resume state.
+    let shipped = dir.path().join("ship").join("pusht").join("wm_diffusion");
+    let export = |from: &Path| {
+        let args = ["wm", "export", "--from", from.to_str().unwrap(), "--out", shipped.to_str().unwrap()];
+        run(&args)
+    };
+    expect_code(&export(&diff), 0);
+    let cfg = read_json(&shipped.join("config.json"));
+    let ae_rel = cfg["model"]["autoencoder"].as_str().unwrap();
+    assert_eq!(ae_rel, "../../../ae");
+    assert_eq!(shipped.join(ae_rel).canonicalize().unwrap(), ae.canonicalize().unwrap());
+    assert_eq!(cfg["model"]["prediction"], "x0");
+    let prov = read_json(&shipped.join("provenance.json"));
+    assert_eq!(prov["exported"][0]["from"], diff.to_str().unwrap());
+    assert_eq!(prov["steps"], 1);
+    assert!(shipped.join("ema.bpk").is_file() && !shipped.join("optimizer.bpk").exists());
+    let (_, err) = expect_code(&export(&diff), 2);
+    assert!(err.contains("already exists"), "{err}");
+    let (_, err) =
+        expect_code(&run(&["wm", "export", "--from", a, "--out", dir.path().join("x").to_str().unwrap()]), 2);
+    assert!(err.contains(&format!("--from {a}")) && err.contains("config.json"), "{err}");
     let (_, err) = expect_code(&wm(&diff, &["--steps", "2", "--resume", "--prediction", "v"]), 2);
     assert!(err.contains("--prediction (saved: \"x0\")"), "{err}");
     let (_, err) = expect_code(&wm(&third, &["--prediction", "x0"]), 2);

@@ -112,7 +112,7 @@ fn prepare(dir: &Path, mut file: PolicyFile, a: &ExportPoliciesArgs) -> Result<E
 }
 
 /// Appends an export record to the list at `slot` (created if absent).
-fn append(slot: &mut Value, record: Value) {
+pub(super) fn append(slot: &mut Value, record: Value) {
     match slot {
         Value::Array(list) => list.push(record),
         Value::Null => *slot = Value::Array(vec![record]),

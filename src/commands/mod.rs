@@ -13,6 +13,7 @@ mod train;
 mod train_policy;
 mod train_wm;
 mod wm_eval;
+mod wm_export;
 
 use std::process::ExitCode;
 
@@ -48,6 +49,7 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Wm(WmCommand::Eval(a)) => wm_eval::run(a),
+        Command::Wm(WmCommand::Export(a)) => wm_export::run(a),
         Command::Scripted(a) => scripted::run(a),
         Command::ExportPolicies(a) => export_policies::run(a),
     }

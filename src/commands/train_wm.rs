@@ -28,7 +28,7 @@ use crate::output::{read_json, write_json};
 use crate::progress;
 
 /// `target` relative to the folder `base` (both must exist), e.g. `../autoencoder`.
-fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
+pub(super) fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
     let b = base.canonicalize().with_context(|| format!("resolving {}", base.display()))?;
     let t = target.canonicalize().with_context(|| format!("resolving {}", target.display()))?;
     let (bc, tc): (Vec<Component>, Vec<Component>) = (b.components().collect(), t.components().collect());

@@ -1,0 +1,74 @@
+//! `evalharness wm export`: a world-model folder to ship or share, made from a
+//! training run: the EMA weights that `rank` and `wm eval` load, `config.json`
+//! with its autoencoder path rewritten relative to the new folder, the training
+//! log, sessions and provenance, which gains an `exported` entry (command,
+//! commit, source folder; one per export, oldest first). The trained weights and
+//! the optimizer state, needed only to resume training, stay in the run.
+//!
+//! The source must load as a model and have a `provenance.json` (a trainer writes
+//! it when a session ends), and so must the copy, checked before it is reported.
+
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use serde_json::json;
+use world_model::model::WorldModel;
+
+use super::export_policies::append;
+use super::train::git_commit;
+use super::train_wm::relative_to;
+use crate::cli::WmExportArgs;
+use crate::output::{Staged, read_json, write_json};
+
+/// Copied when present; `ema.bpk` is required.
+const FILES: [&str; 5] =
+    ["ema.bpk", "state.json", "train_log.jsonl", "sessions.jsonl", "init_from_provenance.json"];
+
+/// `evalharness wm export`.
+pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
+    let device = world_model::device::selected()?;
+    WorldModel::load(&a.from, &device).with_context(|| format!("--from {}", a.from.display()))?;
+    let prov_path = a.from.join("provenance.json");
+    if !prov_path.is_file() {
+        bail!(
+            "--from {}: no provenance.json (a trainer writes it when a session ends; \
+             `train world-model --out {0} --resume --max-minutes 0` writes it without training)",
+            a.from.display()
+        );
+    }
+    let mut provenance = read_json(&prov_path)?;
+    let mut config = read_json(&a.from.join("config.json"))?;
+    let staged = Staged::new(&a.out, a.force)?;
+    if let Some(ae) = config["model"]["autoencoder"].as_str() {
+        // The staging folder is the output's sibling, so paths relative to it hold.
+        let moved = relative_to(&staged.file(""), &a.from.join(ae))?.display().to_string();
+        config["model"]["autoencoder"] = json!(moved);
+        if provenance.get("autoencoder").is_some() {
+            provenance["autoencoder"] = json!(moved);
+        }
+    }
+    write_json(&staged.file("config.json"), &config)?;
+    for name in FILES {
+        let (src, dst) = (a.from.join(name), staged.file(name));
+        if src.is_file() {
+            std::fs::copy(&src, &dst).with_context(|| format!("copying {}", src.display()))?;
+        }
+    }
+    let command: Vec<String> = std::env::args().collect();
+    let entry =
+        json!({"command": command.join(" "), "commit": git_commit(), "from": a.from.display().to_string()});
+    append(&mut provenance["exported"], entry);
+    write_json(&staged.file("provenance.json"), &provenance)?;
+    let out = staged.commit()?;
+    check_loads(&out, &device)?;
+    println!("{}", out.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The exported folder loads as the same kind of model.
+fn check_loads(out: &Path, device: &burn::tensor::Device) -> Result<()> {
+    WorldModel::load(out, device)
+        .with_context(|| format!("{}: the exported model does not load", out.display()))?;
+    Ok(())
+}
