@@ -60,16 +60,17 @@ pub fn resume_or_start<C: Serialize + DeserializeOwned>(
     Ok(saved)
 }
 
-/// Opens a run's JSON-lines log (one object with a `"step"` per line) for
-/// appending, first dropping the lines of steps after `step`, the checkpoint the
-/// run resumes from. A run killed between checkpoints logged steps that the
-/// resumed run repeats; keeping both would give the log two histories for the
-/// same steps. Lines without a step are kept. The file is rewritten (through a
-/// temporary file and a rename) only when a line is dropped.
+/// Opens a run's JSON-lines log (one object with a step counter `key` per line,
+/// e.g. `"step"`) for appending, first dropping the lines whose `key` is after
+/// `step`, the checkpoint the run resumes from. A run killed between checkpoints
+/// logged steps that the resumed run repeats; keeping both would give the log two
+/// histories for the same steps. Lines without `key` (another stage's, sharing the
+/// file) are kept. The file is rewritten (through a temporary file and a rename)
+/// only when a line is dropped.
 ///
 /// # Errors
 /// [`RunFileError`] naming `path` when it cannot be read, rewritten or opened.
-pub fn open_log(path: &Path, step: u64) -> Result<std::fs::File, RunFileError> {
+pub fn open_log(path: &Path, key: &str, step: u64) -> Result<std::fs::File, RunFileError> {
     let err = |m: String| RunFileError { path: path.to_path_buf(), message: m };
     let text = match std::fs::read_to_string(path) {
         Ok(text) => text,
@@ -79,7 +80,7 @@ pub fn open_log(path: &Path, step: u64) -> Result<std::fs::File, RunFileError> {
     let later = |line: &str| {
         serde_json::from_str::<serde_json::Value>(line)
             .ok()
-            .and_then(|v| v["step"].as_u64())
+            .and_then(|v| v[key].as_u64())
             .is_some_and(|s| s > step)
     };
     let kept: Vec<&str> = text.lines().filter(|l| !later(l)).collect();
@@ -138,19 +139,25 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("train_log.jsonl");
         // A fresh run: no file yet.
-        writeln!(open_log(&path, 0).unwrap(), "{{\"step\":1}}").unwrap();
+        writeln!(open_log(&path, "step", 0).unwrap(), "{{\"step\":1}}").unwrap();
         // The run went on to step 4, was checkpointed at step 2 and killed.
-        let mut log = open_log(&path, 1).unwrap();
+        let mut log = open_log(&path, "step", 1).unwrap();
         for s in 2..=4 {
             writeln!(log, "{{\"step\":{s},\"loss\":0.5}}").unwrap();
         }
         writeln!(log, "not json").unwrap();
+        writeln!(log, "{{\"encoder_step\":9}}").unwrap(); // another stage's counter
         drop(log);
-        writeln!(open_log(&path, 2).unwrap(), "{{\"step\":3,\"loss\":0.4}}").unwrap();
+        writeln!(open_log(&path, "step", 2).unwrap(), "{{\"step\":3,\"loss\":0.4}}").unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let kept = "{\"step\":1}\n{\"step\":2,\"loss\":0.5}\nnot json\n{\"encoder_step\":9}\n";
+        assert_eq!(text, format!("{kept}{{\"step\":3,\"loss\":0.4}}\n"));
+        // That stage resumes from its own counter, keeping the other lines.
+        drop(open_log(&path, "encoder_step", 5).unwrap());
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(text, "{\"step\":1}\n{\"step\":2,\"loss\":0.5}\nnot json\n{\"step\":3,\"loss\":0.4}\n");
         assert!(!dir.path().join("train_log.jsonl.partial").exists());
         let bad = dir.path().join("missing/dir/log.jsonl");
-        assert_eq!(open_log(&bad, 0).unwrap_err().path, bad);
+        assert_eq!(open_log(&bad, "step", 0).unwrap_err().path, bad);
     }
 }

@@ -214,11 +214,9 @@ pub fn pretrain_encoder(
         sets
     };
     let log_path = dir.join("log.jsonl");
-    let mut log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(&log_path)
-        .map_err(|e| err(&log_path, e.to_string()))?;
+    // Shared with the U-Net stage's lines, which count "step" and are kept.
+    let mut log = harness::runfile::open_log(&log_path, "encoder_step", state.step)
+        .map_err(|e| err(&e.path, e.message))?;
     let save = |probe: &PoseProbe, optim: &burn::optim::ModuleOptimizer, state: &PretrainState| {
         probe.clone().save_file(&files[0]).map_err(|e| err(&files[0], e.to_string()))?;
         optim.save(&files[1]).map_err(|e| err(&files[1], e.to_string()))?;

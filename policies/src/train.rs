@@ -243,7 +243,7 @@ pub fn train_policy(
     };
     let ac = alphas_cumprod(pc.train_steps);
     let log_path = dir.join("log.jsonl");
-    let mut log = harness::runfile::open_log(&log_path, state.step)
+    let mut log = harness::runfile::open_log(&log_path, "step", state.step)
         .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
     let base = state.elapsed_s;
     let mut recent = Vec::new();

@@ -247,7 +247,8 @@ pub fn train_autoencoder(
     let stride = (held.len() / cfg.eval_frames.max(1)).max(1);
     let eval_idx: Vec<usize> = held.iter().step_by(stride).take(cfg.eval_frames).copied().collect();
     let log_path = out.join("train_log.jsonl");
-    let mut log = harness::runfile::open_log(&log_path, state.step).map_err(|e| ckpt(&e.path, e.message))?;
+    let mut log =
+        harness::runfile::open_log(&log_path, "step", state.step).map_err(|e| ckpt(&e.path, e.message))?;
     let started = Instant::now();
     let base_elapsed = state.elapsed_s;
     let deadline = max_minutes.map(|m| m * 60.0);

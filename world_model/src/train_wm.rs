@@ -253,7 +253,8 @@ pub fn train_world_model(
         std::fs::write(&paths[3], serde_json::to_string(state).unwrap_or_default()).map_err(io(&paths[3]))
     };
     let log_path = out.join("train_log.jsonl");
-    let mut log = harness::runfile::open_log(&log_path, state.step).map_err(|e| ckpt(&e.path, e.message))?;
+    let mut log =
+        harness::runfile::open_log(&log_path, "step", state.step).map_err(|e| ckpt(&e.path, e.message))?;
     let started = Instant::now();
     let base_elapsed = state.elapsed_s;
     let deadline = run.max_minutes.map(|m| m * 60.0);
