@@ -8,7 +8,6 @@
 //! The source must load as a model and have a `provenance.json` (a trainer writes
 //! it when a session ends), and so must the copy, checked before it is reported.
 
-use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
@@ -61,14 +60,8 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
     append(&mut provenance["exported"], entry);
     write_json(&staged.file("provenance.json"), &provenance)?;
     let out = staged.commit()?;
-    check_loads(&out, &device)?;
+    WorldModel::load(&out, &device)
+        .with_context(|| format!("{}: the exported model does not load", out.display()))?;
     println!("{}", out.display());
     Ok(ExitCode::SUCCESS)
-}
-
-/// The exported folder loads as the same kind of model.
-fn check_loads(out: &Path, device: &burn::tensor::Device) -> Result<()> {
-    WorldModel::load(out, device)
-        .with_context(|| format!("{}: the exported model does not load", out.display()))?;
-    Ok(())
 }

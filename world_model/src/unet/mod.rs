@@ -83,7 +83,7 @@ impl UNetConfig {
             bridged.action_maps = Some(true);
         }
         bridged.timestep_embedding |= self.timestep_embedding;
-        source == self || bridged == *self
+        bridged == *self // bridging only adds what `self` has, so the same config passes
     }
 
     /// The paper's pixel-space Push-T model: 96x96 RGB, 96 channels, 4 levels,
