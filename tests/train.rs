@@ -182,6 +182,49 @@ fn policy_stopped_during_encoder_pretraining_resumes() {
     assert!(err.contains("no checkpoint of epoch 7"), "{err}");
     let (_, err) = expect_code(&run(&[&export[..], &["--force", "--action-horizon", "16"]].concat()), 2);
     assert!(err.contains("--action-horizon 16 must be 1..=15"), "{err}");
+
+    // Fine-tuning a checkpoint: its network, action horizon and normalisation carry
+    // over, its provenance nests in the new one's, and typed sizes must agree with it.
+    let tuned = dir.path().join("tuned");
+    let start = set.join("epoch-0002");
+    let tune = [
+        "train",
+        "policy",
+        "--data",
+        d,
+        "--behaviour",
+        "all",
+        "--epochs",
+        "1",
+        "--batch",
+        "40",
+        "--init-from",
+        start.to_str().unwrap(),
+        "--out",
+        tuned.to_str().unwrap(),
+    ];
+    let (stdout, _) = expect_code(&run(&tune), 0);
+    assert!(stdout.contains("step 1/1") && stdout.contains("epoch-0001"), "{stdout}");
+    let file = read_json(&tuned.join("epoch-0001/policy.json"));
+    assert_eq!(file["config"], copy["config"], "{file}");
+    assert_eq!(file["normalisation"], copy["normalisation"], "{file}");
+    assert_eq!(file["provenance"]["init_from"]["epoch"], 2, "{file}");
+    assert_eq!(file["provenance"]["init_from"]["provenance"], copy["provenance"], "{file}");
+    assert!(file["provenance"].get("encoder_pretraining").is_none(), "{file}");
+    let (stdout, _) =
+        expect_code(&run(&[&tune[..], &["--resume", "--epochs", "2", "--save-every", "1"]].concat()), 0);
+    assert!(stdout.contains("epoch-0002"), "{stdout}");
+    let (_, err) = expect_code(&run(&[&tune[..], &["--force", "--down-dims", "16,64"]].concat()), 2);
+    assert!(err.contains("its U-Net has channels [16, 32], not [16, 64]"), "{err}");
+    let (_, err) = expect_code(&run(&[&tune[..], &["--force", "--encoder-steps", "5"]].concat()), 2);
+    assert!(err.contains("--encoder-steps"), "{err}");
+    let other = out.join("epoch-0002");
+    let elsewhere: Vec<&str> = tune
+        .iter()
+        .map(|&a| if a == start.to_str().unwrap() { other.to_str().unwrap() } else { a })
+        .collect();
+    let (_, err) = expect_code(&run(&[&elsewhere[..], &["--resume"]].concat()), 2);
+    assert!(err.contains("--init-from (saved: "), "{err}");
     let scripted = dir.path().join("scripted");
     expect_code(&run(&["scripted", "--out", scripted.to_str().unwrap()]), 0);
     let (_, err) =

@@ -136,15 +136,12 @@ pub fn load_policy(
     device: &Device,
 ) -> Result<Box<dyn Policy>, PolicyLoadError> {
     let err = |m: String| PolicyLoadError::new(dir, m);
-    let json = dir.join("policy.json");
-    let text = std::fs::read_to_string(&json).map_err(|e| err(format!("policy.json: {e}")))?;
-    let file: PolicyFile = serde_json::from_str(&text).map_err(|e| err(format!("policy.json: {e}")))?;
+    let file = read_policy_file(dir)?;
     let name =
         dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
     match file.kind.as_str() {
         "diffusion" => {
-            let cfg: DiffusionConfig = serde_json::from_value(file.config.clone())
-                .map_err(|e| err(format!("policy.json \"config\": {e}")))?;
+            let cfg = diffusion_config(dir, &file)?;
             if cfg.net.image_size != expect.image_size {
                 return Err(err(format!(
                     "takes {0}x{0} frames, the scenario renders {1}x{1}",
@@ -157,19 +154,56 @@ pub fn load_policy(
                     cfg.net.action_dim, expect.action_dim
                 )));
             }
-            if cfg.action_horizon == 0 || cfg.action_horizon > cfg.max_action_horizon() {
-                return Err(err(format!(
-                    "action horizon {} does not fit horizon {}",
-                    cfg.action_horizon, cfg.horizon
-                )));
-            }
-            let weights = dir.join("model.bpk");
-            let net = load_weights(DiffusionNet::new(&cfg, device), &weights)
-                .map_err(|e| err(format!("model.bpk: {e}")))?;
+            let net = diffusion_weights(dir, &cfg, device)?;
             Ok(Box::new(DiffusionPolicy::new(name, cfg, file.normalisation, net, device)))
         }
         other => Err(err(format!("unknown policy kind \"{other}\" (known: diffusion, scripted)"))),
     }
+}
+
+/// Reads a checkpoint folder's `policy.json`.
+///
+/// # Errors
+/// [`PolicyLoadError`] naming the folder for a missing or invalid file.
+pub fn read_policy_file(dir: &Path) -> Result<PolicyFile, PolicyLoadError> {
+    let err = |m: String| PolicyLoadError::new(dir, m);
+    let json = dir.join("policy.json");
+    let text = std::fs::read_to_string(&json).map_err(|e| err(format!("policy.json: {e}")))?;
+    serde_json::from_str(&text).map_err(|e| err(format!("policy.json: {e}")))
+}
+
+/// The diffusion config of a checkpoint's `policy.json`, checked for a usable action horizon.
+///
+/// # Errors
+/// [`PolicyLoadError`] naming the folder for another kind or an invalid config.
+pub fn diffusion_config(dir: &Path, file: &PolicyFile) -> Result<DiffusionConfig, PolicyLoadError> {
+    let err = |m: String| PolicyLoadError::new(dir, m);
+    if file.kind != "diffusion" {
+        return Err(err(format!("policy.json: kind \"{}\", expected \"diffusion\"", file.kind)));
+    }
+    let cfg: DiffusionConfig = serde_json::from_value(file.config.clone())
+        .map_err(|e| err(format!("policy.json \"config\": {e}")))?;
+    if cfg.action_horizon == 0 || cfg.action_horizon > cfg.max_action_horizon() {
+        return Err(err(format!(
+            "action horizon {} does not fit horizon {}",
+            cfg.action_horizon, cfg.horizon
+        )));
+    }
+    Ok(cfg)
+}
+
+/// A diffusion checkpoint's networks (`model.bpk`) built for `cfg` on `device`.
+///
+/// # Errors
+/// [`PolicyLoadError`] naming the folder for weights that are missing, truncated or
+/// do not match the config.
+pub fn diffusion_weights(
+    dir: &Path,
+    cfg: &DiffusionConfig,
+    device: &Device,
+) -> Result<DiffusionNet, PolicyLoadError> {
+    load_weights(DiffusionNet::new(cfg, device), &dir.join("model.bpk"))
+        .map_err(|e| PolicyLoadError::new(dir, format!("model.bpk: {e}")))
 }
 
 /// The checkpoint folders of a policy directory: itself if it holds `policy.json`,

@@ -26,7 +26,9 @@ use serde_json::json;
 
 use crate::data::Demos;
 use crate::diffusion::{DiffusionConfig, DiffusionNet, Normalisation, alphas_cumprod, frames_to_tensor};
-use crate::dir::{PolicyFile, PolicyLoadError, write_policy};
+use crate::dir::{
+    PolicyFile, PolicyLoadError, diffusion_config, diffusion_weights, read_policy_file, write_policy,
+};
 use crate::pretrain::{Pretrain, encode_frames, pretrain_encoder};
 use world_model::optim::Ema;
 
@@ -64,6 +66,11 @@ pub struct PolicyTrainConfig {
     /// effective decay warms up as `min(ema, (1 + k) / (10 + k))` after k updates.
     #[serde(default)]
     pub ema: f64,
+    /// A diffusion-policy checkpoint folder the run starts from instead of fresh
+    /// weights (fine-tuning, e.g. on more demonstrations). Its encoder stays frozen
+    /// (the U-Net trains on cached features) and the run must use its network config.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init_from: Option<PathBuf>,
 }
 
 fn default_encoder_lr() -> f64 {
@@ -196,6 +203,9 @@ pub fn train_policy(
         let text = std::fs::read_to_string(&paths[2]).map_err(io(&paths[2]))?;
         state = serde_json::from_str(&text).map_err(|e| PolicyLoadError::new(&paths[2], e.to_string()))?;
     }
+    if let Some(src) = tc.init_from.as_ref().filter(|_| !run.resume) {
+        net = init_weights(src, pc, &device)?;
+    }
     let mut ema = Ema::new(&net, tc.ema);
     if tc.ema > 0.0 && state.ema_updates > 0 {
         let module = ema.module.clone();
@@ -237,6 +247,10 @@ pub fn train_policy(
             ema = Ema::new(&net, tc.ema);
         }
         tracing::info!(frames = demos.len(), "encoding every frame with the frozen encoder");
+        Some(encode_frames(&net.encoder.valid(), demos, s, inner))
+    } else if tc.init_from.is_some() {
+        // The starting checkpoint's encoder (saved unchanged in `.train/model.bpk` on resume).
+        tracing::info!(frames = demos.len(), "encoding every frame with the starting checkpoint's encoder");
         Some(encode_frames(&net.encoder.valid(), demos, s, inner))
     } else {
         None
@@ -350,6 +364,23 @@ pub fn train_policy(
     save_state(&net, &ema, &optim, &state)?;
     let loss = recent.iter().sum::<f64>() / recent.len().max(1) as f64;
     Ok(PolicyOutcome { step: state.step, total, saved, loss })
+}
+
+/// The weights of the checkpoint a run starts from, which must have the run's
+/// network config.
+fn init_weights(src: &Path, pc: &DiffusionConfig, device: &Device) -> Result<DiffusionNet, PolicyLoadError> {
+    let file = read_policy_file(src)?;
+    let cfg = diffusion_config(src, &file)?;
+    if cfg.net != pc.net || cfg.horizon != pc.horizon || cfg.train_steps != pc.train_steps {
+        return Err(PolicyLoadError::new(
+            src,
+            format!(
+                "its network ({:?}, horizon {}, {} diffusion steps) is not the run's ({:?}, horizon {}, {})",
+                cfg.net, cfg.horizon, cfg.train_steps, pc.net, pc.horizon, pc.train_steps
+            ),
+        ));
+    }
+    diffusion_weights(src, pc, device)
 }
 
 /// Linear warm-up, then constant.

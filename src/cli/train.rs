@@ -64,6 +64,12 @@ pub struct TrainPolicyArgs {
     /// `.train/encoder*`), e.g. to train several U-Nets on one encoder.
     #[arg(long)]
     pub encoder_from: Option<PathBuf>,
+    /// Fine-tune a diffusion-policy checkpoint folder (e.g. on more demonstrations):
+    /// start from its weights, network config, action horizon and normalisation; its
+    /// encoder stays frozen and the U-Net trains on cached features. Epochs count
+    /// from 1 again; each checkpoint's provenance nests the starting one's.
+    #[arg(long, conflicts_with_all = ["encoder_from", "encoder_steps"])]
+    pub init_from: Option<PathBuf>,
     /// Decay of the weights' moving average that checkpoints are saved from (0: raw
     /// weights); 0.999 for a new run. With `--resume`, switches the EMA on (from the
     /// current weights) or changes its decay.

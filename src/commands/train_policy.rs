@@ -5,7 +5,8 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use policies::data::Demos;
-use policies::diffusion::DiffusionConfig;
+use policies::diffusion::{DiffusionConfig, Normalisation};
+use policies::dir::{diffusion_config, read_policy_file};
 use policies::net::NetConfig;
 use policies::train::{Phase, PolicyRun, PolicyTrainConfig, RunConfigs, train_policy};
 use serde_json::json;
@@ -23,15 +24,26 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
     if a.ema.is_some_and(|d| !(0.0..1.0).contains(&d)) {
         bail!("--ema must be in [0, 1), got {}", a.ema.unwrap_or_default());
     }
-    let policy = DiffusionConfig {
+    let mut policy = DiffusionConfig {
         net: NetConfig::new().with_encoder_width(a.encoder_width).with_down_dims(a.down_dims.clone()),
         inference_steps: a.inference_steps,
         ..DiffusionConfig::default()
     };
+    let start = a.init_from.as_deref().map(|dir| starting_checkpoint(dir, &policy)).transpose()?;
+    if let Some(s) = &start {
+        policy = s.config.clone();
+    }
     let behaviour = (a.behaviour != "all").then_some(a.behaviour.as_str());
     tracing::info!(data = %a.data.display(), ?behaviour, "loading demonstrations");
     let demos = Demos::load(&a.data, behaviour, a.episodes, policy.net.image_size)?;
     tracing::info!(episodes = demos.episodes.len(), samples = demos.len(), "loaded");
+    let normalisation = match &start {
+        Some(s) => {
+            warn_outside(&demos.normalisation(), &s.normalisation);
+            s.normalisation.clone()
+        }
+        None => demos.normalisation(),
+    };
     let args: Vec<String> = std::env::args().collect();
     let configs = RunConfigs {
         train: PolicyTrainConfig {
@@ -43,11 +55,12 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
             weight_decay: 1e-6,
             seed: a.seed,
             checkpoint_every: 50,
-            encoder_steps: a.encoder_steps,
+            encoder_steps: if start.is_some() { 0 } else { a.encoder_steps },
             encoder_lr: a.encoder_lr,
             ema: a.ema.unwrap_or(0.999),
+            init_from: a.init_from.clone(),
         },
-        normalisation: demos.normalisation(),
+        normalisation,
         provenance: json!({
             "command": args.join(" "),
             "commit": git_commit(),
@@ -60,6 +73,12 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
                 "collected_with": dataset_origin(&a.data),
             },
             "encoder_from": a.encoder_from.as_ref().map(|p| p.display().to_string()),
+            "init_from": start.as_ref().map(|s| json!({
+                "path": s.dir.display().to_string(),
+                "epoch": s.epoch,
+                "step": s.step,
+                "provenance": s.provenance,
+            })),
         }),
         policy,
     };
@@ -111,7 +130,8 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
 fn check_resume_flags(path: &std::path::Path, fresh: &RunConfigs) -> Result<()> {
     let saved = crate::output::read_json(path)?;
     let ours = serde_json::to_value(fresh)?;
-    let keys = ["save_every", "batch", "lr", "seed", "encoder_steps", "encoder_lr"].map(|k| (k, k));
+    let keys =
+        ["save_every", "batch", "lr", "seed", "encoder_steps", "encoder_lr", "init_from"].map(|k| (k, k));
     let mut fixed = fixed_fields(&ours["train"], &saved["train"], &keys);
     let net = [("encoder_width", "encoder_width"), ("down_dims", "down_dims")];
     fixed.extend(fixed_fields(&ours["policy"]["net"], &saved["policy"]["net"], &net));
@@ -124,6 +144,70 @@ fn check_resume_flags(path: &std::path::Path, fresh: &RunConfigs) -> Result<()> 
     let data = [("behaviour", "behaviour"), ("episodes", "episodes")];
     fixed.extend(fixed_fields(&ours["provenance"]["data"], &saved["provenance"]["data"], &data));
     refuse_contradicting_flags(path, "policy", &fixed)
+}
+
+/// The checkpoint `--init-from` names, read and checked against the flags typed
+/// with it (the network is the checkpoint's; a typed size that differs is refused).
+struct Start {
+    dir: std::path::PathBuf,
+    config: DiffusionConfig,
+    normalisation: Normalisation,
+    epoch: u64,
+    step: u64,
+    provenance: serde_json::Value,
+}
+
+fn starting_checkpoint(dir: &std::path::Path, typed: &DiffusionConfig) -> Result<Start> {
+    let file = read_policy_file(dir)?;
+    let mut config = diffusion_config(dir, &file)?;
+    let given = crate::cli::given_on_command_line(&["train", "policy"]);
+    let is_given = |id: &str| given.iter().any(|g| g == id);
+    if is_given("encoder_width") && typed.net.encoder_width != config.net.encoder_width {
+        bail!(
+            "--init-from {}: its encoder width is {}, not {}",
+            dir.display(),
+            config.net.encoder_width,
+            typed.net.encoder_width
+        );
+    }
+    if is_given("down_dims") && typed.net.down_dims != config.net.down_dims {
+        bail!(
+            "--init-from {}: its U-Net has channels {:?}, not {:?}",
+            dir.display(),
+            config.net.down_dims,
+            typed.net.down_dims
+        );
+    }
+    if is_given("inference_steps") {
+        config.inference_steps = typed.inference_steps;
+    }
+    Ok(Start {
+        dir: dir.to_path_buf(),
+        config,
+        normalisation: file.normalisation,
+        epoch: file.epoch,
+        step: file.step,
+        provenance: file.provenance,
+    })
+}
+
+/// Logs a warning when the demonstrations reach outside the starting checkpoint's
+/// normalisation ranges (the network then sees inputs beyond [-1, 1]).
+fn warn_outside(data: &Normalisation, ck: &Normalisation) {
+    for (what, d, c) in
+        [("agent position", &data.agent_pos, &ck.agent_pos), ("action", &data.action, &ck.action)]
+    {
+        if (0..2).any(|i| d.min[i] < c.min[i] || d.max[i] > c.max[i]) {
+            tracing::warn!(
+                "the data's {what} range {:?}..{:?} exceeds the starting checkpoint's {:?}..{:?}; \
+                 normalised values leave [-1, 1]",
+                d.min,
+                d.max,
+                c.min,
+                c.max
+            );
+        }
+    }
 }
 
 #[cfg(test)]
