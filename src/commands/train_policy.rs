@@ -17,7 +17,6 @@ use crate::progress;
 
 /// `evalharness train policy`.
 pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
-    prepare_out(&a.out, a.session.resume, a.session.force, ".train/state.json")?;
     if a.batch == 0 || a.epochs == Some(0) || a.save_every == 0 {
         bail!("--batch, --epochs and --save-every must be positive");
     }
@@ -33,6 +32,8 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
     if let Some(s) = &start {
         policy = s.config.clone();
     }
+    // Checked before `--force` clears the output folder.
+    prepare_out(&a.out, a.session.resume, a.session.force, ".train/state.json")?;
     let behaviour = (a.behaviour != "all").then_some(a.behaviour.as_str());
     tracing::info!(data = %a.data.display(), ?behaviour, "loading demonstrations");
     let demos = Demos::load(&a.data, behaviour, a.episodes, policy.net.image_size)?;
