@@ -100,6 +100,13 @@ pub struct ExportPoliciesArgs {
     /// Replace an existing `--out`.
     #[arg(long)]
     pub force: bool,
+    /// Add the checkpoints to an existing set `--out` (names it already holds are refused).
+    #[arg(long, conflicts_with = "force")]
+    pub add: bool,
+    /// Prefix for the exported folder names (e.g. `ft-` for a fine-tuning run's epochs
+    /// next to the run they started from).
+    #[arg(long, default_value = "")]
+    pub prefix: String,
 }
 
 /// `evalharness scripted`.

@@ -44,6 +44,33 @@ impl Staged {
             .with_context(|| format!("moving {} into place", self.target.display()))?;
         Ok(self.target)
     }
+
+    /// Moves each entry of the staging directory into the existing target folder,
+    /// refusing (before moving anything) names the target already holds.
+    pub fn commit_into(self) -> Result<PathBuf> {
+        let entries: Vec<PathBuf> = std::fs::read_dir(&self.tmp)
+            .with_context(|| format!("reading {}", self.tmp.display()))?
+            .map(|e| e.map(|e| e.path()))
+            .collect::<std::io::Result<_>>()
+            .with_context(|| format!("reading {}", self.tmp.display()))?;
+        let taken: Vec<String> = entries
+            .iter()
+            .filter_map(|e| e.file_name())
+            .filter(|n| self.target.join(n).exists())
+            .map(|n| n.to_string_lossy().into_owned())
+            .collect();
+        if !taken.is_empty() {
+            std::fs::remove_dir_all(&self.tmp).with_context(|| format!("removing {}", self.tmp.display()))?;
+            bail!("{} already holds {}", self.target.display(), taken.join(", "));
+        }
+        for e in &entries {
+            let dst = self.target.join(e.file_name().unwrap_or_default());
+            std::fs::rename(e, &dst)
+                .with_context(|| format!("moving {} to {}", e.display(), dst.display()))?;
+        }
+        std::fs::remove_dir(&self.tmp).with_context(|| format!("removing {}", self.tmp.display()))?;
+        Ok(self.target)
+    }
 }
 
 /// Reads a JSON file, naming it in any error.

@@ -224,6 +224,18 @@ fn policy_stopped_during_encoder_pretraining_resumes() {
     assert!(tuned.join("epoch-0002/model.bpk").is_file(), "a refused --force run keeps the old output");
     let (_, err) = expect_code(&run(&[&tune[..], &["--force", "--encoder-steps", "5"]].concat()), 2);
     assert!(err.contains("--encoder-steps"), "{err}");
+    // The fine-tuned epochs join the set they started from, under a prefix.
+    let (t, st) = (tuned.to_str().unwrap(), set.to_str().unwrap());
+    let add = ["export-policies", "--from", t, "--epochs", "1", "--prefix", "ft-", "--add", "--out", st];
+    let (stdout, _) = expect_code(&run(&add), 0);
+    assert!(stdout.trim().ends_with("ft-epoch-0001"), "{stdout}");
+    assert!(set.join("epoch-0002/model.bpk").is_file() && set.join("ft-epoch-0001/model.bpk").is_file());
+    let (_, err) = expect_code(&run(&add), 2);
+    assert!(err.contains("already holds ft-epoch-0001"), "{err}");
+    assert!(!dir.path().join("set.partial").exists());
+    let nowhere = dir.path().join("nowhere");
+    let (_, err) = expect_code(&run(&[&add[..9], &[nowhere.to_str().unwrap()]].concat()), 2);
+    assert!(err.contains("is not an existing policy set"), "{err}");
     let other = out.join("epoch-0002");
     let elsewhere: Vec<&str> = tune
         .iter()

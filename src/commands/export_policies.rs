@@ -2,6 +2,9 @@
 //! checkpoints — typically chosen epochs of one `train policy` run — optionally
 //! with other inference settings (executed actions per decision, DDIM steps).
 //!
+//! `--add` puts the checkpoints into an existing set (e.g. a fine-tuning run's
+//! epochs, `--prefix ft-`, next to the run it started from).
+//!
 //! Weights are copied byte for byte; `policy.json` keeps everything but the
 //! changed settings and appends to `provenance.exported` (command, commit, source
 //! folder, each change as `[before, after]`; one entry per export, oldest first). A checkpoint's `provenance.json`
@@ -42,7 +45,21 @@ pub fn run(a: &ExportPoliciesArgs) -> Result<ExitCode> {
     if !missing.is_empty() {
         bail!("{}: no checkpoint of epoch {}", a.from.display(), missing.join(", "));
     }
-    let out = Staged::new(&a.out, a.force)?;
+    if a.add && !a.out.is_dir() {
+        bail!("--add: {} is not an existing policy set", a.out.display());
+    }
+    if a.prefix.contains(['/', '\\']) || a.prefix.starts_with('.') {
+        bail!(
+            "--prefix {:?}: a folder-name prefix cannot contain a path separator or start with '.'",
+            a.prefix
+        );
+    }
+    let taken: Vec<&str> =
+        picked.iter().filter(|p| a.add && a.out.join(&p.name).exists()).map(|p| p.name.as_str()).collect();
+    if !taken.is_empty() {
+        bail!("--add: {} already holds {}", a.out.display(), taken.join(", "));
+    }
+    let out = Staged::new(&a.out, a.force || a.add)?;
     let command: Vec<String> = std::env::args().collect();
     let (command, commit) = (command.join(" "), git_commit());
     for p in &mut picked {
@@ -66,7 +83,7 @@ pub fn run(a: &ExportPoliciesArgs) -> Result<ExitCode> {
             write_json(&dst.join("provenance.json"), &v)?;
         }
     }
-    let root = out.commit()?;
+    let root = if a.add { out.commit_into()? } else { out.commit()? };
     for p in &picked {
         println!("{}", root.join(&p.name).display());
     }
@@ -106,8 +123,10 @@ fn prepare(dir: &Path, mut file: PolicyFile, a: &ExportPoliciesArgs) -> Result<E
         );
     }
     file.config = serde_json::to_value(&cfg)?;
-    let name =
-        dir.file_name().map_or_else(|| format!("epoch-{:04}", file.epoch), |n| n.to_string_lossy().into());
+    let name = dir
+        .file_name()
+        .map_or_else(|| format!("epoch-{:04}", file.epoch), |n| n.to_string_lossy().into_owned());
+    let name = format!("{}{name}", a.prefix);
     Ok(Export { dir: dir.to_path_buf(), name, file, changes })
 }
 
