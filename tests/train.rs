@@ -340,8 +340,18 @@ fn world_model_loss_variants_train_and_warm_start() {
     // A warm start may add action maps (zero-initialised input channel); the run resumes
     // with them, and a run without maps cannot start from it.
     let maps = dir.path().join("wm_maps");
-    expect_code(&wm(&maps, &["--steps", "1", "--init-from", from, "--warmup", "1", "--action-maps"]), 0);
+    // (With context-noise augmentation, recorded in the run's config.)
+    let noisy = ["--context-noise", "0.25"];
+    expect_code(
+        &wm(
+            &maps,
+            &[&["--steps", "1", "--init-from", from, "--warmup", "1", "--action-maps"], &noisy[..]].concat(),
+        ),
+        0,
+    );
     assert_eq!(read_json(&maps.join("config.json"))["model"]["unet"]["action_maps"], true);
+    assert_eq!(read_json(&maps.join("config.json"))["train"]["context_noise"], 0.25);
+    assert_eq!(cfg["train"]["context_noise"], 0.0);
     assert_eq!(cfg["model"]["unet"]["action_maps"], serde_json::Value::Null);
     expect_code(&wm(&maps, &["--steps", "2", "--resume", "--ema-decay", "0.99"]), 0);
     assert_eq!(read_json(&maps.join("config.json"))["train"]["ema_decay"], 0.99);
@@ -349,9 +359,11 @@ fn world_model_loss_variants_train_and_warm_start() {
     assert!(err.contains("--ema-decay"), "{err}");
     // Model and loss flags that contradict the saved run are refused, not ignored
     // (the ones equal to it, from `wm`'s own arguments, are accepted above).
-    let resume = ["--steps", "3", "--resume", "--self-forcing", "3", "--warmup", "1"];
+    let resume =
+        ["--steps", "3", "--resume", "--self-forcing", "3", "--warmup", "1", "--context-noise", "0.5"];
     let (_, err) = expect_code(&wm_with(&maps, "24", &resume), 2);
     assert!(err.contains("--self-forcing (saved: 1)"), "{err}");
+    assert!(err.contains("--context-noise (saved: 0.25)"), "{err}");
     assert!(err.contains("--base-channels (saved: 16)"), "{err}");
     assert!(!err.contains("--warmup"), "{err}");
     assert_eq!(read_json(&maps.join("state.json"))["step"], 2);
@@ -408,6 +420,8 @@ fn world_model_loss_variants_train_and_warm_start() {
     // Motion weighting and self-forcing belong to the drifting loss.
     let (_, err) = expect_code(&wm(&third, &["--objective", "mse", "--self-forcing", "2"]), 2);
     assert!(err.contains("--self-forcing"), "{err}");
+    let (_, err) = expect_code(&wm(&third, &["--context-noise=-0.5"]), 2);
+    assert!(err.contains("--context-noise"), "{err}");
     let (_, err) = expect_code(&wm(&third, &["--motion-weighting"]), 2);
     assert!(err.contains("--field token"), "{err}");
 }

@@ -159,6 +159,11 @@ pub struct TrainWorldModelArgs {
     /// sample's history is its own detached predictions; 1 = true history only.
     #[arg(long, default_value_t = 1)]
     pub self_forcing: usize,
+    /// Context-noise augmentation (not in the paper): add Gaussian noise of a level
+    /// drawn from U[0, SIGMA] to each training history (normalised latent units), so
+    /// the model learns to predict from the imperfect histories of its own rollouts.
+    #[arg(long, default_value_t = 0.0, value_name = "SIGMA")]
+    pub context_noise: f32,
     /// Weight each latent cell's loss by how much it moves (spec §4; with `--field token`).
     #[arg(long)]
     pub motion_weighting: bool,

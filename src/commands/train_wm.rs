@@ -64,11 +64,15 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         init_from: a.init_from.clone(),
         motion: a.motion_weighting.then(MotionWeighting::default),
         chunks: a.self_forcing,
+        context_noise: a.context_noise,
         ema_decay: a.ema_decay.unwrap_or(defaults.ema_decay),
         ..defaults
     };
     if !(0.0..1.0).contains(&cfg.ema_decay) {
         bail!("--ema-decay: needs a value in [0, 1), got {}", cfg.ema_decay);
+    }
+    if !(a.context_noise.is_finite() && a.context_noise >= 0.0) {
+        bail!("--context-noise: needs a finite level >= 0, got {}", a.context_noise);
     }
     if a.self_forcing == 0 || (a.self_forcing > 1 && objective != Objective::Drifting) {
         bail!("--self-forcing: needs a chunk count >= 1, and more than 1 only with --objective drifting");
@@ -341,7 +345,11 @@ fn check_resume_flags(a: &TrainWorldModelArgs, fresh: &WmTrainConfig) -> Result<
     let (ours, theirs) = (serde_json::to_value(fresh)?, serde_json::to_value(&train)?);
     let keys = ["contexts", "samples", "field", "warmup", "lr", "seed", "eval_every", "eval_windows"];
     let keys = keys.map(|k| (k, k));
-    let more = [("checkpoint_every", "checkpoint_every"), ("self_forcing", "chunks")];
+    let more = [
+        ("checkpoint_every", "checkpoint_every"),
+        ("self_forcing", "chunks"),
+        ("context_noise", "context_noise"),
+    ];
     let mut fixed = fixed_fields(&ours, &theirs, &[&keys[..], &more[..]].concat());
     let init_from = match (&fresh.init_from, &train.init_from) {
         (Some(x), Some(y)) if x == y || same_folder(x, y) => theirs["init_from"].clone(),

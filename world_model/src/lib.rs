@@ -7,12 +7,13 @@
 //! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer; [`codec`]:
 //!   autoencoder latents or pixels, the space the U-Net works in;
 //! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
-//!   (drifting, MSE and diffusion objectives);
+//!   (drifting, MSE and diffusion objectives); [`context_noise`]: corrupted training histories;
 //! - [`model`]: a trained world model for inference; [`eval`]: video-quality metrics;
 //! - [`data`]: datasets with a held-out split.
 
 pub mod autoencoder;
 pub mod codec;
+pub mod context_noise;
 pub mod data;
 pub mod device;
 pub mod drift;

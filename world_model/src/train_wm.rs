@@ -77,6 +77,10 @@ pub struct WmTrainConfig {
     /// self-forcing over L chunks (spec §7).
     #[serde(default = "one")]
     pub chunks: usize,
+    /// Context-noise augmentation: each training history row gets Gaussian noise of
+    /// a level drawn from U[0, this] (normalised latent units; 0 = off; not in the paper).
+    #[serde(default)]
+    pub context_noise: f32,
 }
 
 fn one() -> usize {
@@ -105,6 +109,7 @@ impl WmTrainConfig {
             init_from: None,
             motion: None,
             chunks: 1,
+            context_noise: 0.0,
         }
     }
 }
@@ -279,6 +284,7 @@ pub fn train_world_model(
         latents.ensure(&hist_idx, codec, &inner);
         latents.ensure(&target_idx, codec, &inner);
         let hist = latents.tensor(&hist_idx, k, &device).swap_dims(1, 2); // [b n, C, K, s, s]
+        let hist = crate::context_noise::corrupt(hist, cfg.context_noise, derive(cfg.seed, &[step, 7]));
         let b = windows.len();
         let mut loss_r = Vec::new();
         let loss = match objective {
