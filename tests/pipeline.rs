@@ -195,6 +195,15 @@ fn pipeline_end_to_end() {
         assert!(res["agreement"].get(key).is_some(), "missing agreement.{key}");
     }
     assert_eq!(res["policies"][0]["sim"]["episodes"], 3);
+    // Every row records how much of the block its last seen frame shows: the whole T
+    // (its rendered area is ~1.06 of the polygon's) in MuJoCo, whatever the tiny world
+    // model kept in imagination; the run prints the imagined mean.
+    for p in res["policies"].as_array().unwrap() {
+        let sim = p["sim"]["block_area"].as_f64().unwrap();
+        assert!((0.8..1.1).contains(&sim), "MuJoCo block area {sim}");
+        assert!(p["world_model"]["block_area"].as_f64().unwrap().is_finite());
+    }
+    assert!(stdout.contains("block kept"), "{stdout}");
     let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
     assert_eq!(rows.lines().count(), 2 * 3 * 2); // policies x seeds x branches
     // The parquet table holds the same rows, typed.

@@ -17,6 +17,7 @@
 //! | `final_block_x`, `_y`, `_theta` | f64, null in the world-model branch | final block pose |
 //! | `goal_x`, `goal_y`, `goal_theta` | f64 | goal pose |
 //! | `scorer_abs_error` | f64, null in the world-model branch | frame scorer's mean error on real frames |
+//! | `block_area` | f64, null in runs written before it existed | block pixels in the last frame the policy saw, as a fraction of the T's area (≈ 1 in MuJoCo; how much of the block a world-model rollout kept) |
 //!
 //! Written single-threaded with fixed options, so the same rows give the same bytes.
 
@@ -59,6 +60,8 @@ pub struct EpisodeRecord {
     pub goal: [f64; 3],
     /// Frame scorer's mean absolute error (MuJoCo branch).
     pub scorer_abs_error: Option<f64>,
+    /// Block area of the last seen frame, as a fraction of the T's.
+    pub block_area: Option<f64>,
 }
 
 /// The rows as a data frame (in the given order).
@@ -90,6 +93,7 @@ pub fn episodes_frame(rows: &[EpisodeRecord]) -> PolarsResult<DataFrame> {
                 "scorer_abs_error".into(),
                 rows.iter().map(|r| r.scorer_abs_error).collect::<Vec<_>>(),
             ),
+            Column::new("block_area".into(), rows.iter().map(|r| r.block_area).collect::<Vec<_>>()),
         ],
     )
 }
@@ -133,11 +137,13 @@ mod tests {
             final_block: Some([250.0, 260.0, 0.5]),
             goal: [256.0, 256.0, 0.785],
             scorer_abs_error: Some(0.01),
+            block_area: Some(0.98),
         };
         let w = EpisodeRecord {
             branch: "world_model".into(),
             final_block: None,
             scorer_abs_error: None,
+            block_area: None,
             ..r.clone()
         };
         vec![r, w]
@@ -150,12 +156,14 @@ mod tests {
         write_episodes_parquet(&path, &rows()).unwrap();
         let df = read_episodes_parquet(&path).unwrap();
         assert_eq!(df.height(), 2);
-        assert_eq!(df.width(), 15);
+        assert_eq!(df.width(), 16);
         let seed = df.column("seed").unwrap();
         assert_eq!(seed.dtype(), &DataType::UInt64);
         assert_eq!(seed.u64().unwrap().get(1), Some(100_000));
         let x = df.column("final_block_x").unwrap().f64().unwrap();
         assert_eq!((x.get(0), x.get(1)), (Some(250.0), None));
+        let area = df.column("block_area").unwrap().f64().unwrap();
+        assert_eq!((area.get(0), area.get(1)), (Some(0.98), None));
         assert_eq!(df.column("branch").unwrap().str().unwrap().get(1), Some("world_model"));
         assert_eq!(df.column("success").unwrap().bool().unwrap().get(0), Some(false));
         // Same rows, same bytes.

@@ -74,6 +74,18 @@ impl FrameScorer {
         (hit / self.goal_sum).clamp(0.0, 1.0)
     }
 
+    /// Block pixels in the whole frame (Σ block fraction) as a fraction of the T's area
+    /// in pixels (the goal T has the block's shape, so its mask sum is that area): ≈ 1
+    /// on a real frame (less where the agent covers the block or the block leaves the
+    /// floor), far below 1 when an imagined frame has lost the block, above 1 when it
+    /// smears it. A health check of world-model frames, not a score.
+    pub fn block_area(&self, frame: &[u8]) -> f64 {
+        if self.goal_sum <= 0.0 || frame.len() != self.size * self.size * 3 {
+            return 0.0;
+        }
+        frame.chunks_exact(3).map(block_fraction).sum::<f64>() / self.goal_sum
+    }
+
     /// Estimated reward: clip(coverage / success threshold, 0, 1).
     pub fn reward(&self, frame: &[u8]) -> f64 {
         (self.coverage(frame) / self.success_coverage).clamp(0.0, 1.0)
@@ -102,6 +114,21 @@ mod tests {
     }
 
     #[test]
+    fn block_area_of_an_empty_floor_is_zero_and_of_a_red_frame_is_large() {
+        let cfg = cfg();
+        let raster = Rasterizer::new(&cfg);
+        let (_, goal) = initial_state(&cfg, 5);
+        let scorer = FrameScorer::new(&cfg, &goal, raster.size());
+        let n = raster.size() * raster.size();
+        assert_eq!(scorer.block_area(&vec![255; n * 3]), 0.0);
+        // Every pixel block-red: the frame's area over the T's (96² pixels against
+        // the T's ~ (120·30 + 90·30) / (512/96)² ≈ 221 pixels: far above 1).
+        let red: Vec<u8> = (0..n).flat_map(|_| [237, 39, 68]).collect();
+        assert!(scorer.block_area(&red) > 10.0);
+        assert_eq!(scorer.block_area(&red[..30]), 0.0, "a frame of the wrong size");
+    }
+
+    #[test]
     fn estimate_tracks_exact_coverage_on_rendered_frames() {
         let cfg = cfg();
         let raster = Rasterizer::new(&cfg);
@@ -118,8 +145,13 @@ mod tests {
             };
             state.agent = [20.0, 20.0];
             let exact = score(&cfg, &state.block, &goal).coverage;
-            let est = scorer.coverage(&raster.render(&state, &goal));
+            let frame = raster.render(&state, &goal);
+            let est = scorer.coverage(&frame);
             assert!((est - exact).abs() < 0.06, "step {k}: estimate {est:.3} vs exact {exact:.3}");
+            // The whole block is in view (the agent is in a corner): its pixels add up
+            // to the T's area, plus the anti-aliased rim (measured 1.060–1.062 here).
+            let area = scorer.block_area(&frame);
+            assert!((1.0..1.1).contains(&area), "step {k}: block area {area:.3}");
         }
     }
 }

@@ -162,6 +162,9 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         let html = report::write_report(&a.out)?;
         tracing::info!(report = %html.display(), "report written");
     }
+    if let Some((text, true)) = results::block_area_note(&res) {
+        tracing::warn!("{text}");
+    }
     print_summary(&res, &a.out);
     gates(a, &res, &failed)
 }
@@ -242,6 +245,7 @@ pub(crate) fn write_tables(out: &Path, rows: &[EpisodeRow]) -> Result<()> {
             final_block: r.final_block,
             goal: r.goal,
             scorer_abs_error: r.scorer_abs_error,
+            block_area: r.block_area,
         })
         .collect();
     write_episodes_parquet(&out.join("episodes.parquet"), &records)?;
@@ -277,13 +281,14 @@ fn write_csv(path: &Path, sorted: &[&EpisodeRow]) -> Result<()> {
 }
 
 fn print_summary(res: &Value, out: &Path) {
-    println!("{:<16} {:>10} {:>12}", "policy", "MuJoCo", "world model");
+    println!("{:<16} {:>10} {:>12} {:>12}", "policy", "MuJoCo", "world model", "block kept");
     for p in res["policies"].as_array().into_iter().flatten() {
         println!(
-            "{:<16} {:>10.3} {:>12.3}",
+            "{:<16} {:>10.3} {:>12.3} {:>12.2}",
             p["name"].as_str().unwrap_or("?"),
             p["sim"]["mean"].as_f64().unwrap_or(f64::NAN),
-            p["world_model"]["mean"].as_f64().unwrap_or(f64::NAN)
+            p["world_model"]["mean"].as_f64().unwrap_or(f64::NAN),
+            p["world_model"]["block_area"].as_f64().unwrap_or(f64::NAN)
         );
     }
     let ag = &res["agreement"];

@@ -82,6 +82,8 @@ struct Track {
     /// Score so far at the end of each action chunk (repeated after the episode ended,
     /// so every trace of a batch has the same length).
     trace: Vec<f64>,
+    /// Block area of the last frame the policy saw.
+    area: Option<f64>,
 }
 
 impl Track {
@@ -279,8 +281,9 @@ pub fn sim_branch(
     let mut track = vec![Track::default(); n];
     let mut scorer_err = vec![(0.0f64, 0usize); n];
     let mut rec = start.recording();
-    for (t, env) in track.iter_mut().zip(&start.envs) {
+    for (((t, env), sc), f) in track.iter_mut().zip(&start.envs).zip(&start.scorers).zip(&start.first) {
         t.add(env.score().coverage, thr);
+        t.area = Some(sc.block_area(f));
     }
     let mut steps = 0;
     let mut active: Vec<usize> = (0..n).collect();
@@ -322,6 +325,9 @@ pub fn sim_branch(
             track[i].steps += len;
             scorer_err[i].0 += err;
             scorer_err[i].1 += frames.len();
+            if let Some((f, _)) = frames.last() {
+                track[i].area = Some(start.scorers[i].block_area(f));
+            }
             frames.into_iter().for_each(|f| push(&mut hist[i], f, o));
         }
         record_chunk(&mut rec, &hist);
@@ -347,6 +353,7 @@ pub fn sim_branch(
             .with_poses(Some(start.envs[i].state().block.to_array()), start.goals[i])
             .with_scorer_error(Some(err))
             .with_trace(t.trace.clone())
+            .with_block_area(t.area)
         })
         .collect();
     Ok(BranchOut { rows, frames: rec })
@@ -379,6 +386,7 @@ pub fn wm_branch(
     let mut rec = start.recording();
     for ((t, sc), f) in track.iter_mut().zip(&start.scorers).zip(&start.first) {
         t.add(sc.coverage(f), thr);
+        t.area = Some(sc.block_area(f));
     }
     let tw = Instant::now();
     let device = wm.device().clone();
@@ -420,6 +428,7 @@ pub fn wm_branch(
                     for j in 0..m {
                         let fr = &frames[p * m + j];
                         track[i].add(start.scorers[i].coverage(fr), thr);
+                        track[i].area = Some(start.scorers[i].block_area(fr));
                         push(&mut hist[i], (fr.clone(), chunks[p][done + first_seen + j]), o);
                     }
                 }
@@ -463,6 +472,7 @@ pub fn wm_branch(
             )
             .with_poses(None, start.goals[i])
             .with_trace(t.trace.clone())
+            .with_block_area(t.area)
         })
         .collect();
     Ok(BranchOut { rows, frames: rec })

@@ -102,6 +102,9 @@ pub fn write_report(out: &Path) -> Result<PathBuf> {
             errs.iter().sum::<f64>() / errs.len() as f64
         ));
     }
+    if let Some((text, _)) = super::results::block_area_note(&results) {
+        notes.push(text);
+    }
     notes.push("Score = max over the episode of clip(coverage / 0.95, 0, 1); success = coverage > 0.95 at some step.".into());
     let extras =
         Extras { plots, filmstrips, config: serde_json::to_string_pretty(&config)?, provenance: prov, notes };
