@@ -202,8 +202,11 @@ fn pipeline_end_to_end() {
         let sim = p["sim"]["block_area"].as_f64().unwrap();
         assert!((0.8..1.1).contains(&sim), "MuJoCo block area {sim}");
         assert!(p["world_model"]["block_area"].as_f64().unwrap().is_finite());
+        let goal = p["sim"]["goal_kept"].as_f64().unwrap();
+        assert!((0.85..=1.0).contains(&goal), "MuJoCo goal kept {goal}");
+        assert!(p["world_model"]["goal_kept"].as_f64().unwrap().is_finite());
     }
-    assert!(stdout.contains("block kept"), "{stdout}");
+    assert!(stdout.contains("block kept") && stdout.contains("goal kept"), "{stdout}");
     let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
     assert_eq!(rows.lines().count(), 2 * 3 * 2); // policies x seeds x branches
     // The parquet table holds the same rows, typed.

@@ -17,7 +17,8 @@
 //! | `final_block_x`, `_y`, `_theta` | f64, null in the world-model branch | final block pose |
 //! | `goal_x`, `goal_y`, `goal_theta` | f64 | goal pose |
 //! | `scorer_abs_error` | f64, null in the world-model branch | frame scorer's mean error on real frames |
-//! | `block_area` | f64, null in runs written before it existed | block pixels in the last frame the policy saw, as a fraction of the T's area (≈ 1 in MuJoCo; how much of the block a world-model rollout kept) |
+//! | `block_area` | f64, null in runs written before it existed | block pixels in the last frame the policy saw, as a fraction of the T's area (≈ 1.06 in MuJoCo; how much of the block a world-model rollout kept) |
+//! | `goal_kept` | f64, null in runs written before it existed | fraction of the (static) goal T that frame still shows (≈ 0.94–0.99 in MuJoCo) |
 //!
 //! Written single-threaded with fixed options, so the same rows give the same bytes.
 
@@ -62,6 +63,8 @@ pub struct EpisodeRecord {
     pub scorer_abs_error: Option<f64>,
     /// Block area of the last seen frame, as a fraction of the T's.
     pub block_area: Option<f64>,
+    /// Fraction of the goal T that frame still shows.
+    pub goal_kept: Option<f64>,
 }
 
 /// The rows as a data frame (in the given order).
@@ -94,6 +97,7 @@ pub fn episodes_frame(rows: &[EpisodeRecord]) -> PolarsResult<DataFrame> {
                 rows.iter().map(|r| r.scorer_abs_error).collect::<Vec<_>>(),
             ),
             Column::new("block_area".into(), rows.iter().map(|r| r.block_area).collect::<Vec<_>>()),
+            Column::new("goal_kept".into(), rows.iter().map(|r| r.goal_kept).collect::<Vec<_>>()),
         ],
     )
 }
@@ -138,12 +142,14 @@ mod tests {
             goal: [256.0, 256.0, 0.785],
             scorer_abs_error: Some(0.01),
             block_area: Some(0.98),
+            goal_kept: Some(0.95),
         };
         let w = EpisodeRecord {
             branch: "world_model".into(),
             final_block: None,
             scorer_abs_error: None,
             block_area: None,
+            goal_kept: None,
             ..r.clone()
         };
         vec![r, w]
@@ -156,7 +162,7 @@ mod tests {
         write_episodes_parquet(&path, &rows()).unwrap();
         let df = read_episodes_parquet(&path).unwrap();
         assert_eq!(df.height(), 2);
-        assert_eq!(df.width(), 16);
+        assert_eq!(df.width(), 17);
         let seed = df.column("seed").unwrap();
         assert_eq!(seed.dtype(), &DataType::UInt64);
         assert_eq!(seed.u64().unwrap().get(1), Some(100_000));

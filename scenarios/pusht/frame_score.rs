@@ -86,6 +86,30 @@ impl FrameScorer {
         frame.chunks_exact(3).map(block_fraction).sum::<f64>() / self.goal_sum
     }
 
+    /// How much of the goal T the frame still shows: Σ_p goal(p)·min(1, dark(p) +
+    /// block(p)) / Σ_p goal(p), with dark = 1 − max(R, G, B)/255 (the goal is drawn
+    /// black and only the block or the agent ever covers it). The goal never moves, so
+    /// on a real frame this is ≈ 1 (less where the agent covers it); an imagined frame
+    /// whose goal has faded or eroded scores far lower — the world model has lost the
+    /// scene. A health check of world-model frames, not a score.
+    pub fn goal_kept(&self, frame: &[u8]) -> f64 {
+        if self.goal_sum <= 0.0 || frame.len() != self.size * self.size * 3 {
+            return 0.0;
+        }
+        let dark = |px: &[u8]| 1.0 - f64::from(px[0].max(px[1]).max(px[2])) / 255.0;
+        let kept: f64 = self
+            .goal
+            .iter()
+            .enumerate()
+            .filter(|(_, g)| **g > 0.0)
+            .map(|(i, g)| {
+                let px = &frame[i * 3..i * 3 + 3];
+                g * (dark(px) + block_fraction(px)).min(1.0)
+            })
+            .sum();
+        kept / self.goal_sum
+    }
+
     /// Estimated reward: clip(coverage / success threshold, 0, 1).
     pub fn reward(&self, frame: &[u8]) -> f64 {
         (self.coverage(frame) / self.success_coverage).clamp(0.0, 1.0)
@@ -121,6 +145,9 @@ mod tests {
         let scorer = FrameScorer::new(&cfg, &goal, raster.size());
         let n = raster.size() * raster.size();
         assert_eq!(scorer.block_area(&vec![255; n * 3]), 0.0);
+        // A white frame has lost the goal; a black one hides nothing.
+        assert_eq!(scorer.goal_kept(&vec![255; n * 3]), 0.0);
+        assert!((scorer.goal_kept(&vec![0; n * 3]) - 1.0).abs() < 1e-12);
         // Every pixel block-red: the frame's area over the T's (96² pixels against
         // the T's ~ (120·30 + 90·30) / (512/96)² ≈ 221 pixels: far above 1).
         let red: Vec<u8> = (0..n).flat_map(|_| [237, 39, 68]).collect();
@@ -152,6 +179,10 @@ mod tests {
             // to the T's area, plus the anti-aliased rim (measured 1.060–1.062 here).
             let area = scorer.block_area(&frame);
             assert!((1.0..1.1).contains(&area), "step {k}: block area {area:.3}");
+            // The goal shows wherever the block does not cover it (measured 0.937–0.989:
+            // its anti-aliased rim mixes with the white floor).
+            let goal_kept = scorer.goal_kept(&frame);
+            assert!((0.9..=1.0).contains(&goal_kept), "step {k}: goal kept {goal_kept:.3}");
         }
     }
 }

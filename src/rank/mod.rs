@@ -12,6 +12,7 @@ pub mod merge;
 pub mod paired;
 pub mod report;
 pub mod results;
+pub mod scene;
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -162,7 +163,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         let html = report::write_report(&a.out)?;
         tracing::info!(report = %html.display(), "report written");
     }
-    if let Some((text, true)) = results::block_area_note(&res) {
+    if let Some((text, true)) = scene::scene_note(&res) {
         tracing::warn!("{text}");
     }
     print_summary(&res, &a.out);
@@ -246,6 +247,7 @@ pub(crate) fn write_tables(out: &Path, rows: &[EpisodeRow]) -> Result<()> {
             goal: r.goal,
             scorer_abs_error: r.scorer_abs_error,
             block_area: r.block_area,
+            goal_kept: r.goal_kept,
         })
         .collect();
     write_episodes_parquet(&out.join("episodes.parquet"), &records)?;
@@ -281,14 +283,18 @@ fn write_csv(path: &Path, sorted: &[&EpisodeRow]) -> Result<()> {
 }
 
 fn print_summary(res: &Value, out: &Path) {
-    println!("{:<16} {:>10} {:>12} {:>12}", "policy", "MuJoCo", "world model", "block kept");
+    println!(
+        "{:<16} {:>10} {:>12} {:>12} {:>10}",
+        "policy", "MuJoCo", "world model", "block kept", "goal kept"
+    );
     for p in res["policies"].as_array().into_iter().flatten() {
         println!(
-            "{:<16} {:>10.3} {:>12.3} {:>12.2}",
+            "{:<16} {:>10.3} {:>12.3} {:>12.2} {:>10.2}",
             p["name"].as_str().unwrap_or("?"),
             p["sim"]["mean"].as_f64().unwrap_or(f64::NAN),
             p["world_model"]["mean"].as_f64().unwrap_or(f64::NAN),
-            p["world_model"]["block_area"].as_f64().unwrap_or(f64::NAN)
+            p["world_model"]["block_area"].as_f64().unwrap_or(f64::NAN),
+            p["world_model"]["goal_kept"].as_f64().unwrap_or(f64::NAN)
         );
     }
     let ag = &res["agreement"];

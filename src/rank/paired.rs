@@ -82,8 +82,8 @@ struct Track {
     /// Score so far at the end of each action chunk (repeated after the episode ended,
     /// so every trace of a batch has the same length).
     trace: Vec<f64>,
-    /// Block area of the last frame the policy saw.
-    area: Option<f64>,
+    /// Scene checks (block area, goal kept) of the last frame the policy saw.
+    scene: Option<(f64, f64)>,
 }
 
 impl Track {
@@ -96,6 +96,11 @@ impl Track {
     fn end_chunk(&mut self) {
         self.trace.push((self.best_reward * 1e6).round() / 1e6);
     }
+}
+
+/// The scene checks of a frame: (block area, goal kept).
+fn scene_of(scorer: &FrameScorer, frame: &[u8]) -> (f64, f64) {
+    (scorer.block_area(frame), scorer.goal_kept(frame))
 }
 
 /// A frame and the agent position seen with it.
@@ -283,7 +288,7 @@ pub fn sim_branch(
     let mut rec = start.recording();
     for (((t, env), sc), f) in track.iter_mut().zip(&start.envs).zip(&start.scorers).zip(&start.first) {
         t.add(env.score().coverage, thr);
-        t.area = Some(sc.block_area(f));
+        t.scene = Some(scene_of(sc, f));
     }
     let mut steps = 0;
     let mut active: Vec<usize> = (0..n).collect();
@@ -326,7 +331,7 @@ pub fn sim_branch(
             scorer_err[i].0 += err;
             scorer_err[i].1 += frames.len();
             if let Some((f, _)) = frames.last() {
-                track[i].area = Some(start.scorers[i].block_area(f));
+                track[i].scene = Some(scene_of(&start.scorers[i], f));
             }
             frames.into_iter().for_each(|f| push(&mut hist[i], f, o));
         }
@@ -353,7 +358,7 @@ pub fn sim_branch(
             .with_poses(Some(start.envs[i].state().block.to_array()), start.goals[i])
             .with_scorer_error(Some(err))
             .with_trace(t.trace.clone())
-            .with_block_area(t.area)
+            .with_scene(t.scene)
         })
         .collect();
     Ok(BranchOut { rows, frames: rec })
@@ -386,7 +391,7 @@ pub fn wm_branch(
     let mut rec = start.recording();
     for ((t, sc), f) in track.iter_mut().zip(&start.scorers).zip(&start.first) {
         t.add(sc.coverage(f), thr);
-        t.area = Some(sc.block_area(f));
+        t.scene = Some(scene_of(sc, f));
     }
     let tw = Instant::now();
     let device = wm.device().clone();
@@ -428,7 +433,7 @@ pub fn wm_branch(
                     for j in 0..m {
                         let fr = &frames[p * m + j];
                         track[i].add(start.scorers[i].coverage(fr), thr);
-                        track[i].area = Some(start.scorers[i].block_area(fr));
+                        track[i].scene = Some(scene_of(&start.scorers[i], fr));
                         push(&mut hist[i], (fr.clone(), chunks[p][done + first_seen + j]), o);
                     }
                 }
@@ -472,7 +477,7 @@ pub fn wm_branch(
             )
             .with_poses(None, start.goals[i])
             .with_trace(t.trace.clone())
-            .with_block_area(t.area)
+            .with_scene(t.scene)
         })
         .collect();
     Ok(BranchOut { rows, frames: rec })

@@ -102,7 +102,7 @@ pub fn write_report(out: &Path) -> Result<PathBuf> {
             errs.iter().sum::<f64>() / errs.len() as f64
         ));
     }
-    if let Some((text, _)) = super::results::block_area_note(&results) {
+    if let Some((text, _)) = super::scene::scene_note(&results) {
         notes.push(text);
     }
     notes.push("Score = max over the episode of clip(coverage / 0.95, 0, 1); success = coverage > 0.95 at some step.".into());

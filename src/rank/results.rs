@@ -71,6 +71,11 @@ pub struct EpisodeRow {
     /// written before it existed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub block_area: Option<f64>,
+    /// How much of the (static) goal T that frame still shows
+    /// ([`scenarios::pusht::frame_score::FrameScorer::goal_kept`]): ≈ 0.94–0.99 in
+    /// MuJoCo; lower when an imagined scene has faded or eroded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal_kept: Option<f64>,
 }
 
 impl EpisodeRow {
@@ -100,12 +105,14 @@ impl EpisodeRow {
             scorer_abs_error: None,
             score_trace: Vec::new(),
             block_area: None,
+            goal_kept: None,
         }
     }
 
-    /// With the block area of the last seen frame.
-    pub fn with_block_area(mut self, a: Option<f64>) -> Self {
-        self.block_area = a;
+    /// With the scene checks of the last seen frame: (block area, goal kept).
+    pub fn with_scene(mut self, scene: Option<(f64, f64)>) -> Self {
+        self.block_area = scene.map(|s| s.0);
+        self.goal_kept = scene.map(|s| s.1);
         self
     }
 
@@ -172,14 +179,15 @@ pub fn branch_stats(rows: &[&EpisodeRow], bootstrap: usize, seed: u64) -> Value 
     let scores: Vec<f64> = rows.iter().map(|r| r.score).collect();
     let n = scores.len();
     let k = rows.iter().filter(|r| r.success).count();
-    let areas: Vec<f64> = rows.iter().filter_map(|r| r.block_area).collect();
+    let mean_of = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
     json!({
         "mean": scores.iter().sum::<f64>() / n.max(1) as f64,
         "ci95": mean_ci(&scores, bootstrap, seed),
         "success_rate": k as f64 / n.max(1) as f64,
         "success_ci95": wilson(k, n, 1.959_963_984_540_054),
         "episodes": n,
-        "block_area": (!areas.is_empty()).then(|| areas.iter().sum::<f64>() / areas.len() as f64),
+        "block_area": mean_of(rows.iter().filter_map(|r| r.block_area).collect()),
+        "goal_kept": mean_of(rows.iter().filter_map(|r| r.goal_kept).collect()),
     })
 }
 
@@ -223,41 +231,6 @@ pub fn summarise(rows: &[EpisodeRow], policies: &[String], bootstrap: usize, see
     json!({"policies": out, "agreement": m.to_json(&names, ci.as_ref())})
 }
 
-/// Below this mean block area (fraction of the T's) a policy's imagined episodes end
-/// in frames that have lost the block.
-pub const DEGRADED_BLOCK_AREA: f64 = 0.5;
-
-/// A sentence on how much of the block the world model's rollouts kept (mean block
-/// area of the last seen frame, per branch), and a warning naming the policies whose
-/// imagined episodes end with less than [`DEGRADED_BLOCK_AREA`] of it; `None` for runs
-/// that did not record block areas.
-pub fn block_area_note(res: &Value) -> Option<(String, bool)> {
-    let pol = res["policies"].as_array()?;
-    let area = |p: &Value, b: &str| p[b]["block_area"].as_f64();
-    let wm: Vec<(&str, f64)> =
-        pol.iter().filter_map(|p| Some((p["name"].as_str()?, area(p, "world_model")?))).collect();
-    let sim: Vec<f64> = pol.iter().filter_map(|p| area(p, "sim")).collect();
-    if wm.is_empty() || sim.is_empty() {
-        return None;
-    }
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-    let (lo, hi) = wm.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &(_, a)| (l.min(a), h.max(a)));
-    let mut text = format!(
-        "Block kept at the end of the episodes (block pixels in the last frame the policy saw, as a fraction \
-         of the T's area): MuJoCo {:.2} on average, world model {lo:.2}–{hi:.2} across policies.",
-        mean(&sim)
-    );
-    let bad: Vec<&str> = wm.iter().filter(|(_, a)| *a < DEGRADED_BLOCK_AREA).map(|(n, _)| *n).collect();
-    if !bad.is_empty() {
-        text.push_str(&format!(
-            " The imagined episodes of {} end with less than half of the block: the world model's rollout \
-             degraded, and these imagined scores come from frames that no longer show the scene.",
-            bad.join(", ")
-        ));
-    }
-    Some((text, !bad.is_empty()))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -288,36 +261,11 @@ mod tests {
         assert_eq!(s["policies"][1]["sim"]["success_rate"].as_f64(), Some(0.0));
         assert!((s["agreement"]["pearson"].as_f64().unwrap() - 1.0).abs() < 1e-12);
         assert_eq!(s["agreement"]["rank_inversions"].as_u64(), Some(0));
-        // No block areas recorded (as in runs made before they existed): no note.
+        // No scene checks recorded (as in runs made before they existed): null.
         assert_eq!(s["policies"][0]["sim"]["block_area"], Value::Null);
-        assert_eq!(block_area_note(&s), None);
         // Same input in another order gives the same summary.
         let mut rev = rows.clone();
         rev.reverse();
         assert_eq!(summarise(&rev, &["a".into(), "b".into()], 200, 0), s);
-    }
-
-    #[test]
-    fn block_area_note_names_policies_whose_imagined_block_vanished() {
-        // Policy a: MuJoCo areas 1.0, 0.9 (mean 0.95), world model 0.2, 0.4 (mean 0.3 < 0.5);
-        // policy b: MuJoCo 0.95, 0.95, world model 0.8, 0.6 (mean 0.7).
-        let areas = [("a", 1.0, 0.2), ("a", 0.9, 0.4), ("b", 0.95, 0.8), ("b", 0.95, 0.6)];
-        let rows: Vec<EpisodeRow> = areas
-            .iter()
-            .enumerate()
-            .flat_map(|(i, &(p, sim, wm))| {
-                [
-                    row(p, i as u64, Branch::Sim, 0.5).with_block_area(Some(sim)),
-                    row(p, i as u64, Branch::WorldModel, 0.5).with_block_area(Some(wm)),
-                ]
-            })
-            .collect();
-        let s = summarise(&rows, &["a".into(), "b".into()], 100, 0);
-        assert!((s["policies"][0]["world_model"]["block_area"].as_f64().unwrap() - 0.3).abs() < 1e-12);
-        let (text, warn) = block_area_note(&s).unwrap();
-        assert!(warn);
-        // MuJoCo mean over policies (0.95 + 0.95) / 2 = 0.95; world model 0.30–0.70.
-        assert!(text.contains("MuJoCo 0.95") && text.contains("world model 0.30–0.70"), "{text}");
-        assert!(text.contains("episodes of a end"), "{text}");
     }
 }
