@@ -223,9 +223,10 @@ pub struct RankArgs {
     /// Output folder.
     #[arg(long, default_value = "results/rank")]
     pub out: PathBuf,
-    /// Threads for replaying the report's episodes. The two branches of every batch always
-    /// run side by side on one thread each (burn kernels single-threaded, so results are
-    /// bit-reproducible), whatever this is.
+    /// Worker threads. Each takes the next task from one queue of every batch's two
+    /// branches (world model, MuJoCo) and runs it with burn's kernels single-threaded,
+    /// so results are identical (bit for bit) for any value; also the threads that
+    /// replay the report's episodes.
     #[arg(long, default_value_t = 2)]
     pub jobs: usize,
     /// Master seed of the policies' sampling noise and of the bootstrap.

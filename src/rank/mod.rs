@@ -13,6 +13,7 @@ pub mod paired;
 pub mod report;
 pub mod results;
 pub mod scene;
+mod schedule;
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -30,8 +31,9 @@ use world_model::model::WorldModel;
 use crate::cli::RankArgs;
 use crate::output::write_json;
 use crate::progress;
-use paired::{Setup, Timing, run_batch};
+use paired::Setup;
 use results::{EpisodeRow, append_rows, read_rows, summarise};
+use schedule::Batch;
 
 /// Parses `--shard i/n`.
 fn parse_shard(s: Option<&str>) -> Result<(usize, usize)> {
@@ -86,24 +88,29 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     let seeds: Vec<u64> = (0..a.episodes as u64).map(|i| a.seed_start + i).collect();
     let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
     let pb = progress::bar((dirs.len() * a.episodes) as u64, "rank", quiet);
-    let mut timing = Timing::default();
     let mut failed: Vec<Value> = Vec::new();
     let mut names = Vec::new();
     let started = Instant::now();
+    // Load every policy first (a policy that fails to load is reported and left out),
+    // then run all their batches on the workers.
+    let mut loaded: Vec<(usize, Box<dyn harness::policy::Policy>)> = Vec::new();
     for (pi, dir) in dirs.iter().enumerate() {
         let name =
             dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
         names.push(name.clone());
-        let policy = match load_any(dir, expect, &device, &cfg, &model) {
-            Ok(p) => p,
+        match load_any(dir, expect, &device, &cfg, &model) {
+            Ok(p) => loaded.push((pi, p)),
             Err(e) => {
                 tracing::error!("{e}; continuing with the other policies");
                 failed.push(json!({"policy": name, "error": e.to_string()}));
                 pb.inc(a.episodes as u64);
-                continue;
             }
-        };
+        }
+    }
+    let mut jobs: Vec<Batch> = Vec::new();
+    for (li, (pi, _)) in loaded.iter().enumerate() {
         for (bi, batch) in batches.iter().enumerate() {
+            let name = &names[*pi];
             if (pi * batches.len() + bi) % shards != shard {
                 pb.inc(batch.len() as u64);
                 continue;
@@ -111,29 +118,33 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
             let todo: Vec<u64> = batch
                 .iter()
                 .copied()
-                .filter(|s| rows.iter().filter(|r| r.policy == name && r.seed == *s).count() < 2)
+                .filter(|s| rows.iter().filter(|r| &r.policy == name && r.seed == *s).count() < 2)
                 .collect();
             pb.inc((batch.len() - todo.len()) as u64);
-            if todo.is_empty() {
-                continue;
-            }
-            let out = run_batch(policy.as_ref(), &todo, &setup, &wm, &mut timing);
-            match out {
-                Ok(new) => {
-                    // Drop half-written pairs of these seeds (from a killed run) before appending.
-                    rows.retain(|r| !(r.policy == name && todo.contains(&r.seed)));
-                    append_rows(&jsonl, &new)?;
-                    rows.extend(new);
-                    pb.inc(todo.len() as u64);
-                }
-                Err(e) => {
-                    tracing::error!("policy {name}: {e:#}; continuing with the other policies");
-                    failed.push(json!({"policy": name, "error": format!("{e:#}")}));
-                    break;
-                }
+            if !todo.is_empty() {
+                jobs.push(Batch { policy: li, seeds: todo });
             }
         }
     }
+    let policies: Vec<&dyn harness::policy::Policy> = loaded.iter().map(|(_, p)| p.as_ref()).collect();
+    let mut done = |j: usize, out: schedule::BatchResult| -> Result<()> {
+        let (name, todo) = (&names[loaded[jobs[j].policy].0], &jobs[j].seeds);
+        match out {
+            Ok(new) => {
+                // Drop half-written pairs of these seeds (from a killed run) before appending.
+                rows.retain(|r| !(&r.policy == name && todo.contains(&r.seed)));
+                append_rows(&jsonl, &new)?;
+                rows.extend(new);
+                pb.inc(todo.len() as u64);
+            }
+            Err(e) => {
+                tracing::error!("policy {name}: {e:#}; continuing with the other policies");
+                failed.push(json!({"policy": name, "error": format!("{e:#}")}));
+            }
+        }
+        Ok(())
+    };
+    let timing = schedule::run_batches(&policies, &jobs, &setup, &wm, a.jobs, &mut done)?;
     pb.finish_and_clear();
     let failed_names: Vec<&str> = failed.iter().filter_map(|f| f["policy"].as_str()).collect();
     let ok_names: Vec<String> =

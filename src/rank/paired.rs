@@ -231,40 +231,6 @@ fn still_active(active: &[usize], track: &[Track]) -> Vec<usize> {
     active.iter().copied().filter(|&i| track[i].best_reward < 1.0).collect()
 }
 
-/// Runs both branches for `seeds`; returns one row per (seed, branch), MuJoCo first.
-///
-/// # Errors
-/// A policy error (NaN output, bad input) or a non-finite world-model frame, naming
-/// the policy; a diverging simulation, naming the seed and step.
-pub fn run_batch(
-    policy: &dyn Policy,
-    seeds: &[u64],
-    s: &Setup,
-    wm: &WorldModel,
-    timing: &mut Timing,
-) -> Result<Vec<EpisodeRow>> {
-    // Each branch starts from its own (identical) copy of the initial states.
-    let (start, sim_start) = (Start::new(policy.name(), seeds, s)?, Start::new(policy.name(), seeds, s)?);
-    // The branches run side by side, each on one thread with its own one-thread rayon
-    // pool: every burn kernel then runs sequentially, so its floating-point reductions
-    // are the same in every process (rayon's work-stealing splits are not), and the
-    // two cores are still both busy.
-    let one = || rayon::ThreadPoolBuilder::new().num_threads(1).build();
-    let (pool_a, pool_b) = (one()?, one()?);
-    let (mut t_wm, mut t_sim) = (Timing::default(), Timing::default());
-    let (wm_out, sim_out) = std::thread::scope(|sc| {
-        let h = sc.spawn(|| pool_a.install(|| wm_branch(policy, &start, s, wm, &mut t_wm)));
-        let sim = pool_b.install(|| sim_branch(policy, sim_start, s, &mut t_sim));
-        (h.join(), sim)
-    });
-    let wm_rows =
-        wm_out.map_err(|_| anyhow!("world-model branch of policy {} panicked", policy.name()))??.rows;
-    let sim_rows = sim_out?.rows;
-    timing.add(&t_wm);
-    timing.add(&t_sim);
-    Ok(sim_rows.into_iter().zip(wm_rows).flat_map(|(a, b)| [a, b]).collect())
-}
-
 /// The MuJoCo branch: real frames, real agent positions, exact scores.
 ///
 /// # Errors
