@@ -367,6 +367,15 @@ fn world_model_loss_variants_train_and_warm_start() {
     assert!(err.contains("--base-channels (saved: 16)"), "{err}");
     assert!(!err.contains("--warmup"), "{err}");
     assert_eq!(read_json(&maps.join("state.json"))["step"], 2);
+    // A bad --init-from is refused before --force clears the output, which survives.
+    let missing = dir.path().join("no_such_run");
+    let (_, err) =
+        expect_code(&wm(&maps, &["--steps", "1", "--force", "--init-from", missing.to_str().unwrap()]), 2);
+    assert!(err.contains("--init-from") && err.contains("no_such_run"), "{err}");
+    let (_, err) =
+        expect_code(&wm(&maps, &["--steps", "1", "--force", "--init-from", maps.to_str().unwrap()]), 2);
+    assert!(err.contains("is the output folder itself"), "{err}");
+    assert_eq!(read_json(&maps.join("state.json"))["step"], 2);
     let back = dir.path().join("wm_back");
     let (_, err) = expect_code(&wm(&back, &["--steps", "1", "--init-from", maps.to_str().unwrap()]), 2);
     assert!(err.contains("U-Net config differs"), "{err}");

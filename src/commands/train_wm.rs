@@ -90,6 +90,16 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             "--samples: drifting needs at least 2 samples per context (the other samples are the negatives)"
         );
     }
+    if let (false, Some(dir)) = (a.session.resume, &a.init_from) {
+        // Checked before --force clears the output folder, so a refused run keeps it.
+        WorldModelConfig::read(dir).with_context(|| format!("--init-from {}", dir.display()))?;
+        if !dir.join("ema.bpk").is_file() {
+            bail!("--init-from {}: no ema.bpk (not a world-model run or export)", dir.display());
+        }
+        if same_folder(dir, &a.out) {
+            bail!("--init-from {} is the output folder itself", dir.display());
+        }
+    }
     prepare_out(&a.out, a.session.resume, a.session.force, "state.json")?;
     let from_step = read_step(&a.out);
     if a.session.resume {
