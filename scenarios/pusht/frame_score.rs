@@ -59,19 +59,30 @@ impl FrameScorer {
         Self { goal: mask, goal_sum, size, success_coverage: cfg.task.success_coverage }
     }
 
-    /// Estimated coverage of an HWC RGB frame.
-    pub fn coverage(&self, frame: &[u8]) -> f64 {
-        if self.goal_sum <= 0.0 || frame.len() != self.size * self.size * 3 {
+    /// Whether `frame` is an HWC RGB frame of this scorer's size with a non-empty goal.
+    fn fits(&self, frame: &[u8]) -> bool {
+        self.goal_sum > 0.0 && frame.len() == self.size * self.size * 3
+    }
+
+    /// Σ_p goal(p)·f(pixel p) / Σ_p goal(p): a per-pixel quantity averaged over the
+    /// goal T (0 for a frame that does not fit).
+    fn over_goal(&self, frame: &[u8], f: impl Fn(&[u8]) -> f64) -> f64 {
+        if !self.fits(frame) {
             return 0.0;
         }
-        let hit: f64 = self
+        let sum: f64 = self
             .goal
             .iter()
             .enumerate()
             .filter(|(_, g)| **g > 0.0)
-            .map(|(i, g)| g * block_fraction(&frame[i * 3..i * 3 + 3]))
+            .map(|(i, g)| g * f(&frame[i * 3..i * 3 + 3]))
             .sum();
-        (hit / self.goal_sum).clamp(0.0, 1.0)
+        sum / self.goal_sum
+    }
+
+    /// Estimated coverage of an HWC RGB frame.
+    pub fn coverage(&self, frame: &[u8]) -> f64 {
+        self.over_goal(frame, block_fraction).clamp(0.0, 1.0)
     }
 
     /// Block pixels in the whole frame (Σ block fraction) as a fraction of the T's area
@@ -80,7 +91,7 @@ impl FrameScorer {
     /// floor), far below 1 when an imagined frame has lost the block, above 1 when it
     /// smears it. A health check of world-model frames, not a score.
     pub fn block_area(&self, frame: &[u8]) -> f64 {
-        if self.goal_sum <= 0.0 || frame.len() != self.size * self.size * 3 {
+        if !self.fits(frame) {
             return 0.0;
         }
         frame.chunks_exact(3).map(block_fraction).sum::<f64>() / self.goal_sum
@@ -93,21 +104,8 @@ impl FrameScorer {
     /// whose goal has faded or eroded scores far lower — the world model has lost the
     /// scene. A health check of world-model frames, not a score.
     pub fn goal_kept(&self, frame: &[u8]) -> f64 {
-        if self.goal_sum <= 0.0 || frame.len() != self.size * self.size * 3 {
-            return 0.0;
-        }
         let dark = |px: &[u8]| 1.0 - f64::from(px[0].max(px[1]).max(px[2])) / 255.0;
-        let kept: f64 = self
-            .goal
-            .iter()
-            .enumerate()
-            .filter(|(_, g)| **g > 0.0)
-            .map(|(i, g)| {
-                let px = &frame[i * 3..i * 3 + 3];
-                g * (dark(px) + block_fraction(px)).min(1.0)
-            })
-            .sum();
-        kept / self.goal_sum
+        self.over_goal(frame, |px| (dark(px) + block_fraction(px)).min(1.0))
     }
 
     /// Estimated reward: clip(coverage / success threshold, 0, 1).

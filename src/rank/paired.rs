@@ -399,7 +399,6 @@ pub fn wm_branch(
                     for j in 0..m {
                         let fr = &frames[p * m + j];
                         track[i].add(start.scorers[i].coverage(fr), thr);
-                        track[i].scene = Some(scene_of(&start.scorers[i], fr));
                         push(&mut hist[i], (fr.clone(), chunks[p][done + first_seen + j]), o);
                     }
                 }
@@ -411,6 +410,10 @@ pub fn wm_branch(
         for (&i, r) in active.iter().zip(sub) {
             gen_rngs[i] = r;
             track[i].steps += len;
+            // Scene checks of the chunk's last seen frame only (the row keeps the last).
+            if let Some((f, _)) = hist[i].back() {
+                track[i].scene = Some(scene_of(&start.scorers[i], f));
+            }
         }
         record_chunk(&mut rec, &hist);
         track.iter_mut().for_each(Track::end_chunk);
