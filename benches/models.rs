@@ -113,11 +113,16 @@ fn objectives(c: &mut Criterion) {
         let wm = WorldModel::from_parts(cfg, FrameCodec::pixels(s), unet.init(&device), &device);
         for &b in &batches {
             let history = Tensor::<5>::zeros([b, 4, ch, s, s], &device); // [b, 4, C, s, s]
+            let anchor = Tensor::<4>::zeros([b, ch, s, s], &device); // [b, C, s, s]
             let actions = Tensor::<3>::zeros([b, 4, 2], &device); // [b, F, 2]
             let mut rngs: Vec<Rng> = (0..b as u64).map(Rng::new).collect();
             let id = BenchmarkId::new(format!("{name}_{sample_steps}_passes"), b);
             g.bench_with_input(id, &b, |bench, _| {
-                bench.iter(|| black_box(wm.predict(history.clone(), actions.clone(), &mut rngs).into_data()))
+                bench.iter(|| {
+                    black_box(
+                        wm.predict(history.clone(), anchor.clone(), actions.clone(), &mut rngs).into_data(),
+                    )
+                })
             });
         }
     }
@@ -134,12 +139,12 @@ fn chunk(c: &mut Criterion, group: &str, wm: &WorldModel, batches: &[usize]) {
         let frames = Tensor::<4>::zeros([b, 3, 96, 96], &device);
         let z = wm.encode(frames); // [b, C, s, s]
         let [_, ch, s, _] = z.dims();
-        let history = z.reshape([b, 1, ch, s, s]).repeat_dim(1, 4); // [b, 4, C, s, s]
+        let history = z.clone().reshape([b, 1, ch, s, s]).repeat_dim(1, 4); // [b, 4, C, s, s]
         let actions = Tensor::<3>::from_data(TensorData::new(vec![0f32; b * 4 * 2], [b, 4, 2]), &device);
         let mut rngs: Vec<Rng> = (0..b as u64).map(Rng::new).collect();
         g.bench_with_input(BenchmarkId::new("predict_4_decode_2", b), &b, |bench, _| {
             bench.iter(|| {
-                let out = wm.predict(history.clone(), actions.clone(), &mut rngs); // [b, 4, C, s, s]
+                let out = wm.predict(history.clone(), z.clone(), actions.clone(), &mut rngs); // [b, 4, C, s, s]
                 let last = out.slice([0..b, 2..4]).reshape([b * 2, ch, s, s]);
                 black_box(wm.decode(last).into_data())
             })

@@ -55,6 +55,8 @@ fn build(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
             "2",
             "--eval-every",
             "1",
+            // The anchor path end to end: training, `rank`'s world-model branch, replays.
+            "--anchor",
         ]),
         0,
     );
@@ -205,8 +207,12 @@ fn pipeline_end_to_end() {
         let goal = p["sim"]["goal_kept"].as_f64().unwrap();
         assert!((0.85..=1.0).contains(&goal), "MuJoCo goal kept {goal}");
         assert!(p["world_model"]["goal_kept"].as_f64().unwrap().is_finite());
+        // The agent is drawn over everything: all of its disk shows in MuJoCo.
+        let agent = p["sim"]["agent_kept"].as_f64().unwrap();
+        assert!((0.8..=1.0).contains(&agent), "MuJoCo agent kept {agent}");
+        assert!(p["world_model"]["agent_kept"].as_f64().unwrap().is_finite());
     }
-    assert!(stdout.contains("block kept") && stdout.contains("goal kept"), "{stdout}");
+    assert!(stdout.contains("block kept") && stdout.contains("agent kept"), "{stdout}");
     let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
     assert_eq!(rows.lines().count(), 2 * 3 * 2); // policies x seeds x branches
     // The parquet table holds the same rows, typed.

@@ -337,19 +337,25 @@ fn world_model_loss_variants_train_and_warm_start() {
         "" => assert_eq!(commit, "unknown"),
         head => assert!(commit == head || commit == format!("{head}+dirty"), "{commit} vs {head}"),
     }
-    // A warm start may add action maps (zero-initialised input channel); the run resumes
-    // with them, and a run without maps cannot start from it.
+    // A warm start may add action maps and the anchor (zero-initialised input channels);
+    // the run resumes with them, and a run without maps cannot start from it.
     let maps = dir.path().join("wm_maps");
     // (With context-noise augmentation, recorded in the run's config.)
     let noisy = ["--context-noise", "0.25"];
     expect_code(
         &wm(
             &maps,
-            &[&["--steps", "1", "--init-from", from, "--warmup", "1", "--action-maps"], &noisy[..]].concat(),
+            &[
+                &["--steps", "1", "--init-from", from, "--warmup", "1", "--action-maps", "--anchor"],
+                &noisy[..],
+            ]
+            .concat(),
         ),
         0,
     );
     assert_eq!(read_json(&maps.join("config.json"))["model"]["unet"]["action_maps"], true);
+    assert_eq!(read_json(&maps.join("config.json"))["model"]["unet"]["anchor"], true);
+    assert_eq!(cfg["model"]["unet"]["anchor"], serde_json::Value::Null);
     assert_eq!(read_json(&maps.join("config.json"))["train"]["context_noise"], 0.25);
     assert_eq!(cfg["train"]["context_noise"], 0.0);
     assert_eq!(cfg["model"]["unet"]["action_maps"], serde_json::Value::Null);
@@ -388,7 +394,16 @@ fn world_model_loss_variants_train_and_warm_start() {
     // resume that names the other parameterisation is refused.
     let diff = dir.path().join("wm_diff");
     let m = maps.to_str().unwrap();
-    let x0 = ["--objective", "diffusion", "--prediction", "x0", "--sample-steps", "2", "--action-maps"];
+    let x0 = [
+        "--objective",
+        "diffusion",
+        "--prediction",
+        "x0",
+        "--sample-steps",
+        "2",
+        "--action-maps",
+        "--anchor",
+    ];
     expect_code(&wm(&diff, &[&x0[..], &["--steps", "1", "--init-from", m, "--warmup", "1"]].concat()), 0);
     let model = &read_json(&diff.join("config.json"))["model"];
     assert_eq!((&model["prediction"], &model["unet"]["timestep_embedding"]), (&json!("x0"), &json!(true)));

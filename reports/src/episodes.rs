@@ -19,6 +19,7 @@
 //! | `scorer_abs_error` | f64, null in the world-model branch | frame scorer's mean error on real frames |
 //! | `block_area` | f64, null in runs written before it existed | block pixels in the last frame the policy saw, as a fraction of the T's area (≈ 1.06 in MuJoCo; how much of the block a world-model rollout kept) |
 //! | `goal_kept` | f64, null in runs written before it existed | fraction of the (static) goal T that frame still shows (≈ 0.94–0.99 in MuJoCo) |
+//! | `agent_kept` | f64, null in runs written before it existed | agent pixels in that frame as a fraction of the agent disk's area, capped at 1 (≈ 1 in MuJoCo; near 0 when a world-model rollout lost the agent) |
 //!
 //! Written single-threaded with fixed options, so the same rows give the same bytes.
 
@@ -65,6 +66,8 @@ pub struct EpisodeRecord {
     pub block_area: Option<f64>,
     /// Fraction of the goal T that frame still shows.
     pub goal_kept: Option<f64>,
+    /// Fraction of the agent's disk that frame shows (capped at 1).
+    pub agent_kept: Option<f64>,
 }
 
 /// The rows as a data frame (in the given order).
@@ -98,6 +101,7 @@ pub fn episodes_frame(rows: &[EpisodeRecord]) -> PolarsResult<DataFrame> {
             ),
             Column::new("block_area".into(), rows.iter().map(|r| r.block_area).collect::<Vec<_>>()),
             Column::new("goal_kept".into(), rows.iter().map(|r| r.goal_kept).collect::<Vec<_>>()),
+            Column::new("agent_kept".into(), rows.iter().map(|r| r.agent_kept).collect::<Vec<_>>()),
         ],
     )
 }
@@ -143,6 +147,7 @@ mod tests {
             scorer_abs_error: Some(0.01),
             block_area: Some(0.98),
             goal_kept: Some(0.95),
+            agent_kept: Some(0.99),
         };
         let w = EpisodeRecord {
             branch: "world_model".into(),
@@ -150,6 +155,7 @@ mod tests {
             scorer_abs_error: None,
             block_area: None,
             goal_kept: None,
+            agent_kept: Some(0.02),
             ..r.clone()
         };
         vec![r, w]
@@ -162,7 +168,7 @@ mod tests {
         write_episodes_parquet(&path, &rows()).unwrap();
         let df = read_episodes_parquet(&path).unwrap();
         assert_eq!(df.height(), 2);
-        assert_eq!(df.width(), 17);
+        assert_eq!(df.width(), 18);
         let seed = df.column("seed").unwrap();
         assert_eq!(seed.dtype(), &DataType::UInt64);
         assert_eq!(seed.u64().unwrap().get(1), Some(100_000));
@@ -170,6 +176,8 @@ mod tests {
         assert_eq!((x.get(0), x.get(1)), (Some(250.0), None));
         let area = df.column("block_area").unwrap().f64().unwrap();
         assert_eq!((area.get(0), area.get(1)), (Some(0.98), None));
+        let agent = df.column("agent_kept").unwrap().f64().unwrap();
+        assert_eq!((agent.get(0), agent.get(1)), (Some(0.99), Some(0.02)));
         assert_eq!(df.column("branch").unwrap().str().unwrap().get(1), Some("world_model"));
         assert_eq!(df.column("success").unwrap().bool().unwrap().get(0), Some(false));
         // Same rows, same bytes.

@@ -22,12 +22,33 @@ pub fn block_fraction(px: &[u8]) -> f64 {
     ((f64::from(px[0]) - f64::from(px[1])) / 198.0).clamp(0.0, 1.0)
 }
 
+/// Agent fraction of an RGB pixel: `(B − R) / 160`, clamped to [0, 1]. The agent's
+/// RoyalBlue (65, 105, 225) has B − R = 160 and its inner disk (78, 126, 255) 177;
+/// the floor, the goal, the walls and the block have B − R ≤ 0. Linear in a mix
+/// with white or black, like [`block_fraction`].
+pub fn agent_fraction(px: &[u8]) -> f64 {
+    ((f64::from(px[2]) - f64::from(px[0])) / 160.0).clamp(0.0, 1.0)
+}
+
+/// Health checks of one frame: is the scene still there? (Not scores.)
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneCheck {
+    /// [`FrameScorer::block_area`].
+    pub block_area: f64,
+    /// [`FrameScorer::goal_kept`].
+    pub goal_kept: f64,
+    /// [`FrameScorer::agent_kept`].
+    pub agent_kept: f64,
+}
+
 /// A coverage estimator for one goal pose.
 #[derive(Clone, Debug)]
 pub struct FrameScorer {
     /// Fraction of each pixel inside the goal T (row-major).
     goal: Vec<f64>,
     goal_sum: f64,
+    /// The agent disk's area in pixels.
+    agent_px: f64,
     size: usize,
     success_coverage: f64,
 }
@@ -56,7 +77,8 @@ impl FrameScorer {
             *m = f64::from(inside) / (n * n) as f64;
         }
         let goal_sum = mask.iter().sum();
-        Self { goal: mask, goal_sum, size, success_coverage: cfg.task.success_coverage }
+        let agent_px = std::f64::consts::PI * (cfg.agent.radius / scale).powi(2);
+        Self { goal: mask, goal_sum, agent_px, size, success_coverage: cfg.task.success_coverage }
     }
 
     /// Whether `frame` is an HWC RGB frame of this scorer's size with a non-empty goal.
@@ -108,6 +130,30 @@ impl FrameScorer {
         self.over_goal(frame, |px| (dark(px) + block_fraction(px)).min(1.0))
     }
 
+    /// Agent pixels in the whole frame (Σ agent fraction) as a fraction of the agent
+    /// disk's area in pixels, capped at 1. The agent is drawn over everything, so on a
+    /// real frame this is ≈ 1 (a little less where its anti-aliased rim touches the
+    /// block); an imagined frame in which the agent has vanished scores near 0 — the
+    /// world model no longer shows what the policy does, so no contact can follow. The
+    /// cap keeps a smeared agent (imagined blue over twice the disk, say) from hiding
+    /// vanished ones in a policy's mean; the filmstrips show smearing. A health check
+    /// of world-model frames, not a score.
+    pub fn agent_kept(&self, frame: &[u8]) -> f64 {
+        if !self.fits(frame) {
+            return 0.0;
+        }
+        (frame.chunks_exact(3).map(agent_fraction).sum::<f64>() / self.agent_px).min(1.0)
+    }
+
+    /// All three health checks of a frame.
+    pub fn scene(&self, frame: &[u8]) -> SceneCheck {
+        SceneCheck {
+            block_area: self.block_area(frame),
+            goal_kept: self.goal_kept(frame),
+            agent_kept: self.agent_kept(frame),
+        }
+    }
+
     /// Estimated reward: clip(coverage / success threshold, 0, 1).
     pub fn reward(&self, frame: &[u8]) -> f64 {
         (self.coverage(frame) / self.success_coverage).clamp(0.0, 1.0)
@@ -131,6 +177,12 @@ mod tests {
         assert_eq!(block_fraction(&[255, 255, 255]), 0.0);
         assert_eq!(block_fraction(&[0, 0, 0]), 0.0);
         assert_eq!(block_fraction(&[65, 105, 225]), 0.0);
+        assert_eq!((agent_fraction(&[65, 105, 225]), agent_fraction(&[78, 126, 255])), (1.0, 1.0));
+        for other in [[255, 255, 255], [0, 0, 0], [237, 39, 68], [165, 28, 48], [211, 211, 211]] {
+            assert_eq!(agent_fraction(&other), 0.0, "{other:?}");
+        }
+        // Half agent on white: (160·0.5 + 0) / 160 = 0.5, i.e. (160, 180, 240).
+        assert!((agent_fraction(&[160, 180, 240]) - 0.5).abs() < 0.01);
         // Half block on black: (118.5 − 19.5) / 198 = 0.5.
         assert!((block_fraction(&[118, 19, 34]) - 0.5).abs() < 0.01);
     }
@@ -143,6 +195,7 @@ mod tests {
         let scorer = FrameScorer::new(&cfg, &goal, raster.size());
         let n = raster.size() * raster.size();
         assert_eq!(scorer.block_area(&vec![255; n * 3]), 0.0);
+        assert_eq!(scorer.agent_kept(&vec![255; n * 3]), 0.0);
         // A white frame has lost the goal; a black one hides nothing.
         assert_eq!(scorer.goal_kept(&vec![255; n * 3]), 0.0);
         assert!((scorer.goal_kept(&vec![0; n * 3]) - 1.0).abs() < 1e-12);
@@ -182,5 +235,32 @@ mod tests {
             let goal_kept = scorer.goal_kept(&frame);
             assert!((0.9..=1.0).contains(&goal_kept), "step {k}: goal kept {goal_kept:.3}");
         }
+    }
+
+    #[test]
+    fn the_agent_shows_wherever_it_is() {
+        let cfg = cfg();
+        let raster = Rasterizer::new(&cfg);
+        let (mut state, goal) = initial_state(&cfg, 3);
+        let scorer = FrameScorer::new(&cfg, &goal, raster.size());
+        // Positions over the world, a corner by the walls included. The disk covers
+        // π·(15·96/512)² = 24.85 pixels; its anti-aliased rim on white counts in
+        // proportion, so the sum comes out within a few percent of that (then capped at 1).
+        let mut areas = Vec::new();
+        for &(x, y) in &[(20.0, 20.0), (256.0, 20.0), (490.0, 490.0), (100.0, 300.0), (400.0, 150.0)] {
+            state.agent = [x, y];
+            let s = scorer.scene(&raster.render(&state, &goal));
+            areas.push(s.agent_kept);
+            assert!((0.95..=1.0).contains(&s.agent_kept), "agent at ({x}, {y}): {:.3}", s.agent_kept);
+        }
+        // Touching the block, the rim pixels mixing blue with red count less (B − R of the
+        // mix falls faster than on white), so the check reads a little under 1.
+        state.agent = [state.block.x, state.block.y - 75.0 - 15.0];
+        let touching = scorer.agent_kept(&raster.render(&state, &goal));
+        assert!((0.8..=1.0).contains(&touching), "{touching:.3} ({areas:?})");
+        // Without the agent (its pixels painted white) the check reads 0.
+        let mut frame = raster.render(&state, &goal);
+        frame.chunks_exact_mut(3).filter(|p| agent_fraction(p) > 0.0).for_each(|p| p.fill(255));
+        assert_eq!(scorer.agent_kept(&frame), 0.0);
     }
 }

@@ -172,6 +172,12 @@ pub struct TrainWorldModelArgs {
     /// without maps, the new channel starts at zero weight.
     #[arg(long)]
     pub action_maps: bool,
+    /// Also give the U-Net the episode's first frame (the anchor) with every chunk (C
+    /// input channels; not in the paper): a real view of the static scene and of the
+    /// block's shape that a long closed-loop rollout cannot erode. With `--init-from`
+    /// a model without it, the new channels start at zero weight.
+    #[arg(long)]
+    pub anchor: bool,
     /// Start from another world-model run's EMA weights (same U-Net and autoencoder;
     /// its latent statistics are reused).
     #[arg(long)]

@@ -133,6 +133,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
                 }),
                 timestep_embedding: objective == Objective::Diffusion,
                 action_maps: a.action_maps.then_some(true),
+                anchor: a.anchor.then_some(true),
                 ..family
             };
             let stats = match &a.init_from {
@@ -374,6 +375,7 @@ fn check_resume_flags(a: &TrainWorldModelArgs, fresh: &WmTrainConfig) -> Result<
         ("config", family(matches!(a.config, WmConfigArg::PushtPixel)), family(model.autoencoder.is_none())),
         ("base_channels", json!(a.base_channels), json!(model.unet.model_channels)),
         ("action_maps", json!(a.action_maps), json!(model.unet.uses_action_maps())),
+        ("anchor", json!(a.anchor), json!(model.unet.uses_anchor())),
         ("sample_steps", json!(a.sample_steps), json!(model.sample_steps)),
         ("prediction", json!(prediction(a)), json!(model.prediction.unwrap_or_default())),
     ]);

@@ -259,6 +259,7 @@ pub(crate) fn write_tables(out: &Path, rows: &[EpisodeRow]) -> Result<()> {
             scorer_abs_error: r.scorer_abs_error,
             block_area: r.block_area,
             goal_kept: r.goal_kept,
+            agent_kept: r.agent_kept,
         })
         .collect();
     write_episodes_parquet(&out.join("episodes.parquet"), &records)?;
@@ -295,17 +296,19 @@ fn write_csv(path: &Path, sorted: &[&EpisodeRow]) -> Result<()> {
 
 fn print_summary(res: &Value, out: &Path) {
     println!(
-        "{:<16} {:>10} {:>12} {:>12} {:>10}",
-        "policy", "MuJoCo", "world model", "block kept", "goal kept"
+        "{:<16} {:>10} {:>12} {:>12} {:>10} {:>11}",
+        "policy", "MuJoCo", "world model", "block kept", "goal kept", "agent kept"
     );
     for p in res["policies"].as_array().into_iter().flatten() {
+        let wm = |k: &str| p["world_model"][k].as_f64().unwrap_or(f64::NAN);
         println!(
-            "{:<16} {:>10.3} {:>12.3} {:>12.2} {:>10.2}",
+            "{:<16} {:>10.3} {:>12.3} {:>12.2} {:>10.2} {:>11.2}",
             p["name"].as_str().unwrap_or("?"),
             p["sim"]["mean"].as_f64().unwrap_or(f64::NAN),
-            p["world_model"]["mean"].as_f64().unwrap_or(f64::NAN),
-            p["world_model"]["block_area"].as_f64().unwrap_or(f64::NAN),
-            p["world_model"]["goal_kept"].as_f64().unwrap_or(f64::NAN)
+            wm("mean"),
+            wm("block_area"),
+            wm("goal_kept"),
+            wm("agent_kept")
         );
     }
     let ag = &res["agreement"];

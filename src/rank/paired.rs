@@ -27,7 +27,7 @@ use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
 use mujoco_rs::prelude::MjModel;
 use rayon::prelude::*;
-use scenarios::pusht::frame_score::FrameScorer;
+use scenarios::pusht::frame_score::{FrameScorer, SceneCheck};
 use scenarios::pusht::render::Rasterizer;
 use scenarios::pusht::{PushTConfig, PushTEnv};
 use world_model::data::tensor_to_frames;
@@ -82,8 +82,8 @@ struct Track {
     /// Score so far at the end of each action chunk (repeated after the episode ended,
     /// so every trace of a batch has the same length).
     trace: Vec<f64>,
-    /// Scene checks (block area, goal kept) of the last frame the policy saw.
-    scene: Option<(f64, f64)>,
+    /// Scene checks of the last frame the policy saw.
+    scene: Option<SceneCheck>,
 }
 
 impl Track {
@@ -96,11 +96,6 @@ impl Track {
     fn end_chunk(&mut self) {
         self.trace.push((self.best_reward * 1e6).round() / 1e6);
     }
-}
-
-/// The scene checks of a frame: (block area, goal kept).
-fn scene_of(scorer: &FrameScorer, frame: &[u8]) -> (f64, f64) {
-    (scorer.block_area(frame), scorer.goal_kept(frame))
 }
 
 /// A frame and the agent position seen with it.
@@ -254,7 +249,7 @@ pub fn sim_branch(
     let mut rec = start.recording();
     for (((t, env), sc), f) in track.iter_mut().zip(&start.envs).zip(&start.scorers).zip(&start.first) {
         t.add(env.score().coverage, thr);
-        t.scene = Some(scene_of(sc, f));
+        t.scene = Some(sc.scene(f));
     }
     let mut steps = 0;
     let mut active: Vec<usize> = (0..n).collect();
@@ -297,7 +292,7 @@ pub fn sim_branch(
             scorer_err[i].0 += err;
             scorer_err[i].1 += frames.len();
             if let Some((f, _)) = frames.last() {
-                track[i].scene = Some(scene_of(&start.scorers[i], f));
+                track[i].scene = Some(start.scorers[i].scene(f));
             }
             frames.into_iter().for_each(|f| push(&mut hist[i], f, o));
         }
@@ -357,7 +352,7 @@ pub fn wm_branch(
     let mut rec = start.recording();
     for ((t, sc), f) in track.iter_mut().zip(&start.scorers).zip(&start.first) {
         t.add(sc.coverage(f), thr);
-        t.scene = Some(scene_of(sc, f));
+        t.scene = Some(sc.scene(f));
     }
     let tw = Instant::now();
     let device = wm.device().clone();
@@ -365,7 +360,8 @@ pub fn wm_branch(
     let refs: Vec<&[u8]> = start.first.iter().map(Vec::as_slice).collect();
     let z0 = wm.encode(policies::diffusion::frames_to_tensor(&refs, size, &device)); // [n, C, s, s]
     let [_, c, ls, _] = z0.dims();
-    // Latent histories of the active episodes, in `active`'s order.
+    // Latent histories and anchors (the first frame) of the active episodes, in `active`'s order.
+    let mut anchor = z0.clone(); // [a, C, s, s]
     let mut zh = z0.unsqueeze_dim::<5>(1).expand([n, k, c, ls, ls]); // [a, K, C, s, s]
     timing.world_model_s += tw.elapsed().as_secs_f64();
     let mut steps = 0;
@@ -383,7 +379,7 @@ pub fn wm_branch(
                 .flat_map(|ch| ch[done..done + f].iter().flat_map(|a| a.map(normalise_action)))
                 .collect();
             let act = Tensor::<3>::from_data(TensorData::new(acts, [a, f, 2]), &device);
-            let pred = wm.predict(zh.clone(), act, &mut sub); // [a, f, C, s, s]
+            let pred = wm.predict(zh.clone(), anchor.clone(), act, &mut sub); // [a, f, C, s, s]
             let check: f32 = pred.clone().abs().sum().into_scalar();
             if !check.is_finite() {
                 bail!("world model produced non-finite latents for policy {name} at step {}", steps + done);
@@ -412,7 +408,7 @@ pub fn wm_branch(
             track[i].steps += len;
             // Scene checks of the chunk's last seen frame only (the row keeps the last).
             if let Some((f, _)) = hist[i].back() {
-                track[i].scene = Some(scene_of(&start.scorers[i], f));
+                track[i].scene = Some(start.scorers[i].scene(f));
             }
         }
         record_chunk(&mut rec, &hist);
@@ -420,13 +416,10 @@ pub fn wm_branch(
         steps += len;
         let next = still_active(&active, &track);
         if next.len() < active.len() && !next.is_empty() {
-            let keep: Vec<Tensor<5>> = active
-                .iter()
-                .enumerate()
-                .filter(|(_, i)| next.contains(i))
-                .map(|(p, _)| zh.clone().narrow(0, p, 1))
-                .collect();
-            zh = Tensor::cat(keep, 0);
+            let kept: Vec<usize> =
+                active.iter().enumerate().filter(|(_, i)| next.contains(i)).map(|(p, _)| p).collect();
+            zh = Tensor::cat(kept.iter().map(|&p| zh.clone().narrow(0, p, 1)).collect(), 0);
+            anchor = Tensor::cat(kept.iter().map(|&p| anchor.clone().narrow(0, p, 1)).collect(), 0);
         }
         active = next;
         timing.world_model_s += tw.elapsed().as_secs_f64();

@@ -13,6 +13,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use harness::metrics::agreement;
 use harness::metrics::bootstrap::{agreement_ci, mean_ci, wilson};
+use scenarios::pusht::frame_score::SceneCheck;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
@@ -76,6 +77,11 @@ pub struct EpisodeRow {
     /// MuJoCo; lower when an imagined scene has faded or eroded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub goal_kept: Option<f64>,
+    /// Agent pixels in that frame as a fraction of the agent disk's area, capped at 1
+    /// ([`scenarios::pusht::frame_score::FrameScorer::agent_kept`]): ≈ 1 in MuJoCo;
+    /// near 0 when an imagined rollout lost the agent. Absent in older runs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub agent_kept: Option<f64>,
 }
 
 impl EpisodeRow {
@@ -106,13 +112,15 @@ impl EpisodeRow {
             score_trace: Vec::new(),
             block_area: None,
             goal_kept: None,
+            agent_kept: None,
         }
     }
 
-    /// With the scene checks of the last seen frame: (block area, goal kept).
-    pub fn with_scene(mut self, scene: Option<(f64, f64)>) -> Self {
-        self.block_area = scene.map(|s| s.0);
-        self.goal_kept = scene.map(|s| s.1);
+    /// With the scene checks of the last seen frame.
+    pub fn with_scene(mut self, scene: Option<SceneCheck>) -> Self {
+        self.block_area = scene.map(|s| s.block_area);
+        self.goal_kept = scene.map(|s| s.goal_kept);
+        self.agent_kept = scene.map(|s| s.agent_kept);
         self
     }
 
@@ -188,6 +196,7 @@ pub fn branch_stats(rows: &[&EpisodeRow], bootstrap: usize, seed: u64) -> Value 
         "episodes": n,
         "block_area": mean_of(rows.iter().filter_map(|r| r.block_area).collect()),
         "goal_kept": mean_of(rows.iter().filter_map(|r| r.goal_kept).collect()),
+        "agent_kept": mean_of(rows.iter().filter_map(|r| r.agent_kept).collect()),
     })
 }
 

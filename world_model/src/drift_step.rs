@@ -80,12 +80,14 @@ fn host(t: Tensor<5>) -> Vec<f32> {
 ///
 /// # Shapes
 /// - `hist`: `[b n, C, K, s, s]`, each context's true history repeated n times
+/// - `anchor`: `[b n, C, s, s]`, each context's episode's first frame (anchored U-Nets)
 /// - `act`: `[b n, chunks·F, 2]` normalised actions
 pub fn drifting_loss(
     unet: &UNet,
     latents: &Latents,
     windows: &[Window],
     mut hist: Tensor<5>,
+    anchor: Option<Tensor<4>>,
     act: Tensor<3>,
     setup: &DriftSetup,
 ) -> (Tensor<1>, Vec<f32>) {
@@ -98,7 +100,7 @@ pub fn drifting_loss(
     for i in 0..setup.chunks.max(1) {
         let noise = Tensor::<5>::random([bn, c, f, s, s], Distribution::Normal(0.0, 1.0), &device);
         let a = act.clone().narrow(1, i * f, f); // [b n, F, 2]
-        let out = unet.forward(noise, hist.clone(), a, None); // [b n, C, F, s, s]
+        let out = unet.forward(noise, hist.clone(), a, anchor.clone(), None); // [b n, C, F, s, s]
         let pos_idx: Vec<usize> =
             windows.iter().flat_map(|w| w.targets[i * f..(i + 1) * f].iter().copied()).collect();
         let pos = latents.tensor(&pos_idx, f, &device); // [b, F, C, s, s]

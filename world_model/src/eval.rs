@@ -4,6 +4,7 @@
 //! every generated frame with the real one — MSE on [-1, 1] pixels, and PSNR and
 //! SSIM on uint8 as scikit-image computes them — per frame, averaged per video,
 //! then over videos. Timing is generation wall time (U-Net + decoding) per frame.
+//! An anchored model also sees its episode's first frame, as in `rank`.
 
 use std::time::Instant;
 
@@ -64,10 +65,20 @@ pub fn rollout(
     let (k, f_max) = (wm.cfg.unet.history, wm.cfg.future);
     let b = starts.len();
     let ctx: Vec<usize> = starts.iter().flat_map(|&t| t..t + k).collect();
+    let firsts: Vec<usize> = starts
+        .iter()
+        .map(|&t| data.episodes.iter().find(|r| r.contains(&t)).map_or(t, |r| r.start))
+        .collect();
     let t0 = Instant::now();
     let z = wm.encode(data.frames_tensor(&ctx, &device)); // [b k, C, s, s]
     let [_, c, s, _] = z.dims();
     let mut hist = z.reshape([b, k, c, s, s]);
+    // Each video's episode's first frame; a model without an anchor ignores it.
+    let anchor = if wm.uses_anchor() {
+        wm.encode(data.frames_tensor(&firsts, &device)) // [b, C, s, s]
+    } else {
+        hist.clone().narrow(1, 0, 1).reshape([b, c, s, s])
+    };
     let mut rngs: Vec<Rng> = starts.iter().map(|&t| Rng::new(derive(seed, &[t as u64]))).collect();
     let mut out: Vec<Vec<Vec<u8>>> = vec![Vec::with_capacity(len); b];
     let mut done = 0;
@@ -80,7 +91,7 @@ pub fn rollout(
             .map(|(i, d)| normalise_action(data.actions[i * 2 + d]))
             .collect();
         let act = Tensor::<3>::from_data(TensorData::new(acts, [b, f, 2]), &device);
-        let pred = wm.predict(hist.clone(), act, &mut rngs); // [b, f, C, s, s]
+        let pred = wm.predict(hist.clone(), anchor.clone(), act, &mut rngs); // [b, f, C, s, s]
         let frames = tensor_to_frames(wm.decode(pred.clone().reshape([b * f, c, s, s])));
         for (i, fr) in frames.into_iter().enumerate() {
             out[i / f].push(fr);

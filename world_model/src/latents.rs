@@ -12,7 +12,9 @@
 //! o_{t+1..t+4} and actions a_t..a_{t+3} (a_k is executed after observing o_k,
 //! so a_{t+f} drives o_{t+f+1}). History steps before the episode's first frame
 //! repeat that frame, exactly as a rollout starts from one observation repeated
-//! four times; the targets always lie inside the episode.
+//! four times; the targets always lie inside the episode. The window also names
+//! the episode's first frame, the anchor a U-Net configured with one reads (a
+//! rollout's first observation).
 
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
@@ -151,6 +153,8 @@ pub struct Window {
     pub history: Vec<usize>,
     /// Target frame indices o_{t+1..t+F}.
     pub targets: Vec<usize>,
+    /// The episode's first frame index (the anchor).
+    pub anchor: usize,
     /// Normalised actions a_t..a_{t+F-1}, `F x 2`.
     pub actions: Vec<f32>,
 }
@@ -172,7 +176,7 @@ pub fn window(data: &EpisodeData, t: usize, history: usize, future: usize) -> Wi
     let targets = (1..=future).map(|f| t + f).collect();
     let actions =
         (0..future).flat_map(|f| [0, 1].map(|d| normalise_action(data.actions[(t + f) * 2 + d]))).collect();
-    Window { history: hist, targets, actions }
+    Window { history: hist, targets, anchor: ep_start, actions }
 }
 
 #[cfg(test)]
@@ -197,11 +201,13 @@ mod tests {
         let w = window(&d, 1, 4, 4);
         assert_eq!(w.history, vec![0, 0, 0, 1]);
         assert_eq!(w.targets, vec![2, 3, 4, 5]);
+        assert_eq!(w.anchor, 0);
         // a'_1 = 2·1/511 − 1, a'_y = 2·511/511 − 1 = 1.
         assert!((w.actions[0] - (2.0 / 511.0 - 1.0)).abs() < 1e-6);
         assert_eq!(w.actions[1], 1.0);
         // A window in the second episode repeats that episode's first frame.
         assert_eq!(window(&d, 7, 4, 1).history, vec![6, 6, 6, 7]);
+        assert_eq!(window(&d, 7, 4, 1).anchor, 6);
     }
 
     #[test]

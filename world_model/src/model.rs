@@ -192,35 +192,56 @@ impl WorldModel {
         (t(&self.cfg.latents.mean), t(&self.cfg.latents.std))
     }
 
+    /// Whether the U-Net reads the anchor (the episode's first frame) passed to
+    /// [`Self::predict`]; other models ignore it.
+    pub fn uses_anchor(&self) -> bool {
+        self.cfg.unet.uses_anchor()
+    }
+
     /// Predicts the next F latent frames in latent space.
     ///
     /// # Shapes
     /// - `history`: `[b, K, C, s, s]` normalised latents
+    /// - `anchor`: `[b, C, s, s]` the normalised latents of each episode's first
+    ///   observed frame (read only by anchored models)
     /// - `actions`: `[b, F, 2]` normalised actions (F ≤ the configured future)
     /// - returns `[b, F, C, s, s]`
-    pub fn predict(&self, history: Tensor<5>, actions: Tensor<3>, rngs: &mut [Rng]) -> Tensor<5> {
+    pub fn predict(
+        &self,
+        history: Tensor<5>,
+        anchor: Tensor<4>,
+        actions: Tensor<3>,
+        rngs: &mut [Rng],
+    ) -> Tensor<5> {
         let [b, _, c, s, _] = history.dims();
         let [_, f, _] = actions.dims();
         let hist = history.swap_dims(1, 2); // [b, C, K, s, s]
+        let anchor = self.uses_anchor().then_some(anchor);
         let noise = row_noise(rngs, c * f * s * s);
         let x = Tensor::<5>::from_data(TensorData::new(noise, [b, c, f, s, s]), &self.device);
         let out = match self.cfg.objective {
-            Objective::Drifting | Objective::Mse => self.unet.forward(x, hist, actions, None),
-            Objective::Diffusion => self.ddim(x, hist, actions),
+            Objective::Drifting | Objective::Mse => self.unet.forward(x, hist, actions, anchor, None),
+            Objective::Diffusion => self.ddim(x, hist, actions, anchor),
         };
         out.swap_dims(1, 2) // [b, F, C, s, s]
     }
 
     /// Deterministic DDIM from t = 1 to 0 in `sample_steps` steps. Every t < 1 step
     /// has ᾱ(t) < 1, so recovering ε from an x0 prediction never divides by zero.
-    fn ddim(&self, mut x: Tensor<5>, hist: Tensor<5>, actions: Tensor<3>) -> Tensor<5> {
+    fn ddim(
+        &self,
+        mut x: Tensor<5>,
+        hist: Tensor<5>,
+        actions: Tensor<3>,
+        anchor: Option<Tensor<4>>,
+    ) -> Tensor<5> {
         let k = self.cfg.sample_steps.max(1);
         let b = x.dims()[0];
         for i in 0..k {
             let (t, t_next) = (1.0 - i as f64 / k as f64, 1.0 - (i + 1) as f64 / k as f64);
             let (a, a_next) = (alpha_bar(t), alpha_bar(t_next));
             let tt = Tensor::<1>::from_floats(vec![t as f32; b].as_slice(), &self.device);
-            let out = self.unet.forward(x.clone(), hist.clone(), actions.clone(), Some(tt));
+            let out = self.unet.forward(x.clone(), hist.clone(), actions.clone(), anchor.clone(), Some(tt));
             let (x0, eps) = match self.cfg.prediction.unwrap_or_default() {
                 Prediction::V => {
                     let x0 = x.clone() * a.sqrt() - out.clone() * (1.0 - a).sqrt();
@@ -271,13 +292,14 @@ mod tests {
         let hist = Tensor::<5>::random([2, 4, 3, 8, 8], burn::tensor::Distribution::Default, &device);
         let act = Tensor::<3>::zeros([2, 4, 2], &device);
         let rngs = || (0..2).map(Rng::new).collect::<Vec<_>>();
-        let ya = a.predict(hist.clone(), act.clone(), &mut rngs());
-        let yb = b.predict(hist.clone(), act.clone(), &mut rngs());
+        let anchor = hist.clone().narrow(1, 0, 1).reshape([2, 3, 8, 8]);
+        let ya = a.predict(hist.clone(), anchor.clone(), act.clone(), &mut rngs());
+        let yb = b.predict(hist.clone(), anchor.clone(), act.clone(), &mut rngs());
         let diff: f32 = (ya.clone() - yb).abs().max().into_scalar();
         assert!(diff < 1e-5, "one x0 DDIM step differs from the one-pass output by {diff}");
         // More steps re-noise and denoise again: a different, finite sample.
         b.cfg.sample_steps = 4;
-        let y4 = b.predict(hist, act, &mut rngs());
+        let y4 = b.predict(hist, anchor, act, &mut rngs());
         let moved: f32 = (ya - y4.clone()).abs().mean().into_scalar();
         assert!(moved > 1e-4, "{moved}");
         assert!(y4.into_data().try_to_vec::<f32>().unwrap().iter().all(|v| v.is_finite()));

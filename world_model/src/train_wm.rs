@@ -153,33 +153,52 @@ pub struct TrainingFrames<'a> {
     pub codec: &'a FrameCodec,
 }
 
-/// Stacked windows: `[b·K]` history and `[b·F]` target indices, `[b, F, 2]` actions.
-fn stack(windows: &[Window], repeat: usize, device: &Device) -> (Vec<usize>, Vec<usize>, Tensor<3>) {
-    let mut hist = Vec::new();
-    let mut targets = Vec::new();
-    let mut acts = Vec::new();
+/// Windows stacked for a batch, each repeated `repeat` times.
+struct Stacked {
+    /// `[b·K]` history frame indices.
+    hist: Vec<usize>,
+    /// `[b·F]` target frame indices.
+    targets: Vec<usize>,
+    /// `[b]` anchor frame indices (each episode's first frame).
+    anchors: Vec<usize>,
+    /// `[b, F, 2]` normalised actions.
+    act: Tensor<3>,
+}
+
+fn stack(windows: &[Window], repeat: usize, device: &Device) -> Stacked {
+    let (mut hist, mut targets, mut anchors, mut acts) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for w in windows {
         for _ in 0..repeat {
             hist.extend_from_slice(&w.history);
             targets.extend_from_slice(&w.targets);
+            anchors.push(w.anchor);
             acts.extend_from_slice(&w.actions);
         }
     }
     let f = windows.first().map_or(0, |w| w.targets.len());
     let act = Tensor::from_data(TensorData::new(acts, [windows.len() * repeat, f, 2]), device);
-    (hist, targets, act)
+    Stacked { hist, targets, anchors, act }
+}
+
+/// The anchors' normalised latents `[b, C, s, s]` (already encoded).
+fn anchor_tensor(latents: &Latents, anchors: &[usize], device: &Device) -> Tensor<4> {
+    let z = latents.tensor(anchors, 1, device); // [b, 1, C, s, s]
+    let [b, _, c, s, _] = z.dims();
+    z.reshape([b, c, s, s])
 }
 
 /// Held-out one-chunk latent MSE of `model` on `windows` (fixed noise seeds).
 fn evaluate(model: &WorldModel, latents: &mut Latents, codec: &FrameCodec, windows: &[Window]) -> f64 {
     let device = model.device().clone();
     let (k, f) = (windows[0].history.len(), windows[0].targets.len());
-    let (hist, targets, act) = stack(windows, 1, &device);
-    latents.ensure(&hist, codec, &device);
-    latents.ensure(&targets, codec, &device);
+    let st = stack(windows, 1, &device);
+    for idx in [&st.hist, &st.targets, &st.anchors] {
+        latents.ensure(idx, codec, &device);
+    }
     let mut rngs: Vec<Rng> = (0..windows.len()).map(|i| Rng::new(i as u64)).collect();
-    let pred = model.predict(latents.tensor(&hist, k, &device), act, &mut rngs);
-    let truth = latents.tensor(&targets, f, &device);
+    let anchor = anchor_tensor(latents, &st.anchors, &device);
+    let pred = model.predict(latents.tensor(&st.hist, k, &device), anchor, st.act, &mut rngs);
+    let truth = latents.tensor(&st.targets, f, &device);
     (pred - truth).powf_scalar(2.0).mean().into_scalar::<f32>().into()
 }
 
@@ -237,6 +256,9 @@ pub fn train_world_model(
         if model_cfg.unet.uses_action_maps() {
             unet = unet.with_action_maps();
         }
+        if model_cfg.unet.uses_anchor() {
+            unet = unet.with_anchor();
+        }
         if model_cfg.unet.timestep_embedding {
             unet = unet.with_timestep_embedding(&device);
         }
@@ -280,11 +302,14 @@ pub fn train_world_model(
             })
             .collect();
         let n = if objective == Objective::Drifting { cfg.samples } else { 1 };
-        let (hist_idx, target_idx, act) = stack(&windows, n, &device);
-        latents.ensure(&hist_idx, codec, &inner);
-        latents.ensure(&target_idx, codec, &inner);
+        let Stacked { hist: hist_idx, targets: target_idx, anchors, act } = stack(&windows, n, &device);
+        for idx in [&hist_idx, &target_idx, &anchors] {
+            latents.ensure(idx, codec, &inner);
+        }
         let hist = latents.tensor(&hist_idx, k, &device).swap_dims(1, 2); // [b n, C, K, s, s]
+        // Context noise corrupts the history only: the anchor is always a real frame.
         let hist = crate::context_noise::corrupt(hist, cfg.context_noise, derive(cfg.seed, &[step, 7]));
+        let anchor = model_cfg.unet.uses_anchor().then(|| anchor_tensor(&latents, &anchors, &device)); // [b n, C, s, s]
         let b = windows.len();
         let mut loss_r = Vec::new();
         let loss = match objective {
@@ -295,14 +320,14 @@ pub fn train_world_model(
                     motion: cfg.motion.as_ref(),
                     chunks,
                 };
-                let (loss, r) = drifting_loss(&unet, &latents, &windows, hist, act, &setup);
+                let (loss, r) = drifting_loss(&unet, &latents, &windows, hist, anchor, act, &setup);
                 loss_r = r;
                 loss
             }
             Objective::Mse => {
                 let noise = Tensor::<5>::random([b, c, f, s, s], Distribution::Normal(0.0, 1.0), &device);
                 let target = latents.tensor(&target_idx, f, &device).swap_dims(1, 2); // [b, C, F, s, s]
-                (unet.forward(noise, hist, act, None) - target).powf_scalar(2.0).mean()
+                (unet.forward(noise, hist, act, anchor, None) - target).powf_scalar(2.0).mean()
             }
             Objective::Diffusion => {
                 let x0 = latents.tensor(&target_idx, f, &device).swap_dims(1, 2); // [b, C, F, s, s]
@@ -324,7 +349,7 @@ pub fn train_world_model(
                     Prediction::X0 => x0,
                 };
                 let tt = Tensor::<1>::from_floats(t.as_slice(), &device);
-                (unet.forward(xt, hist, act, Some(tt)) - target).powf_scalar(2.0).mean()
+                (unet.forward(xt, hist, act, anchor, Some(tt)) - target).powf_scalar(2.0).mean()
             }
         };
         let loss_value: f64 = loss.clone().into_scalar::<f32>().into();

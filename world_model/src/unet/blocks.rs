@@ -55,14 +55,24 @@ impl Conv3dF {
         Self { spatial, temporal }
     }
 
-    /// The same convolution reading `extra` more input channels (appended last)
-    /// with zero weights, so its output is unchanged.
-    pub fn with_extra_inputs(mut self, extra: usize) -> Self {
+    /// The same convolution reading `extra` more input channels, inserted before
+    /// the last `after` existing ones (0: appended last), with zero weights, so its
+    /// output is unchanged.
+    pub fn with_extra_inputs(mut self, extra: usize, after: usize) -> Self {
         let w = self.spatial.weight.val(); // [cout, cin, k, k]
-        let [co, _, kh, kw] = w.dims();
+        let [co, ci, kh, kw] = w.dims();
         let zeros = Tensor::<4>::zeros([co, extra, kh, kw], &w.device());
+        let split = ci - after.min(ci);
+        let mut parts = Vec::with_capacity(3);
+        if split > 0 {
+            parts.push(w.clone().narrow(1, 0, split));
+        }
+        parts.push(zeros);
+        if split < ci {
+            parts.push(w.narrow(1, split, ci - split));
+        }
         // Detached: a fresh leaf, so it can be a trainable parameter on an autodiff device.
-        self.spatial.weight = Param::from_tensor(Tensor::cat(vec![w, zeros], 1).detach());
+        self.spatial.weight = Param::from_tensor(Tensor::cat(parts, 1).detach());
         self
     }
 

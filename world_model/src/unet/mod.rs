@@ -10,6 +10,12 @@
 //! input channel: a Gaussian bump at its action's position in the frame, so the
 //! convolutions see *where* the agent is driven, which FiLM (a per-channel
 //! scale and shift) can only convey indirectly.
+//! With `anchor` (not in the paper either) the episode's first observed frame is
+//! fed too, broadcast over F like the history: in a closed-loop rollout the
+//! history soon holds only the model's own output, while the anchor stays a real
+//! frame showing the static scene (Push-T's goal T, which never moves) and the
+//! block's true shape, so the network can copy what does not change instead of
+//! re-deriving it from its own drifting predictions.
 //! Skips follow the ADM layout: one after `conv_in`, one after every residual
 //! block (with its attention) and one after every downsampling.
 
@@ -64,6 +70,10 @@ pub struct UNetConfig {
     /// written before it existed still load (missing = none).
     #[config(default = "None")]
     pub action_maps: Option<bool>,
+    /// Feed the episode's first observed frame (the anchor) as C more input
+    /// channels (not in the paper). An option for the same reason (missing = no).
+    #[config(default = "None")]
+    pub anchor: Option<bool>,
 }
 
 impl UNetConfig {
@@ -72,15 +82,23 @@ impl UNetConfig {
         self.action_maps == Some(true)
     }
 
+    /// Whether the U-Net reads the anchor frame.
+    pub fn uses_anchor(&self) -> bool {
+        self.anchor == Some(true)
+    }
+
     /// Whether a run with this config can start from `source`'s weights: the same
-    /// U-Net, or one that lacks only action maps and/or the timestep embedding
-    /// (added with zero weights by [`UNet::with_action_maps`] and
-    /// [`UNet::with_timestep_embedding`], so the warm-started network computes
-    /// exactly what its source did).
+    /// U-Net, or one that lacks only action maps, the anchor and/or the timestep
+    /// embedding (added with zero weights by [`UNet::with_action_maps`],
+    /// [`UNet::with_anchor`] and [`UNet::with_timestep_embedding`], so the
+    /// warm-started network computes exactly what its source did).
     pub fn can_start_from(&self, source: &UNetConfig) -> bool {
         let mut bridged = source.clone();
         if self.uses_action_maps() {
             bridged.action_maps = Some(true);
+        }
+        if self.uses_anchor() {
+            bridged.anchor = Some(true);
         }
         bridged.timestep_embedding |= self.timestep_embedding;
         bridged == *self // bridging only adds what `self` has, so the same config passes
@@ -101,7 +119,8 @@ impl UNetConfig {
     pub fn init(&self, device: &Device) -> UNet {
         let (e, g) = (self.emb_dim, self.groups);
         let mc = self.model_channels;
-        let in_ch = self.frame_channels * (1 + self.history) + usize::from(self.uses_action_maps());
+        let in_ch = self.frame_channels * (1 + self.history + usize::from(self.uses_anchor()))
+            + usize::from(self.uses_action_maps());
         let mut chans = vec![mc]; // channels of every skip, in push order
         let mut enc = Vec::new();
         let mut downs = Vec::new();
@@ -167,7 +186,9 @@ impl UNetConfig {
             conv_out: Conv3dF::new(c, self.frame_channels, 3, 1, device),
             res_blocks: self.res_blocks,
             emb_dim: e,
+            frame_channels: self.frame_channels,
             action_maps: self.uses_action_maps(),
+            anchor: self.uses_anchor(),
         }
     }
 }
@@ -214,7 +235,9 @@ pub struct UNet {
     conv_out: Conv3dF,
     res_blocks: usize,
     emb_dim: usize,
+    frame_channels: usize,
     action_maps: bool,
+    anchor: bool,
 }
 
 impl UNet {
@@ -224,6 +247,9 @@ impl UNet {
     /// - `noise`: `[b, cf, F, h, w]`
     /// - `history`: `[b, cf, K, h, w]`
     /// - `actions`: `[b, F, a]` (a_{t+f} drives frame t+f+1)
+    /// - `anchor`: `[b, cf, h, w]`, the episode's first frame (read only by a U-Net
+    ///   configured with `anchor`; when it is `None` there, the last history frame
+    ///   stands in)
     /// - `timestep`: `[b]` in [0, 1] (diffusion baseline only)
     /// - returns `[b, cf, F, h, w]`
     pub fn forward(
@@ -231,16 +257,22 @@ impl UNet {
         noise: Tensor<5>,
         history: Tensor<5>,
         actions: Tensor<3>,
+        anchor: Option<Tensor<4>>,
         timestep: Option<Tensor<1>>,
     ) -> Tensor<5> {
         let [b, cf, f, h, w] = noise.dims();
         let [_, _, k, _, _] = history.dims();
+        let anchor = self.anchor.then(|| {
+            let a = anchor.unwrap_or_else(|| history.clone().narrow(2, k - 1, 1).reshape([b, cf, h, w]));
+            a.reshape([b, cf, 1, h, w]).expand([b, cf, f, h, w]) // [b, cf, F, h, w]
+        });
         let hist = history.swap_dims(1, 2).reshape([b, k * cf, 1, h, w]).expand([b, k * cf, f, h, w]); // k-major
         let mut parts = vec![noise, hist]; // [b, cf, F, h, w], [b, cf K, F, h, w]
         if self.action_maps {
             parts.push(action_maps(actions.clone(), h, w)); // [b, 1, F, h, w]
         }
-        let x = Tensor::cat(parts, 1); // [b, cf (1 + K) (+ 1), F, h, w]
+        parts.extend(anchor);
+        let x = Tensor::cat(parts, 1); // [b, cf (1 + K) (+ 1) (+ cf), F, h, w]
         let mut emb = self.act2.forward(silu(self.act1.forward(actions))); // [b, F, e]
         if let (Some(mlp), Some(t)) = (&self.time, timestep) {
             let te = mlp.l2.forward(silu(mlp.l1.forward(sinusoidal(t, self.emb_dim)))); // [b, e]
@@ -280,8 +312,21 @@ impl UNet {
     /// to use the maps (warm-starting an `action_maps` run from one without).
     pub fn with_action_maps(mut self) -> Self {
         if !self.action_maps {
-            self.conv_in = self.conv_in.with_extra_inputs(1);
+            // The map channel comes before the anchor's (see `forward`).
+            let after = if self.anchor { self.frame_channels } else { 0 };
+            self.conv_in = self.conv_in.with_extra_inputs(1, after);
             self.action_maps = true;
+        }
+        self
+    }
+
+    /// The same network with anchor input channels added (after the action map, if
+    /// any), their weights zero: it computes exactly what it did before, and training
+    /// can then learn to use the anchor (warm-starting an `anchor` run from one without).
+    pub fn with_anchor(mut self) -> Self {
+        if !self.anchor {
+            self.conv_in = self.conv_in.with_extra_inputs(self.frame_channels, 0);
+            self.anchor = true;
         }
         self
     }
@@ -319,104 +364,4 @@ fn sinusoidal(t: Tensor<1>, dim: usize) -> Tensor<2> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn pixel_config_has_the_papers_parameter_count() {
-        // Spec §5: 66,560 + 40,800 + 2,652,480 + 580,032 + 5,032,512 + 2,817 = 8,375,201.
-        let unet = UNetConfig::pusht_pixel().init(&Device::flex());
-        assert_eq!(unet.num_params(), 8_375_201);
-    }
-
-    #[test]
-    fn latent_model_predicts_four_frames_in_one_pass() {
-        let device = Device::flex();
-        let cfg = UNetConfig::pusht_latent(8);
-        let unet = cfg.init(&device);
-        let noise = Tensor::<5>::zeros([2, 8, 4, 12, 12], &device);
-        let hist = Tensor::<5>::zeros([2, 8, 4, 12, 12], &device);
-        let act = Tensor::<3>::zeros([2, 4, 2], &device);
-        assert_eq!(unet.forward(noise.clone(), hist.clone(), act.clone(), None).dims(), [2, 8, 4, 12, 12]);
-        // Fewer future frames (a truncated last chunk) work too: the temporal convs pad.
-        let out = unet.forward(noise.narrow(2, 0, 3), hist, act.narrow(1, 0, 3), None);
-        assert_eq!(out.dims(), [2, 8, 3, 12, 12]);
-    }
-
-    #[test]
-    fn warm_starts_bridge_action_maps_and_the_timestep_embedding() {
-        let plain = UNetConfig { model_channels: 32, ..UNetConfig::pusht_latent(4) };
-        let timed = UNetConfig { timestep_embedding: true, ..plain.clone() };
-        let both = UNetConfig { action_maps: Some(true), ..timed.clone() };
-        assert!(both.can_start_from(&plain) && both.can_start_from(&timed) && both.can_start_from(&both));
-        assert!(!plain.can_start_from(&timed), "a warm start adds layers, never drops them");
-        assert!(!both.can_start_from(&UNetConfig { model_channels: 64, ..plain.clone() }));
-        // The added embedding's output layer is zero: the same output at every t.
-        let device = Device::flex();
-        let unet = plain.init(&device);
-        let rand = |s: [usize; 5]| Tensor::<5>::random(s, burn::tensor::Distribution::Default, &device);
-        let (noise, hist) = (rand([2, 4, 4, 8, 8]), rand([2, 4, 4, 8, 8]));
-        let a = Tensor::<3>::zeros([2, 4, 2], &device);
-        let before = unet.forward(noise.clone(), hist.clone(), a.clone(), None);
-        let with_t = unet.with_timestep_embedding(&device);
-        assert_eq!(with_t.num_params(), timed.init(&device).num_params());
-        for t in [0.0, 0.37, 1.0] {
-            let t = Tensor::<1>::from_floats([t, t].as_slice(), &device);
-            let after = with_t.forward(noise.clone(), hist.clone(), a.clone(), Some(t));
-            let diff: f32 = (before.clone() - after).abs().max().into_scalar();
-            assert!(diff < 1e-5, "the zero-output embedding changed the output by {diff}");
-        }
-    }
-
-    #[test]
-    fn actions_condition_the_output() {
-        let device = Device::flex();
-        let unet = UNetConfig { model_channels: 32, ..UNetConfig::pusht_latent(4) }.init(&device);
-        let noise = Tensor::<5>::random([1, 4, 4, 12, 12], burn::tensor::Distribution::Default, &device);
-        let hist = Tensor::<5>::random([1, 4, 4, 12, 12], burn::tensor::Distribution::Default, &device);
-        let a = Tensor::<3>::zeros([1, 4, 2], &device);
-        let y1 = unet.forward(noise.clone(), hist.clone(), a.clone(), None);
-        let y2 = unet.forward(noise, hist, a + 0.5, None);
-        let diff: f32 = (y1 - y2).abs().mean().into_scalar();
-        assert!(diff > 1e-4, "actions have no effect ({diff})");
-    }
-}
-
-#[cfg(test)]
-mod timing {
-    use super::*;
-    use crate::drift::{PUSHT_TEMPERATURES, drift_loss};
-    use burn::optim::{AdamWConfig, GradientsParams};
-
-    /// One drifting training step on latents: 4 contexts x 16 samples = 64 clips.
-    /// Run by hand: `cargo test --release -p world_model step_time -- --ignored --nocapture`
-    /// (`UNET_BASE`, `CONTEXTS`, `SAMPLES` override 64, 4, 16).
-    #[test]
-    #[ignore = "timing, run by hand"]
-    fn step_time() {
-        let device = Device::flex().autodiff();
-        let env = |k: &str, d: usize| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
-        let base = env("UNET_BASE", 64);
-        let mut unet = UNetConfig { model_channels: base, ..UNetConfig::pusht_latent(8) }.init(&device);
-        let mut optim = AdamWConfig::new().init();
-        let (b, n, c) = (env("CONTEXTS", 4), env("SAMPLES", 16), 8);
-        for i in 0..3 {
-            let t0 = std::time::Instant::now();
-            let noise = Tensor::<5>::random(
-                [b * n, c, 4, 12, 12],
-                burn::tensor::Distribution::Normal(0.0, 1.0),
-                &device,
-            );
-            let hist = Tensor::<5>::zeros([b * n, c, 4, 12, 12], &device);
-            let act = Tensor::<3>::zeros([b * n, 4, 2], &device);
-            let out = unet.forward(noise, hist, act, None); // [b n, c, 4, 12, 12]
-            // One field per (context, future frame): [b 4, n, c 12 12].
-            let out = out.reshape([b, n, c, 4, 144]).permute([0, 3, 1, 2, 4]).reshape([b * 4, n, c * 144]);
-            let pos = Tensor::<3>::zeros([b * 4, 1, c * 144], &device);
-            let (loss, _) = drift_loss(out, None, &pos, &PUSHT_TEMPERATURES);
-            let grads = GradientsParams::from_grads(loss.backward(), &unet);
-            unet = optim.step(1e-4, unet, grads);
-            eprintln!("step {i}: {:.2} s ({} params)", t0.elapsed().as_secs_f64(), unet.num_params());
-        }
-    }
-}
+mod tests;
