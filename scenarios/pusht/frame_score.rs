@@ -102,6 +102,15 @@ impl FrameScorer {
         sum / self.goal_sum
     }
 
+    /// Σ_p f(pixel p) over the whole frame, divided by `area` pixels (0 for a frame
+    /// that does not fit).
+    fn over_frame(&self, frame: &[u8], f: impl Fn(&[u8]) -> f64, area: f64) -> f64 {
+        if !self.fits(frame) {
+            return 0.0;
+        }
+        frame.chunks_exact(3).map(f).sum::<f64>() / area
+    }
+
     /// Estimated coverage of an HWC RGB frame.
     pub fn coverage(&self, frame: &[u8]) -> f64 {
         self.over_goal(frame, block_fraction).clamp(0.0, 1.0)
@@ -113,10 +122,7 @@ impl FrameScorer {
     /// floor), far below 1 when an imagined frame has lost the block, above 1 when it
     /// smears it. A health check of world-model frames, not a score.
     pub fn block_area(&self, frame: &[u8]) -> f64 {
-        if !self.fits(frame) {
-            return 0.0;
-        }
-        frame.chunks_exact(3).map(block_fraction).sum::<f64>() / self.goal_sum
+        self.over_frame(frame, block_fraction, self.goal_sum)
     }
 
     /// How much of the goal T the frame still shows: Σ_p goal(p)·min(1, dark(p) +
@@ -139,10 +145,7 @@ impl FrameScorer {
     /// vanished ones in a policy's mean; the filmstrips show smearing. A health check
     /// of world-model frames, not a score.
     pub fn agent_kept(&self, frame: &[u8]) -> f64 {
-        if !self.fits(frame) {
-            return 0.0;
-        }
-        (frame.chunks_exact(3).map(agent_fraction).sum::<f64>() / self.agent_px).min(1.0)
+        self.over_frame(frame, agent_fraction, self.agent_px).min(1.0)
     }
 
     /// All three health checks of a frame.
