@@ -68,22 +68,22 @@ mod tests {
         let rand = |s: [usize; 5]| Tensor::<5>::random(s, burn::tensor::Distribution::Default, &device);
         let (noise, hist) = (rand([1, 4, 4, 8, 8]), rand([1, 4, 4, 8, 8]));
         let a = Tensor::<3>::zeros([1, 4, 2], &device);
-        let before = unet.forward(noise.clone(), hist.clone(), a.clone(), None);
+        let before = unet.forward(noise.clone(), hist.clone(), a.clone(), None, None);
         let widened = unet.with_action_maps();
-        let after = widened.forward(noise.clone(), hist.clone(), a.clone(), None);
+        let after = widened.forward(noise.clone(), hist.clone(), a.clone(), None, None);
         let diff: f32 = (before - after.clone()).abs().max().into_scalar();
         assert!(diff < 1e-5, "widening changed the output by {diff}");
         // On an autodiff device the widened weight is a trainable leaf.
         let ad = device.clone().autodiff();
         let trained = cfg.init(&ad).with_action_maps();
-        let y = trained.forward(noise.clone(), hist.clone(), a.clone(), None);
+        let y = trained.forward(noise.clone(), hist.clone(), a.clone(), None, None);
         let grads = burn::optim::GradientsParams::from_grads(y.sum().backward(), &trained);
         assert!(!grads.is_empty());
         // A fresh action-map model has the extra channel and reacts to it.
         let fresh = UNetConfig { action_maps: Some(true), ..cfg }.init(&device);
         assert_eq!(fresh.num_params(), widened.num_params());
-        let y1 = fresh.forward(noise.clone(), hist.clone(), a.clone(), None);
-        let y2 = fresh.forward(noise, hist, a + 0.5, None);
+        let y1 = fresh.forward(noise.clone(), hist.clone(), a.clone(), None, None);
+        let y2 = fresh.forward(noise, hist, a + 0.5, None, None);
         let moved: f32 = (y1 - y2).abs().mean().into_scalar();
         assert!(moved > 1e-4, "actions have no effect ({moved})");
     }
