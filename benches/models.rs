@@ -10,7 +10,9 @@
 //! shipped model's architecture as DriftWorld (one pass) and as the K-step diffusion
 //! baseline (`BENCH_DIFFUSION_STEPS`, default 10), random weights, at batch 1 unless
 //! `BENCH_OBJECTIVE_BATCHES=1,100`. The device is `EVALHARNESS_DEVICE` (see
-//! `world_model::device`).
+//! `world_model::device`). `decoder` times the frame decoder alone, burn's
+//! convolutions against the direct CPU kernels (`world_model::cpu_decoder`), at
+//! batch 1 and 50 on the shipped autoencoder (`BENCH_AUTOENCODER=DIR`).
 
 // criterion_group! generates undocumented functions.
 #![allow(missing_docs)]
@@ -19,14 +21,16 @@ use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::{Device, Distribution, Tensor, TensorData};
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use harness::policy::Observation;
 use harness::rng::Rng;
 use policies::dir::{Expectations, checkpoint_dirs, load_policy};
 use world_model::codec::FrameCodec;
+use world_model::cpu_decoder::CpuDecoder;
 use world_model::latents::LatentStats;
 use world_model::model::{Objective, WorldModel, WorldModelConfig};
+use world_model::train_ae::load_autoencoder;
 use world_model::unet::UNetConfig;
 
 const BATCHES: [usize; 2] = [1, 100];
@@ -129,6 +133,28 @@ fn objectives(c: &mut Criterion) {
     g.finish();
 }
 
+fn decoder(c: &mut Criterion) {
+    let dir = path("BENCH_AUTOENCODER", "checkpoints/pusht/autoencoder");
+    let device = Device::flex();
+    let (ae, cfg) = load_autoencoder(&dir, &device)
+        .unwrap_or_else(|e| panic!("benchmark needs an autoencoder checkpoint: {e}"));
+    let (ch, s) = (cfg.latent_channels, cfg.latent_size());
+    let direct = CpuDecoder::new(&ae, s).unwrap_or_else(|e| panic!("{e}"));
+    let mut g = c.benchmark_group("decoder");
+    g.sample_size(10).measurement_time(Duration::from_secs(20));
+    for b in [1, 50] {
+        let z = Tensor::<4>::random([b, ch, s, s], Distribution::Normal(0.0, 1.0), &device); // [b, C, s, s]
+        let v: Vec<f32> = z.clone().into_data().try_to_vec().unwrap_or_default();
+        g.bench_with_input(BenchmarkId::new("burn", b), &b, |bench, _| {
+            bench.iter(|| black_box(ae.decode(z.clone()).into_data()))
+        });
+        g.bench_with_input(BenchmarkId::new("direct", b), &b, |bench, &b| {
+            bench.iter(|| black_box(direct.decode(&v, b)))
+        });
+    }
+    g.finish();
+}
+
 fn chunk(c: &mut Criterion, group: &str, wm: &WorldModel, batches: &[usize]) {
     let device = wm.device().clone();
     let mut g = c.benchmark_group(group);
@@ -153,5 +179,5 @@ fn chunk(c: &mut Criterion, group: &str, wm: &WorldModel, batches: &[usize]) {
     g.finish();
 }
 
-criterion_group!(benches, policy, world_model, objectives, pixel_world_model);
+criterion_group!(benches, policy, world_model, decoder, objectives, pixel_world_model);
 criterion_main!(benches);

@@ -138,7 +138,7 @@ mod tests {
             })
             .collect();
         let (text, _) = scene_note(&summarise(&older, &names, 100, 0)).unwrap();
-        assert!(!text.contains("agent") && text.contains("episodes of a end"), "{text}");
+        assert!(!text.contains("agent's disk") && text.contains("episodes of a end"), "{text}");
         // Without the checks (older runs): no note.
         let plain: Vec<EpisodeRow> = rows.into_iter().map(|r| r.with_scene(None)).collect();
         assert_eq!(scene_note(&summarise(&plain, &["a".into()], 100, 0)), None);

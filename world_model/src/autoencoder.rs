@@ -87,10 +87,10 @@ fn conv(cin: usize, cout: usize, k: usize, stride: usize, device: &Device) -> Co
 /// GroupNorm -> SiLU -> conv, twice, plus the input.
 #[derive(Module, Debug)]
 pub struct ResBlock {
-    norm1: GroupNorm,
-    conv1: Conv2d,
-    norm2: GroupNorm,
-    conv2: Conv2d,
+    pub(crate) norm1: GroupNorm,
+    pub(crate) conv1: Conv2d,
+    pub(crate) norm2: GroupNorm,
+    pub(crate) conv2: Conv2d,
 }
 
 impl ResBlock {
@@ -120,12 +120,12 @@ pub struct Autoencoder {
     enc_blocks: Vec<ResBlock>,
     enc_norm: GroupNorm,
     enc_out: Conv2d,
-    dec_in: Conv2d,
-    dec_blocks: Vec<ResBlock>,
-    dec_up: Vec<Conv2d>,
+    pub(crate) dec_in: Conv2d,
+    pub(crate) dec_blocks: Vec<ResBlock>,
+    pub(crate) dec_up: Vec<Conv2d>,
     upsample: Interpolate2d,
-    dec_norm: GroupNorm,
-    dec_out: Conv2d,
+    pub(crate) dec_norm: GroupNorm,
+    pub(crate) dec_out: Conv2d,
 }
 
 impl Autoencoder {

@@ -5,7 +5,8 @@
 //! - [`drift`]: the drifting loss; [`drift_step`]: a batch's drifting loss (fields,
 //!   self-forcing); [`motion`]: its motion weighting; [`unet`]: the action-conditioned U-Net;
 //! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer; [`codec`]:
-//!   autoencoder latents or pixels, the space the U-Net works in;
+//!   autoencoder latents or pixels, the space the U-Net works in; [`cpu_decoder`] +
+//!   [`direct_conv`]: the decoder on direct CPU kernels, for inference;
 //! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
 //!   (drifting, MSE and diffusion objectives); [`context_noise`]: corrupted training histories;
 //! - [`model`]: a trained world model for inference; [`eval`]: video-quality metrics;
@@ -14,8 +15,10 @@
 pub mod autoencoder;
 pub mod codec;
 pub mod context_noise;
+pub mod cpu_decoder;
 pub mod data;
 pub mod device;
+pub mod direct_conv;
 pub mod drift;
 pub mod drift_step;
 pub mod error;

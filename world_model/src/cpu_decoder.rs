@@ -1,0 +1,212 @@
+//! The frame autoencoder's decoder on the CPU without burn: the same network
+//! as [`Autoencoder::decode`], run with the direct kernels of
+//! [`crate::direct_conv`].
+//!
+//! `rank` and `wm eval` decode every frame a policy sees; with burn-flex that
+//! was about half of `rank`'s CPU time. A [`WorldModel`](crate::model::WorldModel)
+//! on the Flex (CPU) device builds one of these at load time and decodes with
+//! it; training (which needs gradients) and GPU devices keep burn's path. The
+//! two agree to float rounding (tested below).
+
+use burn::module::Param;
+use burn::nn::conv::Conv2d;
+use burn::nn::{GroupNorm, PaddingConfig2d};
+use burn::tensor::Tensor;
+
+use crate::autoencoder::{Autoencoder, ResBlock};
+use crate::direct_conv::{Conv3x3, Norm, Padded};
+
+/// Why a decoder cannot be run by the direct kernels (a layer they do not support).
+#[derive(Debug, thiserror::Error)]
+#[error("decoder layer {layer}: {message}")]
+pub struct UnsupportedLayer {
+    layer: String,
+    message: String,
+}
+
+/// GroupNorm -> SiLU -> conv, twice, plus the input (as [`ResBlock`]).
+#[derive(Clone, Debug)]
+struct Block {
+    norm1: Norm,
+    conv1: Conv3x3,
+    norm2: Norm,
+    conv2: Conv3x3,
+}
+
+/// The decoder's weights, laid out for the direct kernels.
+#[derive(Clone, Debug)]
+pub struct CpuDecoder {
+    latent_channels: usize,
+    latent_size: usize,
+    dec_in: Conv3x3,
+    blocks: Vec<Block>,
+    ups: Vec<Conv3x3>,
+    norm: Norm,
+    out: Conv3x3,
+}
+
+impl CpuDecoder {
+    /// Copies the decoder half of `ae` (latents of `latent_size`²).
+    ///
+    /// # Errors
+    /// [`UnsupportedLayer`] for a convolution that is not 3x3, stride 1, padding 1, or
+    /// weights that are not f32.
+    pub fn new(ae: &Autoencoder, latent_size: usize) -> Result<Self, UnsupportedLayer> {
+        let block = |b: &ResBlock, name: &str| -> Result<Block, UnsupportedLayer> {
+            Ok(Block {
+                norm1: norm(&b.norm1, &format!("{name}.norm1"))?,
+                conv1: conv(&b.conv1, &format!("{name}.conv1"))?,
+                norm2: norm(&b.norm2, &format!("{name}.norm2"))?,
+                conv2: conv(&b.conv2, &format!("{name}.conv2"))?,
+            })
+        };
+        let dec_in = conv(&ae.dec_in, "dec_in")?;
+        Ok(Self {
+            latent_channels: dec_in.cin(),
+            latent_size,
+            blocks: (ae.dec_blocks.iter().enumerate())
+                .map(|(i, b)| block(b, &format!("dec_blocks.{i}")))
+                .collect::<Result<_, _>>()?,
+            ups: (ae.dec_up.iter().enumerate())
+                .map(|(i, c)| conv(c, &format!("dec_up.{i}")))
+                .collect::<Result<_, _>>()?,
+            norm: norm(&ae.dec_norm, "dec_norm")?,
+            out: conv(&ae.dec_out, "dec_out")?,
+            dec_in,
+        })
+    }
+
+    /// Decodes `b` latents `z` (`[b, C, s, s]`, row-major, not normalised) to raw frames.
+    ///
+    /// # Shapes
+    /// `[b, C, s, s] -> [b, 3, 8s, 8s]`
+    pub fn decode(&self, z: &[f32], b: usize) -> Vec<f32> {
+        let (c, s) = (self.latent_channels, self.latent_size);
+        let per = c * s * s;
+        debug_assert_eq!(z.len(), b * per);
+        let side = s << self.ups.len();
+        let mut out = Vec::with_capacity(b * self.out.cout() * side * side);
+        for zi in z.chunks(per) {
+            out.extend(self.decode_one(zi));
+        }
+        out
+    }
+
+    /// One latent `[C, s, s]` to one frame `[3, 8s, 8s]`.
+    fn decode_one(&self, z: &[f32]) -> Vec<f32> {
+        let (c, mut side) = (self.latent_channels, self.latent_size);
+        let mut pad = Padded::zeros(c, side, side);
+        pad.fill(z, false);
+        let mut h = vec![0.0; self.dec_in.cout() * side * side]; // [c3, s, s]
+        self.dec_in.forward(&pad, None, &mut h);
+        h = self.block(&self.blocks[0], h, side);
+        for (up, block) in self.ups.iter().zip(&self.blocks[1..]) {
+            side *= 2;
+            let mut pad = Padded::zeros(up.cin(), side, side);
+            pad.fill(&h, true); // nearest 2x
+            h = vec![0.0; up.cout() * side * side];
+            up.forward(&pad, None, &mut h);
+            h = self.block(block, h, side);
+        }
+        let mut pad = Padded::zeros(self.out.cin(), side, side);
+        pad.fill_norm_silu(&h, &self.norm);
+        let mut frame = vec![0.0; self.out.cout() * side * side]; // [3, 8s, 8s]
+        self.out.forward(&pad, None, &mut frame);
+        frame
+    }
+
+    /// `x + conv2(silu(norm2(conv1(silu(norm1(x))))))` on `[c, side, side]`.
+    fn block(&self, b: &Block, x: Vec<f32>, side: usize) -> Vec<f32> {
+        let c = b.conv1.cin();
+        let mut pad = Padded::zeros(c, side, side);
+        pad.fill_norm_silu(&x, &b.norm1);
+        let mut t = vec![0.0; c * side * side];
+        b.conv1.forward(&pad, None, &mut t);
+        pad.fill_norm_silu(&t, &b.norm2);
+        b.conv2.forward(&pad, Some(&x), &mut t);
+        t
+    }
+}
+
+fn values<const D: usize>(t: Tensor<D>, layer: &str) -> Result<Vec<f32>, UnsupportedLayer> {
+    t.into_data()
+        .try_to_vec::<f32>()
+        .map_err(|e| UnsupportedLayer { layer: layer.into(), message: format!("{e:?}") })
+}
+
+fn conv(c: &Conv2d, layer: &str) -> Result<Conv3x3, UnsupportedLayer> {
+    let err = |message: &str| UnsupportedLayer { layer: layer.into(), message: message.into() };
+    let padded_one = matches!(c.padding, PaddingConfig2d::Explicit(1, 1, 1, 1));
+    if c.kernel_size != [3, 3] || c.stride != [1, 1] || c.dilation != [1, 1] || c.groups != 1 || !padded_one {
+        return Err(err("only 3x3 convolutions with stride 1 and padding 1 are supported"));
+    }
+    let [cout, cin, _, _] = c.weight.val().dims();
+    let weight = values(c.weight.val(), layer)?;
+    let bias = c.bias.as_ref().map(|b| values(b.val(), layer)).transpose()?;
+    Ok(Conv3x3::new(cin, cout, &weight, bias.as_deref()))
+}
+
+fn norm(n: &GroupNorm, layer: &str) -> Result<Norm, UnsupportedLayer> {
+    let param = |p: &Option<Param<Tensor<1>>>, fill: f32| match p {
+        Some(p) => values(p.val(), layer),
+        None => Ok(vec![fill; n.num_channels]),
+    };
+    Ok(Norm {
+        groups: n.num_groups,
+        gamma: param(&n.gamma, 1.0)?,
+        beta: param(&n.beta, 0.0)?,
+        eps: n.epsilon,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::tensor::{Device, Distribution, TensorData};
+
+    use super::*;
+    use crate::autoencoder::AutoencoderConfig;
+
+    #[test]
+    fn decodes_what_burn_decodes() {
+        // Random weights (GroupNorm's γ/β are 1/0 at init, so perturb them too, through a
+        // trained-looking round: the check is that every layer is wired the same way).
+        let device = Device::flex();
+        let cfg = AutoencoderConfig {
+            channels: [8, 16, 16, 16],
+            latent_channels: 4,
+            groups: 4,
+            ..AutoencoderConfig::new()
+        };
+        let ae = cfg.init(&device);
+        let ae = perturb_norms(ae);
+        let z = Tensor::<4>::random([2, 4, 12, 12], Distribution::Normal(0.0, 1.0), &device);
+        let want: Vec<f32> = ae.decode(z.clone()).into_data().try_to_vec().unwrap_or_default();
+        let dec = CpuDecoder::new(&ae, 12).unwrap_or_else(|e| panic!("{e}"));
+        let got = dec.decode(&z.into_data().try_to_vec::<f32>().unwrap_or_default(), 2);
+        assert_eq!(got.len(), 2 * 3 * 96 * 96);
+        let max = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        let scale = want.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
+        assert!(scale > 1e-3, "degenerate test output");
+        assert!(max < 1e-4 * scale.max(1.0), "max difference {max} (output scale {scale})");
+    }
+
+    /// Sets every GroupNorm's γ and β to non-trivial values.
+    fn perturb_norms(mut ae: Autoencoder) -> Autoencoder {
+        let device = Device::flex();
+        let mut k = 0.0f32;
+        let mut set = |n: &mut GroupNorm| {
+            let c = n.num_channels;
+            k += 1.0;
+            let g: Vec<f32> = (0..c).map(|i| 0.5 + 0.1 * ((i as f32 + k) % 7.0)).collect();
+            let b: Vec<f32> = (0..c).map(|i| 0.05 * ((i as f32 * 3.0 + k) % 5.0) - 0.1).collect();
+            n.gamma = Some(Param::from_tensor(Tensor::from_data(TensorData::new(g, [c]), &device)));
+            n.beta = Some(Param::from_tensor(Tensor::from_data(TensorData::new(b, [c]), &device)));
+        };
+        for b in &mut ae.dec_blocks {
+            set(&mut b.norm1);
+            set(&mut b.norm2);
+        }
+        set(&mut ae.dec_norm);
+        ae
+    }
+}
