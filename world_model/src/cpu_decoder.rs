@@ -190,6 +190,18 @@ mod tests {
         assert!(max < 1e-4 * scale.max(1.0), "max difference {max} (output scale {scale})");
     }
 
+    /// A fixed amount of work for `perf stat -e task-clock` (CPU time, unaffected by other
+    /// jobs): 40 frames through the default-size decoder.
+    #[test]
+    #[ignore = "a workload for profiling, not a check"]
+    fn profile_workload() {
+        let device = Device::flex();
+        let ae = AutoencoderConfig::new().init(&device);
+        let dec = CpuDecoder::new(&ae, 12).unwrap_or_else(|e| panic!("{e}"));
+        let z: Vec<f32> = (0..40 * 8 * 144).map(|i| ((i * 7919) % 200) as f32 / 100.0 - 1.0).collect();
+        assert_eq!(dec.decode(&z, 40).len(), 40 * 3 * 96 * 96);
+    }
+
     /// Sets every GroupNorm's γ and β to non-trivial values.
     fn perturb_norms(mut ae: Autoencoder) -> Autoencoder {
         let device = Device::flex();
