@@ -140,8 +140,9 @@ fn conv(c: &Conv2d, layer: &str) -> Result<Conv3x3, UnsupportedLayer> {
     if c.kernel_size != [3, 3] || c.stride != [1, 1] || c.dilation != [1, 1] || c.groups != 1 || !padded_one {
         return Err(err("only 3x3 convolutions with stride 1 and padding 1 are supported"));
     }
-    let [cout, cin, _, _] = c.weight.val().dims();
-    let weight = values(c.weight.val(), layer)?;
+    let w = c.weight.val(); // [cout, cin, 3, 3]
+    let [cout, cin, _, _] = w.dims();
+    let weight = values(w, layer)?;
     let bias = c.bias.as_ref().map(|b| values(b.val(), layer)).transpose()?;
     Ok(Conv3x3::new(cin, cout, &weight, bias.as_deref()))
 }

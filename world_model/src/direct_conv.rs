@@ -34,11 +34,6 @@ impl Padded {
         Self { c, h, w, stride, data: vec![0.0; c * (h + 2) * stride] }
     }
 
-    /// Channels, height, width.
-    pub fn dims(&self) -> (usize, usize, usize) {
-        (self.c, self.h, self.w)
-    }
-
     /// The interior row `y` of channel `ch` (`w` values).
     fn row_mut(&mut self, ch: usize, y: usize) -> &mut [f32] {
         let start = (ch * (self.h + 2) + y + 1) * self.stride + 1;
