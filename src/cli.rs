@@ -319,7 +319,7 @@ pub struct SimulateArgs {
     #[command(flatten)]
     pub common: ScenarioArgs,
     /// Behaviour to run: `expert` (sampling planner), `explore` (smooth random targets),
-    /// or a policy checkpoint folder / folder of checkpoints (scores each checkpoint).
+    /// `decoy` (the expert pushing to random poses instead of the goal), or a policy checkpoint folder / folder of checkpoints (scores each checkpoint).
     #[arg(long, default_value = "expert")]
     pub policy: String,
     /// With a policy folder: write each checkpoint's measured MuJoCo score into its
@@ -345,7 +345,8 @@ pub struct CollectArgs {
     /// Scenario, episodes, seeds, jobs.
     #[command(flatten)]
     pub common: ScenarioArgs,
-    /// Behaviour mix, as name=weight pairs; each episode draws one from its seed.
+    /// Behaviour mix, as name=weight pairs (expert, explore, decoy); each episode draws
+    /// one from its seed.
     #[arg(long, default_value = "expert=0.8,explore=0.2")]
     pub mix: String,
     /// Output zarr folder (diffusion_policy / GPC replay-buffer layout).

@@ -92,6 +92,8 @@ pub struct Expert {
     phase: Phase,
     last_target: Option<[f64; 2]>,
     cooldown: u32,
+    /// Pose to push the block to instead of the episode's goal (see [`Expert::set_target`]).
+    target: Option<Pose2>,
 }
 
 impl Expert {
@@ -103,13 +105,22 @@ impl Expert {
             phase: Phase::Idle,
             last_target: None,
             cooldown: 0,
+            target: None,
         }
+    }
+
+    /// Pushes the block to `target` instead of the episode's goal (`None`: the goal
+    /// again). Drops the current plan, so the next action replans.
+    pub fn set_target(&mut self, target: Option<Pose2>) {
+        self.target = target;
+        self.phase = Phase::Idle;
+        self.cooldown = 0;
     }
 
     /// The next action (the agent's absolute target position).
     pub fn act(&mut self, env: &PushTEnv) -> [f64; 2] {
         let state = env.state();
-        let goal = env.goal();
+        let goal = self.target.unwrap_or_else(|| env.goal());
         if let Some(a) = self.advance(&state) {
             self.last_target = Some(a);
             return a;

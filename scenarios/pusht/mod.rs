@@ -7,6 +7,7 @@
 //! DriftWorld variant (randomised goal); `reset.fixed_goal` gives the standard one.
 
 pub mod config;
+pub mod decoy;
 pub mod expert;
 pub mod explore;
 pub mod frame_score;

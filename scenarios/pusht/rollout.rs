@@ -12,6 +12,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
+use super::decoy::Decoy;
 use super::expert::Expert;
 use super::explore::Explorer;
 use super::geometry::Pose2;
@@ -29,6 +30,12 @@ pub trait Behaviour {
 impl Behaviour for Expert {
     fn act(&mut self, env: &PushTEnv) -> [f64; 2] {
         Expert::act(self, env)
+    }
+}
+
+impl Behaviour for Decoy {
+    fn act(&mut self, env: &PushTEnv) -> [f64; 2] {
+        Decoy::act(self, env)
     }
 }
 

@@ -11,6 +11,7 @@ use anyhow::{Context, Result, bail};
 use harness::seed::{derive, fnv1a};
 use mujoco_rs::prelude::MjModel;
 use rayon::prelude::*;
+use scenarios::pusht::decoy::Decoy;
 use scenarios::pusht::expert::Expert;
 use scenarios::pusht::explore::Explorer;
 use scenarios::pusht::mj_render::{MujocoRenderer, SideBySide};
@@ -25,6 +26,8 @@ pub enum BehaviourKind {
     Expert,
     /// Smooth random targets.
     Explore,
+    /// The expert pushing the block to seeded random poses instead of the goal.
+    Decoy,
 }
 
 impl BehaviourKind {
@@ -33,8 +36,9 @@ impl BehaviourKind {
         match name {
             "expert" => Ok(Self::Expert),
             "explore" => Ok(Self::Explore),
+            "decoy" => Ok(Self::Decoy),
             other => bail!(
-                "unknown policy '{other}' (built-in behaviours: expert, explore; or a checkpoint folder)"
+                "unknown policy '{other}' (built-in behaviours: expert, explore, decoy; or a checkpoint folder)"
             ),
         }
     }
@@ -44,6 +48,7 @@ impl BehaviourKind {
         match self {
             Self::Expert => "expert",
             Self::Explore => "explore",
+            Self::Decoy => "decoy",
         }
     }
 }
@@ -85,6 +90,9 @@ fn behaviour(kind: BehaviourKind, env: &PushTEnv, seed: u64, p: Perturbation) ->
             }
         }
         BehaviourKind::Explore => Box::new(Explorer::new(derive(seed, &[fnv1a("explore")]))),
+        BehaviourKind::Decoy => {
+            Box::new(Decoy::new(Expert::new(env.model(), env.config()), derive(seed, &[fnv1a("decoy")])))
+        }
     }
 }
 
