@@ -12,6 +12,7 @@ use harness::policy::{ActionChunk, Observation, Policy, PolicyError, sanitize};
 use harness::rng::Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::cpu_unet::CpuUnet1d;
 use crate::net::{CondUnet1d, NetConfig, ObsEncoder};
 
 /// Min-max statistics of one 2-D quantity.
@@ -145,14 +146,9 @@ impl DiffusionNet {
 
     /// Deterministic DDIM from noise `x` (`[b, horizon, 2]`) with `k` steps.
     pub fn sample(&self, cond: Tensor<2>, mut x: Tensor<3>, k: usize, ac: &[f64]) -> Tensor<3> {
-        let t_total = ac.len();
-        let ratio = (t_total / k.max(1)).max(1);
         let b = x.dims()[0];
         let device = x.device();
-        let steps: Vec<usize> = (0..k.max(1)).map(|j| j * ratio).filter(|&t| t < t_total).rev().collect();
-        for &t in &steps {
-            let a = ac[t];
-            let a_prev = if t >= ratio { ac[t - ratio] } else { 1.0 };
+        for (t, a, a_prev) in ddim_steps(k, ac) {
             let tt = Tensor::<1>::from_floats(vec![t as f32; b].as_slice(), &device);
             let eps = self.unet.forward(x.clone(), tt, cond.clone());
             let x0 = ((x - eps.clone() * (1.0 - a).sqrt()) / a.sqrt()).clamp(-1.0, 1.0);
@@ -160,6 +156,41 @@ impl DiffusionNet {
         }
         x
     }
+}
+
+/// The `k` DDIM steps over a `T = ac.len()` schedule, noisiest first: `(t, ᾱ_t, ᾱ_prev)`
+/// with t = j·⌊T/k⌋ and ᾱ_prev = ᾱ_{t − ⌊T/k⌋} (1 past the last).
+pub fn ddim_steps(k: usize, ac: &[f64]) -> Vec<(usize, f64, f64)> {
+    let t_total = ac.len();
+    let ratio = (t_total / k.max(1)).max(1);
+    (0..k.max(1))
+        .map(|j| j * ratio)
+        .filter(|&t| t < t_total)
+        .rev()
+        .map(|t| (t, ac[t], if t >= ratio { ac[t - ratio] } else { 1.0 }))
+        .collect()
+}
+
+/// [`DiffusionNet::sample`] on [`CpuUnet1d`]: `x` is `[b, horizon, 2]`, `cond` `[b, c]`.
+fn sample_cpu(
+    unet: &CpuUnet1d,
+    cond: &[f32],
+    mut x: Vec<f32>,
+    horizon: usize,
+    k: usize,
+    ac: &[f64],
+) -> Vec<f32> {
+    let prep = unet.prepare(cond, x.len() / (2 * horizon));
+    for (t, a, a_prev) in ddim_steps(k, ac) {
+        let eps = unet.forward(&prep, &x, horizon, t as f32);
+        let (sa, s1a) = (a.sqrt() as f32, (1.0 - a).sqrt() as f32);
+        let (sp, s1p) = (a_prev.sqrt() as f32, (1.0 - a_prev).sqrt() as f32);
+        for (v, e) in x.iter_mut().zip(&eps) {
+            let x0 = ((*v - e * s1a) / sa).clamp(-1.0, 1.0);
+            *v = x0 * sp + e * s1p;
+        }
+    }
+    x
 }
 
 /// A loaded diffusion policy (inference).
@@ -171,9 +202,14 @@ pub struct DiffusionPolicy {
     /// Normalisation.
     pub norm: Normalisation,
     net: DiffusionNet,
+    /// The U-Net on plain CPU loops (Flex device, unless [`POLICY_KERNELS_ENV`] says `burn`).
+    cpu_unet: Option<CpuUnet1d>,
     ac: Vec<f64>,
     device: Device,
 }
+
+/// Set to `burn` to sample with burn's U-Net on the CPU too (the direct loops are the default).
+pub const POLICY_KERNELS_ENV: &str = "EVALHARNESS_POLICY_KERNELS";
 
 impl DiffusionPolicy {
     /// Wraps trained networks.
@@ -185,7 +221,15 @@ impl DiffusionPolicy {
         device: &Device,
     ) -> Self {
         let ac = alphas_cumprod(cfg.train_steps);
-        Self { name, cfg, norm, net, ac, device: device.clone() }
+        let burn_only = std::env::var(POLICY_KERNELS_ENV).is_ok_and(|v| v.trim() == "burn");
+        let cpu_unet = if *device == Device::flex() && !burn_only {
+            CpuUnet1d::new(&net.unet)
+                .inspect_err(|e| tracing::warn!(policy = %name, "burn's U-Net kept: {e}"))
+                .ok()
+        } else {
+            None
+        };
+        Self { name, cfg, norm, net, cpu_unet, ac, device: device.clone() }
     }
 }
 
@@ -240,9 +284,21 @@ impl Policy for DiffusionPolicy {
             Tensor::from_data(TensorData::new(pos, [b, o, 2]), &self.device),
         );
         let noise: Vec<f32> = rngs.iter_mut().flat_map(|r| r.normals_f32(h * 2)).collect();
-        let x = Tensor::from_data(TensorData::new(noise, [b, h, 2]), &self.device);
-        let out = self.net.sample(cond, x, self.cfg.inference_steps, &self.ac);
-        let v: Vec<f32> = out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+        let v: Vec<f32> = match &self.cpu_unet {
+            Some(unet) => {
+                let cond: Vec<f32> =
+                    cond.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+                sample_cpu(unet, &cond, noise, h, self.cfg.inference_steps, &self.ac)
+            }
+            None => {
+                let x = Tensor::from_data(TensorData::new(noise, [b, h, 2]), &self.device);
+                let out = self.net.sample(cond, x, self.cfg.inference_steps, &self.ac);
+                out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+            }
+        };
+        if v.len() != b * h * 2 {
+            return Err(bad(format!("the network returned {} values, expected {}", v.len(), b * h * 2)));
+        }
         let start = o - 1;
         let mut chunks: Vec<ActionChunk> = (0..b)
             .map(|i| {

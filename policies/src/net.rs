@@ -128,8 +128,8 @@ impl ObsEncoder {
 /// Conv1d → GroupNorm(8) → Mish.
 #[derive(Module, Debug)]
 pub struct Conv1dBlock {
-    conv: Conv1d,
-    norm: GroupNorm,
+    pub(crate) conv: Conv1d,
+    pub(crate) norm: GroupNorm,
 }
 
 impl Conv1dBlock {
@@ -150,10 +150,10 @@ impl Conv1dBlock {
 /// Conditional residual block: block, FiLM(cond), block, plus a 1x1 skip.
 #[derive(Module, Debug)]
 pub struct CondRes1d {
-    b0: Conv1dBlock,
-    film: Linear,
-    b1: Conv1dBlock,
-    skip: Option<Conv1d>,
+    pub(crate) b0: Conv1dBlock,
+    pub(crate) film: Linear,
+    pub(crate) b1: Conv1dBlock,
+    pub(crate) skip: Option<Conv1d>,
 }
 
 impl CondRes1d {
@@ -184,23 +184,23 @@ impl CondRes1d {
 /// A U-Net level: two conditional blocks and an optional resampling.
 #[derive(Module, Debug)]
 pub struct Level1d {
-    r0: CondRes1d,
-    r1: CondRes1d,
-    down: Option<Conv1d>,
-    up: Option<ConvTranspose1d>,
+    pub(crate) r0: CondRes1d,
+    pub(crate) r1: CondRes1d,
+    pub(crate) down: Option<Conv1d>,
+    pub(crate) up: Option<ConvTranspose1d>,
 }
 
 /// The conditional 1-D U-Net (ε-prediction).
 #[derive(Module, Debug)]
 pub struct CondUnet1d {
-    step1: Linear,
-    step2: Linear,
-    downs: Vec<Level1d>,
-    mids: Vec<CondRes1d>,
-    ups: Vec<Level1d>,
-    final_block: Conv1dBlock,
-    final_conv: Conv1d,
-    step_embed: usize,
+    pub(crate) step1: Linear,
+    pub(crate) step2: Linear,
+    pub(crate) downs: Vec<Level1d>,
+    pub(crate) mids: Vec<CondRes1d>,
+    pub(crate) ups: Vec<Level1d>,
+    pub(crate) final_block: Conv1dBlock,
+    pub(crate) final_conv: Conv1d,
+    pub(crate) step_embed: usize,
 }
 
 impl CondUnet1d {

@@ -1,0 +1,556 @@
+//! The diffusion policy's conditional 1-D U-Net on the CPU without burn: the same
+//! network as [`CondUnet1d::forward`], in plain loops over `f32` slices.
+//!
+//! Why: a decision runs the U-Net once per DDIM step (10 by default) on tensors of
+//! a few thousand elements. burn-flex spends most of that time on per-operation
+//! overhead (im2col, dispatch, allocation) and on `mish`'s three transcendental
+//! calls per element: in `rank` it was ~85% of the policy's time, itself half of
+//! the whole run. Here one `mish` is one `exp`, and nothing is dispatched: convolutions are single matrix products over the whole
+//! batch (the `gemm` crate's kernels), and the FiLM layers' observation half is
+//! computed once per decision instead of once per step. A [`DiffusionPolicy`](crate::diffusion::DiffusionPolicy)
+//! on the Flex device samples with this; training keeps burn's path. The two agree
+//! to float rounding (tested below).
+//!
+//! Inside, sequences are `[c, n·t]` (channel-major, then sample, then position);
+//! the public interface takes burn's row-major `[n, horizon, action_dim]`.
+
+use burn::module::Param;
+use burn::nn::conv::{Conv1d, ConvTranspose1d};
+use burn::nn::{GroupNorm, Linear, PaddingConfig1d};
+use burn::tensor::Tensor;
+
+use crate::net::{CondRes1d, CondUnet1d, Conv1dBlock, Level1d};
+
+/// Why a U-Net cannot be run by these kernels (a layer they do not support).
+#[derive(Debug, thiserror::Error)]
+#[error("policy U-Net layer {layer}: {message}")]
+pub struct UnsupportedLayer {
+    layer: String,
+    message: String,
+}
+
+fn unsupported(layer: &str, message: impl Into<String>) -> UnsupportedLayer {
+    UnsupportedLayer { layer: layer.into(), message: message.into() }
+}
+
+fn values<const D: usize>(t: Tensor<D>, layer: &str) -> Result<Vec<f32>, UnsupportedLayer> {
+    t.into_data().try_to_vec::<f32>().map_err(|e| unsupported(layer, format!("{e:?}")))
+}
+
+fn bias(b: &Option<Param<Tensor<1>>>, n: usize, layer: &str) -> Result<Vec<f32>, UnsupportedLayer> {
+    b.as_ref().map_or(Ok(vec![0.0; n]), |b| values(b.val(), layer))
+}
+
+/// Mish, `x · tanh(softplus(x))`, with one `exp`: tanh(ln(1 + e)) = n / (n + 2) for
+/// n = e(e + 2). Above 20 softplus is the identity (burn's threshold) and so is mish.
+fn mish(x: f32) -> f32 {
+    if x > 20.0 {
+        return x;
+    }
+    let e = x.exp();
+    let n = e * (e + 2.0);
+    x * n / (n + 2.0)
+}
+
+/// `c (+)= a · b` for row-major `a: [m, k]`, `b: [k, n]`, `c: [m, n]`, on the `gemm`
+/// crate's kernels (the ones burn-flex uses), one thread.
+fn matmul(m: usize, k: usize, n: usize, a: &[f32], b: &[f32], c: &mut [f32], accumulate: bool) {
+    assert!(a.len() >= m * k && b.len() >= k * n && c.len() >= m * n, "matmul shapes");
+    if m == 0 || n == 0 {
+        return;
+    }
+    if k == 0 {
+        if !accumulate {
+            c[..m * n].fill(0.0);
+        }
+        return;
+    }
+    // SAFETY: the three slices hold at least m·k, k·n and m·n elements (checked above),
+    // the strides describe row-major matrices inside them, and `c` is borrowed mutably
+    // so it aliases neither input. gemm computes dst := α·dst + β·lhs·rhs.
+    #[allow(unsafe_code)]
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            c.as_mut_ptr(),
+            1,
+            n as isize,
+            accumulate,
+            a.as_ptr(),
+            1,
+            k as isize,
+            b.as_ptr(),
+            1,
+            n as isize,
+            if accumulate { 1.0 } else { 0.0 },
+            1.0,
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        );
+    }
+}
+
+/// `y = x W + b` with burn's layout `W: [d_in, d_out]`.
+#[derive(Clone, Debug)]
+struct Lin {
+    din: usize,
+    dout: usize,
+    w: Vec<f32>,
+    b: Vec<f32>,
+}
+
+impl Lin {
+    fn new(l: &Linear, layer: &str) -> Result<Self, UnsupportedLayer> {
+        let w = l.weight.val(); // [d_in, d_out]
+        let [din, dout] = w.dims();
+        Ok(Self { din, dout, w: values(w, layer)?, b: bias(&l.bias, dout, layer)? })
+    }
+
+    /// `[n, d_in] -> [n, d_out]`
+    fn forward(&self, x: &[f32]) -> Vec<f32> {
+        let n = x.len() / self.din;
+        let mut y: Vec<f32> = (0..n).flat_map(|_| self.b.iter().copied()).collect();
+        matmul(n, self.din, self.dout, x, &self.w, &mut y, true);
+        y
+    }
+}
+
+/// A 1-D convolution (dilation 1, one group), weights `[c_out, c_in·k]`, run as one
+/// matrix product over the whole batch: activations are `[c, n·t]` (channel-major,
+/// then sample, then position).
+#[derive(Clone, Debug)]
+struct Conv1 {
+    cin: usize,
+    cout: usize,
+    k: usize,
+    stride: usize,
+    pad: usize,
+    w: Vec<f32>,
+    b: Vec<f32>,
+}
+
+impl Conv1 {
+    fn new(c: &Conv1d, layer: &str) -> Result<Self, UnsupportedLayer> {
+        let pad = match c.padding {
+            PaddingConfig1d::Explicit(a, b) if a == b => a,
+            PaddingConfig1d::Valid => 0,
+            ref p => return Err(unsupported(layer, format!("padding {p:?}"))),
+        };
+        if c.dilation != 1 || c.groups != 1 {
+            return Err(unsupported(layer, "only dilation 1 and one group are supported"));
+        }
+        let w = c.weight.val();
+        let [cout, cin, k] = w.dims();
+        Ok(Self { cin, cout, k, stride: c.stride, pad, w: values(w, layer)?, b: bias(&c.bias, cout, layer)? })
+    }
+
+    /// `[c_in, n·t] -> [c_out, n·t']`, returning t'.
+    fn forward(&self, x: &[f32], n: usize, t: usize) -> (Vec<f32>, usize) {
+        let (s, p, k) = (self.stride, self.pad, self.k);
+        let to = (t + 2 * p).saturating_sub(k) / s + 1;
+        let cols = n * to;
+        let mut y: Vec<f32> = self.b.iter().flat_map(|&b| std::iter::repeat_n(b, cols)).collect();
+        if k == 1 && s == 1 && p == 0 {
+            matmul(self.cout, self.cin, cols, &self.w, x, &mut y, true);
+            return (y, to);
+        }
+        // im2col: row (ci, kk), column (sample, o) holds x[ci, sample, o·s + kk − p].
+        let mut col = vec![0.0; self.cin * k * cols];
+        for ci in 0..self.cin {
+            for kk in 0..k {
+                let row = &mut col[(ci * k + kk) * cols..][..cols];
+                let lo = p.saturating_sub(kk).div_ceil(s);
+                let hi = (t + p).saturating_sub(kk).div_ceil(s).min(to);
+                for smp in 0..n {
+                    let xr = &x[ci * n * t + smp * t..][..t];
+                    for o in lo..hi {
+                        row[smp * to + o] = xr[o * s + kk - p];
+                    }
+                }
+            }
+        }
+        matmul(self.cout, self.cin * k, cols, &self.w, &col, &mut y, true);
+        (y, to)
+    }
+}
+
+/// A transposed 1-D convolution (dilation 1, one group): one matrix product to
+/// per-tap contributions `[c_out·k, n·t]`, then scattered to their output positions.
+#[derive(Clone, Debug)]
+struct ConvT1 {
+    cin: usize,
+    cout: usize,
+    k: usize,
+    stride: usize,
+    pad: usize,
+    pad_out: usize,
+    /// `[c_out·k, c_in]` (burn stores `[c_in, c_out, k]`).
+    w: Vec<f32>,
+    b: Vec<f32>,
+}
+
+impl ConvT1 {
+    fn new(c: &ConvTranspose1d, layer: &str) -> Result<Self, UnsupportedLayer> {
+        if c.dilation != 1 || c.groups != 1 {
+            return Err(unsupported(layer, "only dilation 1 and one group are supported"));
+        }
+        let w = c.weight.val();
+        let [cin, cout, k] = w.dims();
+        let w = values(w.reshape([cin, cout * k]).transpose(), layer)?;
+        let (stride, pad, pad_out) = (c.stride, c.padding, c.padding_out);
+        Ok(Self { cin, cout, k, stride, pad, pad_out, w, b: bias(&c.bias, cout, layer)? })
+    }
+
+    /// `[c_in, n·t] -> [c_out, n·t']` with t' = (t − 1)·s − 2p + k + p_out, returning t'.
+    fn forward(&self, x: &[f32], n: usize, t: usize) -> (Vec<f32>, usize) {
+        let (s, p, k) = (self.stride, self.pad, self.k);
+        let to = ((t - 1) * s + k + self.pad_out).saturating_sub(2 * p);
+        let mut z = vec![0.0; self.cout * k * n * t];
+        matmul(self.cout * k, self.cin, n * t, &self.w, x, &mut z, false);
+        let mut y: Vec<f32> = self.b.iter().flat_map(|&b| std::iter::repeat_n(b, n * to)).collect();
+        for co in 0..self.cout {
+            let yr = &mut y[co * n * to..][..n * to];
+            for kk in 0..k {
+                let zr = &z[(co * k + kk) * n * t..][..n * t];
+                for smp in 0..n {
+                    for i in 0..t {
+                        let o = i * s + kk;
+                        if o >= p && o - p < to {
+                            yr[smp * to + o - p] += zr[smp * t + i];
+                        }
+                    }
+                }
+            }
+        }
+        (y, to)
+    }
+}
+
+/// GroupNorm followed by mish, in place on `[c, n·t]`.
+#[derive(Clone, Debug)]
+struct NormMish {
+    groups: usize,
+    gamma: Vec<f32>,
+    beta: Vec<f32>,
+    eps: f64,
+}
+
+impl NormMish {
+    fn new(g: &GroupNorm, layer: &str) -> Result<Self, UnsupportedLayer> {
+        let c = g.num_channels;
+        let param = |p: &Option<Param<Tensor<1>>>, fill: f32| match p {
+            Some(p) => values(p.val(), layer),
+            None => Ok(vec![fill; c]),
+        };
+        Ok(Self {
+            groups: g.num_groups,
+            gamma: param(&g.gamma, 1.0)?,
+            beta: param(&g.beta, 0.0)?,
+            eps: g.epsilon,
+        })
+    }
+
+    fn apply(&self, x: &mut [f32], n: usize, t: usize) {
+        let c = self.gamma.len();
+        let cg = c / self.groups;
+        let count = (cg * t) as f64;
+        for g in 0..self.groups {
+            for smp in 0..n {
+                let rows = || (g * cg..(g + 1) * cg).map(|ch| ch * n * t + smp * t);
+                let mean = rows().flat_map(|r| &x[r..r + t]).map(|&v| f64::from(v)).sum::<f64>() / count;
+                let var =
+                    rows().flat_map(|r| &x[r..r + t]).map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>()
+                        / count;
+                let inv = 1.0 / (var + self.eps).sqrt();
+                for (j, r) in rows().enumerate() {
+                    let ch = g * cg + j;
+                    let a = (inv as f32) * self.gamma[ch];
+                    let b = self.beta[ch] - (mean * inv) as f32 * self.gamma[ch];
+                    x[r..r + t].iter_mut().for_each(|v| *v = mish(*v * a + b));
+                }
+            }
+        }
+    }
+}
+
+/// Conv → GroupNorm → mish ([`Conv1dBlock`]).
+#[derive(Clone, Debug)]
+struct Block {
+    conv: Conv1,
+    norm: NormMish,
+}
+
+impl Block {
+    fn new(b: &Conv1dBlock, layer: &str) -> Result<Self, UnsupportedLayer> {
+        Ok(Self { conv: Conv1::new(&b.conv, layer)?, norm: NormMish::new(&b.norm, layer)? })
+    }
+
+    fn forward(&self, x: &[f32], n: usize, t: usize) -> Vec<f32> {
+        let (mut y, to) = self.conv.forward(x, n, t);
+        self.norm.apply(&mut y, n, to);
+        y
+    }
+}
+
+/// Block, FiLM from the conditioning, block, plus a skip ([`CondRes1d`]). The FiLM
+/// layer is split by its input: the step-embedding rows change every DDIM step, the
+/// observation rows only every decision ([`CpuUnet1d::prepare`]).
+#[derive(Clone, Debug)]
+struct Res {
+    b0: Block,
+    /// FiLM rows of the step embedding: `[e, 2·c_out]`, no bias.
+    film_step: Lin,
+    /// FiLM rows of the observation, with the bias: `[obs, 2·c_out]`.
+    film_obs: Lin,
+    b1: Block,
+    skip: Option<Conv1>,
+}
+
+impl Res {
+    fn new(r: &CondRes1d, step_embed: usize, layer: &str) -> Result<Self, UnsupportedLayer> {
+        let film = Lin::new(&r.film, &format!("{layer}.film"))?;
+        let split = step_embed * film.dout;
+        let film_step =
+            Lin { din: step_embed, dout: film.dout, w: film.w[..split].to_vec(), b: vec![0.0; film.dout] };
+        let film_obs =
+            Lin { din: film.din - step_embed, dout: film.dout, w: film.w[split..].to_vec(), b: film.b };
+        Ok(Self {
+            b0: Block::new(&r.b0, &format!("{layer}.b0"))?,
+            film_step,
+            film_obs,
+            b1: Block::new(&r.b1, &format!("{layer}.b1"))?,
+            skip: r.skip.as_ref().map(|s| Conv1::new(s, &format!("{layer}.skip"))).transpose()?,
+        })
+    }
+
+    /// `x: [c_in, n·t]`; `film_obs: [n, 2·c_out]`, `film_step: [2·c_out]` → `[c_out, n·t]`
+    fn forward(&self, x: &[f32], n: usize, t: usize, film_obs: &[f32], film_step: &[f32]) -> Vec<f32> {
+        let mut h = self.b0.forward(x, n, t); // [co, n t]
+        let co = self.b0.conv.cout;
+        for (c, rows) in h.chunks_mut(n * t).enumerate() {
+            for (smp, row) in rows.chunks_mut(t).enumerate() {
+                let f = &film_obs[smp * 2 * co..];
+                let (scale, shift) = (f[c] + film_step[c], f[co + c] + film_step[co + c]);
+                row.iter_mut().for_each(|v| *v = *v * scale + shift);
+            }
+        }
+        let mut h = self.b1.forward(&h, n, t);
+        match &self.skip {
+            Some(s) => h.iter_mut().zip(s.forward(x, n, t).0).for_each(|(a, b)| *a += b),
+            None => h.iter_mut().zip(x).for_each(|(a, b)| *a += b),
+        }
+        h
+    }
+}
+
+/// Two conditional blocks and an optional resampling ([`Level1d`]).
+#[derive(Clone, Debug)]
+struct Level {
+    r0: Res,
+    r1: Res,
+    down: Option<Conv1>,
+    up: Option<ConvT1>,
+}
+
+impl Level {
+    fn new(l: &Level1d, e: usize, layer: &str) -> Result<Self, UnsupportedLayer> {
+        Ok(Self {
+            r0: Res::new(&l.r0, e, &format!("{layer}.r0"))?,
+            r1: Res::new(&l.r1, e, &format!("{layer}.r1"))?,
+            down: l.down.as_ref().map(|d| Conv1::new(d, &format!("{layer}.down"))).transpose()?,
+            up: l.up.as_ref().map(|u| ConvT1::new(u, &format!("{layer}.up"))).transpose()?,
+        })
+    }
+}
+
+/// The U-Net's weights, laid out for these kernels.
+#[derive(Clone, Debug)]
+pub struct CpuUnet1d {
+    step1: Lin,
+    step2: Lin,
+    step_embed: usize,
+    downs: Vec<Level>,
+    mids: Vec<Res>,
+    ups: Vec<Level>,
+    final_block: Block,
+    final_conv: Conv1,
+}
+
+/// What a decision's observations contribute to every FiLM layer (`[n, 2·c_out]` each,
+/// in [`CpuUnet1d::blocks`] order); the same for all of its DDIM steps.
+pub struct Prepared {
+    n: usize,
+    film_obs: Vec<Vec<f32>>,
+}
+
+impl CpuUnet1d {
+    /// Copies `u`'s weights.
+    ///
+    /// # Errors
+    /// [`UnsupportedLayer`] for a layer these kernels do not run (grouped or dilated
+    /// convolutions, asymmetric padding) or weights that are not f32.
+    pub fn new(u: &CondUnet1d) -> Result<Self, UnsupportedLayer> {
+        let e = u.step_embed;
+        let levels = |ls: &[Level1d], name: &str| -> Result<Vec<Level>, UnsupportedLayer> {
+            ls.iter().enumerate().map(|(i, l)| Level::new(l, e, &format!("{name}.{i}"))).collect()
+        };
+        let mids = u.mids.iter().enumerate().map(|(i, m)| Res::new(m, e, &format!("mids.{i}")));
+        Ok(Self {
+            step1: Lin::new(&u.step1, "step1")?,
+            step2: Lin::new(&u.step2, "step2")?,
+            step_embed: e,
+            downs: levels(&u.downs, "downs")?,
+            mids: mids.collect::<Result<_, _>>()?,
+            ups: levels(&u.ups, "ups")?,
+            final_block: Block::new(&u.final_block, "final_block")?,
+            final_conv: Conv1::new(&u.final_conv, "final_conv")?,
+        })
+    }
+
+    /// The conditional blocks in the order `forward` runs them.
+    fn blocks(&self) -> Vec<&Res> {
+        let mut v: Vec<&Res> = self.downs.iter().flat_map(|l| [&l.r0, &l.r1]).collect();
+        v.extend(&self.mids);
+        v.extend(self.ups.iter().flat_map(|l| [&l.r0, &l.r1]));
+        v
+    }
+
+    /// The observation part of every FiLM layer for `obs: [n, obs_cond]`.
+    pub fn prepare(&self, obs: &[f32], n: usize) -> Prepared {
+        let m: Vec<f32> = obs.iter().map(|&v| mish(v)).collect();
+        Prepared { n, film_obs: self.blocks().iter().map(|r| r.film_obs.forward(&m)).collect() }
+    }
+
+    /// Predicts the noise of the prepared decision's `n` noisy action sequences at
+    /// diffusion step `t`.
+    ///
+    /// # Shapes
+    /// - `x`: `[n, horizon, action_dim]`
+    /// - returns `[n, horizon, action_dim]`
+    pub fn forward(&self, prep: &Prepared, x: &[f32], horizon: usize, t: f32) -> Vec<f32> {
+        let (n, a) = (prep.n, self.final_conv.cout);
+        // Step embedding (as `net::sinusoidal`) and its MLP: the same for every sample.
+        let half = self.step_embed / 2;
+        let args: Vec<f32> =
+            (0..half).map(|i| t * (-(10000f32).ln() * i as f32 / (half - 1).max(1) as f32).exp()).collect();
+        let emb: Vec<f32> = args.iter().map(|v| v.sin()).chain(args.iter().map(|v| v.cos())).collect();
+        let mut h1 = self.step1.forward(&emb);
+        h1.iter_mut().for_each(|v| *v = mish(*v));
+        let te: Vec<f32> = self.step2.forward(&h1).into_iter().map(mish).collect(); // mish(te): [e]
+        let blocks = self.blocks();
+        let film_step: Vec<Vec<f32>> = blocks.iter().map(|r| r.film_step.forward(&te)).collect();
+        let mut film = prep.film_obs.iter().zip(&film_step);
+        let mut res = |r: &Res, h: &[f32], len: usize| {
+            let (fo, fs) = film.next().unwrap_or_else(|| unreachable!("one FiLM per block"));
+            r.forward(h, n, len, fo, fs)
+        };
+        // [n, horizon, a] -> [a, n·horizon]
+        let mut h = vec![0.0; n * horizon * a];
+        for smp in 0..n {
+            for s in 0..horizon {
+                for c in 0..a {
+                    h[c * n * horizon + smp * horizon + s] = x[(smp * horizon + s) * a + c];
+                }
+            }
+        }
+        let mut len = horizon;
+        let mut skips = Vec::new();
+        for l in &self.downs {
+            h = res(&l.r0, &h, len);
+            h = res(&l.r1, &h, len);
+            skips.push(h.clone());
+            if let Some(d) = &l.down {
+                (h, len) = d.forward(&h, n, len);
+            }
+        }
+        for m in &self.mids {
+            h = res(m, &h, len);
+        }
+        for l in &self.ups {
+            let skip = skips.pop().unwrap_or_else(|| h.clone());
+            h.extend_from_slice(&skip); // channel concatenation: [c_h + c_skip, n·len]
+            h = res(&l.r0, &h, len);
+            h = res(&l.r1, &h, len);
+            if let Some(u) = &l.up {
+                (h, len) = u.forward(&h, n, len);
+            }
+        }
+        let (y, len) = self.final_conv.forward(&self.final_block.forward(&h, n, len), n, len);
+        let mut out = vec![0.0; n * len * a];
+        for smp in 0..n {
+            for s in 0..len {
+                for c in 0..a {
+                    out[(smp * len + s) * a + c] = y[c * n * len + smp * len + s];
+                }
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::module::{Module, ModuleMapper};
+    use burn::tensor::{Device, Distribution};
+
+    use super::*;
+    use crate::net::NetConfig;
+
+    /// Adds N(0, 0.1) to every weight, so GroupNorm's γ = 1 and β = 0 at init become
+    /// distinct values and a mis-wired affine shows.
+    struct Jitter;
+
+    impl ModuleMapper for Jitter {
+        fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+            param.map(|t| {
+                let noise = Tensor::random(t.shape(), Distribution::Normal(0.0, 0.1), &t.device());
+                t + noise
+            })
+        }
+    }
+
+    #[test]
+    fn mish_matches_its_definition() {
+        for x in [-30.0f32, -5.0, -1.0, -0.1, 0.0, 0.3, 1.0, 4.0, 19.9, 25.0] {
+            let softplus = if x > 20.0 { x } else { x.exp().ln_1p() };
+            let want = x * softplus.tanh();
+            assert!(
+                (mish(x) - want).abs() <= 1e-6 * want.abs().max(1.0),
+                "mish({x}) = {} vs {want}",
+                mish(x)
+            );
+        }
+    }
+
+    #[test]
+    fn predicts_what_burn_predicts() {
+        // The shipped policies' sizes: 3 levels (down and up resampling both exercised),
+        // kernel 5, skip convolutions where the channel count changes.
+        let device = Device::flex();
+        let cfg = NetConfig { down_dims: vec![32, 64, 128], ..NetConfig::new() };
+        let unet = CondUnet1d::new(&cfg, &device).map(&mut Jitter);
+        let cpu = CpuUnet1d::new(&unet).unwrap_or_else(|e| panic!("{e}"));
+        let (n, h) = (3, 16);
+        let x = Tensor::<3>::random([n, h, 2], Distribution::Normal(0.0, 1.0), &device);
+        let obs = Tensor::<2>::random([n, cfg.obs_cond_dim()], Distribution::Normal(0.0, 1.0), &device);
+        for t in [0.0f32, 37.0, 99.0] {
+            let want: Vec<f32> = unet
+                .forward(x.clone(), Tensor::from_floats(vec![t; n].as_slice(), &device), obs.clone())
+                .into_data()
+                .try_to_vec()
+                .unwrap_or_default();
+            let xs: Vec<f32> = x.clone().into_data().try_to_vec().unwrap_or_default();
+            let os: Vec<f32> = obs.clone().into_data().try_to_vec().unwrap_or_default();
+            let got = cpu.forward(&cpu.prepare(&os, n), &xs, h, t);
+            assert_eq!(got.len(), n * h * 2);
+            let scale = want.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
+            let max = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+            assert!(scale > 1e-2, "degenerate test output");
+            assert!(max < 1e-4 * scale.max(1.0), "t = {t}: max difference {max} (output scale {scale})");
+        }
+    }
+}
