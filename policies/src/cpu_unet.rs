@@ -54,7 +54,7 @@ fn mish(x: f32) -> f32 {
 
 /// `c (+)= a · b` for row-major `a: [m, k]`, `b: [k, n]`, `c: [m, n]`, on the `gemm`
 /// crate's kernels (the ones burn-flex uses), one thread.
-fn matmul(m: usize, k: usize, n: usize, a: &[f32], b: &[f32], c: &mut [f32], accumulate: bool) {
+pub(crate) fn matmul(m: usize, k: usize, n: usize, a: &[f32], b: &[f32], c: &mut [f32], accumulate: bool) {
     assert!(a.len() >= m * k && b.len() >= k * n && c.len() >= m * n, "matmul shapes");
     if m == 0 || n == 0 {
         return;

@@ -12,6 +12,7 @@ use harness::policy::{ActionChunk, Observation, Policy, PolicyError, sanitize};
 use harness::rng::Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::cpu_encoder::CpuEncoder;
 use crate::cpu_unet::CpuUnet1d;
 use crate::net::{CondUnet1d, NetConfig, ObsEncoder};
 
@@ -204,6 +205,8 @@ pub struct DiffusionPolicy {
     net: DiffusionNet,
     /// The U-Net on plain CPU loops (Flex device, unless [`POLICY_KERNELS_ENV`] says `burn`).
     cpu_unet: Option<CpuUnet1d>,
+    /// The frame encoder on direct CPU kernels (same condition).
+    cpu_encoder: Option<CpuEncoder>,
     ac: Vec<f64>,
     device: Device,
 }
@@ -222,19 +225,30 @@ impl DiffusionPolicy {
     ) -> Self {
         let ac = alphas_cumprod(cfg.train_steps);
         let burn_only = std::env::var(POLICY_KERNELS_ENV).is_ok_and(|v| v.trim() == "burn");
-        let cpu_unet = if *device == Device::flex() && !burn_only {
-            CpuUnet1d::new(&net.unet)
-                .inspect_err(|e| tracing::warn!(policy = %name, "burn's U-Net kept: {e}"))
-                .ok()
-        } else {
-            None
-        };
-        Self { name, cfg, norm, net, cpu_unet, ac, device: device.clone() }
+        let direct = *device == Device::flex() && !burn_only;
+        let cpu_unet = direct
+            .then(|| {
+                CpuUnet1d::new(&net.unet)
+                    .inspect_err(|e| tracing::warn!(policy = %name, "burn's U-Net kept: {e}"))
+            })
+            .and_then(Result::ok);
+        let cpu_encoder = direct
+            .then(|| {
+                CpuEncoder::new(&net.encoder)
+                    .inspect_err(|e| tracing::warn!(policy = %name, "burn's encoder kept: {e}"))
+            })
+            .and_then(Result::ok);
+        Self { name, cfg, norm, net, cpu_unet, cpu_encoder, ac, device: device.clone() }
     }
 }
 
 /// Byte frames (HWC) to a `[n, 3, s, s]` tensor in [-1, 1].
 pub fn frames_to_tensor(frames: &[&[u8]], s: usize, device: &Device) -> Tensor<4> {
+    Tensor::from_data(TensorData::new(frames_to_vec(frames, s), [frames.len(), 3, s, s]), device)
+}
+
+/// Byte frames (HWC) to `[n, 3, s, s]` values in [-1, 1].
+pub fn frames_to_vec(frames: &[&[u8]], s: usize) -> Vec<f32> {
     let plane = s * s;
     let mut v = vec![0f32; frames.len() * 3 * plane];
     for (k, f) in frames.iter().enumerate() {
@@ -244,7 +258,7 @@ pub fn frames_to_tensor(frames: &[&[u8]], s: usize, device: &Device) -> Tensor<4
             }
         }
     }
-    Tensor::from_data(TensorData::new(v, [frames.len(), 3, s, s]), device)
+    v
 }
 
 impl Policy for DiffusionPolicy {
@@ -279,18 +293,30 @@ impl Policy for DiffusionPolicy {
             pos.extend(ob.agent_pos.iter().flat_map(|p| self.norm.agent_pos.normalise(*p)));
         }
         let b = obs.len();
-        let cond = self.net.obs_cond(
-            frames_to_tensor(&frames, s, &self.device),
-            Tensor::from_data(TensorData::new(pos, [b, o, 2]), &self.device),
-        );
+        // Conditioning [b, o·(features + 2)]: per observed frame, its features and position.
+        let cond: Vec<f32> = match &self.cpu_encoder {
+            Some(enc) => {
+                let feat = enc.forward(&frames_to_vec(&frames, s), b * o, s); // [b o, f]
+                let f = feat.len() / (b * o).max(1);
+                feat.chunks(f).zip(pos.chunks(2)).flat_map(|(x, p)| x.iter().chain(p)).copied().collect()
+            }
+            None => self
+                .net
+                .obs_cond(
+                    frames_to_tensor(&frames, s, &self.device),
+                    Tensor::from_data(TensorData::new(pos, [b, o, 2]), &self.device),
+                )
+                .into_data()
+                .convert::<f32>()
+                .try_into_vec::<f32>()
+                .unwrap_or_default(),
+        };
         let noise: Vec<f32> = rngs.iter_mut().flat_map(|r| r.normals_f32(h * 2)).collect();
         let v: Vec<f32> = match &self.cpu_unet {
-            Some(unet) => {
-                let cond: Vec<f32> =
-                    cond.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
-                sample_cpu(unet, &cond, noise, h, self.cfg.inference_steps, &self.ac)
-            }
+            Some(unet) => sample_cpu(unet, &cond, noise, h, self.cfg.inference_steps, &self.ac),
             None => {
+                let c = cond.len() / b.max(1);
+                let cond = Tensor::from_data(TensorData::new(cond, [b, c]), &self.device);
                 let x = Tensor::from_data(TensorData::new(noise, [b, h, 2]), &self.device);
                 let out = self.net.sample(cond, x, self.cfg.inference_steps, &self.ac);
                 out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()

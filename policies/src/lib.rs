@@ -1,7 +1,8 @@
 //! Vision policies for Push-T, trained on the project's own demonstrations.
 //!
 //! - [`net`]: the CNN frame encoder and the conditional 1-D U-Net;
-//! - [`cpu_unet`]: that U-Net on plain CPU loops, which inference uses on the Flex device;
+//! - [`cpu_unet`], [`cpu_encoder`]: the U-Net and the encoder on the project's own CPU
+//!   kernels, which inference uses on the Flex device;
 //! - [`diffusion`]: the `diffusion` kind (DDPM training, DDIM inference) behind
 //!   [`harness::policy::Policy`];
 //! - [`data`]: demonstrations from a replay-buffer dataset;
@@ -9,6 +10,7 @@
 //! - [`train`]: the trainer, which saves a checkpoint every few epochs;
 //! - [`dir`]: the policy directory format and its validating loader.
 
+pub mod cpu_encoder;
 pub mod cpu_unet;
 pub mod data;
 pub mod diffusion;

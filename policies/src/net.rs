@@ -61,10 +61,10 @@ fn conv2(cin: usize, cout: usize, stride: usize, device: &Device) -> Conv2d {
 /// GN → SiLU → conv, twice, plus the input.
 #[derive(Module, Debug)]
 pub struct Res2d {
-    n1: GroupNorm,
-    c1: Conv2d,
-    n2: GroupNorm,
-    c2: Conv2d,
+    pub(crate) n1: GroupNorm,
+    pub(crate) c1: Conv2d,
+    pub(crate) n2: GroupNorm,
+    pub(crate) c2: Conv2d,
 }
 
 impl Res2d {
@@ -87,10 +87,10 @@ impl Res2d {
 /// Frame encoder: 96² → 48² → 24² → 12² → 6², flattened, linear.
 #[derive(Module, Debug)]
 pub struct ObsEncoder {
-    downs: Vec<Conv2d>,
-    blocks: Vec<Res2d>,
-    norm: GroupNorm,
-    out: Linear,
+    pub(crate) downs: Vec<Conv2d>,
+    pub(crate) blocks: Vec<Res2d>,
+    pub(crate) norm: GroupNorm,
+    pub(crate) out: Linear,
 }
 
 impl ObsEncoder {

@@ -16,9 +16,9 @@ use burn::tensor::Tensor;
 use crate::autoencoder::{Autoencoder, ResBlock};
 use crate::direct_conv::{Conv3x3, Norm, Padded};
 
-/// Why a decoder cannot be run by the direct kernels (a layer they do not support).
+/// Why a network cannot be run by the direct kernels (a layer they do not support).
 #[derive(Debug, thiserror::Error)]
-#[error("decoder layer {layer}: {message}")]
+#[error("layer {layer}: {message}")]
 pub struct UnsupportedLayer {
     layer: String,
     message: String,
@@ -54,13 +54,13 @@ impl CpuDecoder {
     pub fn new(ae: &Autoencoder, latent_size: usize) -> Result<Self, UnsupportedLayer> {
         let block = |b: &ResBlock, name: &str| -> Result<Block, UnsupportedLayer> {
             Ok(Block {
-                norm1: norm(&b.norm1, &format!("{name}.norm1"))?,
-                conv1: conv(&b.conv1, &format!("{name}.conv1"))?,
-                norm2: norm(&b.norm2, &format!("{name}.norm2"))?,
-                conv2: conv(&b.conv2, &format!("{name}.conv2"))?,
+                norm1: norm_of(&b.norm1, &format!("{name}.norm1"))?,
+                conv1: conv3x3_of(&b.conv1, &format!("{name}.conv1"))?,
+                norm2: norm_of(&b.norm2, &format!("{name}.norm2"))?,
+                conv2: conv3x3_of(&b.conv2, &format!("{name}.conv2"))?,
             })
         };
-        let dec_in = conv(&ae.dec_in, "dec_in")?;
+        let dec_in = conv3x3_of(&ae.dec_in, "dec_in")?;
         Ok(Self {
             latent_channels: dec_in.cin(),
             latent_size,
@@ -68,10 +68,10 @@ impl CpuDecoder {
                 .map(|(i, b)| block(b, &format!("dec_blocks.{i}")))
                 .collect::<Result<_, _>>()?,
             ups: (ae.dec_up.iter().enumerate())
-                .map(|(i, c)| conv(c, &format!("dec_up.{i}")))
+                .map(|(i, c)| conv3x3_of(c, &format!("dec_up.{i}")))
                 .collect::<Result<_, _>>()?,
-            norm: norm(&ae.dec_norm, "dec_norm")?,
-            out: conv(&ae.dec_out, "dec_out")?,
+            norm: norm_of(&ae.dec_norm, "dec_norm")?,
+            out: conv3x3_of(&ae.dec_out, "dec_out")?,
             dec_in,
         })
     }
@@ -134,7 +134,11 @@ fn values<const D: usize>(t: Tensor<D>, layer: &str) -> Result<Vec<f32>, Unsuppo
         .map_err(|e| UnsupportedLayer { layer: layer.into(), message: format!("{e:?}") })
 }
 
-fn conv(c: &Conv2d, layer: &str) -> Result<Conv3x3, UnsupportedLayer> {
+/// The weights of a 3x3, stride-1, padding-1 burn convolution for [`Conv3x3`].
+///
+/// # Errors
+/// [`UnsupportedLayer`] for any other convolution or non-f32 weights.
+pub fn conv3x3_of(c: &Conv2d, layer: &str) -> Result<Conv3x3, UnsupportedLayer> {
     let err = |message: &str| UnsupportedLayer { layer: layer.into(), message: message.into() };
     let padded_one = matches!(c.padding, PaddingConfig2d::Explicit(1, 1, 1, 1));
     if c.kernel_size != [3, 3] || c.stride != [1, 1] || c.dilation != [1, 1] || c.groups != 1 || !padded_one {
@@ -147,7 +151,11 @@ fn conv(c: &Conv2d, layer: &str) -> Result<Conv3x3, UnsupportedLayer> {
     Ok(Conv3x3::new(cin, cout, &weight, bias.as_deref()))
 }
 
-fn norm(n: &GroupNorm, layer: &str) -> Result<Norm, UnsupportedLayer> {
+/// A burn GroupNorm's parameters as a [`Norm`].
+///
+/// # Errors
+/// [`UnsupportedLayer`] for non-f32 parameters.
+pub fn norm_of(n: &GroupNorm, layer: &str) -> Result<Norm, UnsupportedLayer> {
     let param = |p: &Option<Param<Tensor<1>>>, fill: f32| match p {
         Some(p) => values(p.val(), layer),
         None => Ok(vec![fill; n.num_channels]),

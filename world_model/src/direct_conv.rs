@@ -40,6 +40,16 @@ impl Padded {
         &mut self.data[start..start + self.w]
     }
 
+    /// The interior (`[c, h, w]`, without the border), in order.
+    pub fn interior(&self) -> impl Iterator<Item = f32> + '_ {
+        (0..self.c).flat_map(move |ch| {
+            (0..self.h).flat_map(move |y| {
+                let start = (ch * (self.h + 2) + y + 1) * self.stride + 1;
+                self.data[start..start + self.w].iter().copied()
+            })
+        })
+    }
+
     /// Copies `src` (`[c, h, w]`, or `[c, h/2, w/2]` repeated 2x2 when `upsample`) inside the border.
     pub fn fill(&mut self, src: &[f32], upsample: bool) {
         let (c, h, w) = (self.c, self.h, self.w);

@@ -1,0 +1,213 @@
+//! The diffusion policy's frame encoder on the CPU without burn: the same network
+//! as [`ObsEncoder::forward`], on the world model's direct 3x3 kernels
+//! ([`world_model::direct_conv`]) for the stride-1 residual blocks and on matrix
+//! products (im2col + the `gemm` crate) for the stride-2 downsampling convolutions.
+//!
+//! Why: once the U-Net ran on [`crate::cpu_unet`], encoding the two observed frames
+//! was most of a decision's remaining cost, mostly burn-flex's per-layer overhead.
+//! A [`DiffusionPolicy`](crate::diffusion::DiffusionPolicy) on the Flex device
+//! encodes with this; training keeps burn's path. The two agree to float rounding
+//! (tested below).
+
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::Conv2d;
+use world_model::cpu_decoder::{UnsupportedLayer, conv3x3_of, norm_of};
+use world_model::direct_conv::{Conv3x3, Norm, Padded};
+
+use crate::cpu_unet::matmul;
+use crate::net::{ObsEncoder, Res2d};
+
+/// A 3x3, stride-2, padding-1 convolution as im2col + one matrix product.
+#[derive(Clone, Debug)]
+struct Down {
+    cin: usize,
+    cout: usize,
+    /// `[c_out, c_in·9]`
+    w: Vec<f32>,
+    b: Vec<f32>,
+}
+
+impl Down {
+    fn new(c: &Conv2d, layer: &str) -> Result<Self, String> {
+        let padded_one = matches!(c.padding, PaddingConfig2d::Explicit(1, 1, 1, 1));
+        if c.kernel_size != [3, 3]
+            || c.stride != [2, 2]
+            || c.dilation != [1, 1]
+            || c.groups != 1
+            || !padded_one
+        {
+            return Err(format!("{layer}: only 3x3 convolutions with stride 2 and padding 1 are supported"));
+        }
+        let w = c.weight.val(); // [cout, cin, 3, 3]
+        let [cout, cin, _, _] = w.dims();
+        let w = w.into_data().try_to_vec::<f32>().map_err(|e| format!("{layer}: {e:?}"))?;
+        let b = match &c.bias {
+            Some(b) => b.val().into_data().try_to_vec::<f32>().map_err(|e| format!("{layer}: {e:?}"))?,
+            None => vec![0.0; cout],
+        };
+        Ok(Self { cin, cout, w, b })
+    }
+
+    /// `[c_in, s, s] -> [c_out, s/2, s/2]` (s even).
+    fn forward(&self, x: &[f32], s: usize) -> Vec<f32> {
+        let so = s / 2;
+        let cols = so * so;
+        let mut col = vec![0.0; self.cin * 9 * cols];
+        for ci in 0..self.cin {
+            let plane = &x[ci * s * s..][..s * s];
+            for ky in 0..3 {
+                for kx in 0..3 {
+                    let row = &mut col[(ci * 9 + ky * 3 + kx) * cols..][..cols];
+                    for oy in 0..so {
+                        // Input row 2·oy + ky − 1, column 2·ox + kx − 1; zero outside.
+                        let Some(iy) = (2 * oy + ky).checked_sub(1).filter(|&v| v < s) else { continue };
+                        for ox in 0..so {
+                            if let Some(ix) = (2 * ox + kx).checked_sub(1).filter(|&v| v < s) {
+                                row[oy * so + ox] = plane[iy * s + ix];
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let mut y: Vec<f32> = self.b.iter().flat_map(|&b| std::iter::repeat_n(b, cols)).collect();
+        matmul(self.cout, self.cin * 9, cols, &self.w, &col, &mut y, true);
+        y
+    }
+}
+
+/// GN → SiLU → conv, twice, plus the input ([`Res2d`]).
+#[derive(Clone, Debug)]
+struct Block {
+    n1: Norm,
+    c1: Conv3x3,
+    n2: Norm,
+    c2: Conv3x3,
+}
+
+/// The encoder's weights, laid out for the direct kernels.
+#[derive(Clone, Debug)]
+pub struct CpuEncoder {
+    downs: Vec<Down>,
+    blocks: Vec<Block>,
+    norm: Norm,
+    /// Final linear layer, burn's layout `[d_in, d_out]`.
+    out_w: Vec<f32>,
+    out_b: Vec<f32>,
+    features: usize,
+}
+
+impl CpuEncoder {
+    /// Copies `e`'s weights.
+    ///
+    /// # Errors
+    /// A message naming the layer these kernels cannot run.
+    pub fn new(e: &ObsEncoder) -> Result<Self, String> {
+        let err = |x: UnsupportedLayer| x.to_string();
+        let block = |b: &Res2d, i: usize| -> Result<Block, String> {
+            Ok(Block {
+                n1: norm_of(&b.n1, &format!("blocks.{i}.n1")).map_err(err)?,
+                c1: conv3x3_of(&b.c1, &format!("blocks.{i}.c1")).map_err(err)?,
+                n2: norm_of(&b.n2, &format!("blocks.{i}.n2")).map_err(err)?,
+                c2: conv3x3_of(&b.c2, &format!("blocks.{i}.c2")).map_err(err)?,
+            })
+        };
+        let w = e.out.weight.val();
+        let [_, features] = w.dims();
+        let out_w = w.into_data().try_to_vec::<f32>().map_err(|x| format!("out: {x:?}"))?;
+        let out_b = match &e.out.bias {
+            Some(b) => b.val().into_data().try_to_vec::<f32>().map_err(|x| format!("out: {x:?}"))?,
+            None => vec![0.0; features],
+        };
+        Ok(Self {
+            downs: e
+                .downs
+                .iter()
+                .enumerate()
+                .map(|(i, d)| Down::new(d, &format!("downs.{i}")))
+                .collect::<Result<_, _>>()?,
+            blocks: e.blocks.iter().enumerate().map(|(i, b)| block(b, i)).collect::<Result<_, _>>()?,
+            norm: norm_of(&e.norm, "norm").map_err(err)?,
+            out_w,
+            out_b,
+            features,
+        })
+    }
+
+    /// Encodes `n` frames.
+    ///
+    /// # Shapes
+    /// `[n, 3, s, s]` in [-1, 1] → `[n, features]`
+    pub fn forward(&self, frames: &[f32], n: usize, s: usize) -> Vec<f32> {
+        let per = frames.len() / n.max(1);
+        let mut flat = Vec::new();
+        for x in frames.chunks(per).take(n) {
+            let mut h = x.to_vec();
+            let mut side = s;
+            for (i, down) in self.downs.iter().enumerate() {
+                h = down.forward(&h, side);
+                side /= 2;
+                if let Some(b) = self.blocks.get(i) {
+                    h = residual(b, h, side);
+                }
+            }
+            // silu(groupnorm(h)), flattened [c·side²]
+            let mut pad = Padded::zeros(h.len() / (side * side), side, side);
+            pad.fill_norm_silu(&h, &self.norm);
+            flat.extend(pad.interior());
+        }
+        let din = flat.len() / n.max(1);
+        let mut y: Vec<f32> = (0..n).flat_map(|_| self.out_b.iter().copied()).collect();
+        matmul(n, din, self.features, &flat, &self.out_w, &mut y, true);
+        y
+    }
+}
+
+/// `x + c2(silu(n2(c1(silu(n1(x))))))` on `[c, side, side]`.
+fn residual(b: &Block, x: Vec<f32>, side: usize) -> Vec<f32> {
+    let c = b.c1.cin();
+    let mut pad = Padded::zeros(c, side, side);
+    pad.fill_norm_silu(&x, &b.n1);
+    let mut t = vec![0.0; c * side * side];
+    b.c1.forward(&pad, None, &mut t);
+    pad.fill_norm_silu(&t, &b.n2);
+    b.c2.forward(&pad, Some(&x), &mut t);
+    t
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::module::{Module, ModuleMapper, Param};
+    use burn::tensor::{Device, Distribution, Tensor};
+
+    use super::*;
+    use crate::net::NetConfig;
+
+    /// Adds N(0, 0.1) to every weight (GroupNorm's γ = 1, β = 0 at init become distinct).
+    struct Jitter;
+
+    impl ModuleMapper for Jitter {
+        fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+            param.map(|t| {
+                let noise = Tensor::random(t.shape(), Distribution::Normal(0.0, 0.1), &t.device());
+                t + noise
+            })
+        }
+    }
+
+    #[test]
+    fn encodes_what_burn_encodes() {
+        let device = Device::flex();
+        let cfg = NetConfig { encoder_width: 8, ..NetConfig::new() };
+        let enc = ObsEncoder::new(&cfg, &device).map(&mut Jitter);
+        let cpu = CpuEncoder::new(&enc).unwrap_or_else(|e| panic!("{e}"));
+        let x = Tensor::<4>::random([3, 3, 96, 96], Distribution::Uniform(-1.0, 1.0), &device);
+        let want: Vec<f32> = enc.forward(x.clone()).into_data().try_to_vec().unwrap_or_default();
+        let got = cpu.forward(&x.into_data().try_to_vec::<f32>().unwrap_or_default(), 3, 96);
+        assert_eq!(got.len(), 3 * cfg.feature_dim);
+        let scale = want.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
+        let max = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(scale > 1e-2, "degenerate test output");
+        assert!(max < 1e-4 * scale.max(1.0), "max difference {max} (output scale {scale})");
+    }
+}
