@@ -12,9 +12,9 @@
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::Conv2d;
 use world_model::cpu_decoder::{UnsupportedLayer, conv3x3_of, norm_of};
+use world_model::cpu_kernels::{Conv2dShape, matmul};
 use world_model::direct_conv::{Conv3x3, Norm, Padded};
 
-use crate::cpu_unet::matmul;
 use crate::net::{ObsEncoder, Res2d};
 
 /// A 3x3, stride-2, padding-1 convolution as im2col + one matrix product.
@@ -53,23 +53,7 @@ impl Down {
         let so = s / 2;
         let cols = so * so;
         let mut col = vec![0.0; self.cin * 9 * cols];
-        for ci in 0..self.cin {
-            let plane = &x[ci * s * s..][..s * s];
-            for ky in 0..3 {
-                for kx in 0..3 {
-                    let row = &mut col[(ci * 9 + ky * 3 + kx) * cols..][..cols];
-                    for oy in 0..so {
-                        // Input row 2·oy + ky − 1, column 2·ox + kx − 1; zero outside.
-                        let Some(iy) = (2 * oy + ky).checked_sub(1).filter(|&v| v < s) else { continue };
-                        for ox in 0..so {
-                            if let Some(ix) = (2 * ox + kx).checked_sub(1).filter(|&v| v < s) {
-                                row[oy * so + ox] = plane[iy * s + ix];
-                            }
-                        }
-                    }
-                }
-            }
-        }
+        Conv2dShape { k: 3, stride: 2, pad: 1 }.im2col(x, self.cin, 1, s, s, 0, 1, &mut col);
         let mut y: Vec<f32> = self.b.iter().flat_map(|&b| std::iter::repeat_n(b, cols)).collect();
         matmul(self.cout, self.cin * 9, cols, &self.w, &col, &mut y, true);
         y

@@ -19,6 +19,10 @@ use burn::nn::conv::{Conv1d, ConvTranspose1d};
 use burn::nn::{GroupNorm, Linear, PaddingConfig1d};
 use burn::tensor::Tensor;
 
+use world_model::cpu_decoder::norm_of;
+use world_model::cpu_kernels::{Dense, group_norm_cols, matmul};
+use world_model::direct_conv::Norm;
+
 use crate::net::{CondRes1d, CondUnet1d, Conv1dBlock, Level1d};
 
 /// Why a U-Net cannot be run by these kernels (a layer they do not support).
@@ -41,6 +45,11 @@ fn bias(b: &Option<Param<Tensor<1>>>, n: usize, layer: &str) -> Result<Vec<f32>,
     b.as_ref().map_or(Ok(vec![0.0; n]), |b| values(b.val(), layer))
 }
 
+/// A dense layer, its errors renamed for this network.
+fn dense(l: &Linear, layer: &str) -> Result<Dense, UnsupportedLayer> {
+    Dense::new(l, layer).map_err(|e| unsupported(layer, e.to_string()))
+}
+
 /// Mish, `x · tanh(softplus(x))`, with one `exp`: tanh(ln(1 + e)) = n / (n + 2) for
 /// n = e(e + 2). Above 20 softplus is the identity (burn's threshold) and so is mish.
 fn mish(x: f32) -> f32 {
@@ -50,73 +59,6 @@ fn mish(x: f32) -> f32 {
     let e = x.exp();
     let n = e * (e + 2.0);
     x * n / (n + 2.0)
-}
-
-/// `c (+)= a · b` for row-major `a: [m, k]`, `b: [k, n]`, `c: [m, n]`, on the `gemm`
-/// crate's kernels (the ones burn-flex uses), one thread.
-pub(crate) fn matmul(m: usize, k: usize, n: usize, a: &[f32], b: &[f32], c: &mut [f32], accumulate: bool) {
-    assert!(a.len() >= m * k && b.len() >= k * n && c.len() >= m * n, "matmul shapes");
-    if m == 0 || n == 0 {
-        return;
-    }
-    if k == 0 {
-        if !accumulate {
-            c[..m * n].fill(0.0);
-        }
-        return;
-    }
-    // SAFETY: the three slices hold at least m·k, k·n and m·n elements (checked above),
-    // the strides describe row-major matrices inside them, and `c` is borrowed mutably
-    // so it aliases neither input. gemm computes dst := α·dst + β·lhs·rhs.
-    #[allow(unsafe_code)]
-    unsafe {
-        gemm::gemm(
-            m,
-            n,
-            k,
-            c.as_mut_ptr(),
-            1,
-            n as isize,
-            accumulate,
-            a.as_ptr(),
-            1,
-            k as isize,
-            b.as_ptr(),
-            1,
-            n as isize,
-            if accumulate { 1.0 } else { 0.0 },
-            1.0,
-            false,
-            false,
-            false,
-            gemm::Parallelism::None,
-        );
-    }
-}
-
-/// `y = x W + b` with burn's layout `W: [d_in, d_out]`.
-#[derive(Clone, Debug)]
-struct Lin {
-    din: usize,
-    dout: usize,
-    w: Vec<f32>,
-    b: Vec<f32>,
-}
-
-impl Lin {
-    fn new(l: &Linear, layer: &str) -> Result<Self, UnsupportedLayer> {
-        let w = l.weight.val(); // [d_in, d_out]
-        let [din, dout] = w.dims();
-        Ok(Self { din, dout, w: values(w, layer)?, b: bias(&l.bias, dout, layer)? })
-    }
-
-    /// `[n, d_in] -> [n, d_out]`
-    fn forward(&self, x: &[f32]) -> Vec<f32> {
-        let n = x.len() / self.din;
-        let mut y: Vec<f32> = (0..n).flat_map(|_| self.b.iter().copied()).collect();
-        matmul(n, self.din, self.dout, x, &self.w, &mut y, true);
-        y
-    }
 }
 
 /// A 1-D convolution (dilation 1, one group), weights `[c_out, c_in·k]`, run as one
@@ -232,48 +174,15 @@ impl ConvT1 {
 
 /// GroupNorm followed by mish, in place on `[c, n·t]`.
 #[derive(Clone, Debug)]
-struct NormMish {
-    groups: usize,
-    gamma: Vec<f32>,
-    beta: Vec<f32>,
-    eps: f64,
-}
+struct NormMish(Norm);
 
 impl NormMish {
     fn new(g: &GroupNorm, layer: &str) -> Result<Self, UnsupportedLayer> {
-        let c = g.num_channels;
-        let param = |p: &Option<Param<Tensor<1>>>, fill: f32| match p {
-            Some(p) => values(p.val(), layer),
-            None => Ok(vec![fill; c]),
-        };
-        Ok(Self {
-            groups: g.num_groups,
-            gamma: param(&g.gamma, 1.0)?,
-            beta: param(&g.beta, 0.0)?,
-            eps: g.epsilon,
-        })
+        norm_of(g, layer).map(Self).map_err(|e| unsupported(layer, e.to_string()))
     }
 
     fn apply(&self, x: &mut [f32], n: usize, t: usize) {
-        let c = self.gamma.len();
-        let cg = c / self.groups;
-        let count = (cg * t) as f64;
-        for g in 0..self.groups {
-            for smp in 0..n {
-                let rows = || (g * cg..(g + 1) * cg).map(|ch| ch * n * t + smp * t);
-                let mean = rows().flat_map(|r| &x[r..r + t]).map(|&v| f64::from(v)).sum::<f64>() / count;
-                let var =
-                    rows().flat_map(|r| &x[r..r + t]).map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>()
-                        / count;
-                let inv = 1.0 / (var + self.eps).sqrt();
-                for (j, r) in rows().enumerate() {
-                    let ch = g * cg + j;
-                    let a = (inv as f32) * self.gamma[ch];
-                    let b = self.beta[ch] - (mean * inv) as f32 * self.gamma[ch];
-                    x[r..r + t].iter_mut().for_each(|v| *v = mish(*v * a + b));
-                }
-            }
-        }
+        group_norm_cols(x, &self.0, n, 1, t, None, mish);
     }
 }
 
@@ -303,21 +212,16 @@ impl Block {
 struct Res {
     b0: Block,
     /// FiLM rows of the step embedding: `[e, 2·c_out]`, no bias.
-    film_step: Lin,
+    film_step: Dense,
     /// FiLM rows of the observation, with the bias: `[obs, 2·c_out]`.
-    film_obs: Lin,
+    film_obs: Dense,
     b1: Block,
     skip: Option<Conv1>,
 }
 
 impl Res {
     fn new(r: &CondRes1d, step_embed: usize, layer: &str) -> Result<Self, UnsupportedLayer> {
-        let film = Lin::new(&r.film, &format!("{layer}.film"))?;
-        let split = step_embed * film.dout;
-        let film_step =
-            Lin { din: step_embed, dout: film.dout, w: film.w[..split].to_vec(), b: vec![0.0; film.dout] };
-        let film_obs =
-            Lin { din: film.din - step_embed, dout: film.dout, w: film.w[split..].to_vec(), b: film.b };
+        let (film_step, film_obs) = dense(&r.film, &format!("{layer}.film"))?.split_inputs(step_embed);
         Ok(Self {
             b0: Block::new(&r.b0, &format!("{layer}.b0"))?,
             film_step,
@@ -370,8 +274,8 @@ impl Level {
 /// The U-Net's weights, laid out for these kernels.
 #[derive(Clone, Debug)]
 pub struct CpuUnet1d {
-    step1: Lin,
-    step2: Lin,
+    step1: Dense,
+    step2: Dense,
     step_embed: usize,
     downs: Vec<Level>,
     mids: Vec<Res>,
@@ -400,8 +304,8 @@ impl CpuUnet1d {
         };
         let mids = u.mids.iter().enumerate().map(|(i, m)| Res::new(m, e, &format!("mids.{i}")));
         Ok(Self {
-            step1: Lin::new(&u.step1, "step1")?,
-            step2: Lin::new(&u.step2, "step2")?,
+            step1: dense(&u.step1, "step1")?,
+            step2: dense(&u.step2, "step2")?,
             step_embed: e,
             downs: levels(&u.downs, "downs")?,
             mids: mids.collect::<Result<_, _>>()?,

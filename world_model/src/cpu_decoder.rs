@@ -14,6 +14,7 @@ use burn::nn::{GroupNorm, PaddingConfig2d};
 use burn::tensor::Tensor;
 
 use crate::autoencoder::{Autoencoder, ResBlock};
+use crate::cpu_kernels::values;
 use crate::direct_conv::{Conv3x3, Norm, Padded};
 
 /// Why a network cannot be run by the direct kernels (a layer they do not support).
@@ -22,6 +23,13 @@ use crate::direct_conv::{Conv3x3, Norm, Padded};
 pub struct UnsupportedLayer {
     layer: String,
     message: String,
+}
+
+impl UnsupportedLayer {
+    /// `layer` cannot run on these kernels, because of `message`.
+    pub fn new(layer: &str, message: impl Into<String>) -> Self {
+        Self { layer: layer.into(), message: message.into() }
+    }
 }
 
 /// GroupNorm -> SiLU -> conv, twice, plus the input (as [`ResBlock`]).
@@ -128,18 +136,12 @@ impl CpuDecoder {
     }
 }
 
-fn values<const D: usize>(t: Tensor<D>, layer: &str) -> Result<Vec<f32>, UnsupportedLayer> {
-    t.into_data()
-        .try_to_vec::<f32>()
-        .map_err(|e| UnsupportedLayer { layer: layer.into(), message: format!("{e:?}") })
-}
-
 /// The weights of a 3x3, stride-1, padding-1 burn convolution for [`Conv3x3`].
 ///
 /// # Errors
 /// [`UnsupportedLayer`] for any other convolution or non-f32 weights.
 pub fn conv3x3_of(c: &Conv2d, layer: &str) -> Result<Conv3x3, UnsupportedLayer> {
-    let err = |message: &str| UnsupportedLayer { layer: layer.into(), message: message.into() };
+    let err = |message: &str| UnsupportedLayer::new(layer, message);
     let padded_one = matches!(c.padding, PaddingConfig2d::Explicit(1, 1, 1, 1));
     if c.kernel_size != [3, 3] || c.stride != [1, 1] || c.dilation != [1, 1] || c.groups != 1 || !padded_one {
         return Err(err("only 3x3 convolutions with stride 1 and padding 1 are supported"));

@@ -102,7 +102,7 @@ impl Padded {
 /// x = n ln 2 + r with |r| <= ln 2 / 2, a degree-7 polynomial for e^r, 2^n from the
 /// exponent bits). Within a few ulp of `f32::exp` on [-87, 88); clamped outside.
 #[inline(always)]
-fn exp(x: f32) -> f32 {
+pub fn exp(x: f32) -> f32 {
     const LOG2E: f32 = std::f32::consts::LOG2_E;
     // 1.5 · 2^23: adding it rounds to an integer, which then sits in the low mantissa bits.
     const MAGIC: f32 = 12_582_912.0;

@@ -6,7 +6,8 @@
 //!   self-forcing); [`motion`]: its motion weighting; [`unet`]: the action-conditioned U-Net;
 //! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer; [`codec`]:
 //!   autoencoder latents or pixels, the space the U-Net works in; [`cpu_decoder`] +
-//!   [`direct_conv`]: the decoder on direct CPU kernels, for inference;
+//!   [`direct_conv`]: the decoder on direct CPU kernels, for inference; [`cpu_kernels`]:
+//!   whole-batch kernels (GEMM, GroupNorm, im2col) of the CPU U-Nets ([`unet::cpu`]);
 //! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
 //!   (drifting, MSE and diffusion objectives); [`context_noise`]: corrupted training histories;
 //! - [`model`]: a trained world model for inference; [`eval`]: video-quality metrics;
@@ -16,6 +17,7 @@ pub mod autoencoder;
 pub mod codec;
 pub mod context_noise;
 pub mod cpu_decoder;
+pub mod cpu_kernels;
 pub mod data;
 pub mod device;
 pub mod direct_conv;

@@ -21,6 +21,7 @@ use crate::cpu_decoder::CpuDecoder;
 use crate::error::WorldModelError;
 use crate::latents::LatentStats;
 use crate::train_ae::ckpt;
+use crate::unet::cpu::CpuUNet;
 use crate::unet::{UNet, UNetConfig};
 
 /// The training objective, which also decides how frames are sampled.
@@ -121,6 +122,8 @@ pub struct WorldModel {
     device: Device,
     /// The decoder on direct CPU kernels (Flex device and latent family only).
     cpu_decoder: Option<CpuDecoder>,
+    /// The U-Net on CPU kernels (Flex device only).
+    cpu_unet: Option<CpuUNet>,
 }
 
 /// Set to `burn` to decode with burn's convolutions even on the CPU (for comparisons).
@@ -136,6 +139,17 @@ fn cpu_decoder(codec: &FrameCodec, device: &Device) -> Option<CpuDecoder> {
     CpuDecoder::new(ae, codec.size())
         .inspect_err(|e| tracing::warn!("decoding with burn's convolutions: {e}"))
         .ok()
+}
+
+/// Set to `burn` to run the U-Net with burn's operations even on the CPU (for comparisons).
+pub const UNET_ENV: &str = "EVALHARNESS_UNET";
+
+/// The U-Net on CPU kernels on the Flex device, unless [`UNET_ENV`] asks for burn's.
+fn cpu_unet(unet: &UNet, device: &Device) -> Option<CpuUNet> {
+    if *device != Device::flex() || std::env::var(UNET_ENV).is_ok_and(|v| v.trim() == "burn") {
+        return None;
+    }
+    CpuUNet::new(unet).inspect_err(|e| tracing::warn!("predicting with burn's U-Net: {e}")).ok()
 }
 
 /// Standard-normal noise `[rows, per]`, row r drawn from `rngs[r]`.
@@ -163,13 +177,15 @@ impl WorldModel {
             return Err(ckpt(&cfg_path, "\"unet.frame_channels\" differs from the encoded frames' channels"));
         }
         let cpu_decoder = cpu_decoder(&codec, device);
-        Ok(Self { cfg, codec, unet, device: device.clone(), cpu_decoder })
+        let cpu_unet = cpu_unet(&unet, device);
+        Ok(Self { cfg, codec, unet, device: device.clone(), cpu_decoder, cpu_unet })
     }
 
     /// Builds a model from parts (used by the trainer's evaluation).
     pub fn from_parts(cfg: WorldModelConfig, codec: FrameCodec, unet: UNet, device: &Device) -> Self {
         let cpu_decoder = cpu_decoder(&codec, device);
-        Self { cfg, codec, unet, device: device.clone(), cpu_decoder }
+        let cpu_unet = cpu_unet(&unet, device);
+        Self { cfg, codec, unet, device: device.clone(), cpu_decoder, cpu_unet }
     }
 
     /// The RGB frames' side the model reads and writes.
@@ -253,10 +269,36 @@ impl WorldModel {
         let noise = row_noise(rngs, c * f * s * s);
         let x = Tensor::<5>::from_data(TensorData::new(noise, [b, c, f, s, s]), &self.device);
         let out = match self.cfg.objective {
-            Objective::Drifting | Objective::Mse => self.unet.forward(x, hist, actions, anchor, None),
+            Objective::Drifting | Objective::Mse => self.unet_forward(x, hist, actions, anchor, None),
             Objective::Diffusion => self.ddim(x, hist, actions, anchor),
         };
         out.swap_dims(1, 2) // [b, F, C, s, s]
+    }
+
+    /// One U-Net pass ([`UNet::forward`]), on the CPU kernels of [`CpuUNet`] when the
+    /// model has them.
+    fn unet_forward(
+        &self,
+        noise: Tensor<5>,
+        hist: Tensor<5>,
+        actions: Tensor<3>,
+        anchor: Option<Tensor<4>>,
+        timestep: Option<Tensor<1>>,
+    ) -> Tensor<5> {
+        let Some(cpu) = &self.cpu_unet else {
+            return self.unet.forward(noise, hist, actions, anchor, timestep);
+        };
+        let out_dims = noise.dims();
+        let emb = self.unet.embedding(actions.clone(), timestep.clone()); // [b, F, e]
+        let x = self.unet.inputs(noise.clone(), hist.clone(), actions.clone(), anchor.clone()); // [b, c_in, F, h, w]
+        let dims = x.dims();
+        let as_vec = |d: TensorData| d.convert::<f32>().try_to_vec::<f32>();
+        match (as_vec(x.into_data()), as_vec(emb.into_data())) {
+            (Ok(x), Ok(emb)) => {
+                Tensor::from_data(TensorData::new(cpu.forward(&x, &emb, dims), out_dims), &self.device)
+            }
+            _ => self.unet.forward(noise, hist, actions, anchor, timestep),
+        }
     }
 
     /// Deterministic DDIM from t = 1 to 0 in `sample_steps` steps. Every t < 1 step
@@ -274,7 +316,7 @@ impl WorldModel {
             let (t, t_next) = (1.0 - i as f64 / k as f64, 1.0 - (i + 1) as f64 / k as f64);
             let (a, a_next) = (alpha_bar(t), alpha_bar(t_next));
             let tt = Tensor::<1>::from_floats(vec![t as f32; b].as_slice(), &self.device);
-            let out = self.unet.forward(x.clone(), hist.clone(), actions.clone(), anchor.clone(), Some(tt));
+            let out = self.unet_forward(x.clone(), hist.clone(), actions.clone(), anchor.clone(), Some(tt));
             let (x0, eps) = match self.cfg.prediction.unwrap_or_default() {
                 Prediction::V => {
                     let x0 = x.clone() * a.sqrt() - out.clone() * (1.0 - a).sqrt();

@@ -27,8 +27,8 @@ pub fn group_norm(norm: &GroupNorm, x: Tensor<5>) -> Tensor<5> {
 /// A factorised 3-D convolution (spatial k×k per frame, then temporal k over frames).
 #[derive(Module, Debug)]
 pub struct Conv3dF {
-    spatial: Conv2d,
-    temporal: Option<Conv1d>,
+    pub(super) spatial: Conv2d,
+    pub(super) temporal: Option<Conv1d>,
 }
 
 impl Conv3dF {
@@ -98,12 +98,12 @@ impl Conv3dF {
 /// A residual block with per-frame FiLM conditioning.
 #[derive(Module, Debug)]
 pub struct ResBlock {
-    norm1: GroupNorm,
-    conv1: Conv3dF,
-    film: Linear,
-    norm2: GroupNorm,
-    conv2: Conv3dF,
-    skip: Option<Conv3dF>,
+    pub(super) norm1: GroupNorm,
+    pub(super) conv1: Conv3dF,
+    pub(super) film: Linear,
+    pub(super) norm2: GroupNorm,
+    pub(super) conv2: Conv3dF,
+    pub(super) skip: Option<Conv3dF>,
 }
 
 impl ResBlock {
@@ -143,10 +143,10 @@ impl ResBlock {
 /// Spatial self-attention within each frame: `x + proj(MHA(qkv(GN(x))))`.
 #[derive(Module, Debug)]
 pub struct Attention {
-    norm: GroupNorm,
-    qkv: Conv1d,
-    proj: Conv1d,
-    heads: usize,
+    pub(super) norm: GroupNorm,
+    pub(super) qkv: Conv1d,
+    pub(super) proj: Conv1d,
+    pub(super) heads: usize,
 }
 
 impl Attention {

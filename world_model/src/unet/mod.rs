@@ -20,6 +20,9 @@
 //! block (with its attention) and one after every downsampling.
 
 pub mod blocks;
+pub mod cpu;
+#[cfg(test)]
+mod cpu_tests;
 mod maps;
 
 pub use maps::{ACTION_MAP_SIGMA, action_maps};
@@ -260,24 +263,8 @@ impl UNet {
         anchor: Option<Tensor<4>>,
         timestep: Option<Tensor<1>>,
     ) -> Tensor<5> {
-        let [b, cf, f, h, w] = noise.dims();
-        let [_, _, k, _, _] = history.dims();
-        let anchor = self.anchor.then(|| {
-            let a = anchor.unwrap_or_else(|| history.clone().narrow(2, k - 1, 1).reshape([b, cf, h, w]));
-            a.reshape([b, cf, 1, h, w]).expand([b, cf, f, h, w]) // [b, cf, F, h, w]
-        });
-        let hist = history.swap_dims(1, 2).reshape([b, k * cf, 1, h, w]).expand([b, k * cf, f, h, w]); // k-major
-        let mut parts = vec![noise, hist]; // [b, cf, F, h, w], [b, cf K, F, h, w]
-        if self.action_maps {
-            parts.push(action_maps(actions.clone(), h, w)); // [b, 1, F, h, w]
-        }
-        parts.extend(anchor);
-        let x = Tensor::cat(parts, 1); // [b, cf (1 + K) (+ 1) (+ cf), F, h, w]
-        let mut emb = self.act2.forward(silu(self.act1.forward(actions))); // [b, F, e]
-        if let (Some(mlp), Some(t)) = (&self.time, timestep) {
-            let te = mlp.l2.forward(silu(mlp.l1.forward(sinusoidal(t, self.emb_dim)))); // [b, e]
-            emb = emb + te.unsqueeze_dim::<3>(1);
-        }
+        let emb = self.embedding(actions.clone(), timestep); // [b, F, e]
+        let x = self.inputs(noise, history, actions, anchor); // [b, c_in, F, h, w]
         let mut hcur = self.conv_in.forward(x); // [b, mc, F, h, w]
         let mut skips = vec![hcur.clone()];
         let levels = self.downs.len() + 1;
@@ -305,6 +292,47 @@ impl UNet {
             }
         }
         self.conv_out.forward(silu(group_norm(&self.norm_out, hcur)))
+    }
+
+    /// The network's input: noise, the history (flattened k-major into channels and
+    /// broadcast over F), the action maps and the anchor, concatenated channel-wise.
+    ///
+    /// # Shapes
+    /// As [`Self::forward`]; returns `[b, cf (1 + K) (+ 1) (+ cf), F, h, w]`.
+    pub fn inputs(
+        &self,
+        noise: Tensor<5>,
+        history: Tensor<5>,
+        actions: Tensor<3>,
+        anchor: Option<Tensor<4>>,
+    ) -> Tensor<5> {
+        let [b, cf, f, h, w] = noise.dims();
+        let [_, _, k, _, _] = history.dims();
+        let anchor = self.anchor.then(|| {
+            let a = anchor.unwrap_or_else(|| history.clone().narrow(2, k - 1, 1).reshape([b, cf, h, w]));
+            a.reshape([b, cf, 1, h, w]).expand([b, cf, f, h, w]) // [b, cf, F, h, w]
+        });
+        let hist = history.swap_dims(1, 2).reshape([b, k * cf, 1, h, w]).expand([b, k * cf, f, h, w]); // k-major
+        let mut parts = vec![noise, hist]; // [b, cf, F, h, w], [b, cf K, F, h, w]
+        if self.action_maps {
+            parts.push(action_maps(actions, h, w)); // [b, 1, F, h, w]
+        }
+        parts.extend(anchor);
+        Tensor::cat(parts, 1)
+    }
+
+    /// The per-frame conditioning: the action MLP, plus the timestep MLP's output
+    /// (diffusion baseline, when `timestep` is given).
+    ///
+    /// # Shapes
+    /// `actions` `[b, F, a]`, `timestep` `[b]` → `[b, F, e]`
+    pub fn embedding(&self, actions: Tensor<3>, timestep: Option<Tensor<1>>) -> Tensor<3> {
+        let mut emb = self.act2.forward(silu(self.act1.forward(actions))); // [b, F, e]
+        if let (Some(mlp), Some(t)) = (&self.time, timestep) {
+            let te = mlp.l2.forward(silu(mlp.l1.forward(sinusoidal(t, self.emb_dim)))); // [b, e]
+            emb = emb + te.unsqueeze_dim::<3>(1);
+        }
+        emb
     }
 
     /// The same network with an action-map input channel added, its weights
