@@ -81,6 +81,7 @@ fn pixel_world_model(c: &mut Criterion) {
         future: 4,
         sample_steps: 1,
         prediction: None,
+        alpha: None,
         unet: unet.clone(),
     };
     let wm = WorldModel::from_parts(cfg, FrameCodec::pixels(96), unet.init(&device), &device);

@@ -194,6 +194,10 @@ pub struct WmEvalArgs {
     /// Replace an existing `--out`.
     #[arg(long)]
     pub force: bool,
+    /// Action-accentuation strength α for accentuated models (default: each model's
+    /// configured α).
+    #[arg(long)]
+    pub alpha: Option<f32>,
 }
 
 /// `evalharness rank`.
@@ -205,6 +209,10 @@ pub struct RankArgs {
     /// The world model (from `train world-model`).
     #[arg(long, default_value = "checkpoints/pusht/world_model")]
     pub world_model: PathBuf,
+    /// Action-accentuation strength α, for a world model trained with
+    /// `--accentuation` (default: its configured α).
+    #[arg(long)]
+    pub alpha: Option<f32>,
     /// Scenario name or .toml file.
     #[arg(long, default_value = "pusht")]
     pub scenario: String,

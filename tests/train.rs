@@ -337,6 +337,20 @@ fn world_model_loss_variants_train_and_warm_start() {
         "" => assert_eq!(commit, "unknown"),
         head => assert!(commit == head || commit == format!("{head}+dirty"), "{commit} vs {head}"),
     }
+    // Action accentuation (spec §3) on a warm start: the α MLP is added with zero output,
+    // the true current frame joins each token problem's negatives, and the inference α is
+    // written to the model config; α < 1, or α for a model without accentuation, is refused.
+    let acc = dir.path().join("wm_accent");
+    let accent = ["--steps", "1", "--init-from", from, "--warmup", "1", "--field", "token", "--accentuation"];
+    expect_code(&wm(&acc, &[&accent[..], &["--alpha", "3"]].concat()), 0);
+    let acc_cfg = read_json(&acc.join("config.json"));
+    assert_eq!(acc_cfg["model"]["unet"]["accentuation"], true);
+    assert_eq!(acc_cfg["model"]["alpha"], 3.0);
+    assert_eq!(cfg["model"]["alpha"], serde_json::Value::Null);
+    let (_, err) = expect_code(&wm(&acc, &[&accent[..], &["--alpha", "0.5", "--force"]].concat()), 2);
+    assert!(err.contains("--alpha"), "{err}");
+    let (_, err) = expect_code(&wm(&dir.path().join("wm_alpha"), &["--steps", "1", "--alpha", "2"]), 2);
+    assert!(err.contains("--alpha"), "{err}");
     // A warm start may add action maps and the anchor (zero-initialised input channels);
     // the run resumes with them, and a run without maps cannot start from it.
     let maps = dir.path().join("wm_maps");

@@ -178,6 +178,16 @@ pub struct TrainWorldModelArgs {
     /// a model without it, the new channels start at zero weight.
     #[arg(long)]
     pub anchor: bool,
+    /// Action accentuation (spec §3; drifting only): each context draws a strength α
+    /// (log-uniform on [1, 4], 1 with probability 0.1), fed to the U-Net, and the true
+    /// current frame joins the negatives with weight (α − 1)(N − 1). With
+    /// `--init-from` a model without it, the α MLP starts with zero output.
+    #[arg(long)]
+    pub accentuation: bool,
+    /// The α an accentuated model uses at inference (written to its config; >= 1;
+    /// default 2.5, the authors' RT-1 setting).
+    #[arg(long, value_name = "ALPHA")]
+    pub alpha: Option<f32>,
     /// Start from another world-model run's EMA weights (same U-Net and autoencoder;
     /// its latent statistics are reused).
     #[arg(long)]

@@ -43,6 +43,10 @@ pub(super) fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
     Ok(rel)
 }
 
+/// The inference α of an accentuated model when `--alpha` is not given (the
+/// authors' RT-1 evaluation setting, spec §3).
+const DEFAULT_ALPHA: f32 = 2.5;
+
 /// `evalharness train world-model`.
 pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     let objective = fresh_objective(a.objective);
@@ -84,6 +88,16 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     }
     if !a.session.resume && a.prediction != PredictionArg::V && objective != Objective::Diffusion {
         bail!("--prediction chooses the diffusion baseline's output: it needs --objective diffusion");
+    }
+    if !a.session.resume && a.accentuation && objective != Objective::Drifting {
+        bail!("--accentuation adds a weighted negative to the drifting loss: it needs --objective drifting");
+    }
+    if let Some(alpha) = a.alpha
+        && (!a.accentuation || !alpha.is_finite() || alpha < 1.0)
+    {
+        bail!(
+            "--alpha: the inference strength of an --accentuation model, a finite value >= 1 (got {alpha})"
+        );
     }
     if objective == Objective::Drifting && cfg.samples < 2 {
         bail!(
@@ -134,6 +148,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
                 timestep_embedding: objective == Objective::Diffusion,
                 action_maps: a.action_maps.then_some(true),
                 anchor: a.anchor.then_some(true),
+                accentuation: a.accentuation.then_some(true),
                 ..family
             };
             let stats = match &a.init_from {
@@ -155,6 +170,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
                 future: 4,
                 sample_steps: if objective == Objective::Diffusion { a.sample_steps.max(1) } else { 1 },
                 prediction: fresh_prediction(a),
+                alpha: a.accentuation.then_some(a.alpha.unwrap_or(DEFAULT_ALPHA)),
             }
         }
     };
@@ -376,6 +392,7 @@ fn check_resume_flags(a: &TrainWorldModelArgs, fresh: &WmTrainConfig) -> Result<
         ("base_channels", json!(a.base_channels), json!(model.unet.model_channels)),
         ("action_maps", json!(a.action_maps), json!(model.unet.uses_action_maps())),
         ("anchor", json!(a.anchor), json!(model.unet.uses_anchor())),
+        ("accentuation", json!(a.accentuation), json!(model.unet.uses_accentuation())),
         ("sample_steps", json!(a.sample_steps), json!(model.sample_steps)),
         ("prediction", json!(prediction(a)), json!(model.prediction.unwrap_or_default())),
     ]);

@@ -33,9 +33,11 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         .map(|p| {
             let name =
                 p.file_name().map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into_owned());
-            WorldModel::load(p, &device)
-                .map(|m| (name, m))
-                .with_context(|| format!("loading {}", p.display()))
+            let mut wm = WorldModel::load(p, &device).with_context(|| format!("loading {}", p.display()))?;
+            if let Some(alpha) = a.alpha {
+                wm.set_alpha(alpha).map_err(|e| anyhow::anyhow!("--alpha: {e} ({})", p.display()))?;
+            }
+            Ok((name, wm))
         })
         .collect::<Result<_>>()?;
     let data = EpisodeData::load(&a.data, 96)?;

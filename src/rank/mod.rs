@@ -66,8 +66,11 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     let cfg = crate::scenario::load_pusht(&a.scenario)?;
     let model = PushTPhysics::compile(&cfg)?;
     let device = world_model::device::selected()?;
-    let wm = WorldModel::load(&a.world_model, &device)
+    let mut wm = WorldModel::load(&a.world_model, &device)
         .with_context(|| format!("loading world model {}", a.world_model.display()))?;
+    if let Some(alpha) = a.alpha {
+        wm.set_alpha(alpha).map_err(|e| anyhow::anyhow!("--alpha: {e} ({})", a.world_model.display()))?;
+    }
     let dirs = checkpoint_dirs(&a.policies)?;
     let config = json!({
         "command": std::env::args().collect::<Vec<_>>().join(" "),

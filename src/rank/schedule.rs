@@ -191,6 +191,7 @@ mod tests {
             future: 4,
             sample_steps: 1,
             prediction: None,
+            alpha: None,
         };
         let unet = wm_cfg.unet.init(&device);
         let wm = WorldModel::from_parts(wm_cfg, FrameCodec::pixels(size), unet, &device);

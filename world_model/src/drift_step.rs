@@ -15,10 +15,11 @@
 use burn::tensor::{Distribution, Tensor};
 use serde::{Deserialize, Serialize};
 
-use crate::drift::drift_loss_weighted;
+use crate::drift::{Negatives, drift_loss_weighted};
 use crate::latents::{Latents, Window};
 use crate::motion::{MotionWeighting, token_distances};
 use crate::unet::UNet;
+use crate::unet::accent::training_alpha;
 
 /// The unit of the drifting loss (spec §2): one drift problem per frame, or one per
 /// latent cell ("token").
@@ -68,9 +69,12 @@ pub struct DriftSetup<'a> {
     pub motion: Option<&'a MotionWeighting>,
     /// Chunks per rollout: 1 = phase 1, L > 1 = self-forcing.
     pub chunks: usize,
+    /// Action accentuation (spec §3): a per-context α, fed to the U-Net, and the true
+    /// current frame as an extra negative of weight (α − 1)(N − 1).
+    pub accentuation: bool,
 }
 
-fn host(t: Tensor<5>) -> Vec<f32> {
+fn host<const D: usize>(t: Tensor<D>) -> Vec<f32> {
     t.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
 }
 
@@ -95,12 +99,22 @@ pub fn drifting_loss(
     let [bn, c, k, s, _] = hist.dims();
     let b = windows.len();
     let f = windows[0].targets.len() / setup.chunks.max(1);
+    let n = bn / b.max(1);
     let mut total: Option<Tensor<1>> = None;
     let mut loss_r = vec![0.0f32; setup.temperatures.len()];
+    // One α per context (shared by its n samples and its chunks), from two uniform draws.
+    let alphas: Option<Vec<f32>> = setup.accentuation.then(|| {
+        let u = Tensor::<2>::random([b, 2], Distribution::Uniform(0.0, 1.0), &device);
+        host(u).chunks(2).map(|p| training_alpha(p[0], p[1])).collect()
+    });
+    let alpha = alphas.as_ref().map(|al| {
+        let per_clip: Vec<f32> = al.iter().flat_map(|&a| std::iter::repeat_n(a, n)).collect();
+        Tensor::<1>::from_floats(per_clip.as_slice(), &device) // [b n]
+    });
     for i in 0..setup.chunks.max(1) {
         let noise = Tensor::<5>::random([bn, c, f, s, s], Distribution::Normal(0.0, 1.0), &device);
         let a = act.clone().narrow(1, i * f, f); // [b n, F, 2]
-        let out = unet.forward(noise, hist.clone(), a, anchor.clone(), None); // [b n, C, F, s, s]
+        let out = unet.forward_accentuated(noise, hist.clone(), a, anchor.clone(), None, alpha.clone()); // [b n, C, F, s, s]
         let pos_idx: Vec<usize> =
             windows.iter().flat_map(|w| w.targets[i * f..(i + 1) * f].iter().copied()).collect();
         let pos = latents.tensor(&pos_idx, f, &device); // [b, F, C, s, s]
@@ -113,8 +127,24 @@ pub fn drifting_loss(
             let delta = token_distances(&host(pos.clone()), &host(last), c, s * s); // [b F, ss]
             Tensor::<1>::from_floats(m.weights(&delta, s * s).as_slice(), &device) // [b F ss]
         });
+        let negatives = alphas.as_ref().map(|al| {
+            // Each frame's true predecessor o_t (the last history frame, then the true
+            // frames before it), cut into the same problems as the positives.
+            let prev = |w: &Window, j: usize| {
+                if i * f + j == 0 { w.history[k - 1] } else { w.targets[i * f + j - 1] }
+            };
+            let prev_idx: Vec<usize> = windows.iter().flat_map(|w| (0..f).map(move |j| prev(w, j))).collect();
+            let prev = latents.tensor(&prev_idx, f, &device); // [b, F, C, s, s]
+            let (_, y) = setup.field.problems(out.clone(), prev, b); // [p, 1, d]
+            let per = y.dims()[0] / b; // problems per context
+            let w: Vec<f32> =
+                al.iter().flat_map(|&a| std::iter::repeat_n((a - 1.0) * (n as f32 - 1.0), per)).collect();
+            let p = w.len();
+            Negatives { y, w: Tensor::<1>::from_floats(w.as_slice(), &device).reshape([p, 1]) }
+        });
         let (generated, positives) = setup.field.problems(out.clone(), pos, b);
-        let (loss, field) = drift_loss_weighted(generated, None, &positives, setup.temperatures, weights);
+        let (loss, field) =
+            drift_loss_weighted(generated, negatives.as_ref(), &positives, setup.temperatures, weights);
         for (acc, v) in loss_r.iter_mut().zip(&field.loss_r) {
             *acc += v / setup.chunks.max(1) as f32;
         }

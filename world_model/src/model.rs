@@ -79,6 +79,10 @@ pub struct WorldModelConfig {
     /// The diffusion U-Net's output (absent: v, and for the one-pass objectives).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prediction: Option<Prediction>,
+    /// Action-accentuation strength α at inference (spec §3; read only by a U-Net
+    /// trained with accentuation; absent: 1, no accentuation).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha: Option<f32>,
 }
 
 impl WorldModelConfig {
@@ -241,6 +245,22 @@ impl WorldModel {
         (t(&self.cfg.latents.mean), t(&self.cfg.latents.std))
     }
 
+    /// Sets the action-accentuation strength α used from now on (spec §3).
+    ///
+    /// # Errors
+    /// A message when the model was not trained with accentuation or α is not a
+    /// finite value >= 1.
+    pub fn set_alpha(&mut self, alpha: f32) -> Result<(), String> {
+        if !self.cfg.unet.uses_accentuation() {
+            return Err("this world model was not trained with --accentuation, so it has no α input".into());
+        }
+        if !(alpha.is_finite() && alpha >= 1.0) {
+            return Err(format!("α must be a finite value >= 1, got {alpha}"));
+        }
+        self.cfg.alpha = Some(alpha);
+        Ok(())
+    }
+
     /// Whether the U-Net reads the anchor (the episode's first frame) passed to
     /// [`Self::predict`]; other models ignore it.
     pub fn uses_anchor(&self) -> bool {
@@ -285,11 +305,17 @@ impl WorldModel {
         anchor: Option<Tensor<4>>,
         timestep: Option<Tensor<1>>,
     ) -> Tensor<5> {
+        let b = noise.dims()[0];
+        let alpha = self
+            .cfg
+            .unet
+            .uses_accentuation()
+            .then(|| Tensor::<1>::full([b], self.cfg.alpha.unwrap_or(1.0), &self.device));
         let Some(cpu) = &self.cpu_unet else {
-            return self.unet.forward(noise, hist, actions, anchor, timestep);
+            return self.unet.forward_accentuated(noise, hist, actions, anchor, timestep, alpha);
         };
         let out_dims = noise.dims();
-        let emb = self.unet.embedding(actions.clone(), timestep.clone()); // [b, F, e]
+        let emb = self.unet.embedding(actions.clone(), timestep.clone(), alpha.clone()); // [b, F, e]
         let x = self.unet.inputs(noise.clone(), hist.clone(), actions.clone(), anchor.clone()); // [b, c_in, F, h, w]
         let dims = x.dims();
         let as_vec = |d: TensorData| d.convert::<f32>().try_to_vec::<f32>();
@@ -297,7 +323,7 @@ impl WorldModel {
             (Ok(x), Ok(emb)) => {
                 Tensor::from_data(TensorData::new(cpu.forward(&x, &emb, dims), out_dims), &self.device)
             }
-            _ => self.unet.forward(noise, hist, actions, anchor, timestep),
+            _ => self.unet.forward_accentuated(noise, hist, actions, anchor, timestep, alpha),
         }
     }
 
@@ -353,6 +379,7 @@ mod tests {
             future: 4,
             sample_steps: 1,
             prediction: None,
+            alpha: None,
         };
         let diffusion = WorldModelConfig {
             objective: Objective::Diffusion,

@@ -262,6 +262,9 @@ pub fn train_world_model(
         if model_cfg.unet.timestep_embedding {
             unet = unet.with_timestep_embedding(&device);
         }
+        if model_cfg.unet.uses_accentuation() {
+            unet = unet.with_accentuation(&device);
+        }
         ema.module = unet.valid(); // the same draw of any new (zero-output) layers
     }
     if run.resume {
@@ -319,6 +322,7 @@ pub fn train_world_model(
                     temperatures: &cfg.temperatures,
                     motion: cfg.motion.as_ref(),
                     chunks,
+                    accentuation: model_cfg.unet.uses_accentuation(),
                 };
                 let (loss, r) = drifting_loss(&unet, &latents, &windows, hist, anchor, act, &setup);
                 loss_r = r;

@@ -251,3 +251,38 @@ fn problem_weights_scale_each_problem_s_loss() {
     assert!((loss(None) - (l0 + l1) / 2.0).abs() < 1e-5);
     assert!((loss(Some(vec![3.0, 1.0])) - (3.0 * l0 + l1) / 2.0).abs() < 1e-5);
 }
+
+/// The 2-D setting of the accentuation tests: two generated samples at (0, ±0.05), the
+/// positive at (1, 0) and the "current frame" o_t at (0, −1), weighted `w`.
+fn accentuated_field(w: Option<f32>) -> Vec<f32> {
+    let x = t3(vec![0.0, 0.05, 0.0, -0.05], [1, 2, 2]);
+    let pos = t3(vec![1.0, 0.0], [1, 1, 2]);
+    let neg =
+        w.map(|w| Negatives { y: t3(vec![0.0, -1.0], [1, 1, 2]), w: Tensor::from_floats([[w]], &device()) });
+    to_vec(drift_field(&x, neg.as_ref(), &pos, &PUSHT_TEMPERATURES).v)
+}
+
+#[test]
+fn accentuation_at_alpha_one_changes_nothing() {
+    // α = 1 gives the current frame weight (α − 1)(N − 1) = 0: it adds nothing to the
+    // scale (Σ w d) nor to any affinity (A_ij ∝ w_j), so the field is the plain one.
+    let (plain, zero) = (accentuated_field(None), accentuated_field(Some(0.0)));
+    for (p, q) in plain.iter().zip(&zero) {
+        assert!((p - q).abs() < 1e-5, "{plain:?} vs {zero:?}");
+    }
+}
+
+#[test]
+fn accentuation_pushes_samples_away_from_the_current_frame() {
+    // Without o_t the two samples' y-components cancel by symmetry (each is pushed from
+    // the other, the positive lies on y = 0). With o_t below them at weight
+    // (α − 1)(N − 1) = 3 (α = 4, N = 2) the pair as a whole moves up, away from it
+    // (the sample nearer o_t still feels its neighbour more: affinities fall off as
+    // exp(−d̂/R) with small R, so the weight shifts the balance without reversing it).
+    let plain = accentuated_field(None);
+    assert!((plain[1] + plain[3]).abs() < 1e-4, "{plain:?}");
+    let v = accentuated_field(Some(3.0));
+    assert!(v[1] + v[3] > 0.1, "{v:?}");
+    // Both still move towards the positive in x.
+    assert!(v[0] > 0.0 && v[2] > 0.0, "{v:?}");
+}

@@ -36,11 +36,19 @@ fn compare(unet: &UNet, cf: usize, side: usize, timestep: bool) -> f32 {
     let actions = Tensor::<3>::random([b, f, 2], Distribution::Uniform(-1.0, 1.0), &device);
     let anchor = Some(Tensor::<4>::random([b, cf, side, side], Distribution::Normal(0.0, 1.0), &device));
     let t = timestep.then(|| Tensor::<1>::from_floats([0.9f32, 0.5, 0.1].as_slice(), &device));
-    let want =
-        vec_of(unet.forward(noise.clone(), history.clone(), actions.clone(), anchor.clone(), t.clone()));
+    // α = 2.5 for all (read only by accentuated U-Nets).
+    let alpha = Some(Tensor::<1>::full([b], 2.5, &device));
+    let want = vec_of(unet.forward_accentuated(
+        noise.clone(),
+        history.clone(),
+        actions.clone(),
+        anchor.clone(),
+        t.clone(),
+        alpha.clone(),
+    ));
     let x = unet.inputs(noise, history, actions.clone(), anchor);
     let dims = x.dims();
-    let got = cpu.forward(&vec_of(x), &vec_of(unet.embedding(actions, t)), dims);
+    let got = cpu.forward(&vec_of(x), &vec_of(unet.embedding(actions, t, alpha)), dims);
     assert_eq!(got.len(), want.len());
     assert!(got.iter().all(|v| v.is_finite()));
     let scale = want.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
@@ -49,10 +57,11 @@ fn compare(unet: &UNet, cf: usize, side: usize, timestep: bool) -> f32 {
 }
 
 #[test]
-fn predicts_what_burn_predicts_with_action_maps_and_anchor() {
+fn predicts_what_burn_predicts_with_action_maps_anchor_and_accentuation() {
     // The shipped model's layout at a smaller width: two levels (a stride-2 convolution,
     // an upsampling), attention at the coarse level and in the middle, skip
-    // convolutions where channel counts change, the anchor and action-map inputs.
+    // convolutions where channel counts change, the anchor and action-map inputs, and
+    // the accentuation strength's MLP.
     let device = Device::flex();
     let cfg = UNetConfig {
         model_channels: 32,

@@ -19,6 +19,7 @@
 //! Skips follow the ADM layout: one after `conv_in`, one after every residual
 //! block (with its attention) and one after every downsampling.
 
+pub mod accent;
 pub mod blocks;
 pub mod cpu;
 #[cfg(test)]
@@ -34,6 +35,7 @@ use burn::nn::{GroupNorm, GroupNormConfig, Initializer, Linear, LinearConfig};
 use burn::tensor::activation::silu;
 use burn::tensor::{Device, Tensor};
 
+use accent::AlphaMlp;
 use blocks::{Attention, Conv3dF, ResBlock, group_norm};
 
 /// U-Net hyper-parameters.
@@ -77,6 +79,10 @@ pub struct UNetConfig {
     /// channels (not in the paper). An option for the same reason (missing = no).
     #[config(default = "None")]
     pub anchor: Option<bool>,
+    /// Read an action-accentuation strength α (spec §3, [`accent`]). An option for
+    /// the same reason (missing = no).
+    #[config(default = "None")]
+    pub accentuation: Option<bool>,
 }
 
 impl UNetConfig {
@@ -88,6 +94,11 @@ impl UNetConfig {
     /// Whether the U-Net reads the anchor frame.
     pub fn uses_anchor(&self) -> bool {
         self.anchor == Some(true)
+    }
+
+    /// Whether the U-Net reads an accentuation strength α.
+    pub fn uses_accentuation(&self) -> bool {
+        self.accentuation == Some(true)
     }
 
     /// Whether a run with this config can start from `source`'s weights: the same
@@ -102,6 +113,9 @@ impl UNetConfig {
         }
         if self.uses_anchor() {
             bridged.anchor = Some(true);
+        }
+        if self.uses_accentuation() {
+            bridged.accentuation = Some(true);
         }
         bridged.timestep_embedding |= self.timestep_embedding;
         bridged == *self // bridging only adds what `self` has, so the same config passes
@@ -174,6 +188,7 @@ impl UNetConfig {
             act1: LinearConfig::new(self.action_dim, e).init(device),
             act2: LinearConfig::new(e, e).init(device),
             time: time.map(|[a, b]| TimeMlp { l1: a, l2: b }),
+            alpha: self.uses_accentuation().then(|| AlphaMlp::new(e, device)),
             conv_in: Conv3dF::new(in_ch, mc, 3, 1, device),
             enc,
             downs,
@@ -226,6 +241,7 @@ pub struct UNet {
     act1: Linear,
     act2: Linear,
     time: Option<TimeMlp>,
+    alpha: Option<AlphaMlp>,
     conv_in: Conv3dF,
     enc: Vec<Level>,
     downs: Vec<Conv3dF>,
@@ -263,7 +279,21 @@ impl UNet {
         anchor: Option<Tensor<4>>,
         timestep: Option<Tensor<1>>,
     ) -> Tensor<5> {
-        let emb = self.embedding(actions.clone(), timestep); // [b, F, e]
+        self.forward_accentuated(noise, history, actions, anchor, timestep, None)
+    }
+
+    /// [`Self::forward`] with an accentuation strength `alpha` (`[b]`; read only by a
+    /// U-Net configured with `accentuation`, where `None` means α = 1).
+    pub fn forward_accentuated(
+        &self,
+        noise: Tensor<5>,
+        history: Tensor<5>,
+        actions: Tensor<3>,
+        anchor: Option<Tensor<4>>,
+        timestep: Option<Tensor<1>>,
+        alpha: Option<Tensor<1>>,
+    ) -> Tensor<5> {
+        let emb = self.embedding(actions.clone(), timestep, alpha); // [b, F, e]
         let x = self.inputs(noise, history, actions, anchor); // [b, c_in, F, h, w]
         let mut hcur = self.conv_in.forward(x); // [b, mc, F, h, w]
         let mut skips = vec![hcur.clone()];
@@ -322,15 +352,27 @@ impl UNet {
     }
 
     /// The per-frame conditioning: the action MLP, plus the timestep MLP's output
-    /// (diffusion baseline, when `timestep` is given).
+    /// (diffusion baseline, when `timestep` is given), plus the α MLP's (accentuation;
+    /// α = 1 when `alpha` is `None`).
     ///
     /// # Shapes
-    /// `actions` `[b, F, a]`, `timestep` `[b]` → `[b, F, e]`
-    pub fn embedding(&self, actions: Tensor<3>, timestep: Option<Tensor<1>>) -> Tensor<3> {
+    /// `actions` `[b, F, a]`, `timestep` and `alpha` `[b]` → `[b, F, e]`
+    pub fn embedding(
+        &self,
+        actions: Tensor<3>,
+        timestep: Option<Tensor<1>>,
+        alpha: Option<Tensor<1>>,
+    ) -> Tensor<3> {
+        let [b, _, _] = actions.dims();
+        let device = actions.device();
         let mut emb = self.act2.forward(silu(self.act1.forward(actions))); // [b, F, e]
         if let (Some(mlp), Some(t)) = (&self.time, timestep) {
             let te = mlp.l2.forward(silu(mlp.l1.forward(sinusoidal(t, self.emb_dim)))); // [b, e]
             emb = emb + te.unsqueeze_dim::<3>(1);
+        }
+        if let Some(mlp) = &self.alpha {
+            let alpha = alpha.unwrap_or_else(|| Tensor::ones([b], &device));
+            emb = emb + mlp.forward(alpha).unsqueeze_dim::<3>(1); // [b, 1, e] over F
         }
         emb
     }
@@ -368,6 +410,16 @@ impl UNet {
             let e = self.emb_dim;
             let zero = LinearConfig::new(e, e).with_initializer(Initializer::Zeros).init(device);
             self.time = Some(TimeMlp { l1: LinearConfig::new(e, e).init(device), l2: zero });
+        }
+        self
+    }
+
+    /// The same network reading an accentuation strength α through a new α MLP whose
+    /// output layer is zero: it computes exactly what it did before at every α, and
+    /// training can then learn to use α (warm-starting an accentuated run).
+    pub fn with_accentuation(mut self, device: &Device) -> Self {
+        if self.alpha.is_none() {
+            self.alpha = Some(AlphaMlp::new(self.emb_dim, device));
         }
         self
     }
