@@ -225,6 +225,14 @@ fn pipeline_end_to_end() {
     again.push("--resume");
     expect_code(&run(&again), 1);
     assert_eq!(std::fs::read_to_string(out.join("episodes.jsonl")).unwrap(), rows);
+    // Resuming under other settings would mix rows of two experiments: refused, and the
+    // finished rows stay.
+    let mut other = again.clone();
+    let at = other.iter().position(|a| *a == "--max-steps").unwrap() + 1;
+    other[at] = "7";
+    let (_, err) = expect_code(&run(&other), 2);
+    assert!(err.contains("--resume") && err.contains("max_steps (saved: "), "{err}");
+    assert_eq!(std::fs::read_to_string(out.join("episodes.jsonl")).unwrap(), rows);
 
     // One thread gives the same rows and results (timings aside).
     let out1 = dir.join("rank1");
