@@ -161,23 +161,12 @@ fn residual(b: &Block, x: Vec<f32>, side: usize) -> Vec<f32> {
 
 #[cfg(test)]
 mod tests {
-    use burn::module::{Module, ModuleMapper, Param};
+    use burn::module::Module;
     use burn::tensor::{Device, Distribution, Tensor};
+    use world_model::cpu_kernels::Jitter;
 
     use super::*;
     use crate::net::NetConfig;
-
-    /// Adds N(0, 0.1) to every weight (GroupNorm's γ = 1, β = 0 at init become distinct).
-    struct Jitter;
-
-    impl ModuleMapper for Jitter {
-        fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-            param.map(|t| {
-                let noise = Tensor::random(t.shape(), Distribution::Normal(0.0, 0.1), &t.device());
-                t + noise
-            })
-        }
-    }
 
     #[test]
     fn encodes_what_burn_encodes() {

@@ -398,24 +398,12 @@ impl CpuUnet1d {
 
 #[cfg(test)]
 mod tests {
-    use burn::module::{Module, ModuleMapper};
+    use burn::module::Module;
     use burn::tensor::{Device, Distribution};
+    use world_model::cpu_kernels::Jitter;
 
     use super::*;
     use crate::net::NetConfig;
-
-    /// Adds N(0, 0.1) to every weight, so GroupNorm's γ = 1 and β = 0 at init become
-    /// distinct values and a mis-wired affine shows.
-    struct Jitter;
-
-    impl ModuleMapper for Jitter {
-        fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-            param.map(|t| {
-                let noise = Tensor::random(t.shape(), Distribution::Normal(0.0, 0.1), &t.device());
-                t + noise
-            })
-        }
-    }
 
     #[test]
     fn mish_matches_its_definition() {

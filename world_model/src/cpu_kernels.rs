@@ -10,9 +10,9 @@
 //! `W [c_out, c_in·k] × columns [c_in·k, n·l]`, and concatenating channels is
 //! concatenating buffers.
 
-use burn::module::Param;
+use burn::module::{ModuleMapper, Param};
 use burn::nn::Linear;
-use burn::tensor::Tensor;
+use burn::tensor::{Distribution, Tensor};
 
 use crate::cpu_decoder::UnsupportedLayer;
 use crate::direct_conv::{Norm, exp};
@@ -29,6 +29,21 @@ pub fn bias_values(
     layer: &str,
 ) -> Result<Vec<f32>, UnsupportedLayer> {
     b.as_ref().map_or(Ok(vec![0.0; n]), |b| values(b.val(), layer))
+}
+
+/// Adds N(0, 0.1) to every weight of a module. The kernels' tests compare them with
+/// burn on jittered networks, so that init values (GroupNorm's γ = 1 and β = 0, identity
+/// temporal convolutions, zero-initialised layers) become distinct and a mis-wired
+/// tap, affine or FiLM half shows.
+pub struct Jitter;
+
+impl ModuleMapper for Jitter {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        param.map(|t| {
+            let noise = Tensor::random(t.shape(), Distribution::Normal(0.0, 0.1), &t.device());
+            t + noise
+        })
+    }
 }
 
 /// A matrix view: the slice, and the distance between rows (columns are adjacent).

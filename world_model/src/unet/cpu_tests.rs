@@ -1,24 +1,11 @@
 //! The CPU U-Net ([`super::cpu::CpuUNet`]) against burn's ([`UNet::forward`]).
 
-use burn::module::{Module, ModuleMapper, Param};
+use burn::module::Module;
 use burn::tensor::{Device, Distribution, Tensor};
 
 use super::cpu::CpuUNet;
 use super::{UNet, UNetConfig};
-
-/// Adds N(0, 0.1) to every weight, so GroupNorm's γ = 1 and β = 0, the temporal
-/// convolutions' identity init and the zero-initialised layers become distinct
-/// values and a mis-wired tap, affine or FiLM half shows.
-struct Jitter;
-
-impl ModuleMapper for Jitter {
-    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-        param.map(|t| {
-            let noise = Tensor::random(t.shape(), Distribution::Normal(0.0, 0.1), &t.device());
-            t + noise
-        })
-    }
-}
+use crate::cpu_kernels::Jitter;
 
 fn vec_of<const D: usize>(t: Tensor<D>) -> Vec<f32> {
     t.into_data().try_to_vec::<f32>().unwrap_or_default()
