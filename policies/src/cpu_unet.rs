@@ -14,40 +14,27 @@
 //! Inside, sequences are `[c, n·t]` (channel-major, then sample, then position);
 //! the public interface takes burn's row-major `[n, horizon, action_dim]`.
 
-use burn::module::Param;
 use burn::nn::conv::{Conv1d, ConvTranspose1d};
 use burn::nn::{GroupNorm, Linear, PaddingConfig1d};
-use burn::tensor::Tensor;
 
 use world_model::cpu_decoder::norm_of;
-use world_model::cpu_kernels::{Dense, group_norm_cols, matmul};
+use world_model::cpu_kernels::{Dense, bias_values, group_norm_cols, matmul, values};
 use world_model::direct_conv::Norm;
 
 use crate::net::{CondRes1d, CondUnet1d, Conv1dBlock, Level1d};
 
 /// Why a U-Net cannot be run by these kernels (a layer they do not support).
 #[derive(Debug, thiserror::Error)]
-#[error("policy U-Net layer {layer}: {message}")]
-pub struct UnsupportedLayer {
-    layer: String,
-    message: String,
-}
+#[error("policy U-Net {0}")]
+pub struct UnsupportedLayer(#[from] world_model::cpu_decoder::UnsupportedLayer);
 
 fn unsupported(layer: &str, message: impl Into<String>) -> UnsupportedLayer {
-    UnsupportedLayer { layer: layer.into(), message: message.into() }
+    UnsupportedLayer(world_model::cpu_decoder::UnsupportedLayer::new(layer, message))
 }
 
-fn values<const D: usize>(t: Tensor<D>, layer: &str) -> Result<Vec<f32>, UnsupportedLayer> {
-    t.into_data().try_to_vec::<f32>().map_err(|e| unsupported(layer, format!("{e:?}")))
-}
-
-fn bias(b: &Option<Param<Tensor<1>>>, n: usize, layer: &str) -> Result<Vec<f32>, UnsupportedLayer> {
-    b.as_ref().map_or(Ok(vec![0.0; n]), |b| values(b.val(), layer))
-}
-
-/// A dense layer, its errors renamed for this network.
+/// A dense layer, its errors named for this network.
 fn dense(l: &Linear, layer: &str) -> Result<Dense, UnsupportedLayer> {
-    Dense::new(l, layer).map_err(|e| unsupported(layer, e.to_string()))
+    Ok(Dense::new(l, layer)?)
 }
 
 /// Mish, `x · tanh(softplus(x))`, with one `exp`: tanh(ln(1 + e)) = n / (n + 2) for
@@ -87,7 +74,15 @@ impl Conv1 {
         }
         let w = c.weight.val();
         let [cout, cin, k] = w.dims();
-        Ok(Self { cin, cout, k, stride: c.stride, pad, w: values(w, layer)?, b: bias(&c.bias, cout, layer)? })
+        Ok(Self {
+            cin,
+            cout,
+            k,
+            stride: c.stride,
+            pad,
+            w: values(w, layer)?,
+            b: bias_values(&c.bias, cout, layer)?,
+        })
     }
 
     /// `[c_in, n·t] -> [c_out, n·t']`, returning t'.
@@ -144,7 +139,7 @@ impl ConvT1 {
         let [cin, cout, k] = w.dims();
         let w = values(w.reshape([cin, cout * k]).transpose(), layer)?;
         let (stride, pad, pad_out) = (c.stride, c.padding, c.padding_out);
-        Ok(Self { cin, cout, k, stride, pad, pad_out, w, b: bias(&c.bias, cout, layer)? })
+        Ok(Self { cin, cout, k, stride, pad, pad_out, w, b: bias_values(&c.bias, cout, layer)? })
     }
 
     /// `[c_in, n·t] -> [c_out, n·t']` with t' = (t − 1)·s − 2p + k + p_out, returning t'.
@@ -178,7 +173,7 @@ struct NormMish(Norm);
 
 impl NormMish {
     fn new(g: &GroupNorm, layer: &str) -> Result<Self, UnsupportedLayer> {
-        norm_of(g, layer).map(Self).map_err(|e| unsupported(layer, e.to_string()))
+        Ok(Self(norm_of(g, layer)?))
     }
 
     fn apply(&self, x: &mut [f32], n: usize, t: usize) {
@@ -399,7 +394,7 @@ impl CpuUnet1d {
 #[cfg(test)]
 mod tests {
     use burn::module::Module;
-    use burn::tensor::{Device, Distribution};
+    use burn::tensor::{Device, Distribution, Tensor};
     use world_model::cpu_kernels::Jitter;
 
     use super::*;
