@@ -1,5 +1,6 @@
 //! Model throughput benchmarks (criterion): a policy decision and a world-model
-//! chunk at batch 1 and batch 100, on the shipped checkpoints; and one chunk of
+//! chunk at batch 1 and batch 100 (`BENCH_WM_BATCHES=1,25,50,100` for others), on
+//! the shipped checkpoints; and one chunk of
 //! the paper's pixel-space U-Net (random weights: the cost does not depend on them).
 //!
 //! `cargo bench --bench models`; results are recorded in BENCHMARKS.md. The
@@ -67,7 +68,7 @@ fn world_model(c: &mut Criterion) {
     let device = world_model::device::selected().expect("EVALHARNESS_DEVICE");
     let wm = WorldModel::load(&dir, &device)
         .unwrap_or_else(|e| panic!("benchmark needs a world-model checkpoint: {e}"));
-    chunk(c, "world_model_chunk", &wm, &BATCHES);
+    chunk(c, "world_model_chunk", &wm, &env_batches("BENCH_WM_BATCHES", &BATCHES));
 }
 
 /// The paper's pixel-space Push-T model (8,375,201 parameters), drifting, one pass per chunk.

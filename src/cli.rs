@@ -225,8 +225,11 @@ pub struct RankArgs {
     /// Control steps per episode.
     #[arg(long, default_value_t = 300)]
     pub max_steps: usize,
-    /// Episodes advanced together (one batched policy / world-model call).
-    #[arg(long, default_value_t = 100)]
+    /// Episodes advanced together (one batched policy / world-model call). 50 splits
+    /// the default run into 14 batches, so the workers finish together (with 100, one
+    /// idled during the last world-model batch). Part of the run's settings: float
+    /// rounding depends on it, so `--resume` must use the same value.
+    #[arg(long, default_value_t = 50)]
     pub batch: usize,
     /// Output folder.
     #[arg(long, default_value = "results/rank")]
@@ -357,6 +360,12 @@ pub struct CollectArgs {
     /// one from its seed.
     #[arg(long, default_value = "expert=0.8,explore=0.2")]
     pub mix: String,
+    /// Instead of `--mix`: record the closed-loop MuJoCo rollouts of a policy
+    /// checkpoint, or of every checkpoint in a folder (`--episodes` each, the seeds
+    /// and noise of `rank`'s MuJoCo branch). Use checkpoints outside the set you
+    /// will rank, so the world model does not see the ranked policies' behaviour.
+    #[arg(long, conflicts_with = "mix")]
+    pub policy: Option<PathBuf>,
     /// Output zarr folder (diffusion_policy / GPC replay-buffer layout).
     #[arg(long)]
     pub out: PathBuf,

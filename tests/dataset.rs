@@ -103,3 +103,55 @@ fn merge_concatenates_episodes_and_keeps_their_origin() {
     let (_, err) = expect_code(&run(&["dataset", "merge", ps, dir.path().to_str().unwrap(), "--out", pm]), 2);
     assert!(err.contains(dir.path().to_str().unwrap()), "{err}");
 }
+
+#[test]
+fn collect_policy_records_the_rollouts_that_simulate_scores() {
+    use harness::replay::ReplayReader;
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("scripted");
+    let s = set.to_str().unwrap();
+    expect_code(&run(&["scripted", "--out", s, "--noise", "0,200", "--lag", "0"]), 0);
+    let common = ["--policy", s, "--episodes", "2", "--seed-start", "7", "--max-steps", "24"];
+    let (a, b) = (dir.path().join("a.zarr"), dir.path().join("b.zarr"));
+    for (out, jobs) in [(&a, "1"), (&b, "2")] {
+        let args = [&["collect"][..], &common, &["--jobs", jobs, "--out", out.to_str().unwrap()]].concat();
+        let (stdout, _) = expect_code(&run(&args), 0);
+        assert!(stdout.contains("4 episodes of 2 checkpoint(s)"), "{stdout}");
+    }
+    assert_eq!(tree_bytes(&a), tree_bytes(&b), "--jobs 1 and --jobs 2 datasets differ");
+
+    // The same episodes as `simulate --policy` (rank's MuJoCo branch): same seeds, same scores.
+    let sim = dir.path().join("sim");
+    expect_code(&run(&[&["simulate"][..], &common, &["--out", sim.to_str().unwrap()]].concat()), 0);
+    let rows: Vec<serde_json::Value> = std::fs::read_to_string(sim.join("episodes.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let r = ReplayReader::open(&a).unwrap();
+    let eps = r.attrs["evalharness"]["episodes"].as_array().unwrap().clone();
+    assert_eq!(eps.len(), 4);
+    for (e, row) in eps.iter().zip(&rows) {
+        assert_eq!((&e["behaviour"], &e["seed"]), (&row["policy"], &row["seed"]));
+        assert_eq!((&e["score"], &e["steps"]), (&row["score"], &row["steps"]), "{e} vs {row}");
+    }
+    // One observation per step, taken before the action: the first state row is the
+    // reset pose, and the first image is the frame of that pose (not all white).
+    let extras = ["coverage".to_string()];
+    let ep = r.read_episode(0, &extras).unwrap();
+    let steps = eps[0]["steps"].as_u64().unwrap() as usize;
+    assert_eq!((ep.img.len(), ep.action.len(), ep.state.len()), (steps * 96 * 96 * 3, steps * 2, steps * 8));
+    assert!(ep.img[..96 * 96 * 3].iter().any(|&v| v < 200));
+    let max_cov = ep.extras[0].iter().fold(0f32, |m, &c| m.max(c));
+    let score = eps[0]["score"].as_f64().unwrap();
+    assert!((f64::from(max_cov) / 0.95).min(1.0) - score < 1e-6, "coverage {max_cov} vs score {score}");
+    let origin = &r.attrs["evalharness"];
+    assert_eq!(origin["checkpoints"].as_array().unwrap().len(), 2);
+
+    // The expert's perturbations do not apply, and --policy excludes --mix.
+    let o = dir.path().join("c.zarr");
+    let o = o.to_str().unwrap();
+    let (_, err) = expect_code(&run(&["collect", "--policy", s, "--noise", "5", "--out", o]), 2);
+    assert!(err.contains("--noise"), "{err}");
+    expect_code(&run(&["collect", "--policy", s, "--mix", "expert=1", "--out", o]), 2);
+}

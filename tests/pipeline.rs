@@ -232,6 +232,12 @@ fn pipeline_end_to_end() {
     other[at] = "7";
     let (_, err) = expect_code(&run(&other), 2);
     assert!(err.contains("--resume") && err.contains("max_steps (saved: "), "{err}");
+    // So is another batch size: the kernels' rounding depends on it.
+    let mut other = again.clone();
+    let at = other.iter().position(|a| *a == "--batch").unwrap() + 1;
+    other[at] = "3";
+    let (_, err) = expect_code(&run(&other), 2);
+    assert!(err.contains("batch (saved: 2, now: 3)"), "{err}");
     assert_eq!(std::fs::read_to_string(out.join("episodes.jsonl")).unwrap(), rows);
 
     // One thread gives the same rows and results (timings aside).

@@ -13,6 +13,8 @@ use harness::replay::{EpisodeArrays, ReplaySpec, ReplayWriter};
 use harness::seed::{derive, fnv1a};
 use serde_json::json;
 
+use scenarios::pusht::rollout::Episode;
+
 use super::episodes::{BehaviourKind, FrameSpec, Perturbation, RendererKind, Runner, behaviour_label};
 use crate::cli::CollectArgs;
 use crate::progress;
@@ -57,17 +59,43 @@ fn draw(mix: &[(BehaviourKind, f64)], seed: u64) -> BehaviourKind {
     mix.last().map_or(BehaviourKind::Expert, |m| m.0)
 }
 
+/// The dataset layout: `size`² RGB images, 2-D actions, 8 state columns, coverage.
+pub(super) fn replay_spec(size: usize) -> ReplaySpec {
+    ReplaySpec { image_hw: [size, size], action_dim: 2, state_dim: 8, extras: vec!["coverage".into()] }
+}
+
+/// One episode's arrays: the observation before each action, its state row
+/// ([`STATE_COLUMNS`]), the action and the coverage after it.
+pub(super) fn episode_arrays(ep: &Episode) -> EpisodeArrays {
+    let steps = ep.rows.len();
+    let mut arrays = EpisodeArrays::default();
+    for f in &ep.frames[..steps] {
+        arrays.img.extend_from_slice(f);
+    }
+    let g = ep.goal;
+    let mut coverage = Vec::with_capacity(steps);
+    for r in &ep.rows {
+        arrays.action.extend(r.action.map(|v| v as f32));
+        let s = [r.agent[0], r.agent[1], r.block.x, r.block.y, r.block.theta, g.x, g.y, g.theta];
+        arrays.state.extend(s.map(|v| v as f32));
+        coverage.push(r.coverage as f32);
+    }
+    arrays.extras.push(coverage);
+    arrays
+}
+
 /// Runs the command.
 pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
+    if let Some(dir) = &args.policy {
+        return super::collect_policy::run(args, dir, quiet);
+    }
     let c = &args.common;
     let mix = parse_mix(&args.mix)?;
     let cfg = load_pusht(&c.scenario)?;
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };
     let runner = Runner::new(cfg, c.jobs, c.max_steps, perturbation)?;
     let size = runner.cfg.render.size as usize;
-    let spec =
-        ReplaySpec { image_hw: [size, size], action_dim: 2, state_dim: 8, extras: vec!["coverage".into()] };
-    let mut writer = ReplayWriter::create(&args.out, spec, c.force)?;
+    let mut writer = ReplayWriter::create(&args.out, replay_spec(size), c.force)?;
     let work: Vec<(u64, BehaviourKind)> =
         (0..c.episodes).map(|i| (c.seed_start + i, draw(&mix, c.seed_start + i))).collect();
     let pb = progress::bar(c.episodes, "collect", quiet);
@@ -77,19 +105,7 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
         |_| Some(FrameSpec { size, renderer: RendererKind::Raster }),
         |i, ep| {
             let steps = ep.rows.len();
-            let mut arrays = EpisodeArrays::default();
-            for f in &ep.frames[..steps] {
-                arrays.img.extend_from_slice(f);
-            }
-            let g = ep.goal;
-            let mut coverage = Vec::with_capacity(steps);
-            for r in &ep.rows {
-                arrays.action.extend(r.action.map(|v| v as f32));
-                let s = [r.agent[0], r.agent[1], r.block.x, r.block.y, r.block.theta, g.x, g.y, g.theta];
-                arrays.state.extend(s.map(|v| v as f32));
-                coverage.push(r.coverage as f32);
-            }
-            arrays.extras.push(coverage);
+            let arrays = episode_arrays(&ep);
             writer.append(&arrays)?;
             episodes.push(json!({
                 "seed": ep.seed,

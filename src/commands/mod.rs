@@ -2,6 +2,7 @@
 
 mod agreement;
 mod collect;
+mod collect_policy;
 mod dataset;
 mod dataset_merge;
 mod episodes;

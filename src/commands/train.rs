@@ -45,6 +45,18 @@ fn origin_of(e: &serde_json::Value, episodes: Option<u64>) -> serde_json::Value 
         });
     }
     let episodes = episodes.unwrap_or_else(|| e["episodes"].as_array().map_or(0, |l| l.len() as u64));
+    if let Some(policy) = e["policy"].as_str() {
+        // `collect --policy`: `--episodes` counts per checkpoint.
+        let per = episodes / e["checkpoints"].as_array().map_or(1, |c| c.len().max(1) as u64);
+        return json!({
+            "command": format!(
+                "evalharness collect --policy {policy} --episodes {per} --seed-start {} --max-steps {}",
+                e["seed_start"], e["max_steps"]
+            ),
+            "checkpoints": e["checkpoints"],
+            "evalharness_version": e["version"],
+        });
+    }
     json!({
         "command": format!(
             "evalharness collect --episodes {episodes} --seed-start {} --mix {} --noise {} --lag {} --max-steps {}",
@@ -248,4 +260,29 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
         a.out.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn origin_regenerates_scripted_and_policy_datasets() {
+        let mix = json!({"seed_start": 0, "mix": "expert=1", "noise": 0.0, "lag": 0, "max_steps": 300,
+                         "episodes": [{}, {}, {}], "version": "0.1.0"});
+        assert_eq!(
+            origin_of(&mix, None)["command"],
+            "evalharness collect --episodes 3 --seed-start 0 --mix expert=1 --noise 0.0 --lag 0 --max-steps 300"
+        );
+        // `collect --policy`: 4 episodes of 2 checkpoints are `--episodes 2`.
+        let pol = json!({"seed_start": 7, "policy": "runs/p", "checkpoints": [{"name": "a"}, {"name": "b"}],
+                         "max_steps": 24, "episodes": [{}, {}, {}, {}], "version": "0.1.0"});
+        let o = origin_of(&pol, None);
+        assert_eq!(
+            o["command"],
+            "evalharness collect --policy runs/p --episodes 2 --seed-start 7 --max-steps 24"
+        );
+        assert_eq!(o["checkpoints"][1]["name"], "b");
+        assert!(origin_of(&serde_json::Value::Null, None).is_null());
+    }
 }

@@ -14,6 +14,7 @@ pub mod report;
 pub mod results;
 pub mod scene;
 mod schedule;
+pub mod start;
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -332,12 +333,14 @@ fn print_summary(res: &Value, out: &Path) {
 }
 
 /// Refuses to resume a run under different settings (episodes, seeds, policies, world
-/// model and its α, ...): the finished rows would silently mix with new ones. The
-/// batch size and the bootstrap count may change (rows do not depend on the batch;
-/// the statistics are recomputed from all rows). A run without a saved config
-/// (killed before writing it) resumes freely.
+/// model and its α, batch size, ...): the finished rows would silently mix with new
+/// ones. The batch size counts because the kernels' float rounding depends on the
+/// matrix shapes, so an episode run in a batch of another size can come out slightly
+/// different, and a resumed run would no longer equal a straight one bit for bit.
+/// The bootstrap count may change (the statistics are recomputed from all rows). A
+/// run without a saved config (killed before writing it) resumes freely.
 fn check_resumed_config(path: &Path, config: &Value) -> Result<()> {
-    const FREE_ON_RESUME: [&str; 3] = ["command", "batch", "bootstrap"];
+    const FREE_ON_RESUME: [&str; 2] = ["command", "bootstrap"];
     let short = |v: &Value| {
         let text = v.to_string();
         if text.chars().count() > 60 {

@@ -17,7 +17,6 @@
 //! (as gym-pusht terminates at success), in each branch by that branch's score.
 
 use std::collections::VecDeque;
-use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Result, anyhow, bail};
@@ -25,51 +24,17 @@ use burn::tensor::{Tensor, TensorData};
 use harness::policy::{ActionChunk, Observation, Policy};
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
-use mujoco_rs::prelude::MjModel;
 use rayon::prelude::*;
-use scenarios::pusht::frame_score::{FrameScorer, SceneCheck};
+use scenarios::pusht::frame_score::SceneCheck;
 use scenarios::pusht::render::Rasterizer;
-use scenarios::pusht::{PushTConfig, PushTEnv};
+use scenarios::pusht::rollout::{Episode, StepRow};
 use world_model::data::tensor_to_frames;
 use world_model::latents::normalise_action;
 use world_model::model::WorldModel;
 
 use super::results::{Branch, EpisodeRow};
-
-/// Wall-clock split of a batch.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Timing {
-    /// MuJoCo stepping and rendering.
-    pub sim_s: f64,
-    /// World-model prediction and decoding.
-    pub world_model_s: f64,
-    /// Policy inference (both branches).
-    pub policy_s: f64,
-    /// Frames the world model generated.
-    pub frames: u64,
-}
-
-impl Timing {
-    /// Adds another split.
-    pub fn add(&mut self, o: &Timing) {
-        self.sim_s += o.sim_s;
-        self.world_model_s += o.world_model_s;
-        self.policy_s += o.policy_s;
-        self.frames += o.frames;
-    }
-}
-
-/// What a rollout needs besides the policy.
-pub struct Setup<'a> {
-    /// Scenario.
-    pub cfg: &'a PushTConfig,
-    /// Compiled MuJoCo model.
-    pub model: &'a Arc<MjModel>,
-    /// Master seed of the policy noise.
-    pub master_seed: u64,
-    /// Control steps per episode.
-    pub max_steps: usize,
-}
+use super::start::Seen;
+pub use super::start::{BranchOut, Setup, Start, Timing};
 
 /// Per-episode running score.
 #[derive(Clone, Debug, Default)]
@@ -98,11 +63,18 @@ impl Track {
     }
 }
 
-/// A frame and the agent position seen with it.
-type Seen = (Vec<u8>, [f32; 2]);
-
-/// What one MuJoCo episode returns per chunk: coverages, the last frames, scorer error sum.
-type ChunkResult = Result<(Vec<f64>, Vec<Seen>, f64)>;
+/// What one MuJoCo episode returns per chunk.
+#[derive(Default)]
+struct ChunkOut {
+    /// Coverage after each executed action.
+    covs: Vec<f64>,
+    /// The frames the policy will see (the chunk's last `obs_horizon`).
+    seen: Vec<Seen>,
+    /// Sum of the frame scorer's absolute coverage errors on `seen`.
+    err: f64,
+    /// With [`Start::trajectories`]: each step's observation before the action, and its row.
+    steps: Vec<(Vec<u8>, StepRow)>,
+}
 
 fn obs_of(hist: &VecDeque<Seen>, size: usize) -> Observation {
     Observation {
@@ -126,69 +98,6 @@ fn record_chunk(rec: &mut [Vec<Vec<u8>>], hist: &[VecDeque<Seen>]) {
         if let Some(last) = h.back() {
             r.push(last.0.clone());
         }
-    }
-}
-
-/// What both branches start from: environments reset to the seeds, their goals,
-/// frame scorers, the first rendered frames and the policy noise streams.
-pub struct Start {
-    envs: Vec<PushTEnv>,
-    goals: Vec<[f64; 3]>,
-    scorers: Vec<FrameScorer>,
-    first: Vec<Vec<u8>>,
-    start_pos: Vec<[f32; 2]>,
-    policy_rngs: Vec<Rng>,
-    seeds: Vec<u64>,
-    /// Keep the last frame of every action chunk (for filmstrips and GIFs).
-    pub record: bool,
-}
-
-/// A branch's rows and, when recording, each episode's frames at the end of every
-/// action chunk (the first frame first).
-pub struct BranchOut {
-    /// One row per episode.
-    pub rows: Vec<EpisodeRow>,
-    /// Recorded frames per episode (empty unless recording).
-    pub frames: Vec<Vec<Vec<u8>>>,
-}
-
-impl Start {
-    /// Resets one environment per seed.
-    ///
-    /// # Errors
-    /// A diverging first physics step, naming the seed.
-    pub fn new(policy: &str, seeds: &[u64], s: &Setup) -> Result<Self> {
-        let raster = Rasterizer::new(s.cfg);
-        let mut envs = Vec::with_capacity(seeds.len());
-        for &seed in seeds {
-            let mut env = PushTEnv::new(s.model.clone(), s.cfg);
-            env.reset(seed)?;
-            envs.push(env);
-        }
-        let scorers = envs.iter().map(|e| FrameScorer::new(s.cfg, &e.goal(), raster.size())).collect();
-        Ok(Self {
-            goals: envs.iter().map(|e| e.goal().to_array()).collect(),
-            scorers,
-            first: envs.iter().map(|e| raster.render(&e.state(), &e.goal())).collect(),
-            start_pos: envs.iter().map(|e| e.state().agent.map(|v| v as f32)).collect(),
-            policy_rngs: seeds
-                .iter()
-                .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(policy), sd])))
-                .collect(),
-            seeds: seeds.to_vec(),
-            record: false,
-            envs,
-        })
-    }
-
-    fn recording(&self) -> Vec<Vec<Vec<u8>>> {
-        if self.record { self.first.iter().map(|f| vec![f.clone()]).collect() } else { Vec::new() }
-    }
-
-    fn histories(&self, o: usize) -> Vec<VecDeque<Seen>> {
-        (0..self.envs.len())
-            .map(|i| (0..o).map(|_| (self.first[i].clone(), self.start_pos[i])).collect())
-            .collect()
     }
 }
 
@@ -247,6 +156,8 @@ pub fn sim_branch(
     let mut track = vec![Track::default(); n];
     let mut scorer_err = vec![(0.0f64, 0usize); n];
     let mut rec = start.recording();
+    let trajectories = start.trajectories;
+    let mut traj: Vec<Vec<(Vec<u8>, StepRow)>> = vec![Vec::new(); n];
     for (((t, env), sc), f) in track.iter_mut().zip(&start.envs).zip(&start.scorers).zip(&start.first) {
         t.add(env.score().coverage, thr);
         t.scene = Some(sc.scene(f));
@@ -260,41 +171,55 @@ pub fn sim_branch(
         for (&i, ch) in active.iter().zip(&chunks) {
             chunk_of[i] = Some(ch);
         }
-        let results: Vec<Option<ChunkResult>> = start
+        let results: Vec<Option<Result<ChunkOut>>> = start
             .envs
             .par_iter_mut()
             .zip(chunk_of.par_iter())
             .zip(start.scorers.par_iter())
             .map(|((env, chunk), scorer)| {
                 let chunk = (*chunk)?;
-                let mut run = || {
-                    let (mut covs, mut frames, mut err) = (Vec::with_capacity(len), Vec::new(), 0.0);
+                let mut run = || -> Result<ChunkOut> {
+                    let mut out = ChunkOut { covs: Vec::with_capacity(len), ..ChunkOut::default() };
                     for (j, a) in chunk[..len].iter().enumerate() {
-                        let sc = env.step([f64::from(a[0]), f64::from(a[1])])?;
-                        covs.push(sc.coverage);
+                        let before = trajectories.then(|| env.state());
+                        let action = [f64::from(a[0]), f64::from(a[1])];
+                        let sc = env.step(action)?;
+                        out.covs.push(sc.coverage);
+                        if let Some(b) = before {
+                            let step = (steps + j) as u32;
+                            let row = StepRow {
+                                step,
+                                agent: b.agent,
+                                block: b.block,
+                                action,
+                                coverage: sc.coverage,
+                            };
+                            out.steps.push((raster.render(&b, &env.goal()), row));
+                        }
                         if j + o >= len {
                             let st = env.state();
                             let f = raster.render(&st, &env.goal());
-                            err += (scorer.coverage(&f) - sc.coverage).abs();
-                            frames.push((f, st.agent.map(|v| v as f32)));
+                            out.err += (scorer.coverage(&f) - sc.coverage).abs();
+                            out.seen.push((f, st.agent.map(|v| v as f32)));
                         }
                     }
-                    Ok((covs, frames, err))
+                    Ok(out)
                 };
                 Some(run())
             })
             .collect();
         for (i, r) in results.into_iter().enumerate() {
             let Some(r) = r else { continue };
-            let (covs, frames, err) = r?;
-            covs.iter().for_each(|&cv| track[i].add(cv, thr));
+            let out = r?;
+            out.covs.iter().for_each(|&cv| track[i].add(cv, thr));
             track[i].steps += len;
-            scorer_err[i].0 += err;
-            scorer_err[i].1 += frames.len();
-            if let Some((f, _)) = frames.last() {
+            scorer_err[i].0 += out.err;
+            scorer_err[i].1 += out.seen.len();
+            if let Some((f, _)) = out.seen.last() {
                 track[i].scene = Some(start.scorers[i].scene(f));
             }
-            frames.into_iter().for_each(|f| push(&mut hist[i], f, o));
+            out.seen.into_iter().for_each(|f| push(&mut hist[i], f, o));
+            traj[i].extend(out.steps);
         }
         record_chunk(&mut rec, &hist);
         track.iter_mut().for_each(Track::end_chunk);
@@ -322,7 +247,28 @@ pub fn sim_branch(
             .with_scene(t.scene)
         })
         .collect();
-    Ok(BranchOut { rows, frames: rec })
+    let episodes = if trajectories { finish_episodes(&start, &track, traj, &raster) } else { Vec::new() };
+    Ok(BranchOut { rows, frames: rec, episodes })
+}
+
+/// The recorded steps as whole episodes (observations before each action plus the
+/// final one, as `collect` writes them).
+fn finish_episodes(
+    start: &Start,
+    track: &[Track],
+    traj: Vec<Vec<(Vec<u8>, StepRow)>>,
+    raster: &Rasterizer,
+) -> Vec<Episode> {
+    let mut out = Vec::with_capacity(traj.len());
+    for (i, steps) in traj.into_iter().enumerate() {
+        let env = &start.envs[i];
+        let (mut frames, rows): (Vec<Vec<u8>>, Vec<StepRow>) = steps.into_iter().unzip();
+        frames.push(raster.render(&env.state(), &env.goal()));
+        let success = rows.iter().any(|r| r.coverage > env.config().task.success_coverage);
+        let (seed, goal, score) = (start.seeds[i], env.goal(), track[i].best_reward);
+        out.push(Episode { seed, goal, rows, frames, score, success });
+    }
+    out
 }
 
 /// The world-model branch: imagined frames only, scored from frames.
@@ -442,7 +388,7 @@ pub fn wm_branch(
             .with_scene(t.scene)
         })
         .collect();
-    Ok(BranchOut { rows, frames: rec })
+    Ok(BranchOut { rows, frames: rec, episodes: Vec::new() })
 }
 
 #[cfg(test)]

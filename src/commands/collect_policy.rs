@@ -1,0 +1,112 @@
+//! `evalharness collect --policy DIR`: a dataset of policy checkpoints' closed-loop
+//! MuJoCo rollouts, in the same zarr layout as the scripted behaviours.
+//!
+//! Why: a world model trained only on expert and random-exploration episodes has
+//! never seen a weak policy nudge the block without bringing it home, and that is
+//! most of what a ranking run asks it to imagine. Rollouts of checkpoints *outside*
+//! the ranked set (other epochs, other training seeds) fill that gap without
+//! leaking the ranked policies' own behaviour into the model.
+//!
+//! Each checkpoint runs `--episodes` episodes from `--seed-start`, exactly as the
+//! MuJoCo branch of `rank` (and `simulate --policy`) runs it: the same per-episode
+//! noise streams (master seed 0), action horizon and end at success. So the
+//! dataset is a pure function of the arguments, whatever `--jobs` is.
+
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use harness::replay::ReplayWriter;
+use policies::dir::{Expectations, checkpoint_dirs};
+use scenarios::pusht::PushTPhysics;
+use serde_json::json;
+
+use super::collect::{STATE_COLUMNS, episode_arrays, replay_spec};
+use crate::cli::CollectArgs;
+use crate::progress;
+use crate::rank::paired::{Setup, Start, Timing, sim_branch};
+use crate::scenario::load_pusht;
+
+/// Episodes advanced together per batched policy call.
+const BATCH: usize = 100;
+
+/// Runs every checkpoint under `dir` and writes their episodes, checkpoint by checkpoint.
+pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
+    let c = &args.common;
+    if c.noise != 0.0 || c.lag != 0 {
+        bail!("--noise and --lag perturb the scripted expert; they do not apply to --policy");
+    }
+    let cfg = load_pusht(&c.scenario)?;
+    let model = PushTPhysics::compile(&cfg)?;
+    let max_steps = c.max_steps.map_or(cfg.task.max_steps as usize, |m| m as usize);
+    if max_steps == 0 || c.episodes == 0 {
+        bail!("--episodes and --max-steps must be at least 1");
+    }
+    let setup = Setup { cfg: &cfg, model: &model, master_seed: 0, max_steps };
+    let device = world_model::device::selected()?;
+    let dirs = checkpoint_dirs(dir)?;
+    let size = cfg.render.size as usize;
+    let expect = Expectations { image_size: size, action_dim: 2 };
+    let mut writer = ReplayWriter::create(&args.out, replay_spec(size), c.force)?;
+    let seeds: Vec<u64> = (0..c.episodes).map(|i| c.seed_start + i).collect();
+    let pool =
+        rayon::ThreadPoolBuilder::new().num_threads(c.jobs.max(1)).build().context("starting threads")?;
+    let pb = progress::bar(dirs.len() as u64 * c.episodes, "collect", quiet);
+    let (mut episodes, mut checkpoints) = (Vec::new(), Vec::new());
+    for d in &dirs {
+        let policy = crate::policy_kinds::load_any(d, expect, &device, &cfg, &model)
+            .with_context(|| format!("loading policy {}", d.display()))?;
+        let name = policy.name().to_string();
+        let mut timing = Timing::default();
+        let mut score = 0.0;
+        for batch in seeds.chunks(BATCH) {
+            let mut start = Start::new(&name, batch, &setup)?;
+            start.trajectories = true;
+            let out = pool
+                .install(|| sim_branch(policy.as_ref(), start, &setup, &mut timing))
+                .with_context(|| format!("policy {name}"))?;
+            for ep in &out.episodes {
+                writer.append(&episode_arrays(ep))?;
+                score += ep.score;
+                episodes.push(json!({
+                    "seed": ep.seed,
+                    "behaviour": name,
+                    "steps": ep.rows.len(),
+                    "score": ep.score,
+                    "success": ep.success,
+                }));
+            }
+            pb.inc(batch.len() as u64);
+        }
+        let mean = score / seeds.len().max(1) as f64;
+        tracing::info!("{name}: {} episodes, mean score {mean:.3}", seeds.len());
+        checkpoints.push(json!({"name": name, "path": d, "episodes": seeds.len(), "mean_score": mean}));
+    }
+    pb.finish_and_clear();
+    let n = episodes.len();
+    let steps: u64 = episodes.iter().filter_map(|e| e["steps"].as_u64()).sum();
+    let attrs = json!({
+        "evalharness": {
+            "version": env!("CARGO_PKG_VERSION"),
+            "scenario": "pusht",
+            "scenario_config": cfg,
+            "state_columns": STATE_COLUMNS,
+            "action": "absolute agent target position, world units",
+            "coverage": "data/coverage: coverage after each action",
+            "seed_start": c.seed_start,
+            "policy": dir,
+            "checkpoints": checkpoints,
+            "noise": 0.0,
+            "lag": 0,
+            "max_steps": max_steps,
+            "episodes": episodes,
+        }
+    });
+    let path = writer.finish(&attrs)?;
+    println!(
+        "pusht dataset: {n} episodes of {} checkpoint(s), {steps} steps -> {}",
+        dirs.len(),
+        path.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
