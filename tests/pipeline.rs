@@ -134,6 +134,26 @@ fn pipeline_end_to_end() {
     let ssim = e["models"][0]["ssim"].as_f64().unwrap();
     assert!((-1.0..=1.0).contains(&ssim), "{ssim}");
     assert!(ev.join("filmstrip.png").is_file());
+    // The open-loop score check: the model's and persistence's rows score the same real
+    // frames, and that score matches the coverage `collect` recorded for them (held-out
+    // episode 9, frames 4.. after its context; observation j shows the state after
+    // action j − 1) within the frame scorer's error.
+    let scores = e["open_loop_scores"].as_array().unwrap();
+    assert_eq!(
+        scores.iter().map(|r| r["name"].as_str().unwrap()).collect::<Vec<_>>(),
+        ["wm", "persistence"] // the model is the folder `wm`
+    );
+    let reader = harness::replay::ReplayReader::open(&data).unwrap();
+    let ep = reader.episode_range(9);
+    let cov = reader.read_episode(9, &["coverage".to_string()]).unwrap().extras[0].clone();
+    let recorded =
+        cov[3..ep.len() - 1].iter().map(|&c| (f64::from(c) / 0.95).clamp(0.0, 1.0)).fold(0.0, f64::max);
+    for r in scores {
+        let real = r["real_mean"].as_f64().unwrap();
+        assert!((real - recorded).abs() < 0.06, "real {real} vs recorded {recorded}");
+        assert_eq!(r["real_mean"], scores[0]["real_mean"]);
+        assert!((0.0..=1.0).contains(&r["imagined_mean"].as_f64().unwrap()), "{r}");
+    }
 
     // A policy set: the trained checkpoint, a copy, and a corrupt one.
     let set = dir.join("set");

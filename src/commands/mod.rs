@@ -14,6 +14,7 @@ mod train;
 mod train_policy;
 mod train_wm;
 mod wm_eval;
+mod wm_eval_score;
 mod wm_export;
 
 use std::process::ExitCode;

@@ -9,11 +9,16 @@ use world_model::data::{EpisodeData, Split};
 use world_model::eval::{EvalRow, evaluate, persistence};
 use world_model::model::WorldModel;
 
+use super::wm_eval_score::Scoring;
 use crate::cli::WmEvalArgs;
 use crate::output::{Staged, write_json};
 
 /// Frames shown per filmstrip row (every 4th generated frame).
 const STRIP_EVERY: usize = 4;
+
+const SCORE_NOTE: &str = "whole-episode videos: the recorded actions replayed from 4 real frames; \
+    score = max over the frames after the context of clip(coverage / 0.95, 0, 1), real and generated \
+    frames read by the same frame scorer against the episode's goal; persistence = the last context frame";
 
 /// One line of the text summary.
 fn print_row(row: &EvalRow, note: &str) {
@@ -57,6 +62,12 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         bail!("{}: no held-out episode has {} frames", a.data.display(), k + 60);
     }
     let staged = Staged::new(&a.out, a.force)?;
+    let scoring =
+        if full.is_empty() { Err("no whole-episode videos".into()) } else { Scoring::load(&a.data, 96)? };
+    if let Err(why) = &scoring {
+        tracing::warn!("no open-loop score check: {why}");
+    }
+    let (mut scores, mut full_videos) = (Vec::new(), Vec::new());
     let mut rows = Vec::new();
     let mut strip_rows: Vec<Vec<Vec<u8>>> = Vec::new();
     for (name, wm) in &models {
@@ -70,9 +81,13 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         rows.push(row);
         if !full.is_empty() {
             tracing::info!(model = %name, videos = full.len(), "full-episode rollouts");
-            let (row, _) = evaluate(wm, name, &data, &full, "episode", a.batch, a.seed);
+            let (row, videos) = evaluate(wm, name, &data, &full, "episode", a.batch, a.seed);
             print_row(&row, "");
             rows.push(row);
+            if let Ok(sc) = &scoring {
+                scores.push(sc.row(name, &videos));
+            }
+            full_videos = videos;
         }
     }
     for (starts, horizon) in [(&short, "64"), (&full, "episode")] {
@@ -82,12 +97,23 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             rows.push(row);
         }
     }
+    if let Ok(sc) = &scoring {
+        scores.push(sc.persistence(&data, &full_videos, k));
+        for r in &scores {
+            println!(
+                "{:<20} open-loop score over whole episodes: real {:.3} imagined {:.3}  mean |error| {:.3}",
+                r.name, r.real_mean, r.imagined_mean, r.mean_abs_error
+            );
+        }
+    }
     let strip = reports::png::filmstrip(&strip_rows, data.size, data.size);
     reports::png::write_png(&staged.file("filmstrip.png"), &strip.pixels, strip.width, strip.height)?;
     write_json(
         &staged.file("eval.json"),
         &json!({
             "models": rows,
+            "open_loop_scores": scores,
+            "open_loop_scores_note": scoring.as_ref().err().cloned().unwrap_or_else(|| SCORE_NOTE.into()),
             "data": a.data, "held_out": "episodes with index % 10 == 9",
             "videos_64": short.len(), "videos_episode": full.len(), "batch": a.batch, "seed": a.seed,
             "filmstrip": format!("row 1: real frames of held-out episode at step {}, every {STRIP_EVERY}th after the 4 context frames; then one row per model", short[0].0),

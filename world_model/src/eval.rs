@@ -41,8 +41,10 @@ pub struct EvalRow {
     pub videos: usize,
 }
 
-/// One video's real and generated frames (HWC bytes), for filmstrips.
+/// One video's real and generated frames (HWC bytes), for filmstrips and scoring.
 pub struct Video {
+    /// Step index (in the dataset) of its first context frame.
+    pub start: usize,
     /// Real frames after the context.
     pub real: Vec<Vec<u8>>,
     /// Generated frames.
@@ -197,7 +199,7 @@ pub fn evaluate(
             for (&t, g) in st.iter().zip(videos_gen) {
                 let real = real_frames(data, t, k, len);
                 tally.add(&real, &g, data.size);
-                videos.push(Video { real, generated: g });
+                videos.push(Video { start: t, real, generated: g });
             }
         }
     }
