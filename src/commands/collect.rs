@@ -11,8 +11,9 @@ use std::process::ExitCode;
 use anyhow::{Result, bail};
 use harness::replay::{EpisodeArrays, ReplaySpec, ReplayWriter};
 use harness::seed::{derive, fnv1a};
-use serde_json::json;
+use serde_json::{Value, json};
 
+use scenarios::pusht::PushTConfig;
 use scenarios::pusht::rollout::Episode;
 
 use super::episodes::{BehaviourKind, FrameSpec, Perturbation, RendererKind, Runner, behaviour_label};
@@ -84,6 +85,38 @@ pub(super) fn episode_arrays(ep: &Episode) -> EpisodeArrays {
     arrays
 }
 
+/// An episode's entry in the dataset attributes.
+pub(super) fn episode_attr(ep: &Episode, behaviour: &str) -> Value {
+    json!({"seed": ep.seed, "behaviour": behaviour, "steps": ep.rows.len(), "score": ep.score, "success": ep.success})
+}
+
+/// The dataset attributes: the layout and scenario, the seeds, how the episodes were
+/// made (`source`: `collect`'s mix and perturbation, or `--policy`'s checkpoints) and
+/// the episodes.
+pub(super) fn dataset_attrs(
+    cfg: &PushTConfig,
+    seed_start: u64,
+    source: Value,
+    max_steps: impl Into<Value>,
+    episodes: Vec<Value>,
+) -> Value {
+    let mut e = json!({
+        "version": env!("CARGO_PKG_VERSION"),
+        "scenario": "pusht",
+        "scenario_config": cfg,
+        "state_columns": STATE_COLUMNS,
+        "action": "absolute agent target position, world units",
+        "coverage": "data/coverage: coverage after each action",
+        "seed_start": seed_start,
+    });
+    if let (Some(map), Value::Object(src)) = (e.as_object_mut(), source) {
+        map.extend(src);
+        map.insert("max_steps".into(), max_steps.into());
+        map.insert("episodes".into(), Value::Array(episodes));
+    }
+    json!({ "evalharness": e })
+}
+
 /// Runs the command.
 pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     if let Some(dir) = &args.policy {
@@ -104,16 +137,8 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
         &work,
         |_| Some(FrameSpec { size, renderer: RendererKind::Raster }),
         |i, ep| {
-            let steps = ep.rows.len();
-            let arrays = episode_arrays(&ep);
-            writer.append(&arrays)?;
-            episodes.push(json!({
-                "seed": ep.seed,
-                "behaviour": behaviour_label(work[i].1, perturbation),
-                "steps": steps,
-                "score": ep.score,
-                "success": ep.success,
-            }));
+            writer.append(&episode_arrays(&ep))?;
+            episodes.push(episode_attr(&ep, &behaviour_label(work[i].1, perturbation)));
             pb.inc(1);
             Ok(())
         },
@@ -121,22 +146,8 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     pb.finish_and_clear();
     let n = episodes.len();
     let steps: u64 = episodes.iter().filter_map(|e| e["steps"].as_u64()).sum();
-    let attrs = json!({
-        "evalharness": {
-            "version": env!("CARGO_PKG_VERSION"),
-            "scenario": "pusht",
-            "scenario_config": runner.cfg,
-            "state_columns": STATE_COLUMNS,
-            "action": "absolute agent target position, world units",
-            "coverage": "data/coverage: coverage after each action",
-            "seed_start": c.seed_start,
-            "mix": args.mix,
-            "noise": c.noise,
-            "lag": c.lag,
-            "max_steps": runner.max_steps,
-            "episodes": episodes,
-        }
-    });
+    let source = json!({"mix": args.mix, "noise": c.noise, "lag": c.lag});
+    let attrs = dataset_attrs(&runner.cfg, c.seed_start, source, runner.max_steps, episodes);
     let path = writer.finish(&attrs)?;
     println!("pusht dataset: {n} episodes, {steps} steps -> {}", path.display());
     Ok(ExitCode::SUCCESS)

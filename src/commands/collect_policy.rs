@@ -21,7 +21,7 @@ use policies::dir::{Expectations, checkpoint_dirs};
 use scenarios::pusht::PushTPhysics;
 use serde_json::json;
 
-use super::collect::{STATE_COLUMNS, episode_arrays, replay_spec};
+use super::collect::{dataset_attrs, episode_arrays, episode_attr, replay_spec};
 use crate::cli::CollectArgs;
 use crate::progress;
 use crate::rank::paired::{Setup, Start, Timing, sim_branch};
@@ -68,13 +68,7 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
             for ep in &out.episodes {
                 writer.append(&episode_arrays(ep))?;
                 score += ep.score;
-                episodes.push(json!({
-                    "seed": ep.seed,
-                    "behaviour": name,
-                    "steps": ep.rows.len(),
-                    "score": ep.score,
-                    "success": ep.success,
-                }));
+                episodes.push(episode_attr(ep, &name));
             }
             pb.inc(batch.len() as u64);
         }
@@ -85,23 +79,8 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
     pb.finish_and_clear();
     let n = episodes.len();
     let steps: u64 = episodes.iter().filter_map(|e| e["steps"].as_u64()).sum();
-    let attrs = json!({
-        "evalharness": {
-            "version": env!("CARGO_PKG_VERSION"),
-            "scenario": "pusht",
-            "scenario_config": cfg,
-            "state_columns": STATE_COLUMNS,
-            "action": "absolute agent target position, world units",
-            "coverage": "data/coverage: coverage after each action",
-            "seed_start": c.seed_start,
-            "policy": dir,
-            "checkpoints": checkpoints,
-            "noise": 0.0,
-            "lag": 0,
-            "max_steps": max_steps,
-            "episodes": episodes,
-        }
-    });
+    let source = json!({"policy": dir, "checkpoints": checkpoints, "noise": 0.0, "lag": 0});
+    let attrs = dataset_attrs(&cfg, c.seed_start, source, max_steps, episodes);
     let path = writer.finish(&attrs)?;
     println!(
         "pusht dataset: {n} episodes of {} checkpoint(s), {steps} steps -> {}",

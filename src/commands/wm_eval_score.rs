@@ -18,7 +18,7 @@ use serde::Serialize;
 use world_model::data::EpisodeData;
 use world_model::eval::Video;
 
-/// Frame scorers of a dataset's episodes.
+/// What scoring a dataset's frames needs: its scenario and the goal at every step.
 pub struct Scoring {
     cfg: PushTConfig,
     /// Goal pose at each step.
@@ -68,30 +68,28 @@ impl Scoring {
         frames.iter().map(|f| (scorer.coverage(f) / thr).clamp(0.0, 1.0)).fold(0.0, f64::max)
     }
 
-    /// Scores `videos` (each from its episode's goal) against their real frames.
-    pub fn row(&self, name: &str, videos: &[Video]) -> ScoreRow {
-        let pairs: Vec<(f64, f64)> = videos
+    /// (real, imagined) scores of `videos`, each read against its episode's goal;
+    /// `imagined` scores a video's stand-in for its real frames.
+    fn pairs(&self, videos: &[Video], imagined: impl Fn(&FrameScorer, &Video) -> f64) -> Vec<(f64, f64)> {
+        videos
             .iter()
             .map(|v| {
                 let scorer = FrameScorer::new(&self.cfg, &self.goals[v.start], self.size);
-                (self.score(&scorer, &v.real), self.score(&scorer, &v.generated))
+                (self.score(&scorer, &v.real), imagined(&scorer, v))
             })
-            .collect();
-        summarise(name, &pairs)
+            .collect()
+    }
+
+    /// Scores `videos` (each from its episode's goal) against their real frames.
+    pub fn row(&self, name: &str, videos: &[Video]) -> ScoreRow {
+        summarise(name, &self.pairs(videos, |sc, v| self.score(sc, &v.generated)))
     }
 
     /// The "nothing moves" reference: the last context frame (`start + k − 1`) for the
     /// whole video.
     pub fn persistence(&self, data: &EpisodeData, videos: &[Video], k: usize) -> ScoreRow {
-        let pairs: Vec<(f64, f64)> = videos
-            .iter()
-            .map(|v| {
-                let scorer = FrameScorer::new(&self.cfg, &self.goals[v.start], self.size);
-                let last = data.frame(v.start + k - 1).to_vec();
-                (self.score(&scorer, &v.real), self.score(&scorer, &[last]))
-            })
-            .collect();
-        summarise("persistence", &pairs)
+        let last = |v: &Video| vec![data.frame(v.start + k - 1).to_vec()];
+        summarise("persistence", &self.pairs(videos, |sc, v| self.score(sc, &last(v))))
     }
 }
 
