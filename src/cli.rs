@@ -173,9 +173,13 @@ pub struct WmEvalArgs {
     /// World-model folders to compare (repeat the flag).
     #[arg(long = "world-model", required = true)]
     pub world_models: Vec<PathBuf>,
-    /// Dataset; only held-out episodes (index % 10 == 9) are used.
+    /// Dataset; only held-out episodes (index % 10 == 9) are used, unless `--all-episodes`.
     #[arg(long)]
     pub data: PathBuf,
+    /// Use every episode, not only the held-out tenth: for a dataset no compared model
+    /// was trained on (e.g. `collect --policy` rollouts kept for diagnosis).
+    #[arg(long)]
+    pub all_episodes: bool,
     /// Held-out episodes for the 64-frame rollouts (4 real + 60 generated).
     #[arg(long, default_value_t = 20)]
     pub episodes: usize,

@@ -154,6 +154,15 @@ fn pipeline_end_to_end() {
         assert_eq!(r["real_mean"], scores[0]["real_mean"]);
         assert!((0.0..=1.0).contains(&r["imagined_mean"].as_f64().unwrap()), "{r}");
     }
+    assert_eq!(e["episodes_64"], serde_json::json!([9]));
+    assert_eq!(e["episodes_whole"], serde_json::json!([9]));
+    // --all-episodes (a dataset no model was trained on) takes episodes from the start.
+    let all = [&args[..6], &["--episodes", "2", "--full-episodes", "0", "--all-episodes"]].concat();
+    let ev_all = dir.join("eval_all");
+    expect_code(&run(&[&all[..], &["--out", s(&ev_all)]].concat()), 0);
+    let e = read_json(&ev_all.join("eval.json"));
+    assert_eq!(e["episodes_64"], serde_json::json!([0, 1]));
+    assert_eq!(e["models"][0]["videos"], 2, "{e}");
 
     // A policy set: the trained checkpoint, a copy, and a corrupt one.
     let set = dir.join("set");

@@ -47,19 +47,22 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         .collect::<Result<_>>()?;
     let data = EpisodeData::load(&a.data, 96)?;
     let k = models[0].1.cfg.unet.history;
-    let held: Vec<std::ops::Range<usize>> = data
+    let held: Vec<(usize, std::ops::Range<usize>)> = data
         .episodes
         .iter()
         .enumerate()
-        .filter(|(i, _)| Split::HeldOut.contains(*i))
-        .map(|(_, r)| r.clone())
+        .filter(|(i, _)| a.all_episodes || Split::HeldOut.contains(*i))
+        .map(|(i, r)| (i, r.clone()))
         .collect();
-    let short: Vec<(usize, usize)> =
-        held.iter().filter(|r| r.len() >= k + 60).take(a.episodes).map(|r| (r.start, 60)).collect();
-    let full: Vec<(usize, usize)> =
-        held.iter().filter(|r| r.len() > k).take(a.full_episodes).map(|r| (r.start, r.len() - k)).collect();
+    let pick = |min: usize, n: usize| -> Vec<&(usize, std::ops::Range<usize>)> {
+        held.iter().filter(|(_, r)| r.len() >= min).take(n).collect()
+    };
+    let (short_eps, full_eps) = (pick(k + 60, a.episodes), pick(k + 1, a.full_episodes));
+    let short: Vec<(usize, usize)> = short_eps.iter().map(|(_, r)| (r.start, 60)).collect();
+    let full: Vec<(usize, usize)> = full_eps.iter().map(|(_, r)| (r.start, r.len() - k)).collect();
+    let which = if a.all_episodes { "episode" } else { "held-out episode" };
     if short.is_empty() {
-        bail!("{}: no held-out episode has {} frames", a.data.display(), k + 60);
+        bail!("{}: no {which} has {} frames", a.data.display(), k + 60);
     }
     let staged = Staged::new(&a.out, a.force)?;
     let scoring =
@@ -114,9 +117,12 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             "models": rows,
             "open_loop_scores": scores,
             "open_loop_scores_note": scoring.as_ref().err().cloned().unwrap_or_else(|| SCORE_NOTE.into()),
-            "data": a.data, "held_out": "episodes with index % 10 == 9",
+            "data": a.data,
+            "episodes_from": if a.all_episodes { "all episodes (--all-episodes)" } else { "held-out episodes (index % 10 == 9)" },
+            "episodes_64": short_eps.iter().map(|(i, _)| i).collect::<Vec<_>>(),
+            "episodes_whole": full_eps.iter().map(|(i, _)| i).collect::<Vec<_>>(),
             "videos_64": short.len(), "videos_episode": full.len(), "batch": a.batch, "seed": a.seed,
-            "filmstrip": format!("row 1: real frames of held-out episode at step {}, every {STRIP_EVERY}th after the 4 context frames; then one row per model", short[0].0),
+            "filmstrip": format!("row 1: real frames of the {which} at step {}, every {STRIP_EVERY}th after the 4 context frames; then one row per model", short[0].0),
         }),
     )?;
     let out = staged.commit()?;
