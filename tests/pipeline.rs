@@ -153,6 +153,11 @@ fn pipeline_end_to_end() {
         assert!((real - recorded).abs() < 0.06, "real {real} vs recorded {recorded}");
         assert_eq!(r["real_mean"], scores[0]["real_mean"]);
         assert!((0.0..=1.0).contains(&r["imagined_mean"].as_f64().unwrap()), "{r}");
+        // One 64-frame video: no correlation; coverage at frames 0, 8, 16 and 32.
+        assert!(r["pearson"].is_null(), "{r}");
+        let frames: Vec<u64> =
+            r["coverage_curve"].as_array().unwrap().iter().map(|p| p["frame"].as_u64().unwrap()).collect();
+        assert_eq!(frames, [0, 8, 16, 32], "{r}");
     }
     assert_eq!(e["episodes_64"], serde_json::json!([9]));
     assert_eq!(e["episodes_whole"], serde_json::json!([9]));

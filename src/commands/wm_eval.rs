@@ -103,10 +103,17 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
     if let Ok(sc) = &scoring {
         scores.push(sc.persistence(&data, &full_videos, k));
         for r in &scores {
+            let r_text = r.pearson.map_or_else(|| "n/a".to_string(), |p| format!("{p:.3}"));
             println!(
-                "{:<20} open-loop score over whole episodes: real {:.3} imagined {:.3}  mean |error| {:.3}",
+                "{:<20} open-loop score over whole episodes: real {:.3} imagined {:.3}  mean |error| {:.3}  per-video r {r_text}",
                 r.name, r.real_mean, r.imagined_mean, r.mean_abs_error
             );
+            let curve: Vec<String> = r
+                .coverage_curve
+                .iter()
+                .map(|c| format!("{}: {:.2}/{:.2}", c.frame, c.real, c.imagined))
+                .collect();
+            println!("{:<20} coverage real/imagined by frame  {}", "", curve.join("  "));
         }
     }
     let strip = reports::png::filmstrip(&strip_rows, data.size, data.size);
