@@ -83,6 +83,7 @@ fn pixel_world_model(c: &mut Criterion) {
         sample_steps: 1,
         prediction: None,
         alpha: None,
+        goal_free: None,
         unet: unet.clone(),
     };
     let wm = WorldModel::from_parts(cfg, FrameCodec::pixels(96), unet.init(&device), &device);

@@ -333,6 +333,35 @@ fn pipeline_end_to_end() {
     ok.extend(["--force", "--max-inversions", "0", "--min-pearson", "1.01"]);
     let (_, err) = expect_code(&run(&ok), 1);
     assert!(err.contains("gate failed: Pearson"), "{err}");
+
+    // A goal-free world model: trained on the frames re-rendered without the goal (its
+    // config and provenance say so), compared by `wm eval` with the others on the real
+    // frames (the goal drawn back), and ranked with.
+    let gf = dir.join("wm_goal_free");
+    let ae = dir.join("autoencoder");
+    let train = ["train", "world-model", "--data", s(&data), "--autoencoder", s(&ae), "--out", s(&gf)];
+    let tiny = ["--steps", "1", "--base-channels", "16", "--contexts", "2", "--samples", "2", "--anchor"];
+    expect_code(&run(&[&train[..], &tiny[..], &["--goal-free"]].concat()), 0);
+    assert_eq!(read_json(&gf.join("config.json"))["model"]["goal_free"], true);
+    let frames = read_json(&gf.join("provenance.json"))["frames"].as_str().unwrap().to_string();
+    assert!(frames.contains("without the goal"), "{frames}");
+    let ev = dir.join("eval_goal_free");
+    let args = ["wm", "eval", "--world-model", s(&wm), "--world-model", s(&gf), "--data", s(&data)];
+    let more = ["--episodes", "1", "--full-episodes", "1", "--out", s(&ev)];
+    expect_code(&run(&[&args[..], &more[..]].concat()), 0);
+    let e = read_json(&ev.join("eval.json"));
+    let names: Vec<&str> =
+        e["models"].as_array().unwrap().iter().map(|m| m["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["wm", "wm", "wm_goal_free", "wm_goal_free", "persistence", "persistence"]);
+    let out3 = dir.join("rank_goal_free");
+    let mut args = base.to_vec();
+    args[4] = s(&gf);
+    args.extend(["--out", s(&out3), "--no-report"]);
+    expect_code(&run(&args), 0);
+    assert_eq!(read_json(&out3.join("results.json"))["world_model"], s(&gf));
+    // Resuming a goal-free run without the flag keeps it goal-free (its config wins).
+    expect_code(&run(&[&train[..], &["--resume", "--steps", "2"]].concat()), 0);
+    assert_eq!(read_json(&gf.join("config.json"))["model"]["goal_free"], true);
 }
 
 #[test]

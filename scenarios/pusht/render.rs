@@ -139,7 +139,24 @@ impl Rasterizer {
         out
     }
 
+    /// Renders the scene without the goal T (what a goal-free world model sees: the
+    /// goal is static and known, so it is drawn back onto generated frames with
+    /// [`super::frame_score::FrameScorer::draw_goal`] instead of being predicted).
+    pub fn render_without_goal(&self, state: &PushTState) -> Vec<u8> {
+        let mut out = vec![0u8; self.frame_len()];
+        self.render_layers(state, None, &mut out);
+        out
+    }
+
     /// Renders into `out` (length [`Rasterizer::frame_len`]).
+    ///
+    /// # Panics
+    /// If `out` has the wrong length (a programming error).
+    pub fn render_into(&self, state: &PushTState, goal: &Pose2, out: &mut [u8]) {
+        self.render_layers(state, Some(goal), out);
+    }
+
+    /// Renders into `out`, with the goal T or without it.
     ///
     /// Only pixels that an edge may cross are supersampled: a pixel whose centre is
     /// farther than its half diagonal from every boundary takes one sample, and a
@@ -147,7 +164,7 @@ impl Rasterizer {
     ///
     /// # Panics
     /// If `out` has the wrong length (a programming error).
-    pub fn render_into(&self, state: &PushTState, goal: &Pose2, out: &mut [u8]) {
+    fn render_layers(&self, state: &PushTState, goal: Option<&Pose2>, out: &mut [u8]) {
         assert_eq!(out.len(), self.frame_len(), "render buffer has the wrong size");
         let n = self.supersample;
         let scale = self.world / self.size as f64;
@@ -155,11 +172,12 @@ impl Rasterizer {
         let h = scale * std::f64::consts::FRAC_1_SQRT_2;
         let boxes = [
             self.shape_box(&state.block, EDGE_HALF + h),
-            self.shape_box(goal, h),
+            goal.map_or_else(Aabb::empty, |g| self.shape_box(g, h)),
             disk_box(state.agent, self.agent_radius + h),
         ];
         let block = Frame::new(&state.block);
-        let goal = Frame::new(goal);
+        let goal = goal.map(Frame::new);
+        let goal = goal.as_ref();
         let inv = 1.0 / (n * n) as f64;
         for py in 0..self.size {
             let cy = (py as f64 + 0.5) * scale;
@@ -171,8 +189,8 @@ impl Rasterizer {
                     out[o..o + 3].copy_from_slice(&BACKGROUND);
                     continue;
                 }
-                if !near_wall && !self.near_edge(cx, cy, h, state.agent, &block, &goal) {
-                    let c = self.sample(cx, cy, state.agent, &block, &goal);
+                if !near_wall && !self.near_edge(cx, cy, h, state.agent, &block, goal) {
+                    let c = self.sample(cx, cy, state.agent, &block, goal);
                     out[o..o + 3].copy_from_slice(&c);
                     continue;
                 }
@@ -181,7 +199,7 @@ impl Rasterizer {
                     let wy = (py as f64 + (j as f64 + 0.5) / n as f64) * scale;
                     for i in 0..n {
                         let wx = (px as f64 + (i as f64 + 0.5) / n as f64) * scale;
-                        let c = self.sample(wx, wy, state.agent, &block, &goal);
+                        let c = self.sample(wx, wy, state.agent, &block, goal);
                         for k in 0..3 {
                             acc[k] += f64::from(c[k]);
                         }
@@ -195,7 +213,15 @@ impl Rasterizer {
     }
 
     /// Whether any shape boundary passes within `h` of world point (cx, cy).
-    fn near_edge(&self, cx: f64, cy: f64, h: f64, agent: [f64; 2], block: &Frame, goal: &Frame) -> bool {
+    fn near_edge(
+        &self,
+        cx: f64,
+        cy: f64,
+        h: f64,
+        agent: [f64; 2],
+        block: &Frame,
+        goal: Option<&Frame>,
+    ) -> bool {
         let d = (cx - agent[0]).hypot(cy - agent[1]);
         if (d - self.agent_radius).abs() < h || (d - AGENT_INNER_RADIUS).abs() < h {
             return true;
@@ -210,6 +236,7 @@ impl Rasterizer {
         } else if within_inside(&self.shape, b, EDGE_HALF + h) {
             return true;
         }
+        let Some(goal) = goal else { return false };
         let g = goal.to_body(cx, cy);
         let outside = self.shape.distance(g);
         if outside > 0.0 { outside < h } else { within_inside(&self.shape, g, h) }
@@ -233,7 +260,7 @@ impl Rasterizer {
     }
 
     /// The colour of the topmost shape at world point (wx, wy).
-    fn sample(&self, wx: f64, wy: f64, agent: [f64; 2], block: &Frame, goal: &Frame) -> Rgb {
+    fn sample(&self, wx: f64, wy: f64, agent: [f64; 2], block: &Frame, goal: Option<&Frame>) -> Rgb {
         let d = (wx - agent[0]).hypot(wy - agent[1]);
         if d <= AGENT_INNER_RADIUS {
             return AGENT_INNER;
@@ -244,7 +271,7 @@ impl Rasterizer {
         if let Some(c) = block_colour(&self.shape, block.to_body(wx, wy)) {
             return c;
         }
-        if self.shape.contains(goal.to_body(wx, wy)) {
+        if goal.is_some_and(|g| self.shape.contains(g.to_body(wx, wy))) {
             return GOAL;
         }
         if self.on_wall(wx, wy) {
@@ -323,7 +350,7 @@ mod tests {
                     for i in 0..n {
                         let wx = (px as f64 + (i as f64 + 0.5) / n as f64) * scale;
                         let wy = (py as f64 + (j as f64 + 0.5) / n as f64) * scale;
-                        let c = r.sample(wx, wy, state.agent, &block, &goal);
+                        let c = r.sample(wx, wy, state.agent, &block, Some(&goal));
                         (0..3).for_each(|k| acc[k] += f64::from(c[k]));
                     }
                 }

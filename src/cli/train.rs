@@ -178,6 +178,13 @@ pub struct TrainWorldModelArgs {
     /// a model without it, the new channels start at zero weight.
     #[arg(long)]
     pub anchor: bool,
+    /// Train on the frames re-rendered without the goal T (from `data/state`; not in
+    /// the paper). The goal is static and known from the initial state, so `rank` and
+    /// `wm eval` draw it onto the generated frames instead of the model predicting
+    /// it — and the model cannot learn the expert data's "blocks go to the goal"
+    /// prior from seeing where the goal is. Needs a dataset collected by evalharness.
+    #[arg(long)]
+    pub goal_free: bool,
     /// Action accentuation (spec §3; drifting only): each context draws a strength α
     /// (log-uniform on [1, 4], 1 with probability 0.1), fed to the U-Net, and the true
     /// current frame joins the negatives with weight (α − 1)(N − 1). With

@@ -7,6 +7,7 @@ mod dataset;
 mod dataset_merge;
 mod episodes;
 mod export_policies;
+mod goal_free;
 mod scripted;
 mod simulate;
 mod simulate_policy;

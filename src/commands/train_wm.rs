@@ -130,8 +130,13 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         None => fresh_codec(a, &inner)?,
     };
     tracing::info!(data = %a.data.display(), "loading frames");
-    let data = EpisodeData::load(&a.data, codec.image_size())?;
+    let mut data = EpisodeData::load(&a.data, codec.image_size())?;
     tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");
+    let goal_free = saved.as_ref().map_or(a.goal_free, WorldModelConfig::is_goal_free);
+    if goal_free {
+        tracing::info!("re-rendering the frames without the goal (from data/state)");
+        super::goal_free::strip_goal(&a.data, &mut data)?;
+    }
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let model_cfg = match saved {
         Some(saved) => saved,
@@ -171,6 +176,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
                 sample_steps: if objective == Objective::Diffusion { a.sample_steps.max(1) } else { 1 },
                 prediction: fresh_prediction(a),
                 alpha: a.accentuation.then_some(a.alpha.unwrap_or(DEFAULT_ALPHA)),
+                goal_free: a.goal_free.then_some(true),
             }
         }
     };
@@ -213,6 +219,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             "commit": git_commit(),
             "autoencoder": saved.autoencoder,
             "data": data_provenance(&a.data, data.episodes.len(), data.len()),
+            "frames": if goal_free { "re-rendered without the goal from data/state (--goal-free)" } else { "data/img as stored" },
             "steps": outcome.step,
             "finished": outcome.finished,
             "elapsed_s": outcome.elapsed_s,
@@ -392,6 +399,7 @@ fn check_resume_flags(a: &TrainWorldModelArgs, fresh: &WmTrainConfig) -> Result<
         ("base_channels", json!(a.base_channels), json!(model.unet.model_channels)),
         ("action_maps", json!(a.action_maps), json!(model.unet.uses_action_maps())),
         ("anchor", json!(a.anchor), json!(model.unet.uses_anchor())),
+        ("goal_free", json!(a.goal_free), json!(model.is_goal_free())),
         ("accentuation", json!(a.accentuation), json!(model.unet.uses_accentuation())),
         ("sample_steps", json!(a.sample_steps), json!(model.sample_steps)),
         ("prediction", json!(prediction(a)), json!(model.prediction.unwrap_or_default())),

@@ -4,11 +4,13 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
+use scenarios::pusht::frame_score::FrameScorer;
 use serde_json::json;
 use world_model::data::{EpisodeData, Split};
-use world_model::eval::{EvalRow, evaluate, persistence};
+use world_model::eval::{EvalRow, View, evaluate, persistence};
 use world_model::model::WorldModel;
 
+use super::goal_free;
 use super::wm_eval_score::Scoring;
 use crate::cli::WmEvalArgs;
 use crate::output::{Staged, write_json};
@@ -70,12 +72,29 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
     if let Err(why) = &scoring {
         tracing::warn!("no open-loop score check: {why}");
     }
+    // Goal-free models read the scenes re-rendered without the goal, and each of their
+    // frames gets its episode's goal drawn back before any comparison or scoring.
+    let goal_free = if models.iter().any(|(_, wm)| wm.cfg.is_goal_free()) {
+        let mut inputs = EpisodeData::load(&a.data, 96)?;
+        let scene = goal_free::strip_goal(&a.data, &mut inputs)?;
+        Some((inputs, scene))
+    } else {
+        None
+    };
+    let complete = |t: usize, frames: &mut [Vec<u8>]| {
+        if let Some((_, scene)) = &goal_free {
+            let scorer = FrameScorer::new(&scene.cfg, &scene.goal(t), data.size);
+            frames.iter_mut().for_each(|f| scorer.draw_goal(f));
+        }
+    };
+    let view = goal_free.as_ref().map(|(inputs, _)| View { inputs, complete: &complete });
     let (mut scores, mut full_videos) = (Vec::new(), Vec::new());
     let mut rows = Vec::new();
     let mut strip_rows: Vec<Vec<Vec<u8>>> = Vec::new();
     for (name, wm) in &models {
+        let view = if wm.cfg.is_goal_free() { view.as_ref() } else { None };
         tracing::info!(model = %name, videos = short.len(), "64-frame rollouts");
-        let (row, videos) = evaluate(wm, name, &data, &short, "64", a.batch, a.seed);
+        let (row, videos) = evaluate(wm, (name, view), &data, &short, "64", a.batch, a.seed);
         if strip_rows.is_empty() {
             strip_rows.push(videos[0].real.iter().step_by(STRIP_EVERY).cloned().collect());
         }
@@ -84,7 +103,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         rows.push(row);
         if !full.is_empty() {
             tracing::info!(model = %name, videos = full.len(), "full-episode rollouts");
-            let (row, videos) = evaluate(wm, name, &data, &full, "episode", a.batch, a.seed);
+            let (row, videos) = evaluate(wm, (name, view), &data, &full, "episode", a.batch, a.seed);
             print_row(&row, "");
             rows.push(row);
             if let Ok(sc) = &scoring {

@@ -11,18 +11,16 @@
 //! shows, without the closed loop, whether a model follows what weak policies do.
 
 use anyhow::Result;
-use harness::replay::ReplayReader;
 use scenarios::pusht::frame_score::FrameScorer;
-use scenarios::pusht::{Pose2, PushTConfig};
 use serde::Serialize;
 use world_model::data::EpisodeData;
 use world_model::eval::Video;
 
+use super::goal_free::DatasetScene;
+
 /// What scoring a dataset's frames needs: its scenario and the goal at every step.
 pub struct Scoring {
-    cfg: PushTConfig,
-    /// Goal pose at each step.
-    goals: Vec<Pose2>,
+    scene: DatasetScene,
     size: usize,
 }
 
@@ -77,19 +75,12 @@ impl Scoring {
     /// # Errors
     /// An unreadable state array.
     pub fn load(path: &std::path::Path, size: usize) -> Result<Result<Self, String>> {
-        let r = ReplayReader::open(path)?;
-        let Ok(cfg) =
-            serde_json::from_value::<PushTConfig>(r.attrs["evalharness"]["scenario_config"].clone())
-        else {
-            return Ok(Err("the dataset records no evalharness scenario".into()));
-        };
-        let dim = r.state.row_len();
-        if dim < 8 {
-            return Ok(Err(format!("data/state has {dim} columns, not the 8 with the goal")));
-        }
-        let state = r.state.read_f64()?;
-        let goals = state.chunks(dim).map(|s| Pose2::new(s[5], s[6], s[7])).collect();
-        Ok(Ok(Self { cfg, goals, size }))
+        Ok(DatasetScene::load(path)?.map(|scene| Self { scene, size }))
+    }
+
+    /// The scorer of the video starting at dataset step `start`.
+    pub fn scorer(&self, start: usize) -> FrameScorer {
+        FrameScorer::new(&self.scene.cfg, &self.scene.goal(start), self.size)
     }
 
     /// Scores `videos`, each read against its episode's goal; `stand_in(v, j)` is the
@@ -99,13 +90,13 @@ impl Scoring {
         videos: &'a [Video],
         stand_in: impl Fn(&'a Video, usize) -> &'a [u8],
     ) -> Vec<Scored> {
-        let thr = self.cfg.task.success_coverage;
+        let thr = self.scene.cfg.task.success_coverage;
         let score =
             |covs: &mut dyn Iterator<Item = f64>| covs.map(|c| (c / thr).clamp(0.0, 1.0)).fold(0.0, f64::max);
         videos
             .iter()
             .map(|v| {
-                let scorer = FrameScorer::new(&self.cfg, &self.goals[v.start], self.size);
+                let scorer = self.scorer(v.start);
                 let coverage: Vec<(f64, f64)> = (0..v.real.len())
                     .map(|j| (scorer.coverage(&v.real[j]), scorer.coverage(stand_in(v, j))))
                     .collect();

@@ -8,7 +8,10 @@
 //!   the agent position (as in DriftWorld's evaluation). Only the frames the
 //!   policy sees (the last `obs_horizon` of each chunk) are decoded to pixels, and
 //!   those are scored by [`FrameScorer`] against the known goal; the MuJoCo branch
-//!   is scored exactly at every step.
+//!   is scored exactly at every step. A goal-free world model (`train world-model
+//!   --goal-free`) starts from the first frame rendered without the goal, and each
+//!   decoded frame gets the episode's goal drawn back (`FrameScorer::draw_goal`)
+//!   before the policy, the scorer or a recording sees it.
 //!
 //! Both branches draw the policy's sampling noise from clones of the same
 //! per-episode stream, so they are matched pairs. All episodes advance in
@@ -303,7 +306,9 @@ pub fn wm_branch(
     let tw = Instant::now();
     let device = wm.device().clone();
     let (k, f_max) = (wm.cfg.unet.history, wm.cfg.future);
-    let refs: Vec<&[u8]> = start.first.iter().map(Vec::as_slice).collect();
+    let goal_free = wm.cfg.is_goal_free();
+    let firsts = if goal_free { &start.first_without_goal } else { &start.first };
+    let refs: Vec<&[u8]> = firsts.iter().map(Vec::as_slice).collect();
     let z0 = wm.encode(policies::diffusion::frames_to_tensor(&refs, size, &device)); // [n, C, s, s]
     let [_, c, ls, _] = z0.dims();
     // Latent histories and anchors (the first frame) of the active episodes, in `active`'s order.
@@ -336,10 +341,13 @@ pub fn wm_branch(
             if first_seen < f {
                 let m = f - first_seen;
                 let seen = pred.clone().narrow(1, first_seen, m).reshape([a * m, c, ls, ls]);
-                let frames = tensor_to_frames(wm.decode(seen));
+                let mut frames = tensor_to_frames(wm.decode(seen));
                 for (p, &i) in active.iter().enumerate() {
                     for j in 0..m {
-                        let fr = &frames[p * m + j];
+                        let fr = &mut frames[p * m + j];
+                        if goal_free {
+                            start.scorers[i].draw_goal(fr);
+                        }
                         track[i].add(start.scorers[i].coverage(fr), thr);
                         push(&mut hist[i], (fr.clone(), chunks[p][done + first_seen + j]), o);
                     }

@@ -192,6 +192,7 @@ mod tests {
             sample_steps: 1,
             prediction: None,
             alpha: None,
+            goal_free: None,
         };
         let unet = wm_cfg.unet.init(&device);
         let wm = WorldModel::from_parts(wm_cfg, FrameCodec::pixels(size), unet, &device);

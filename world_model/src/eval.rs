@@ -173,11 +173,24 @@ pub fn persistence(data: &EpisodeData, starts: &[(usize, usize)], k: usize, hori
     tally.row("persistence", "none", horizon, 0.0)
 }
 
+/// What a model reads and how its frames are completed, when its inputs are not the
+/// dataset's frames: a goal-free model reads the scenes re-rendered without the
+/// static goal, and each generated frame gets the goal back before it is compared
+/// with the real one.
+pub struct View<'a> {
+    /// The frames the model reads (same steps as the dataset).
+    pub inputs: &'a EpisodeData,
+    /// Completes the generated frames of the video whose context starts at a step.
+    pub complete: &'a (dyn Fn(usize, &mut [Vec<u8>]) + Sync),
+}
+
 /// Evaluates `wm` on videos starting at `starts`, each `len` generated frames long
-/// (or to its episode's end when `len` is `None`), in batches of `batch`.
+/// (or to its episode's end when `len` is `None`), in batches of `batch`; with a
+/// `view`, the model reads `view.inputs` and its frames are completed before the
+/// comparison with `data`'s.
 pub fn evaluate(
     wm: &WorldModel,
-    name: &str,
+    (name, view): (&str, Option<&View>),
     data: &EpisodeData,
     starts: &[(usize, usize)],
     horizon: &str,
@@ -194,9 +207,12 @@ pub fn evaluate(
         for chunk in group.chunks(batch.max(1)) {
             let len = chunk[0].1;
             let st: Vec<usize> = chunk.iter().map(|&(t, _)| t).collect();
-            let (videos_gen, s) = rollout(wm, data, &st, len, seed);
+            let (videos_gen, s) = rollout(wm, view.map_or(data, |v| v.inputs), &st, len, seed);
             secs += s;
-            for (&t, g) in st.iter().zip(videos_gen) {
+            for (&t, mut g) in st.iter().zip(videos_gen) {
+                if let Some(v) = view {
+                    (v.complete)(t, &mut g);
+                }
                 let real = real_frames(data, t, k, len);
                 tally.add(&real, &g, data.size);
                 videos.push(Video { start: t, real, generated: g });

@@ -83,9 +83,19 @@ pub struct WorldModelConfig {
     /// trained with accentuation; absent: 1, no accentuation).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alpha: Option<f32>,
+    /// Trained on frames without the scenario's static goal (`train world-model
+    /// --goal-free`; not in the paper): its users give it goal-free frames and draw
+    /// the known goal onto what it generates. Absent: the frames show the goal.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal_free: Option<bool>,
 }
 
 impl WorldModelConfig {
+    /// Whether the model works on goal-free frames (see [`WorldModelConfig::goal_free`]).
+    pub fn is_goal_free(&self) -> bool {
+        self.goal_free == Some(true)
+    }
+
     /// The `"model"` entry of `dir/config.json`.
     ///
     /// # Errors
@@ -380,6 +390,7 @@ mod tests {
             sample_steps: 1,
             prediction: None,
             alpha: None,
+            goal_free: None,
         };
         let diffusion = WorldModelConfig {
             objective: Objective::Diffusion,
