@@ -28,7 +28,6 @@ use harness::policy::{ActionChunk, Observation, Policy};
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
 use rayon::prelude::*;
-use scenarios::pusht::frame_score::SceneCheck;
 use scenarios::pusht::render::Rasterizer;
 use scenarios::pusht::rollout::{Episode, StepRow};
 use world_model::data::tensor_to_frames;
@@ -36,35 +35,8 @@ use world_model::latents::normalise_action;
 use world_model::model::WorldModel;
 
 use super::results::{Branch, EpisodeRow};
-use super::start::Seen;
 pub use super::start::{BranchOut, Setup, Start, Timing};
-
-/// Per-episode running score.
-#[derive(Clone, Debug, Default)]
-struct Track {
-    best_reward: f64,
-    max_cov: f64,
-    last_cov: f64,
-    /// Control steps executed (until success or the step limit).
-    steps: usize,
-    /// Score so far at the end of each action chunk (repeated after the episode ended,
-    /// so every trace of a batch has the same length).
-    trace: Vec<f64>,
-    /// Scene checks of the last frame the policy saw.
-    scene: Option<SceneCheck>,
-}
-
-impl Track {
-    fn add(&mut self, cov: f64, success_cov: f64) {
-        self.best_reward = self.best_reward.max((cov / success_cov).clamp(0.0, 1.0));
-        self.max_cov = self.max_cov.max(cov);
-        self.last_cov = cov;
-    }
-
-    fn end_chunk(&mut self) {
-        self.trace.push((self.best_reward * 1e6).round() / 1e6);
-    }
-}
+use super::start::{Seen, Track, still_active};
 
 /// What one MuJoCo episode returns per chunk.
 #[derive(Default)]
@@ -129,13 +101,6 @@ fn decide(
         bail!("policy {} returned an empty action chunk or too few chunks", policy.name());
     }
     Ok((chunks, len))
-}
-
-/// Episodes still running: gym-pusht ends an episode at success, and so does each
-/// branch here, at the end of the action chunk that reached it (its score, the best
-/// reward so far, cannot change after that).
-fn still_active(active: &[usize], track: &[Track]) -> Vec<usize> {
-    active.iter().copied().filter(|&i| track[i].best_reward < 1.0).collect()
 }
 
 /// The MuJoCo branch: real frames, real agent positions, exact scores.
@@ -397,25 +362,4 @@ pub fn wm_branch(
         })
         .collect();
     Ok(BranchOut { rows, frames: rec, episodes: Vec::new() })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn succeeded_episodes_leave_the_batch_and_keep_their_trace() {
-        let mut track = vec![Track::default(); 3];
-        // Success coverage 0.95: coverage 0.95 gives reward 1 (ends), 0.5 gives 0.526.
-        track[0].add(0.5, 0.95);
-        track[1].add(0.95, 0.95);
-        track[2].add(0.2, 0.95);
-        assert_eq!(still_active(&[0, 1, 2], &track), vec![0, 2]);
-        // A finished episode is not revived, and its trace keeps the batch's length.
-        assert_eq!(still_active(&[0, 2], &track), vec![0, 2]);
-        track.iter_mut().for_each(Track::end_chunk);
-        track.iter_mut().for_each(Track::end_chunk);
-        assert_eq!(track[1].trace, vec![1.0, 1.0]);
-        assert_eq!(track[0].trace, vec![0.526316, 0.526316]);
-    }
 }

@@ -2,7 +2,8 @@
 //! environments reset to the episode seeds, their goals and frame scorers, the
 //! first frames, the per-episode policy noise streams; the timing split; and a
 //! branch's rows, filmstrip frames and (for `collect --policy`) whole
-//! trajectories. The branches themselves are in [`super::paired`].
+//! trajectories; and each episode's running score and when it ends. The branches
+//! themselves are in [`super::paired`].
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -11,7 +12,7 @@ use anyhow::Result;
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
 use mujoco_rs::prelude::MjModel;
-use scenarios::pusht::frame_score::FrameScorer;
+use scenarios::pusht::frame_score::{FrameScorer, SceneCheck};
 use scenarios::pusht::render::Rasterizer;
 use scenarios::pusht::rollout::Episode;
 use scenarios::pusht::{PushTConfig, PushTEnv};
@@ -126,5 +127,60 @@ impl Start {
         (0..self.envs.len())
             .map(|i| (0..o).map(|_| (self.first[i].clone(), self.start_pos[i])).collect())
             .collect()
+    }
+}
+
+/// Per-episode running score.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Track {
+    pub(super) best_reward: f64,
+    pub(super) max_cov: f64,
+    pub(super) last_cov: f64,
+    /// Control steps executed (until success or the step limit).
+    pub(super) steps: usize,
+    /// Score so far at the end of each action chunk (repeated after the episode ended,
+    /// so every trace of a batch has the same length).
+    pub(super) trace: Vec<f64>,
+    /// Scene checks of the last frame the policy saw.
+    pub(super) scene: Option<SceneCheck>,
+}
+
+impl Track {
+    pub(super) fn add(&mut self, cov: f64, success_cov: f64) {
+        self.best_reward = self.best_reward.max((cov / success_cov).clamp(0.0, 1.0));
+        self.max_cov = self.max_cov.max(cov);
+        self.last_cov = cov;
+    }
+
+    pub(super) fn end_chunk(&mut self) {
+        self.trace.push((self.best_reward * 1e6).round() / 1e6);
+    }
+}
+
+/// Episodes still running: gym-pusht ends an episode at success, and so does each
+/// branch here, at the end of the action chunk that reached it (its score, the best
+/// reward so far, cannot change after that).
+pub(super) fn still_active(active: &[usize], track: &[Track]) -> Vec<usize> {
+    active.iter().copied().filter(|&i| track[i].best_reward < 1.0).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn succeeded_episodes_leave_the_batch_and_keep_their_trace() {
+        let mut track = vec![Track::default(); 3];
+        // Success coverage 0.95: coverage 0.95 gives reward 1 (ends), 0.5 gives 0.526.
+        track[0].add(0.5, 0.95);
+        track[1].add(0.95, 0.95);
+        track[2].add(0.2, 0.95);
+        assert_eq!(still_active(&[0, 1, 2], &track), vec![0, 2]);
+        // A finished episode is not revived, and its trace keeps the batch's length.
+        assert_eq!(still_active(&[0, 2], &track), vec![0, 2]);
+        track.iter_mut().for_each(Track::end_chunk);
+        track.iter_mut().for_each(Track::end_chunk);
+        assert_eq!(track[1].trace, vec![1.0, 1.0]);
+        assert_eq!(track[0].trace, vec![0.526316, 0.526316]);
     }
 }
