@@ -75,7 +75,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
     // Goal-free models read the scenes re-rendered without the goal, and each of their
     // frames gets its episode's goal drawn back before any comparison or scoring.
     let goal_free = if models.iter().any(|(_, wm)| wm.cfg.is_goal_free()) {
-        let mut inputs = EpisodeData::load(&a.data, 96)?;
+        let mut inputs = data.clone();
         let scene = goal_free::strip_goal(&a.data, &mut inputs)?;
         Some((inputs, scene))
     } else {

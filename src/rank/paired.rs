@@ -272,7 +272,15 @@ pub fn wm_branch(
     let device = wm.device().clone();
     let (k, f_max) = (wm.cfg.unet.history, wm.cfg.future);
     let goal_free = wm.cfg.is_goal_free();
-    let firsts = if goal_free { &start.first_without_goal } else { &start.first };
+    // A borrowed `Start`'s environments are still at their reset states (only the
+    // MuJoCo branch, which takes it by value, steps them).
+    let without_goal: Vec<Vec<u8>> = if goal_free {
+        let raster = Rasterizer::new(s.cfg);
+        start.envs.iter().map(|e| raster.render_without_goal(&e.state())).collect()
+    } else {
+        Vec::new()
+    };
+    let firsts = if goal_free { &without_goal } else { &start.first };
     let refs: Vec<&[u8]> = firsts.iter().map(Vec::as_slice).collect();
     let z0 = wm.encode(policies::diffusion::frames_to_tensor(&refs, size, &device)); // [n, C, s, s]
     let [_, c, ls, _] = z0.dims();

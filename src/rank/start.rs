@@ -64,8 +64,6 @@ pub struct Start {
     pub(super) goals: Vec<[f64; 3]>,
     pub(super) scorers: Vec<FrameScorer>,
     pub(super) first: Vec<Vec<u8>>,
-    /// The first frames without the goal (what a goal-free world model reads).
-    pub(super) first_without_goal: Vec<Vec<u8>>,
     pub(super) start_pos: Vec<[f32; 2]>,
     pub(super) policy_rngs: Vec<Rng>,
     pub(super) seeds: Vec<u64>,
@@ -106,7 +104,6 @@ impl Start {
             goals: envs.iter().map(|e| e.goal().to_array()).collect(),
             scorers,
             first: envs.iter().map(|e| raster.render(&e.state(), &e.goal())).collect(),
-            first_without_goal: envs.iter().map(|e| raster.render_without_goal(&e.state())).collect(),
             start_pos: envs.iter().map(|e| e.state().agent.map(|v| v as f32)).collect(),
             policy_rngs: seeds
                 .iter()

@@ -13,6 +13,7 @@ use harness::replay::ReplayReader;
 use crate::error::WorldModelError;
 
 /// Frames, actions and episode boundaries of a dataset.
+#[derive(Clone)]
 pub struct EpisodeData {
     /// `n x h x w x 3` bytes.
     pub frames: Vec<u8>,
