@@ -282,6 +282,39 @@ fn an_interrupted_run_saves_and_resumes() {
     let steps = prov["steps"].as_u64().unwrap();
     assert!((1..100_000).contains(&steps), "{steps}");
     assert_eq!(read_json(&out.join("state.json"))["step"].as_u64().unwrap(), steps);
+    assert!(!out.join("session_open.json").exists());
+    // A session that is killed (SIGKILL: no chance to save or write its sessions.jsonl
+    // line) is recorded by the next one, up to the checkpoint that one resumes from.
+    let mut child = crate::util::evalharness()
+        .args(args)
+        .args(["--resume", "-q"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let logged =
+        |min: usize| std::fs::read_to_string(out.join("train_log.jsonl")).unwrap().lines().count() > min;
+    let t0 = Instant::now();
+    while !logged(steps as usize + 1) {
+        assert!(t0.elapsed() < Duration::from_secs(300), "the resumed run never trained");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(out.join("session_open.json").is_file());
+    expect_code(&run(&[&args[..], &["--resume", "--max-minutes", "0"]].concat()), 0);
+    let sessions = read_json(&out.join("provenance.json"))["sessions"].clone();
+    assert_eq!(sessions.as_array().map(Vec::len), Some(3), "{sessions}");
+    assert!(sessions[1]["ended"].as_str().unwrap().starts_with("interrupted"), "{sessions}");
+    // No checkpoint was due (every 1000 steps), so it is recorded from and to `steps`,
+    // and the log's lines past the checkpoint were dropped when the run resumed.
+    assert_eq!(
+        (sessions[1]["from_step"].as_u64(), sessions[1]["to_step"].as_u64()),
+        (Some(steps), Some(steps))
+    );
+    assert_eq!(sessions[2]["from_step"].as_u64(), Some(steps));
+    assert!(sessions[2].get("ended").is_none());
+    assert!(!logged(steps as usize) && !out.join("session_open.json").exists());
 }
 
 #[test]
@@ -448,6 +481,18 @@ fn world_model_loss_variants_train_and_warm_start() {
     assert!(shipped.join("ema.bpk").is_file() && !shipped.join("optimizer.bpk").exists());
     let (_, err) = expect_code(&export(&diff), 2);
     assert!(err.contains("already exists"), "{err}");
+    // A run whose checkpoint is ahead of its provenance (a session killed after a
+    // checkpoint) is not exported under the older provenance.
+    let state = std::fs::read_to_string(diff.join("state.json")).unwrap();
+    std::fs::write(diff.join("state.json"), r#"{"step":7,"elapsed_s":1.0}"#).unwrap();
+    let elsewhere = dir.path().join("ship_stale");
+    let (_, err) = expect_code(
+        &run(&["wm", "export", "--from", diff.to_str().unwrap(), "--out", elsewhere.to_str().unwrap()]),
+        2,
+    );
+    assert!(err.contains("records 1 steps") && err.contains("at step 7"), "{err}");
+    assert!(err.contains("--resume --max-minutes 0") && !elsewhere.exists(), "{err}");
+    std::fs::write(diff.join("state.json"), state).unwrap();
     let (_, err) =
         expect_code(&run(&["wm", "export", "--from", a, "--out", dir.path().join("x").to_str().unwrap()]), 2);
     assert!(err.contains(&format!("--from {a}")) && err.contains("config.json"), "{err}");

@@ -60,6 +60,23 @@ pub fn resume_or_start<C: Serialize + DeserializeOwned>(
     Ok(saved)
 }
 
+/// Writes `text` to `path` through a temporary file beside it and a rename, so a
+/// process killed while writing leaves the old file or the new one, never a torn
+/// one. For the small state files (`state.json`) saved with every checkpoint; the
+/// weight files (burnpack) are written the same way by burn.
+///
+/// # Errors
+/// [`RunFileError`] naming `path` when the temporary file cannot be written or
+/// renamed.
+pub fn write_atomic(path: &Path, text: &str) -> Result<(), RunFileError> {
+    let err = |m: String| RunFileError { path: path.to_path_buf(), message: m };
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".partial");
+    let tmp = path.with_file_name(name);
+    std::fs::write(&tmp, text).map_err(|e| err(e.to_string()))?;
+    std::fs::rename(&tmp, path).map_err(|e| err(e.to_string()))
+}
+
 /// Opens a run's JSON-lines log (one object with a step counter `key` per line,
 /// e.g. `"step"`) for appending, first dropping the lines whose `key` is after
 /// `step`, the checkpoint the run resumes from. A run killed between checkpoints
@@ -102,6 +119,20 @@ mod tests {
     struct Cfg {
         lr: f64,
         steps: u64,
+    }
+
+    #[test]
+    fn write_atomic_replaces_the_file_and_leaves_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("state.json");
+        std::fs::write(&path, "old").unwrap();
+        write_atomic(&path, r#"{"step":2}"#).unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), r#"{"step":2}"#);
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("state.json")]);
+        let missing = dir.path().join("no_such_dir").join("state.json");
+        let e = write_atomic(&missing, "x").unwrap_err();
+        assert_eq!(e.path, missing);
     }
 
     #[test]

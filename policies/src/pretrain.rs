@@ -221,7 +221,7 @@ pub fn pretrain_encoder(
         probe.clone().save_file(&files[0]).map_err(|e| err(&files[0], e.to_string()))?;
         optim.save(&files[1]).map_err(|e| err(&files[1], e.to_string()))?;
         let text = serde_json::to_string(state).unwrap_or_default();
-        std::fs::write(&files[2], text).map_err(|e| err(&files[2], e.to_string()))
+        harness::runfile::write_atomic(&files[2], &text).map_err(|e| err(&e.path, e.message))
     };
     let started = Instant::now();
     let base = state.elapsed_s;

@@ -222,7 +222,8 @@ pub fn train_policy(
                     .save_file(&paths[3])
                     .map_err(|e| PolicyLoadError::new(&paths[3], e.to_string()))?;
             }
-            std::fs::write(&paths[2], serde_json::to_string(state).unwrap_or_default()).map_err(io(&paths[2]))
+            harness::runfile::write_atomic(&paths[2], &serde_json::to_string(state).unwrap_or_default())
+                .map_err(|e| PolicyLoadError::new(&e.path, e.message))
         };
     let started = Instant::now();
     let mut provenance = configs.provenance.clone();

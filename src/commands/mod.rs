@@ -9,6 +9,7 @@ mod episodes;
 mod export_policies;
 mod goal_free;
 mod scripted;
+mod sessions;
 mod simulate;
 mod simulate_policy;
 mod train;

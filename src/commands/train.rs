@@ -12,6 +12,7 @@ use world_model::autoencoder::AutoencoderConfig;
 use world_model::data::EpisodeData;
 use world_model::train_ae::{AeTrainConfig, RunOptions, train_autoencoder};
 
+use super::sessions::{open_session, read_step, record_session};
 use crate::cli::TrainAutoencoderArgs;
 use crate::output::write_json;
 use crate::progress;
@@ -80,39 +81,6 @@ pub(super) fn stop_on_signals() {
             tracing::warn!(signal = sig, error = %e, "cannot catch the signal; an interrupt loses the steps since the last checkpoint");
         }
     }
-}
-
-/// The step of the checkpoint in `out`, 0 if none.
-pub(super) fn read_step(out: &std::path::Path) -> u64 {
-    std::fs::read_to_string(out.join("state.json"))
-        .ok()
-        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-        .and_then(|v| v["step"].as_u64())
-        .unwrap_or(0)
-}
-
-/// Appends this invocation to `out/sessions.jsonl` and returns every session so far,
-/// so that a run trained over several sessions keeps each command and commit.
-pub(super) fn record_session(
-    out: &std::path::Path,
-    command: &str,
-    from: u64,
-    to: u64,
-    elapsed_s: f64,
-) -> Result<Vec<serde_json::Value>> {
-    use std::io::Write;
-    let path = out.join("sessions.jsonl");
-    let line = json!({"command": command, "commit": git_commit(), "from_step": from, "to_step": to, "elapsed_s_total": elapsed_s});
-    let mut f = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(&path)
-        .with_context(|| format!("opening {}", path.display()))?;
-    writeln!(f, "{line}").with_context(|| format!("writing {}", path.display()))?;
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    text.lines()
-        .map(|l| serde_json::from_str(l).with_context(|| format!("{}: invalid line", path.display())))
-        .collect()
 }
 
 /// A setting `--resume` cannot change: the flag's clap id, the value this command
@@ -205,6 +173,8 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     tracing::info!(data = %a.data.display(), "loading frames");
     let data = EpisodeData::load(&a.data, model_cfg.image_size)?;
     tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");
+    let args: Vec<String> = std::env::args().collect();
+    open_session(&a.out, &args.join(" "), from_step)?;
     let pb = progress::bar(cfg.steps, "autoencoder", quiet);
     let run = RunOptions {
         resume: a.session.resume,
@@ -233,7 +203,6 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     let strip = reports::png::filmstrip(&[top, bottom], size, size);
     let strip_path = a.out.join("reconstructions.png");
     reports::png::write_png(&strip_path, &strip.pixels, strip.width, strip.height)?;
-    let args: Vec<String> = std::env::args().collect();
     let sessions = record_session(&a.out, &args.join(" "), from_step, outcome.step, outcome.elapsed_s)?;
     write_json(
         &a.out.join("provenance.json"),

@@ -19,10 +19,8 @@ use world_model::train_ae::RunOptions;
 use world_model::train_wm::{TrainingFrames, WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
-use super::train::{
-    data_provenance, fixed_fields, git_commit, prepare_out, read_step, record_session,
-    refuse_contradicting_flags,
-};
+use super::sessions::{open_session, read_step, record_session};
+use super::train::{data_provenance, fixed_fields, git_commit, prepare_out, refuse_contradicting_flags};
 use crate::cli::{FieldArg, ObjectiveArg, PredictionArg, TrainWorldModelArgs, WmConfigArg};
 use crate::output::{read_json, write_json};
 use crate::progress;
@@ -180,6 +178,8 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             }
         }
     };
+    let args: Vec<String> = std::env::args().collect();
+    open_session(&a.out, &args.join(" "), from_step)?;
     let pb = progress::bar(cfg.steps, objective.name(), quiet);
     let run = RunOptions {
         resume: a.session.resume,
@@ -202,7 +202,6 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         },
     )?;
     pb.finish_and_clear();
-    let args: Vec<String> = std::env::args().collect();
     let sessions = record_session(&a.out, &args.join(" "), from_step, outcome.step, outcome.elapsed_s)?;
     let saved = saved_model_config(&a.out)?;
     write_json(

@@ -5,8 +5,9 @@
 //! commit, source folder; one per export, oldest first). The trained weights and
 //! the optimizer state, needed only to resume training, stay in the run.
 //!
-//! The source must load as a model and have a `provenance.json` (a trainer writes
-//! it when a session ends), and so must the copy, checked before it is reported.
+//! The source must load as a model and have a `provenance.json` that describes
+//! its weights (the same step as its checkpoint; a trainer writes it when a
+//! session ends), and so must the copy, checked before it is reported.
 
 use std::process::ExitCode;
 
@@ -15,6 +16,7 @@ use serde_json::json;
 use world_model::model::WorldModel;
 
 use super::export_policies::append;
+use super::sessions::stale_provenance;
 use super::train::git_commit;
 use super::train_wm::relative_to;
 use crate::cli::WmExportArgs;
@@ -37,6 +39,13 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
         );
     }
     let mut provenance = read_json(&prov_path)?;
+    if let Some(why) = stale_provenance(&a.from, &provenance) {
+        bail!(
+            "--from {why}; `train world-model --out {} --resume --max-minutes 0` records that session \
+             and rewrites provenance.json without training",
+            a.from.display()
+        );
+    }
     let mut config = read_json(&a.from.join("config.json"))?;
     let staged = Staged::new(&a.out, a.force)?;
     if let Some(ae) = config["model"]["autoencoder"].as_str() {

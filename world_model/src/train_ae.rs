@@ -259,7 +259,8 @@ pub fn train_autoencoder(
      -> Result<(), WorldModelError> {
         model.clone().save_file(&model_path).map_err(|e| ckpt(&model_path, e))?;
         optim.save(&optim_path).map_err(|e| ckpt(&optim_path, e))?;
-        std::fs::write(&state_path, serde_json::to_string(state).unwrap_or_default()).map_err(io(&state_path))
+        harness::runfile::write_atomic(&state_path, &serde_json::to_string(state).unwrap_or_default())
+            .map_err(|e| ckpt(&e.path, e.message))
     };
     while state.step < cfg.steps {
         if deadline.is_some_and(|d| started.elapsed().as_secs_f64() >= d) || harness::stop::requested() {

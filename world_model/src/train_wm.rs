@@ -280,7 +280,8 @@ pub fn train_world_model(
         unet.clone().save_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;
         ema.clone().save_file(&paths[1]).map_err(|e| ckpt(&paths[1], e))?;
         optim.save(&paths[2]).map_err(|e| ckpt(&paths[2], e))?;
-        std::fs::write(&paths[3], serde_json::to_string(state).unwrap_or_default()).map_err(io(&paths[3]))
+        harness::runfile::write_atomic(&paths[3], &serde_json::to_string(state).unwrap_or_default())
+            .map_err(|e| ckpt(&e.path, e.message))
     };
     let log_path = out.join("train_log.jsonl");
     let mut log =
