@@ -13,7 +13,9 @@
 //! `BENCH_OBJECTIVE_BATCHES=1,100`. The device is `EVALHARNESS_DEVICE` (see
 //! `world_model::device`). `decoder` times the frame decoder alone, burn's
 //! convolutions against the direct CPU kernels (`world_model::cpu_decoder`), at
-//! batch 1 and 50 on the shipped autoencoder (`BENCH_AUTOENCODER=DIR`).
+//! batch 1 and 50 on the shipped autoencoder (`BENCH_AUTOENCODER=DIR`);
+//! `BENCH_DECODER_CHANNELS=8,16,32,32` adds a decoder of those widths (random
+//! weights) on the direct kernels, to price a narrower decoder before training one.
 
 // criterion_group! generates undocumented functions.
 #![allow(missing_docs)]
@@ -27,6 +29,7 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use harness::policy::Observation;
 use harness::rng::Rng;
 use policies::dir::{Expectations, checkpoint_dirs, load_policy};
+use world_model::autoencoder::AutoencoderConfig;
 use world_model::codec::FrameCodec;
 use world_model::cpu_decoder::CpuDecoder;
 use world_model::latents::LatentStats;
@@ -145,6 +148,13 @@ fn decoder(c: &mut Criterion) {
     let direct = CpuDecoder::new(&ae, s).unwrap_or_else(|e| panic!("{e}"));
     let mut g = c.benchmark_group("decoder");
     g.sample_size(10).measurement_time(Duration::from_secs(20));
+    let narrow = std::env::var("BENCH_DECODER_CHANNELS").ok().map(|v| {
+        let c: Vec<usize> =
+            v.split(',').map(|x| x.trim().parse().expect("BENCH_DECODER_CHANNELS: 4 integers")).collect();
+        let c: [usize; 4] = c.try_into().expect("BENCH_DECODER_CHANNELS: 4 integers");
+        let ae = AutoencoderConfig { decoder_channels: Some(c), ..cfg.clone() }.init(&device);
+        (v, CpuDecoder::new(&ae, s).unwrap_or_else(|e| panic!("{e}")))
+    });
     for b in [1, 50] {
         let z = Tensor::<4>::random([b, ch, s, s], Distribution::Normal(0.0, 1.0), &device); // [b, C, s, s]
         let v: Vec<f32> = z.clone().into_data().try_to_vec().unwrap_or_default();
@@ -154,6 +164,11 @@ fn decoder(c: &mut Criterion) {
         g.bench_with_input(BenchmarkId::new("direct", b), &b, |bench, &b| {
             bench.iter(|| black_box(direct.decode(&v, b)))
         });
+        if let Some((name, dec)) = &narrow {
+            g.bench_with_input(BenchmarkId::new(format!("direct_{name}"), b), &b, |bench, &b| {
+                bench.iter(|| black_box(dec.decode(&v, b)))
+            });
+        }
     }
     g.finish();
 }

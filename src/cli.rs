@@ -162,6 +162,11 @@ pub struct WmExportArgs {
     /// The new world-model folder.
     #[arg(long)]
     pub out: PathBuf,
+    /// Use this autoencoder instead of the run's: one with the same encoder (checked:
+    /// it must encode exactly as the run's does) and another decoder, e.g. a narrower
+    /// one from `train autoencoder --encoder-from`.
+    #[arg(long)]
+    pub autoencoder: Option<PathBuf>,
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,

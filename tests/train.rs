@@ -481,6 +481,67 @@ fn world_model_loss_variants_train_and_warm_start() {
     assert!(shipped.join("ema.bpk").is_file() && !shipped.join("optimizer.bpk").exists());
     let (_, err) = expect_code(&export(&diff), 2);
     assert!(err.contains("already exists"), "{err}");
+    // A narrower decoder on the same encoder's latents (`train autoencoder
+    // --encoder-from`) replaces the run's decoder in an export; an autoencoder with
+    // another encoder is refused, since the world model's latents would not match.
+    let narrow = dir.path().join("ae_narrow");
+    let n = narrow.to_str().unwrap();
+    let dec = ["train", "autoencoder", "--data", d, "--out", n, "--steps", "1", "--batch", "2"];
+    expect_code(&run(&[&dec[..], &["--encoder-from", a, "--decoder-channels", "8,16,32,32"]].concat()), 0);
+    let prov = read_json(&narrow.join("provenance.json"));
+    assert_eq!(prov["decoder_channels"], json!([8, 16, 32, 32]));
+    assert_eq!(prov["encoder_from"]["path"], a);
+    let (_, err) =
+        expect_code(&run(&[&dec[..], &["--resume", "--decoder-channels", "16,32,64,64"]].concat()), 2);
+    assert!(err.contains("--decoder-channels (saved: [8,16,32,32])"), "{err}");
+    let bad = dir.path().join("ae_bad");
+    let (_, err) = expect_code(
+        &run(&[
+            "train",
+            "autoencoder",
+            "--data",
+            d,
+            "--out",
+            bad.to_str().unwrap(),
+            "--decoder-channels",
+            "8,16,32",
+        ]),
+        2,
+    );
+    assert!(err.contains("--decoder-channels") && err.contains("four multiples of 8"), "{err}");
+    let swapped = dir.path().join("ship").join("wm_narrow");
+    let args = ["wm", "export", "--from", diff.to_str().unwrap(), "--autoencoder", n];
+    expect_code(&run(&[&args[..], &["--out", swapped.to_str().unwrap()]].concat()), 0);
+    let cfg = read_json(&swapped.join("config.json"));
+    assert_eq!(cfg["model"]["autoencoder"], "../../ae_narrow");
+    assert_eq!(read_json(&swapped.join("provenance.json"))["autoencoder_replaced"]["now"], n);
+    let ev = dir.path().join("eval_narrow");
+    let args = ["wm", "eval", "--world-model", swapped.to_str().unwrap(), "--data", long.to_str().unwrap()];
+    let few = ["--episodes", "1", "--full-episodes", "0", "--out", ev.to_str().unwrap()];
+    expect_code(&run(&[&args[..], &few[..]].concat()), 0);
+    let other = dir.path().join("ae_other");
+    let o = other.to_str().unwrap();
+    expect_code(
+        &run(&[
+            "train",
+            "autoencoder",
+            "--data",
+            d,
+            "--out",
+            o,
+            "--steps",
+            "1",
+            "--batch",
+            "2",
+            "--seed",
+            "1",
+        ]),
+        0,
+    );
+    let args = ["wm", "export", "--from", diff.to_str().unwrap(), "--autoencoder", o];
+    let (_, err) =
+        expect_code(&run(&[&args[..], &["--out", dir.path().join("x2").to_str().unwrap()]].concat()), 2);
+    assert!(err.contains("its encoder differs") && err.contains("--encoder-from"), "{err}");
     // A run whose checkpoint is ahead of its provenance (a session killed after a
     // checkpoint) is not exported under the older provenance.
     let state = std::fs::read_to_string(diff.join("state.json")).unwrap();

@@ -259,6 +259,15 @@ pub struct TrainAutoencoderArgs {
     /// Checkpoint interval (steps).
     #[arg(long, default_value_t = 100)]
     pub checkpoint_every: u64,
+    /// Train only a decoder, on the fixed latents of this autoencoder's encoder (its
+    /// weights are copied and never change), so that world models trained on those
+    /// latents can use the new decoder (`wm export --autoencoder`).
+    #[arg(long, value_name = "AUTOENCODER")]
+    pub encoder_from: Option<PathBuf>,
+    /// The decoder's channels at 96, 48, 24 and 12 pixels (default: the encoder's,
+    /// 16,32,64,64). A narrower decoder is cheaper per decoded frame in `rank`.
+    #[arg(long, value_delimiter = ',')]
+    pub decoder_channels: Option<Vec<usize>>,
     /// Session control.
     #[command(flatten)]
     pub session: SessionArgs,

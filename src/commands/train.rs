@@ -153,7 +153,16 @@ pub fn data_provenance(path: &std::path::Path, episodes: usize, frames: usize) -
 pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     prepare_out(&a.out, a.session.resume, a.session.force, "state.json")?;
     let from_step = read_step(&a.out);
-    let model_cfg = AutoencoderConfig::new();
+    let decoder_channels = match a.decoder_channels.as_deref() {
+        None => None,
+        Some(&[c0, c1, c2, c3]) if [c0, c1, c2, c3].iter().all(|&c| c >= 8 && c % 8 == 0) => {
+            Some([c0, c1, c2, c3])
+        }
+        Some(c) => {
+            bail!("--decoder-channels {c:?}: four multiples of 8 (GroupNorm's 8 groups), e.g. 8,16,32,32")
+        }
+    };
+    let model_cfg = AutoencoderConfig { decoder_channels, ..AutoencoderConfig::new() };
     let cfg = AeTrainConfig {
         steps: a.steps.unwrap_or(4000),
         batch: a.batch,
@@ -161,13 +170,16 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
         seed: a.seed,
         eval_every: a.eval_every.max(1),
         checkpoint_every: a.checkpoint_every.max(1),
+        encoder_from: a.encoder_from.clone(),
         ..AeTrainConfig::default()
     };
     if a.session.resume {
         let path = a.out.join("config.json");
         let saved = crate::output::read_json(&path)?;
-        let keys = ["batch", "lr", "seed", "eval_every", "checkpoint_every"].map(|k| (k, k));
-        let fixed = fixed_fields(&serde_json::to_value(&cfg)?, &saved["train"], &keys);
+        let keys = ["batch", "lr", "seed", "eval_every", "checkpoint_every", "encoder_from"].map(|k| (k, k));
+        let mut fixed = fixed_fields(&serde_json::to_value(&cfg)?, &saved["train"], &keys);
+        let model_keys = [("decoder_channels", "decoder_channels")];
+        fixed.extend(fixed_fields(&serde_json::to_value(&model_cfg)?, &saved["model"], &model_keys));
         refuse_contradicting_flags(&path, "autoencoder", &fixed)?;
     }
     tracing::info!(data = %a.data.display(), "loading frames");
@@ -204,10 +216,22 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     let strip_path = a.out.join("reconstructions.png");
     reports::png::write_png(&strip_path, &strip.pixels, strip.width, strip.height)?;
     let sessions = record_session(&a.out, &args.join(" "), from_step, outcome.step, outcome.elapsed_s)?;
+    // The saved config is the run's (a resumed run keeps it).
+    let saved = crate::output::read_json(&a.out.join("config.json"))?;
+    let encoder_from = saved["train"].get("encoder_from").map(|dir| {
+        let dir = std::path::PathBuf::from(dir.as_str().unwrap_or_default());
+        json!({"path": dir.display().to_string(), "provenance": crate::output::read_json(&dir.join("provenance.json")).ok()})
+    });
+    let saved_decoder_channels = saved["model"]["decoder_channels"].clone();
     write_json(
         &a.out.join("provenance.json"),
         &json!({
-            "what": "frame autoencoder (96x96x3 <-> 12x12x8)",
+            "what": match &encoder_from {
+                Some(_) => "frame decoder (12x12x8 -> 96x96x3) trained on a fixed encoder's latents",
+                None => "frame autoencoder (96x96x3 <-> 12x12x8)",
+            },
+            "encoder_from": encoder_from,
+            "decoder_channels": saved_decoder_channels,
             "command": args.join(" "),
             "sessions": sessions,
             "seed": a.seed,

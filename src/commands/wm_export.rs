@@ -5,15 +5,21 @@
 //! commit, source folder; one per export, oldest first). The trained weights and
 //! the optimizer state, needed only to resume training, stay in the run.
 //!
+//! `--autoencoder` swaps the decoder: the folder uses another autoencoder with the
+//! same encoder (checked), e.g. a narrower decoder trained with `train autoencoder
+//! --encoder-from`, recorded in the provenance's `autoencoder_replaced`.
+//!
 //! The source must load as a model and have a `provenance.json` that describes
 //! its weights (the same step as its checkpoint; a trainer writes it when a
 //! session ends), and so must the copy, checked before it is reported.
 
+use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use serde_json::json;
 use world_model::model::WorldModel;
+use world_model::train_ae::load_autoencoder;
 
 use super::export_policies::append;
 use super::sessions::stale_provenance;
@@ -25,6 +31,25 @@ use crate::output::{Staged, read_json, write_json};
 /// Copied when present; `ema.bpk` is required.
 const FILES: [&str; 5] =
     ["ema.bpk", "state.json", "train_log.jsonl", "sessions.jsonl", "init_from_provenance.json"];
+
+/// Refuses `other` unless it encodes exactly as `trained_on`, the autoencoder whose
+/// latents the world model was trained on.
+fn check_same_encoder(trained_on: &Path, other: &Path, device: &burn::tensor::Device) -> Result<()> {
+    let (ours, _) =
+        load_autoencoder(trained_on, device).with_context(|| format!("{}", trained_on.display()))?;
+    let (theirs, _) =
+        load_autoencoder(other, device).with_context(|| format!("--autoencoder {}", other.display()))?;
+    if !theirs.encodes_like(&ours, device) {
+        bail!(
+            "--autoencoder {}: its encoder differs from {}, whose latents the world model was trained on \
+             (a decoder for this model is trained with `train autoencoder --encoder-from {}`)",
+            other.display(),
+            trained_on.display(),
+            trained_on.display()
+        );
+    }
+    Ok(())
+}
 
 /// `evalharness wm export`.
 pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
@@ -49,12 +74,31 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
     let mut config = read_json(&a.from.join("config.json"))?;
     let staged = Staged::new(&a.out, a.force)?;
     if let Some(ae) = config["model"]["autoencoder"].as_str() {
+        let trained_on = a.from.join(ae);
+        let target = match &a.autoencoder {
+            Some(other) => {
+                check_same_encoder(&trained_on, other, &device)?;
+                provenance["autoencoder_replaced"] = json!({
+                    "trained_on": trained_on.display().to_string(),
+                    "now": other.display().to_string(),
+                    "now_provenance": read_json(&other.join("provenance.json")).ok(),
+                });
+                other.clone()
+            }
+            None => trained_on,
+        };
         // The staging folder is the output's sibling, so paths relative to it hold.
-        let moved = relative_to(&staged.file(""), &a.from.join(ae))?.display().to_string();
+        let moved = relative_to(&staged.file(""), &target)?.display().to_string();
         config["model"]["autoencoder"] = json!(moved);
         if provenance.get("autoencoder").is_some() {
             provenance["autoencoder"] = json!(moved);
         }
+    } else if let Some(other) = &a.autoencoder {
+        bail!(
+            "--autoencoder {}: {} is a pixel-space model (no autoencoder)",
+            other.display(),
+            a.from.display()
+        );
     }
     write_json(&staged.file("config.json"), &config)?;
     for name in FILES {

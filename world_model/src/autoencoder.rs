@@ -29,9 +29,21 @@ pub struct AutoencoderConfig {
     /// GroupNorm groups.
     #[config(default = 8)]
     pub groups: usize,
+    /// The decoder's channels at 96, 48, 24 and 12 pixels (listed like `channels`);
+    /// `None`: the same as the encoder's. A narrower decoder
+    /// is cheaper per decoded frame, which is most of `rank`'s world-model time.
+    #[config(default = "None")]
+    pub decoder_channels: Option<[usize; 4]>,
 }
 
 impl AutoencoderConfig {
+    /// Whether `other` has the same encoder (image size, encoder channels, latent
+    /// channels, groups), so that its encoder's weights fit this config.
+    pub fn same_encoder(&self, other: &AutoencoderConfig) -> bool {
+        (self.image_size, self.channels, self.latent_channels, self.groups)
+            == (other.image_size, other.channels, other.latent_channels, other.groups)
+    }
+
     /// Latent side (image / 8).
     pub fn latent_size(&self) -> usize {
         self.image_size / 8
@@ -39,7 +51,8 @@ impl AutoencoderConfig {
 
     /// Builds the module.
     pub fn init(&self, device: &Device) -> Autoencoder {
-        let [c0, c1, c2, c3] = self.channels;
+        let [e0, e1, e2, e3] = self.channels;
+        let [c0, c1, c2, c3] = self.decoder_channels.unwrap_or(self.channels);
         let g = self.groups;
         let up = || {
             Interpolate2dConfig::new()
@@ -48,19 +61,19 @@ impl AutoencoderConfig {
                 .init()
         };
         Autoencoder {
-            enc_in: conv(3, c0, 3, 1, device),
+            enc_in: conv(3, e0, 3, 1, device),
             enc_down: vec![
-                conv(c0, c1, 3, 2, device),
-                conv(c1, c2, 3, 2, device),
-                conv(c2, c3, 3, 2, device),
+                conv(e0, e1, 3, 2, device),
+                conv(e1, e2, 3, 2, device),
+                conv(e2, e3, 3, 2, device),
             ],
             enc_blocks: vec![
-                ResBlock::new(c1, g, device),
-                ResBlock::new(c2, g, device),
-                ResBlock::new(c3, g, device),
+                ResBlock::new(e1, g, device),
+                ResBlock::new(e2, g, device),
+                ResBlock::new(e3, g, device),
             ],
-            enc_norm: GroupNormConfig::new(g, c3).init(device),
-            enc_out: conv(c3, self.latent_channels, 1, 1, device),
+            enc_norm: GroupNormConfig::new(g, e3).init(device),
+            enc_out: conv(e3, self.latent_channels, 1, 1, device),
             dec_in: conv(self.latent_channels, c3, 3, 1, device),
             dec_blocks: vec![
                 ResBlock::new(c3, g, device),
@@ -153,6 +166,35 @@ impl Autoencoder {
         self.dec_out.forward(silu(self.dec_norm.forward(h))) // [b, 3, 96, 96]
     }
 
+    /// This model with `other`'s encoder (its weights, moved over), for training a new
+    /// decoder on the latents of an existing autoencoder (`train autoencoder
+    /// --encoder-from`). The two configs must agree on the encoder (checked by the
+    /// caller with [`AutoencoderConfig::same_encoder`]).
+    pub fn with_encoder_of(self, other: Autoencoder) -> Self {
+        Self {
+            enc_in: other.enc_in,
+            enc_down: other.enc_down,
+            enc_blocks: other.enc_blocks,
+            enc_norm: other.enc_norm,
+            enc_out: other.enc_out,
+            ..self
+        }
+    }
+
+    /// Whether `other` encodes exactly as this model does: both encode the same
+    /// fixed, frame-like input to the same latents, bit for bit (identical encoder
+    /// weights do; a retrained encoder does not). Latents of one are then latents
+    /// of the other, so a world model trained on them may decode with either.
+    pub fn encodes_like(&self, other: &Autoencoder, device: &Device) -> bool {
+        let n = 2 * 3 * 32 * 32;
+        // A deterministic pattern in [-1, 1] with edges at several scales.
+        let v: Vec<f32> =
+            (0..n).map(|i| (((i * 7919) % 251) as f32 / 125.0 - 1.0).clamp(-1.0, 1.0)).collect();
+        let x = Tensor::<4>::from_data(burn::tensor::TensorData::new(v, [2, 3, 32, 32]), device); // [2, 3, 32, 32]
+        let (a, b) = (self.encode(x.clone()).into_data(), other.encode(x).into_data());
+        a.shape() == b.shape() && a.as_slice::<f32>().ok() == b.as_slice::<f32>().ok()
+    }
+
     /// Encode then decode.
     ///
     /// # Shapes
@@ -165,6 +207,23 @@ impl Autoencoder {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_copied_encoder_encodes_alike_and_a_narrow_decoder_decodes() {
+        let device = Device::flex();
+        device.seed(3);
+        let source = AutoencoderConfig::new().init(&device);
+        let narrow =
+            AutoencoderConfig { decoder_channels: Some([8, 16, 32, 32]), ..AutoencoderConfig::new() };
+        assert!(narrow.same_encoder(&AutoencoderConfig::new()));
+        assert!(!narrow.same_encoder(&AutoencoderConfig::new().with_latent_channels(4)));
+        let fresh = narrow.init(&device);
+        assert!(!fresh.encodes_like(&source, &device), "independent draws encode differently");
+        let copied = fresh.with_encoder_of(source.clone());
+        assert!(copied.encodes_like(&source, &device));
+        let z = copied.encode(Tensor::<4>::zeros([1, 3, 96, 96], &device));
+        assert_eq!(copied.decode(z).dims(), [1, 3, 96, 96]);
+    }
 
     #[test]
     fn shapes_round_trip() {

@@ -43,6 +43,10 @@ pub struct AeTrainConfig {
     pub eval_frames: usize,
     /// Checkpoint every this many steps.
     pub checkpoint_every: u64,
+    /// Train only the decoder: the encoder's weights come from this autoencoder and
+    /// stay fixed, so the latents (and world models trained on them) are unchanged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub encoder_from: Option<std::path::PathBuf>,
 }
 
 impl Default for AeTrainConfig {
@@ -56,6 +60,7 @@ impl Default for AeTrainConfig {
             eval_every: 250,
             eval_frames: 256,
             checkpoint_every: 100,
+            encoder_from: None,
         }
     }
 }
@@ -226,6 +231,16 @@ pub fn train_autoencoder(
     let fresh = Configs { model: model_cfg.clone(), train: cfg.clone() };
     let (model_cfg, cfg) = run_configs(out, fresh, run, |t: &mut AeTrainConfig| &mut t.steps)?;
     let mut model = model_cfg.init(&device);
+    if let (Some(dir), false) = (&cfg.encoder_from, resume) {
+        let (source, source_cfg) = load_autoencoder(dir, &device)?;
+        if !model_cfg.same_encoder(&source_cfg) {
+            return Err(ckpt(
+                &dir.join("config.json"),
+                "its encoder (image size, channels, latent channels, groups) differs from this run's",
+            ));
+        }
+        model = model.with_encoder_of(source);
+    }
     let mut optim = AdamWConfig::new().with_beta_1(0.9).with_beta_2(0.95).with_weight_decay(0.01).init();
     let mut state = State { step: 0, elapsed_s: 0.0 };
     let (model_path, optim_path, state_path) =
@@ -276,7 +291,12 @@ pub fn train_autoencoder(
             .collect();
         let lr = crate::optim::warmup_lr(step, cfg.lr, cfg.warmup);
         let x = data.frames_tensor(&idx, &device);
-        let loss = (model.forward(x.clone()) - x).powf_scalar(2.0).mean();
+        let recon = match cfg.encoder_from {
+            // A fixed encoder: no gradient reaches it, so the optimizer leaves it as loaded.
+            Some(_) => model.decode(model.encode(x.clone()).detach()),
+            None => model.forward(x.clone()),
+        }; // [b, 3, 96, 96]
+        let loss = (recon - x).powf_scalar(2.0).mean();
         let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
         if !loss_value.is_finite() {
             return Err(WorldModelError::NonFinite {
