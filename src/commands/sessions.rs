@@ -48,11 +48,11 @@ pub(super) fn open_session(out: &Path, command: &str, from: u64) -> Result<()> {
 }
 
 /// Turns a left-over [`OPEN_SESSION`] into a `sessions.jsonl` line that ends at the
-/// run's checkpoint. Returns whether there was one.
-fn recover_interrupted(out: &Path) -> Result<bool> {
+/// run's checkpoint.
+fn recover_interrupted(out: &Path) -> Result<()> {
     let path = out.join(OPEN_SESSION);
     if !path.is_file() {
-        return Ok(false);
+        return Ok(());
     }
     let mut line = read_json(&path)?;
     let (step, elapsed_s) = checkpoint(out);
@@ -68,8 +68,7 @@ fn recover_interrupted(out: &Path) -> Result<bool> {
         "the run's previous session did not end normally; recorded up to its last checkpoint"
     );
     append(out, &line)?;
-    std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
-    Ok(true)
+    std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))
 }
 
 /// Appends this session (from step `from` to `to`, `elapsed_s` of training over

@@ -226,7 +226,6 @@ pub fn train_autoencoder(
     on_progress: &mut dyn FnMut(&AeProgress),
 ) -> Result<AeOutcome, WorldModelError> {
     let RunOptions { resume, max_minutes, .. } = run;
-    let inner = device.clone();
     let device = device.clone().autodiff();
     device.seed(cfg.seed);
     let fresh = Configs { model: model_cfg.clone(), train: cfg.clone() };
@@ -296,10 +295,7 @@ pub fn train_autoencoder(
             // A fixed encoder: it encodes on the inner backend, so no gradient reaches it
             // and the optimizer leaves it as loaded. (Encoding on the autodiff device and
             // detaching leaks: backward never frees the detached part of the graph.)
-            Some(_) => {
-                let z = model.valid().encode(data.frames_tensor(&idx, &inner)); // [b, C, 12, 12]
-                model.decode(burn::tensor::Tensor::from_data(z.into_data(), &device))
-            }
+            Some(_) => model.decode(model.valid().encode(x.clone().inner()).autodiff()), // z: [b, C, 12, 12]
             None => model.forward(x.clone()),
         }; // [b, 3, 96, 96]
         let loss = (recon - x).powf_scalar(2.0).mean();
