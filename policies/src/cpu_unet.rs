@@ -37,13 +37,13 @@ fn dense(l: &Linear, layer: &str) -> Result<Dense, UnsupportedLayer> {
     Ok(Dense::new(l, layer)?)
 }
 
-/// Mish, `x · tanh(softplus(x))`, with one `exp`: tanh(ln(1 + e)) = n / (n + 2) for
+/// Mish, `x · tanh(softplus(x))`, with one (polynomial) `exp`: tanh(ln(1 + e)) = n / (n + 2) for
 /// n = e(e + 2). Above 20 softplus is the identity (burn's threshold) and so is mish.
 fn mish(x: f32) -> f32 {
     if x > 20.0 {
         return x;
     }
-    let e = x.exp();
+    let e = world_model::direct_conv::exp(x);
     let n = e * (e + 2.0);
     x * n / (n + 2.0)
 }

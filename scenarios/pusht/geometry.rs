@@ -91,7 +91,8 @@ impl Rect {
     pub fn distance(&self, p: [f64; 2]) -> f64 {
         let dx = (self.x[0] - p[0]).max(p[0] - self.x[1]).max(0.0);
         let dy = (self.y[0] - p[1]).max(p[1] - self.y[1]).max(0.0);
-        dx.hypot(dy)
+        // Not `hypot` (a libm call; the renderer asks this per pixel near an edge).
+        (dx * dx + dy * dy).sqrt()
     }
 
     /// Corners in counter-clockwise order (in a y-up sense).

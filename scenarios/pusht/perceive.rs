@@ -213,7 +213,7 @@ impl Perceiver {
                 let inner = (self.border..n - self.border).contains(&px)
                     && (self.border..n - self.border).contains(&py);
                 let (cx, cy) = ((px as f64 + 0.5) * s, (py as f64 + 0.5) * s);
-                let near_agent = agent.is_some_and(|a| (cx - a[0]).hypot(cy - a[1]) < reach);
+                let near_agent = agent.is_some_and(|a| super::render::dist(cx - a[0], cy - a[1]) < reach);
                 if !inner || near_agent || rgb[2] > rgb[0].saturating_add(40) {
                     continue;
                 }

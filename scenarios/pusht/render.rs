@@ -222,7 +222,7 @@ impl Rasterizer {
         block: &Frame,
         goal: Option<&Frame>,
     ) -> bool {
-        let d = (cx - agent[0]).hypot(cy - agent[1]);
+        let d = dist(cx - agent[0], cy - agent[1]);
         if (d - self.agent_radius).abs() < h || (d - AGENT_INNER_RADIUS).abs() < h {
             return true;
         }
@@ -261,7 +261,7 @@ impl Rasterizer {
 
     /// The colour of the topmost shape at world point (wx, wy).
     fn sample(&self, wx: f64, wy: f64, agent: [f64; 2], block: &Frame, goal: Option<&Frame>) -> Rgb {
-        let d = (wx - agent[0]).hypot(wy - agent[1]);
+        let d = dist(wx - agent[0], wy - agent[1]);
         if d <= AGENT_INNER_RADIUS {
             return AGENT_INNER;
         }
@@ -303,6 +303,13 @@ pub fn block_colour(shape: &TShape, b: [f64; 2]) -> Option<Rgb> {
 /// inside (the T is a union of axis-aligned rectangles in its body frame).
 fn within_inside(shape: &TShape, b: [f64; 2], e: f64) -> bool {
     [[-e, -e], [e, -e], [e, e], [-e, e]].iter().any(|o| !shape.contains([b[0] + o[0], b[1] + o[1]]))
+}
+
+/// The length of (dx, dy). Not `f64::hypot`: its overflow care is a libm call per
+/// sample, a few percent of `rank`'s time, and world coordinates are far from overflow.
+#[inline]
+pub(crate) fn dist(dx: f64, dy: f64) -> f64 {
+    (dx * dx + dy * dy).sqrt()
 }
 
 #[cfg(test)]

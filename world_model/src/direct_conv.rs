@@ -8,7 +8,10 @@
 //! zero-bordered feature map, so nothing is copied and every loaded input value
 //! feeds four fused multiply-adds. On x86-64 with AVX2 and FMA (checked at run
 //! time) the same code is compiled for those instructions; elsewhere it runs as
-//! portable Rust. Only inference uses it (no gradients).
+//! portable Rust. Only inference uses it (no gradients). Maps of even size go
+//! through [`crate::winograd`] instead, which needs fewer multiply-adds.
+
+use crate::winograd::Winograd3x3;
 
 /// Output pixels per tile (two 8-lane AVX registers).
 const LANES: usize = 16;
@@ -32,6 +35,28 @@ impl Padded {
     pub fn zeros(c: usize, h: usize, w: usize) -> Self {
         let stride = w.div_ceil(LANES) * LANES + 2;
         Self { c, h, w, stride, data: vec![0.0; c * (h + 2) * stride] }
+    }
+
+    /// Channels.
+    pub fn channels(&self) -> usize {
+        self.c
+    }
+
+    /// Interior height.
+    pub fn height(&self) -> usize {
+        self.h
+    }
+
+    /// Interior width.
+    pub fn width(&self) -> usize {
+        self.w
+    }
+
+    /// Bordered row `by` (0 is the zero row above the interior) of channel `ch`: the
+    /// left border, the `w` interior values, then zeros to the stored row's end
+    /// (at least `w + 2` values).
+    pub fn bordered_row(&self, ch: usize, by: usize) -> &[f32] {
+        &self.data[(ch * (self.h + 2) + by) * self.stride..][..self.stride]
     }
 
     /// The interior row `y` of channel `ch` (`w` values).
@@ -74,14 +99,39 @@ impl Padded {
     /// `silu(groupnorm(src))` (`[c, h, w]`) inside the border: statistics per
     /// group of `c / groups` channels, biased variance, then the affine per channel.
     pub fn fill_norm_silu(&mut self, src: &[f32], norm: &Norm) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
+            // requirement of calling a function compiled with those features.
+            #[allow(unsafe_code)]
+            unsafe {
+                self.fill_norm_silu_avx2(src, norm)
+            };
+            return;
+        }
+        self.fill_norm_silu_impl(src, norm);
+    }
+
+    /// [`Padded::fill_norm_silu`] compiled for AVX2 + FMA (its loops vectorise 8 wide).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn fill_norm_silu_avx2(&mut self, src: &[f32], norm: &Norm) {
+        self.fill_norm_silu_impl(src, norm);
+    }
+
+    /// Two passes for the statistics (sum, then squared deviations from the mean), each
+    /// summed in 8 f32 lanes per row and in f64 across rows, then one for the output.
+    #[inline(always)]
+    fn fill_norm_silu_impl(&mut self, src: &[f32], norm: &Norm) {
         let (c, h, w) = (self.c, self.h, self.w);
         let plane = h * w;
         let per = c / norm.groups;
         let n = (per * plane) as f64;
         for g in 0..norm.groups {
             let part = &src[g * per * plane..(g + 1) * per * plane];
-            let mean = part.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
-            let var = part.iter().map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>() / n;
+            let mean = lane_sum(part, |v| v) / n;
+            let m = mean as f32;
+            let var = lane_sum(part, |v| (v - m) * (v - m)) / n;
             let inv = 1.0 / (var + norm.eps).sqrt();
             for ch in g * per..(g + 1) * per {
                 let scale = (inv * f64::from(norm.gamma[ch])) as f32;
@@ -96,6 +146,25 @@ impl Padded {
             }
         }
     }
+}
+
+/// The sum of `f(v)` over `xs`: runs of 512 values summed in 8 f32 lanes (which
+/// vectorises), the runs' totals in f64.
+#[inline(always)]
+pub fn lane_sum(xs: &[f32], f: impl Fn(f32) -> f32) -> f64 {
+    let mut total = 0.0f64;
+    for run in xs.chunks(512) {
+        let mut lanes = [0.0f32; 8];
+        let mut it = run.chunks_exact(8);
+        for c in &mut it {
+            for (l, &v) in lanes.iter_mut().zip(c) {
+                *l += f(v);
+            }
+        }
+        total += lanes.iter().map(|&l| f64::from(l)).sum::<f64>();
+        total += it.remainder().iter().map(|&v| f64::from(f(v))).sum::<f64>();
+    }
+    total
 }
 
 /// `e^x` for f32 without a library call, so loops over it vectorise (Cephes' `expf`:
@@ -136,13 +205,23 @@ pub struct Norm {
 }
 
 /// A 3x3, stride-1, padding-1 convolution with its weights laid out per tile:
-/// `[cout / 4, cin, 9, 4]` (zero-padded to whole tiles of output channels).
+/// `[cout / 4, cin, 9, 4]` (zero-padded to whole tiles of output channels), and in
+/// the Winograd domain for maps of even size ([`Winograd3x3`]).
 #[derive(Clone, Debug)]
 pub struct Conv3x3 {
     cin: usize,
     cout: usize,
     weights: Vec<f32>,
     bias: Vec<f32>,
+    winograd: Winograd3x3,
+}
+
+/// Whether 3x3 convolutions may use Winograd's algorithm ([`Conv3x3::forward`], the CPU
+/// U-Net): yes unless the environment sets `EVALHARNESS_CONV=direct` (read once), to
+/// compare with the direct and im2col kernels.
+pub fn winograd_enabled() -> bool {
+    static ENABLED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ENABLED.get_or_init(|| std::env::var("EVALHARNESS_CONV").map_or(true, |v| v != "direct"))
 }
 
 impl Conv3x3 {
@@ -163,7 +242,8 @@ impl Conv3x3 {
         if let Some(bias) = bias {
             b[..cout].copy_from_slice(bias);
         }
-        Self { cin, cout, weights, bias: b }
+        let winograd = Winograd3x3::new(cin, cout, weight, bias);
+        Self { cin, cout, weights, bias: b, winograd }
     }
 
     /// Input channels.
@@ -176,11 +256,24 @@ impl Conv3x3 {
         self.cout
     }
 
-    /// Convolves `x` into `out` (`[cout, h, w]`), adding `residual` (same shape) when given.
+    /// Convolves `x` into `out` (`[cout, h, w]`), adding `residual` (same shape) when given:
+    /// with [`Winograd3x3`] on maps of even height and width, else directly.
     ///
     /// # Shapes
     /// `x`: `[cin, h, w]` (bordered) -> `out`: `[cout, h, w]`
     pub fn forward(&self, x: &Padded, residual: Option<&[f32]>, out: &mut [f32]) {
+        if Winograd3x3::supports(x.h, x.w) && winograd_enabled() {
+            self.winograd.forward(x, residual, out);
+        } else {
+            self.forward_direct(x, residual, out);
+        }
+    }
+
+    /// [`Conv3x3::forward`] with the direct kernel whatever the map's size.
+    ///
+    /// # Shapes
+    /// `x`: `[cin, h, w]` (bordered) -> `out`: `[cout, h, w]`
+    pub fn forward_direct(&self, x: &Padded, residual: Option<&[f32]>, out: &mut [f32]) {
         debug_assert_eq!(x.c, self.cin);
         debug_assert_eq!(out.len(), self.cout * x.h * x.w);
         #[cfg(target_arch = "x86_64")]
@@ -353,13 +446,13 @@ mod tests {
             p.fill(&x, false);
             let k = Conv3x3::new(cin, cout, &wt, Some(&b));
             let mut out = vec![f32::NAN; cout * h * w];
-            k.forward(&p, None, &mut out);
+            k.forward_direct(&p, None, &mut out);
             let want = reference(cin, cout, &wt, &b, &x, h, w);
             for (i, (a, e)) in out.iter().zip(&want).enumerate() {
                 assert!((a - e).abs() < 1e-4, "{cin}->{cout} {h}x{w} at {i}: {a} vs {e}");
             }
             // The residual is added on the way out.
-            k.forward(&p, Some(&want), &mut out);
+            k.forward_direct(&p, Some(&want), &mut out);
             assert!(out.iter().zip(&want).all(|(a, e)| (a - 2.0 * e).abs() < 1e-4));
             // The portable kernel (what `forward` runs on CPUs without AVX2 + FMA) agrees.
             let mut portable = vec![f32::NAN; cout * h * w];

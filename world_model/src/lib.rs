@@ -6,8 +6,9 @@
 //!   self-forcing); [`motion`]: its motion weighting; [`unet`]: the action-conditioned U-Net;
 //! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer; [`codec`]:
 //!   autoencoder latents or pixels, the space the U-Net works in; [`cpu_decoder`] +
-//!   [`direct_conv`]: the decoder on direct CPU kernels, for inference; [`cpu_kernels`]:
-//!   whole-batch kernels (GEMM, GroupNorm, im2col) of the CPU U-Nets ([`unet::cpu`]);
+//!   [`direct_conv`] + [`winograd`]: the decoder on direct CPU kernels, for inference; [`cpu_kernels`]:
+//!   whole-batch kernels (GEMM, GroupNorm, im2col) of the CPU U-Nets ([`unet::cpu`]),
+//!   [`winograd_batch`] their 3x3 convolutions;
 //! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
 //!   (drifting, MSE and diffusion objectives); [`context_noise`]: corrupted training histories;
 //! - [`model`]: a trained world model for inference; [`eval`]: video-quality metrics;
@@ -32,5 +33,7 @@ pub mod optim;
 pub mod train_ae;
 pub mod train_wm;
 pub mod unet;
+pub mod winograd;
+pub mod winograd_batch;
 
 pub use error::WorldModelError;

@@ -5,7 +5,8 @@
 //! convolution as a 2-D convolution, four permutations and a 1-D convolution,
 //! and GroupNorm, FiLM and SiLU as separate passes over small tensors. Here
 //! activations stay channel-major, `[c, n, F, h, w]` (see [`crate::cpu_kernels`]):
-//! - a spatial convolution is im2col + one GEMM per chunk of images;
+//! - a 3x3 spatial convolution is Winograd's F(2x2, 3x3) ([`crate::winograd_batch`]),
+//!   any other im2col + one GEMM per chunk of images;
 //! - the temporal convolution is one GEMM per (sample, tap) on column ranges
 //!   shifted by a frame;
 //! - GroupNorm, FiLM and SiLU are one fused pass;
@@ -26,7 +27,8 @@ use crate::cpu_kernels::{
     Conv2dShape, Dense, Film, View, ViewMut, bias_values, group_norm_cols, matmul, matmul_strided, silu,
     values,
 };
-use crate::direct_conv::{Norm, exp};
+use crate::direct_conv::{Norm, exp, winograd_enabled};
+use crate::winograd_batch::BatchWinograd;
 
 /// Elements of one im2col chunk (16 MB of f32).
 const IM2COL_CHUNK: usize = 1 << 22;
@@ -86,6 +88,8 @@ struct Conv {
     w: Vec<f32>,
     b: Vec<f32>,
     temporal: Option<Temporal>,
+    /// The same weights for Winograd's algorithm (3x3, stride 1, padding 1 only).
+    winograd: Option<BatchWinograd>,
 }
 
 impl Conv {
@@ -121,13 +125,16 @@ impl Conv {
                 Some(Temporal { taps, b: bias_values(&t.bias, cout, layer)? })
             }
         };
+        let w = values(w, layer)?;
+        let winograd = (k == 3 && s.stride[0] == 1 && pad == 1).then(|| BatchWinograd::new(cin, cout, &w));
         Ok(Self {
             cin,
             cout,
             shape: Conv2dShape { k, stride: s.stride[0], pad },
-            w: values(w, layer)?,
+            w,
             b: bias_values(&s.bias, cout, layer)?,
             temporal,
+            winograd,
         })
     }
 
@@ -160,6 +167,13 @@ impl Conv {
         let cols = imgs * plane;
         for (row, &b) in out.chunks_mut(cols).zip(&self.b) {
             row.iter_mut().for_each(|v| *v += b);
+        }
+        if let Some(wg) = &self.winograd
+            && BatchWinograd::supports(x.h, x.w)
+            && winograd_enabled()
+        {
+            wg.forward_add(&x.data, imgs, x.h, x.w, out);
+            return;
         }
         let Conv2dShape { k, stride, pad } = self.shape;
         if k == 1 && stride == 1 && pad == 0 {
@@ -275,6 +289,28 @@ impl Attn {
 
     /// `x + proj(MHA(qkv(GN(x))))`, attention over each frame's `h·w` positions.
     fn forward(&self, x: &Video) -> Video {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
+            // requirement of calling a function compiled with those features.
+            #[allow(unsafe_code)]
+            return unsafe { self.forward_avx2(x) };
+        }
+        self.forward_impl(x)
+    }
+
+    /// [`Attn::forward`] compiled for AVX2 + FMA (its loops vectorise 8 wide).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn forward_avx2(&self, x: &Video) -> Video {
+        self.forward_impl(x)
+    }
+
+    /// Scores row by row (`q·k` accumulated over the head's channels), softmax, then the
+    /// values weighted through the transposed weights so every inner loop runs along
+    /// contiguous positions.
+    #[inline(always)]
+    fn forward_impl(&self, x: &Video) -> Video {
         let (c, t) = (x.c, x.h * x.w);
         let cols = x.cols();
         let mut y = x.data.clone();
@@ -285,6 +321,7 @@ impl Attn {
         let scale = 1.0 / (d as f32).sqrt();
         let mut o = vec![0.0; c * cols];
         let mut attn = vec![0.0f32; t * t];
+        let mut attn_t = vec![0.0f32; t * t];
         for img in 0..x.n * x.f {
             for hd in 0..self.heads {
                 let row = |part: usize, dd: usize| &qkv[(part * c + hd * d + dd) * cols + img * t..][..t];
@@ -302,11 +339,17 @@ impl Attn {
                     let sum: f32 = r.iter().sum();
                     r.iter_mut().for_each(|v| *v /= sum);
                 }
+                // attn_t[t2][t1] = attn[t1][t2].
+                for (t1, r) in attn.chunks(t).enumerate() {
+                    for (t2, &a) in r.iter().enumerate() {
+                        attn_t[t2 * t + t1] = a;
+                    }
+                }
                 for dd in 0..d {
                     let v = row(2, dd);
                     let out = &mut o[(hd * d + dd) * cols + img * t..][..t];
-                    for (t1, ov) in out.iter_mut().enumerate() {
-                        *ov = attn[t1 * t..][..t].iter().zip(v).map(|(a, b)| a * b).sum();
+                    for (col, &vv) in attn_t.chunks(t).zip(v) {
+                        out.iter_mut().zip(col).for_each(|(ov, &a)| *ov += a * vv);
                     }
                 }
             }

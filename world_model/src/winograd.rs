@@ -1,0 +1,627 @@
+//! Winograd F(2x2, 3x3) convolution on the CPU: the same 3x3, stride-1,
+//! padding-1 convolution as [`crate::direct_conv`], with 2.25x fewer
+//! multiply-adds.
+//!
+//! Why: `rank` spends most of its world-model time in the frame decoder's 3x3
+//! convolutions, and the direct kernel already runs near what one core's FMA
+//! units give. Winograd's minimal filtering (Lavin & Gray 2016) computes each
+//! 2x2 output tile from a 4x4 input tile with 16 multiplies per input/output
+//! channel pair instead of 36: every tile's input is transformed (`Bᵀ d B`),
+//! multiplied element-wise by the pre-transformed filter (`G g Gᵀ`) and summed
+//! over input channels — 16 independent matrix products over all tiles — and
+//! transformed back (`Aᵀ m A`). The transforms use only 0, ±1 and ½, so the
+//! result equals the direct convolution to float rounding (tested below).
+//!
+//! The tiles of a few tile rows are processed together (about 48 per pass), so the
+//! matrix products run on whole 8-lane vectors of tiles; they keep 4 output
+//! channels x 24 tiles in twelve AVX2 registers across the reduction. Needs even
+//! heights and widths ([`Winograd3x3::supports`]); [`crate::direct_conv::Conv3x3`]
+//! falls back to its direct kernel otherwise.
+
+use crate::direct_conv::Padded;
+
+/// Output channels per register tile.
+const OUT: usize = 4;
+/// Tiles per vector.
+const LANES: usize = 8;
+/// Vectors of tiles per register tile.
+const VECS: usize = 3;
+/// Aim for about this many tiles per pass (a few tile rows of a small map, one of a large).
+const TILES_PER_PASS: usize = 48;
+
+/// Filter transform `G` (4x3).
+const G: [[f64; 3]; 4] = [[1.0, 0.0, 0.0], [0.5, 0.5, 0.5], [0.5, -0.5, 0.5], [0.0, 0.0, 1.0]];
+
+/// `G g Gᵀ` of one 3x3 filter `g` (`[ky, kx]`), as `[i · 4 + j]`, computed in f64.
+pub(crate) fn transform_filter(g: &[f32]) -> [f32; 16] {
+    std::array::from_fn(|p| {
+        let (gi, gj) = (&G[p / 4], &G[p % 4]);
+        let mut s = 0.0;
+        for (ky, &a) in gi.iter().enumerate() {
+            for (kx, &b) in gj.iter().enumerate() {
+                s += a * f64::from(g[ky * 3 + kx]) * b;
+            }
+        }
+        s as f32
+    })
+}
+
+/// `Bᵀ` along one axis for runs of `L` tiles: the four input rows (or columns) of each
+/// tile, `d0 .. d3`, become `[d0 − d2, d1 + d2, d2 − d1, d1 − d3]`.
+#[inline(always)]
+pub(crate) fn input_1d<const L: usize>([d0, d1, d2, d3]: [&[f32; L]; 4]) -> [[f32; L]; 4] {
+    [
+        std::array::from_fn(|k| d0[k] - d2[k]),
+        std::array::from_fn(|k| d1[k] + d2[k]),
+        std::array::from_fn(|k| d2[k] - d1[k]),
+        std::array::from_fn(|k| d1[k] - d3[k]),
+    ]
+}
+
+/// `Aᵀ` along one axis for runs of `L` tiles: `[m0 + m1 + m2, m1 − m2 − m3]`.
+#[inline(always)]
+pub(crate) fn output_1d<const L: usize>([m0, m1, m2, m3]: [&[f32; L]; 4]) -> [[f32; L]; 2] {
+    [std::array::from_fn(|k| m0[k] + m1[k] + m2[k]), std::array::from_fn(|k| m1[k] - m2[k] - m3[k])]
+}
+
+/// `Bᵀ d B` for runs of `L` tiles: `d[r][q]` (tile input row r, column q) to `v[i][j]`.
+#[inline(always)]
+pub(crate) fn input_2d<const L: usize>(d: &[[[f32; L]; 4]; 4]) -> [[[f32; L]; 4]; 4] {
+    let t: [[[f32; L]; 4]; 4] = std::array::from_fn(|r| input_1d([&d[r][0], &d[r][1], &d[r][2], &d[r][3]]));
+    let cols: [[[f32; L]; 4]; 4] =
+        std::array::from_fn(|j| input_1d([&t[0][j], &t[1][j], &t[2][j], &t[3][j]]));
+    std::array::from_fn(|i| std::array::from_fn(|j| cols[j][i]))
+}
+
+/// `Aᵀ m A` for runs of `L` tiles: `m[i · 4 + j]` to the 2x2 outputs `y[dy][dx]`.
+#[inline(always)]
+pub(crate) fn output_2d<const L: usize>(m: &[[f32; L]; 16]) -> [[[f32; L]; 2]; 2] {
+    let cols: [[[f32; L]; 2]; 4] =
+        std::array::from_fn(|j| output_1d([&m[j], &m[4 + j], &m[8 + j], &m[12 + j]]));
+    std::array::from_fn(|dy| output_1d([&cols[0][dy], &cols[1][dy], &cols[2][dy], &cols[3][dy]]))
+}
+
+/// A 3x3 convolution's weights in the Winograd domain: `[16, cout / 4, cin, 4]`
+/// (zero-padded to whole blocks of output channels), and its bias.
+#[derive(Clone, Debug)]
+pub struct Winograd3x3 {
+    cin: usize,
+    cout: usize,
+    u: Vec<f32>,
+    bias: Vec<f32>,
+}
+
+impl Winograd3x3 {
+    /// From burn's layout: `weight` `[cout, cin, 3, 3]`, `bias` `[cout]` (zeros when absent).
+    pub fn new(cin: usize, cout: usize, weight: &[f32], bias: Option<&[f32]>) -> Self {
+        debug_assert_eq!(weight.len(), cout * cin * 9);
+        let blocks = cout.div_ceil(OUT);
+        let mut u = vec![0.0; 16 * blocks * cin * OUT];
+        for co in 0..cout {
+            for ci in 0..cin {
+                let ut = transform_filter(&weight[(co * cin + ci) * 9..][..9]);
+                for (p, &val) in ut.iter().enumerate() {
+                    u[((p * blocks + co / OUT) * cin + ci) * OUT + co % OUT] = val;
+                }
+            }
+        }
+        let mut b = vec![0.0; cout];
+        if let Some(bias) = bias {
+            b.copy_from_slice(bias);
+        }
+        Self { cin, cout, u, bias: b }
+    }
+
+    /// Whether a `h` x `w` map can be convolved this way (whole 2x2 tiles).
+    pub fn supports(h: usize, w: usize) -> bool {
+        h.is_multiple_of(2) && w.is_multiple_of(2) && h > 0 && w > 0
+    }
+
+    /// Convolves `x` into `out` (`[cout, h, w]`), adding `residual` (same shape) when given.
+    ///
+    /// # Shapes
+    /// `x`: `[cin, h, w]` (bordered) -> `out`: `[cout, h, w]`
+    pub fn forward(&self, x: &Padded, residual: Option<&[f32]>, out: &mut [f32]) {
+        let (h, w) = (x.height(), x.width());
+        debug_assert!(Self::supports(h, w));
+        debug_assert_eq!(x.channels(), self.cin);
+        debug_assert_eq!(out.len(), self.cout * h * w);
+        let (th, tw) = (h / 2, w / 2);
+        let rows = (TILES_PER_PASS / tw).clamp(1, th);
+        let blocks = self.cout.div_ceil(OUT);
+        let mut scratch = SCRATCH.take().resize(self.cin, blocks * OUT, rows * tw, tw);
+        for ty0 in (0..th).step_by(rows) {
+            let n = rows.min(th - ty0);
+            for r in 0..n {
+                transform_input(x, ty0 + r, &mut scratch, r * tw);
+            }
+            self.multiply(&mut scratch);
+            let pass = Pass { ty0, rows: n, h, w };
+            transform_output(self, &scratch, &pass, residual, out);
+        }
+        SCRATCH.set(scratch);
+    }
+
+    /// `m[p] = u[p]ᵀ v[p]` for each of the 16 positions: `[cout, tiles] = [cout, cin] · [cin, tiles]`.
+    fn multiply(&self, s: &mut Scratch) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
+            // requirement of calling a function compiled with those features.
+            #[allow(unsafe_code)]
+            unsafe {
+                multiply_avx2_fma(self, s)
+            };
+            return;
+        }
+        multiply_portable(self, s);
+    }
+}
+
+/// Per-pass buffers: transformed inputs `v` `[cin, 16, tiles]` and products `m`
+/// `[cout4, 16, tiles]` (tiles rounded up to whole vectors): a channel's 16 runs are
+/// neighbours, as the transforms read and write them together.
+#[derive(Default)]
+struct Scratch {
+    cin: usize,
+    cout4: usize,
+    /// Tiles per pass, rounded up to whole register tiles.
+    tiles: usize,
+    /// Tiles per tile row.
+    row_tiles: usize,
+    v: Vec<f32>,
+    m: Vec<f32>,
+}
+
+thread_local! {
+    /// The buffers of this thread's last convolution, reused by the next (they are
+    /// large enough that fresh ones cost page faults and zeroing on every call).
+    static SCRATCH: std::cell::Cell<Scratch> = const {
+        std::cell::Cell::new(Scratch { cin: 0, cout4: 0, tiles: 0, row_tiles: 0, v: Vec::new(), m: Vec::new() })
+    };
+}
+
+impl Scratch {
+    /// Buffers for a pass of `tiles` tiles (`row_tiles` per tile row), keeping the
+    /// allocations. Values left from an earlier pass only ever meet padding tiles,
+    /// whose products are never written out.
+    fn resize(mut self, cin: usize, cout4: usize, tiles: usize, row_tiles: usize) -> Self {
+        let tiles = tiles.div_ceil(LANES) * LANES;
+        self.v.resize(16 * cin * tiles, 0.0);
+        // One run of 8 more: a row's last, partial run of tiles is loaded whole.
+        self.m.resize(16 * cout4 * tiles + LANES, 0.0);
+        Self { cin, cout4, tiles, row_tiles, ..self }
+    }
+}
+
+/// `Bᵀ d B` of every 4x4 input tile of tile row `ty`, into `s.v` from tile `at` on.
+fn transform_input(x: &Padded, ty: usize, s: &mut Scratch, at: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+        #[allow(unsafe_code)]
+        unsafe {
+            transform_input_avx2(x, ty, s, at)
+        };
+        return;
+    }
+    transform_input_impl(x, ty, s, at);
+}
+
+/// [`transform_input_impl`] with AVX2 intrinsics: the even and odd columns of each
+/// row are split with two shuffles each, and all 16 transformed runs of 8 tiles stay
+/// in registers until stored.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(unsafe_code)]
+fn transform_input_avx2(x: &Padded, ty: usize, s: &mut Scratch, at: usize) {
+    use std::arch::x86_64::{
+        __m256, _mm256_add_ps, _mm256_castpd_ps, _mm256_castps_pd, _mm256_loadu_ps, _mm256_permute4x64_pd,
+        _mm256_shuffle_ps, _mm256_storeu_ps, _mm256_sub_ps,
+    };
+    // [a0 a2 a4 a6 b0 b2 b4 b6] and [a1 a3 a5 a7 b1 b3 b5 b7].
+    let split = |a: __m256, b: __m256| {
+        let e = _mm256_shuffle_ps::<0x88>(a, b); // [a0 a2 b0 b2 | a4 a6 b4 b6]
+        let o = _mm256_shuffle_ps::<0xDD>(a, b); // [a1 a3 b1 b3 | a5 a7 b5 b7]
+        (
+            _mm256_castpd_ps(_mm256_permute4x64_pd::<0xD8>(_mm256_castps_pd(e))),
+            _mm256_castpd_ps(_mm256_permute4x64_pd::<0xD8>(_mm256_castps_pd(o))),
+        )
+    };
+    let (tw, cin, nk) = (s.row_tiles, s.cin, s.tiles);
+    let mut buf = [0.0f32; 2 * LANES + 2];
+    let mut tail = [0.0f32; LANES];
+    for ci in 0..cin {
+        for x0 in (0..tw).step_by(LANES) {
+            let n = LANES.min(tw - x0);
+            // Row r's transform along x: [d0 - d2, d1 + d2, d2 - d1, d1 - d3] for 8 tiles.
+            let mut along_x = |r: usize| {
+                let src = &x.bordered_row(ci, 2 * ty + r)[2 * x0..];
+                let d: &[f32] = if src.len() >= buf.len() {
+                    &src[..buf.len()]
+                } else {
+                    buf.fill(0.0);
+                    buf.iter_mut().zip(src).for_each(|(a, &b)| *a = b);
+                    &buf
+                };
+                // SAFETY: `d` holds 18 floats, so loads at offsets 0, 8, 2 and 10 are in bounds.
+                let (d0, d1, d2, d3) = unsafe {
+                    let p = d.as_ptr();
+                    let (d0, d1) = split(_mm256_loadu_ps(p), _mm256_loadu_ps(p.add(8)));
+                    let (d2, d3) = split(_mm256_loadu_ps(p.add(2)), _mm256_loadu_ps(p.add(10)));
+                    (d0, d1, d2, d3)
+                };
+                [_mm256_sub_ps(d0, d2), _mm256_add_ps(d1, d2), _mm256_sub_ps(d2, d1), _mm256_sub_ps(d1, d3)]
+            };
+            let t0 = along_x(0);
+            let t1 = along_x(1);
+            let t2 = along_x(2);
+            let t3 = along_x(3);
+            let base = ci * 16 * nk + at + x0;
+            let mut store = |p: usize, v: __m256| {
+                let at = p * nk + base;
+                if n == LANES {
+                    let d = &mut s.v[at..at + LANES];
+                    // SAFETY: `d` holds 8 floats.
+                    unsafe { _mm256_storeu_ps(d.as_mut_ptr(), v) };
+                } else {
+                    // SAFETY: `tail` holds 8 floats.
+                    unsafe { _mm256_storeu_ps(tail.as_mut_ptr(), v) };
+                    s.v[at..at + n].copy_from_slice(&tail[..n]);
+                }
+            };
+            // Along y: v[i * 4 + j] from column j of the four rows.
+            for j in 0..4 {
+                store(j, _mm256_sub_ps(t0[j], t2[j]));
+                store(4 + j, _mm256_add_ps(t1[j], t2[j]));
+                store(8 + j, _mm256_sub_ps(t2[j], t1[j]));
+                store(12 + j, _mm256_sub_ps(t1[j], t3[j]));
+            }
+        }
+    }
+}
+
+/// Eight tiles at a time: the 4 input rows' 18 columns are copied into registers,
+/// transformed along x (B), then along y (Bᵀ), and stored as 16 runs of 8 tiles.
+#[inline(always)]
+fn transform_input_impl(x: &Padded, ty: usize, s: &mut Scratch, at: usize) {
+    let (tw, cin, nk) = (s.row_tiles, s.cin, s.tiles);
+    for ci in 0..cin {
+        // Bordered row 2ty + r is input row 2ty + r - 1: the tile's top row sits one above.
+        let rows: [&[f32]; 4] = std::array::from_fn(|r| x.bordered_row(ci, 2 * ty + r));
+        for x0 in (0..tw).step_by(LANES) {
+            let n = LANES.min(tw - x0);
+            // Tile x0 + t reads bordered columns 2(x0 + t) .. 2(x0 + t) + 3.
+            let mut d = [[0.0f32; 2 * LANES + 2]; 4];
+            for (dr, row) in d.iter_mut().zip(&rows) {
+                let src = &row[2 * x0..];
+                if src.len() >= dr.len() {
+                    dr.copy_from_slice(&src[..2 * LANES + 2]);
+                } else {
+                    dr.iter_mut().zip(src).for_each(|(a, &b)| *a = b);
+                }
+            }
+            // Along x: t[r][j][tile].
+            // Tile k reads bordered columns 2k .. 2k + 3 of each row.
+            let cols: [[[f32; LANES]; 4]; 4] =
+                std::array::from_fn(|r| std::array::from_fn(|q| std::array::from_fn(|k| d[r][2 * k + q])));
+            for (i, row) in input_2d(&cols).iter().enumerate() {
+                for (j, vij) in row.iter().enumerate() {
+                    let dst = (ci * 16 + i * 4 + j) * nk + at + x0;
+                    put(&mut s.v[dst..], vij, n);
+                }
+            }
+        }
+    }
+}
+
+/// Where a pass's tiles go: tile rows `ty0 .. ty0 + rows` of an `h` x `w` output.
+struct Pass {
+    ty0: usize,
+    rows: usize,
+    h: usize,
+    w: usize,
+}
+
+/// `Aᵀ m A` for every tile of the pass, plus bias and residual, into `out`.
+fn transform_output(k: &Winograd3x3, s: &Scratch, pass: &Pass, residual: Option<&[f32]>, out: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+        #[allow(unsafe_code)]
+        unsafe {
+            transform_output_avx2(k, s, pass, residual, out)
+        };
+        return;
+    }
+    transform_output_impl(k, s, pass, residual, out);
+}
+
+/// [`transform_output_impl`] with AVX2 intrinsics: 16 runs of 8 products loaded,
+/// transformed in registers, interleaved into two rows of 16 pixels with unpack and
+/// lane permutes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(unsafe_code)]
+fn transform_output_avx2(
+    k: &Winograd3x3,
+    s: &Scratch,
+    pass: &Pass,
+    residual: Option<&[f32]>,
+    out: &mut [f32],
+) {
+    use std::arch::x86_64::{
+        _mm256_add_ps, _mm256_loadu_ps, _mm256_permute2f128_ps, _mm256_set1_ps, _mm256_storeu_ps,
+        _mm256_sub_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps,
+    };
+    let (tw, nk) = (s.row_tiles, s.tiles);
+    let (h, w) = (pass.h, pass.w);
+    let mut px = [0.0f32; 2 * LANES];
+    for co in 0..k.cout {
+        let b = _mm256_set1_ps(k.bias[co]);
+        for r in 0..pass.rows {
+            let (oy, k0) = (2 * (pass.ty0 + r), r * tw);
+            for x0 in (0..tw).step_by(LANES) {
+                let n = LANES.min(tw - x0);
+                let base = co * 16 * nk + k0 + x0;
+                let m = |p: usize| {
+                    let src = &s.m[p * nk + base..][..LANES];
+                    // SAFETY: `src` holds 8 floats (products past a row's last tile belong
+                    // to the next row or channel, or to the padding; they are never written out).
+                    unsafe { _mm256_loadu_ps(src.as_ptr()) }
+                };
+                // Along y (Aᵀ over i): s0 = m0 + m1 + m2, s1 = m1 - m2 - m3, per column j.
+                let (mut s0, mut s1) = ([b; 4], [b; 4]);
+                for j in 0..4 {
+                    let (m0, m1, m2, m3) = (m(j), m(4 + j), m(8 + j), m(12 + j));
+                    s0[j] = _mm256_add_ps(_mm256_add_ps(m0, m1), m2);
+                    s1[j] = _mm256_sub_ps(_mm256_sub_ps(m1, m2), m3);
+                }
+                for (dy, sd) in [s0, s1].iter().enumerate() {
+                    // Along x: even pixels (plus the bias once), odd pixels.
+                    let e = _mm256_add_ps(_mm256_add_ps(_mm256_add_ps(sd[0], sd[1]), sd[2]), b);
+                    let o = _mm256_add_ps(_mm256_sub_ps(_mm256_sub_ps(sd[1], sd[2]), sd[3]), b);
+                    let (lo, hi) = (_mm256_unpacklo_ps(e, o), _mm256_unpackhi_ps(e, o));
+                    let first = _mm256_permute2f128_ps::<0x20>(lo, hi);
+                    let second = _mm256_permute2f128_ps::<0x31>(lo, hi);
+                    let at = (co * h + oy + dy) * w + 2 * x0;
+                    if n == LANES {
+                        let dst = &mut out[at..at + 2 * LANES];
+                        let (mut first, mut second) = (first, second);
+                        if let Some(res) = residual {
+                            let rs = &res[at..at + 2 * LANES];
+                            // SAFETY: `rs` holds 16 floats.
+                            unsafe {
+                                first = _mm256_add_ps(first, _mm256_loadu_ps(rs.as_ptr()));
+                                second = _mm256_add_ps(second, _mm256_loadu_ps(rs.as_ptr().add(8)));
+                            }
+                        }
+                        // SAFETY: `dst` holds 16 floats.
+                        unsafe {
+                            _mm256_storeu_ps(dst.as_mut_ptr(), first);
+                            _mm256_storeu_ps(dst.as_mut_ptr().add(8), second);
+                        }
+                    } else {
+                        // SAFETY: `px` holds 16 floats.
+                        unsafe {
+                            _mm256_storeu_ps(px.as_mut_ptr(), first);
+                            _mm256_storeu_ps(px.as_mut_ptr().add(8), second);
+                        }
+                        let dst = &mut out[at..at + 2 * n];
+                        for (i, d) in dst.iter_mut().enumerate() {
+                            *d = px[i] + residual.map_or(0.0, |r| r[at + i]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Eight tiles at a time: 16 runs of 8 products, Aᵀ along y then x, interleaved into
+/// two output rows of 16 pixels.
+#[inline(always)]
+fn transform_output_impl(
+    k: &Winograd3x3,
+    s: &Scratch,
+    pass: &Pass,
+    residual: Option<&[f32]>,
+    out: &mut [f32],
+) {
+    let (tw, nk) = (s.row_tiles, s.tiles);
+    let (h, w) = (pass.h, pass.w);
+    for co in 0..k.cout {
+        let b = k.bias[co];
+        for r in 0..pass.rows {
+            let (oy, k0) = (2 * (pass.ty0 + r), r * tw);
+            for x0 in (0..tw).step_by(LANES) {
+                let n = LANES.min(tw - x0);
+                let mut m = [[0.0f32; LANES]; 16];
+                for (p, mp) in m.iter_mut().enumerate() {
+                    let src = (co * 16 + p) * nk + k0 + x0;
+                    put(mp, &s.m[src..], n);
+                }
+                // Pixel (oy + dy, 2(x0 + t) + dx), interleaved.
+                for (dy, [even, odd]) in output_2d(&m).iter().enumerate() {
+                    let mut px = [0.0f32; 2 * LANES];
+                    for (t, pair) in px.chunks_exact_mut(2).enumerate() {
+                        pair[0] = even[t] + b;
+                        pair[1] = odd[t] + b;
+                    }
+                    let at = (co * h + oy + dy) * w + 2 * x0;
+                    let dst = &mut out[at..at + 2 * n];
+                    if let Some(res) = residual {
+                        for ((v, &r), _) in px.iter_mut().zip(&res[at..]).zip(0..2 * n) {
+                            *v += r;
+                        }
+                    }
+                    put(dst, &px, 2 * n);
+                }
+            }
+        }
+    }
+}
+
+/// Copies the first `n` of `src` into `dst`: a fixed-size copy (a few vector moves)
+/// when `n` is a whole run of 8 or 16, element by element otherwise.
+#[inline(always)]
+fn put(dst: &mut [f32], src: &[f32], n: usize) {
+    if n == LANES {
+        dst[..LANES].copy_from_slice(&src[..LANES]);
+    } else if n == 2 * LANES {
+        dst[..2 * LANES].copy_from_slice(&src[..2 * LANES]);
+    } else {
+        dst.iter_mut().zip(src).take(n).for_each(|(a, &b)| *a = b);
+    }
+}
+
+/// The matrix products in plain Rust (CPUs without AVX2 + FMA).
+fn multiply_portable(k: &Winograd3x3, s: &mut Scratch) {
+    let (cin, nk) = (k.cin, s.tiles);
+    let blocks = s.cout4 / OUT;
+    for p in 0..16 {
+        for b in 0..blocks {
+            let wb = &k.u[(p * blocks + b) * cin * OUT..][..cin * OUT];
+            for j in 0..OUT {
+                let dst = ((b * OUT + j) * 16 + p) * nk;
+                let mut acc = vec![0.0f32; nk];
+                for ci in 0..cin {
+                    let wv = wb[ci * OUT + j];
+                    let v = &s.v[(ci * 16 + p) * nk..][..nk];
+                    for (a, &x) in acc.iter_mut().zip(v) {
+                        *a += wv * x;
+                    }
+                }
+                s.m[dst..dst + nk].copy_from_slice(&acc);
+            }
+        }
+    }
+}
+
+/// The matrix products with AVX2 + FMA: a 4-channel x 24-tile block of sums in twelve
+/// registers through the whole reduction (fewer tiles at the end of a pass).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(unsafe_code)]
+fn multiply_avx2_fma(k: &Winograd3x3, s: &mut Scratch) {
+    let (cin, nk) = (k.cin, s.tiles);
+    let blocks = s.cout4 / OUT;
+    for p in 0..16 {
+        let v = &s.v[p * nk..];
+        for b in 0..blocks {
+            let wb = &k.u[(p * blocks + b) * cin * OUT..][..cin * OUT];
+            let m = &mut s.m[(b * OUT * 16 + p) * nk..];
+            let mut t = 0;
+            while t < nk {
+                match (nk - t) / LANES {
+                    1 => block::<1>(wb, v, m, cin, nk, t),
+                    2 => block::<2>(wb, v, m, cin, nk, t),
+                    _ => block::<VECS>(wb, v, m, cin, nk, t),
+                }
+                t += LANES * VECS.min((nk - t) / LANES);
+            }
+        }
+    }
+}
+
+/// One register block: `N` vectors of tiles from tile `t`, 4 output channels.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(unsafe_code)]
+fn block<const N: usize>(wb: &[f32], v: &[f32], m: &mut [f32], cin: usize, nk: usize, t: usize) {
+    use std::arch::x86_64::{
+        _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_storeu_ps,
+    };
+    // Rows (input channels of `v`, output channels of `m`) are 16 runs of `nk` tiles apart.
+    let stride = 16 * nk;
+    assert!(wb.len() >= cin * OUT && t + N * LANES <= nk);
+    assert!(v.len() >= (cin - 1) * stride + nk && m.len() >= (OUT - 1) * stride + nk);
+    let mut acc = [[_mm256_setzero_ps(); N]; OUT];
+    for ci in 0..cin {
+        // SAFETY: ci < cin and t + N·8 <= nk (asserted above), so every load is within `v`.
+        let x: [_; N] =
+            std::array::from_fn(|n| unsafe { _mm256_loadu_ps(v.as_ptr().add(ci * stride + t + n * LANES)) });
+        let w = &wb[ci * OUT..ci * OUT + OUT];
+        for (aj, &wj) in acc.iter_mut().zip(w) {
+            let wv = _mm256_set1_ps(wj);
+            for (a, &xn) in aj.iter_mut().zip(&x) {
+                *a = _mm256_fmadd_ps(wv, xn, *a);
+            }
+        }
+    }
+    for (j, aj) in acc.iter().enumerate() {
+        for (n, a) in aj.iter().enumerate() {
+            // SAFETY: j < 4 and t + N·8 <= nk (asserted above), so the store is within `m`.
+            unsafe { _mm256_storeu_ps(m.as_mut_ptr().add(j * stride + t + n * LANES), *a) };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::direct_conv::Conv3x3;
+
+    fn values(n: usize, seed: u32) -> Vec<f32> {
+        (0..n)
+            .map(|i| (((i as u32).wrapping_mul(2_654_435_761) ^ seed) % 1000) as f32 / 500.0 - 1.0)
+            .collect()
+    }
+
+    #[test]
+    fn matches_the_direct_kernel() {
+        // Partial blocks of output channels (3, 5), maps of one tile, of a few tile rows
+        // per pass (12x12: 6 rows of 6 tiles = 36 -> 40 with padding), and of one row per
+        // pass (96 wide), non-square.
+        for (cin, cout, h, w) in
+            [(2, 3, 2, 2), (5, 8, 4, 16), (3, 5, 12, 12), (16, 16, 6, 96), (8, 4, 24, 10)]
+        {
+            let wt = values(cout * cin * 9, 7);
+            let b = values(cout, 11);
+            let x = values(cin * h * w, 3);
+            let mut p = Padded::zeros(cin, h, w);
+            p.fill(&x, false);
+            let direct = Conv3x3::new(cin, cout, &wt, Some(&b));
+            let mut want = vec![f32::NAN; cout * h * w];
+            direct.forward_direct(&p, None, &mut want);
+            let k = Winograd3x3::new(cin, cout, &wt, Some(&b));
+            let mut got = vec![f32::NAN; cout * h * w];
+            k.forward(&p, None, &mut got);
+            for (i, (a, e)) in got.iter().zip(&want).enumerate() {
+                assert!((a - e).abs() < 1e-4, "{cin}->{cout} {h}x{w} at {i}: {a} vs {e}");
+            }
+            // The residual is added on the way out.
+            k.forward(&p, Some(&want), &mut got);
+            assert!(got.iter().zip(&want).all(|(a, e)| (a - 2.0 * e).abs() < 1e-4));
+            // The portable products agree with the vector ones.
+            let tiles = (TILES_PER_PASS / (w / 2)).clamp(1, h / 2) * w / 2;
+            let mut s = Scratch::default().resize(cin, cout.div_ceil(OUT) * OUT, tiles, w / 2);
+            transform_input(&p, 0, &mut s, 0);
+            multiply_portable(&k, &mut s);
+            let portable = s.m.clone();
+            k.multiply(&mut s);
+            assert!(portable.iter().zip(&s.m).all(|(a, e)| (a - e).abs() < 1e-4));
+        }
+    }
+
+    #[test]
+    fn a_single_tap_filter_shifts_the_image() {
+        // Only the centre tap is 1: the output equals the input. Only the top-left tap is
+        // 1: output (y, x) = input (y - 1, x - 1), zero on the first row and column.
+        let (h, w) = (4, 4);
+        let x: Vec<f32> = (0..16).map(|i| i as f32).collect();
+        let mut p = Padded::zeros(1, h, w);
+        p.fill(&x, false);
+        let mut centre = [0.0f32; 9];
+        centre[4] = 1.0;
+        let mut out = vec![0.0; 16];
+        Winograd3x3::new(1, 1, &centre, None).forward(&p, None, &mut out);
+        assert!(out.iter().zip(&x).all(|(a, e)| (a - e).abs() < 1e-6), "{out:?}");
+        let mut corner = [0.0f32; 9];
+        corner[0] = 1.0;
+        Winograd3x3::new(1, 1, &corner, None).forward(&p, None, &mut out);
+        // Row 1 is [0, x(0,0), x(0,1), x(0,2)] = [0, 0, 1, 2]; row 0 is all zero.
+        assert_eq!(&out[..4], &[0.0; 4]);
+        assert!(out[4..8].iter().zip([0.0, 0.0, 1.0, 2.0]).all(|(a, e)| (a - e).abs() < 1e-6));
+    }
+}

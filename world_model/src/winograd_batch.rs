@@ -1,0 +1,240 @@
+//! Winograd F(2x2, 3x3) for channel-major batches of images, `[c, imgs, h, w]`:
+//! the 3x3 spatial convolutions of the CPU U-Net ([`crate::unet::cpu`]).
+//!
+//! Why: after the decoder, those convolutions (im2col + one GEMM) were the
+//! largest part of `rank`'s world-model time. Here every 4x4 input tile of a
+//! chunk of images is transformed (`Bᵀ d B`), the 16 element-wise products with
+//! the pre-transformed filters (`G g Gᵀ`) become 16 GEMMs `[cout, cin] · [cin,
+//! tiles]` on the `gemm` crate's kernels — 16 multiply-adds per 2x2 output
+//! instead of 36 — and the tiles are transformed back (`Aᵀ m A`) and added to the
+//! output. The same algebra as [`crate::winograd`] (which works on one bordered
+//! image for the decoder); this one needs no border copy of the whole batch and
+//! keeps the GEMMs wide. Equal to the im2col convolution to float rounding
+//! (tested below).
+
+use crate::cpu_kernels::matmul;
+use crate::winograd::{Winograd3x3, input_2d, output_2d, transform_filter};
+
+/// Floats per transformed buffer (`[16, c, tiles]`) per chunk of images: 8 MB.
+const CHUNK: usize = 1 << 21;
+
+/// A 3x3, stride-1, padding-1 convolution's weights in the Winograd domain:
+/// `[16, cout, cin]`. The bias is the caller's.
+#[derive(Clone, Debug)]
+pub struct BatchWinograd {
+    cin: usize,
+    cout: usize,
+    u: Vec<f32>,
+}
+
+impl BatchWinograd {
+    /// From burn's layout, `weight` `[cout, cin, 3, 3]`.
+    pub fn new(cin: usize, cout: usize, weight: &[f32]) -> Self {
+        debug_assert_eq!(weight.len(), cout * cin * 9);
+        let mut u = vec![0.0; 16 * cout * cin];
+        for co in 0..cout {
+            for ci in 0..cin {
+                let ut = transform_filter(&weight[(co * cin + ci) * 9..][..9]);
+                for (p, &val) in ut.iter().enumerate() {
+                    u[(p * cout + co) * cin + ci] = val;
+                }
+            }
+        }
+        Self { cin, cout, u }
+    }
+
+    /// Whether `h` x `w` images can be convolved this way (whole 2x2 tiles).
+    pub fn supports(h: usize, w: usize) -> bool {
+        Winograd3x3::supports(h, w)
+    }
+
+    /// Adds the convolution (no bias) of `x` to `out`.
+    ///
+    /// # Shapes
+    /// `x`: `[cin, imgs, h, w]` -> `out`: `[cout, imgs, h, w]` (accumulated)
+    pub fn forward_add(&self, x: &[f32], imgs: usize, h: usize, w: usize, out: &mut [f32]) {
+        debug_assert!(Self::supports(h, w));
+        debug_assert_eq!(x.len(), self.cin * imgs * h * w);
+        debug_assert_eq!(out.len(), self.cout * imgs * h * w);
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
+            // requirement of calling a function compiled with those features.
+            #[allow(unsafe_code)]
+            unsafe {
+                self.forward_add_avx2(x, imgs, h, w, out)
+            };
+            return;
+        }
+        self.forward_add_impl(x, imgs, h, w, out);
+    }
+
+    /// [`BatchWinograd::forward_add`] compiled for AVX2 + FMA (the transforms vectorise).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn forward_add_avx2(&self, x: &[f32], imgs: usize, h: usize, w: usize, out: &mut [f32]) {
+        self.forward_add_impl(x, imgs, h, w, out);
+    }
+
+    #[inline(always)]
+    fn forward_add_impl(&self, x: &[f32], imgs: usize, h: usize, w: usize, out: &mut [f32]) {
+        let (cin, cout) = (self.cin, self.cout);
+        let per_img = (h / 2) * (w / 2);
+        // Images per chunk: a whole number of 8-lane runs where the budget allows.
+        let fit = (CHUNK / (16 * cin.max(cout) * per_img)).max(1);
+        let per = if fit >= LANES { fit / LANES * LANES } else { fit }.min(imgs.div_ceil(LANES) * LANES);
+        let lanes = per.div_ceil(LANES) * LANES;
+        let mut v = vec![0.0f32; 16 * cin * per_img * lanes];
+        let mut m = vec![0.0f32; 16 * cout * per_img * lanes];
+        let mut buf = vec![0.0f32; (h + 2) * (w + 2) * lanes];
+        for i0 in (0..imgs).step_by(per) {
+            let n = per.min(imgs - i0);
+            let geo = Geometry { imgs, h, w, i0, n, lanes: n.div_ceil(LANES) * LANES };
+            let tiles = per_img * geo.lanes;
+            transform_input(x, cin, &geo, &mut buf, &mut v[..16 * cin * tiles]);
+            for p in 0..16 {
+                let a = &self.u[p * cout * cin..][..cout * cin];
+                let b = &v[p * cin * tiles..][..cin * tiles];
+                matmul(cout, cin, tiles, a, b, &mut m[p * cout * tiles..][..cout * tiles], false);
+            }
+            transform_output(&m[..16 * cout * tiles], cout, &geo, &mut buf, out);
+        }
+    }
+}
+
+/// Images per vector.
+const LANES: usize = 8;
+
+/// Images `i0 .. i0 + n` of a batch of `imgs` images of `h` x `w`, laid out with the
+/// image index innermost, padded to `lanes` (a multiple of 8) images.
+struct Geometry {
+    imgs: usize,
+    h: usize,
+    w: usize,
+    i0: usize,
+    n: usize,
+    lanes: usize,
+}
+
+/// `Bᵀ d B` of every 4x4 tile (input rows and columns `2t − 1 .. 2t + 2`, zero outside)
+/// of the chunk's images, into `v` `[16, c, tiles]` with tiles ordered (ty, tx, image):
+/// each channel is first copied image-innermost into `buf` (`[h + 2, w + 2, lanes]`,
+/// zero border), so a tile position's values for 8 images are one vector.
+#[inline(always)]
+fn transform_input(x: &[f32], c: usize, g: &Geometry, buf: &mut [f32], v: &mut [f32]) {
+    let (h, w, l) = (g.h, g.w, g.lanes);
+    let (th, tw, pw) = (h / 2, w / 2, w + 2);
+    let tiles = th * tw * l;
+    let buf = &mut buf[..(h + 2) * pw * l];
+    buf.fill(0.0);
+    for ci in 0..c {
+        for j in 0..g.n {
+            let plane = &x[(ci * g.imgs + g.i0 + j) * h * w..][..h * w];
+            for (y, src) in plane.chunks_exact(w).enumerate() {
+                for (xx, &val) in src.iter().enumerate() {
+                    buf[((y + 1) * pw + xx + 1) * l + j] = val;
+                }
+            }
+        }
+        for ty in 0..th {
+            for tx in 0..tw {
+                for j0 in (0..l).step_by(LANES) {
+                    // d[r][q]: input (2ty + r − 1, 2tx + q − 1) of images j0 .. j0 + 8.
+                    let d: [[[f32; LANES]; 4]; 4] = std::array::from_fn(|r| {
+                        std::array::from_fn(|q| {
+                            let at = ((2 * ty + r) * pw + 2 * tx + q) * l + j0;
+                            buf[at..at + LANES].try_into().unwrap_or([0.0; LANES])
+                        })
+                    });
+                    let at = (ty * tw + tx) * l + j0;
+                    for (i, row) in input_2d(&d).iter().enumerate() {
+                        for (j, val) in row.iter().enumerate() {
+                            let dst = ((i * 4 + j) * c + ci) * tiles + at;
+                            v[dst..dst + LANES].copy_from_slice(val);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `Aᵀ m A` of every tile of `m` (`[16, c, tiles]`, as [`transform_input`] orders
+/// them), added to the chunk's images in `out` (`[c, imgs, h, w]`) through `buf`.
+#[inline(always)]
+fn transform_output(m: &[f32], c: usize, g: &Geometry, buf: &mut [f32], out: &mut [f32]) {
+    let (h, w, l) = (g.h, g.w, g.lanes);
+    let (th, tw) = (h / 2, w / 2);
+    let tiles = th * tw * l;
+    let buf = &mut buf[..h * w * l];
+    for co in 0..c {
+        for ty in 0..th {
+            for tx in 0..tw {
+                for j0 in (0..l).step_by(LANES) {
+                    let at = (ty * tw + tx) * l + j0;
+                    let v: [[f32; LANES]; 16] = std::array::from_fn(|p| {
+                        let src = (p * c + co) * tiles + at;
+                        m[src..src + LANES].try_into().unwrap_or([0.0; LANES])
+                    });
+                    for (dy, [even, odd]) in output_2d(&v).iter().enumerate() {
+                        let e = ((2 * ty + dy) * w + 2 * tx) * l + j0;
+                        buf[e..e + LANES].copy_from_slice(even);
+                        buf[e + l..e + l + LANES].copy_from_slice(odd);
+                    }
+                }
+            }
+        }
+        for j in 0..g.n {
+            let img = &mut out[(co * g.imgs + g.i0 + j) * h * w..][..h * w];
+            for (i, o) in img.iter_mut().enumerate() {
+                *o += buf[i * l + j];
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cpu_kernels::Conv2dShape;
+
+    fn values(n: usize, seed: u32) -> Vec<f32> {
+        (0..n)
+            .map(|i| (((i as u32).wrapping_mul(2_654_435_761) ^ seed) % 1000) as f32 / 500.0 - 1.0)
+            .collect()
+    }
+
+    #[test]
+    fn matches_im2col_and_gemm() {
+        // One tile, several images per chunk, non-square, channel counts that are not
+        // multiples of anything.
+        for (cin, cout, imgs, h, w) in [(1, 1, 1, 2, 2), (3, 5, 7, 6, 6), (8, 4, 3, 12, 12), (5, 6, 2, 4, 10)]
+        {
+            let wt = values(cout * cin * 9, 7);
+            let x = values(cin * imgs * h * w, 3);
+            // The reference: im2col + GEMM, as the U-Net's other path computes it.
+            let shape = Conv2dShape { k: 3, stride: 1, pad: 1 };
+            let mut col = vec![0.0; cin * 9 * imgs * h * w];
+            shape.im2col(&x, cin, imgs, h, w, 0, imgs, &mut col);
+            let start = values(cout * imgs * h * w, 5);
+            let mut want = start.clone();
+            matmul(cout, cin * 9, imgs * h * w, &wt, &col, &mut want, true);
+            let mut got = start;
+            BatchWinograd::new(cin, cout, &wt).forward_add(&x, imgs, h, w, &mut got);
+            for (i, (a, e)) in got.iter().zip(&want).enumerate() {
+                assert!((a - e).abs() < 1e-4, "{cin}->{cout} {imgs}x{h}x{w} at {i}: {a} vs {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_centre_tap_is_the_identity() {
+        // A single channel with only the centre tap 1 adds the input to the output.
+        let x: Vec<f32> = (0..2 * 16).map(|i| i as f32).collect();
+        let mut k = [0.0f32; 9];
+        k[4] = 1.0;
+        let mut out = vec![1.0; 32];
+        BatchWinograd::new(1, 1, &k).forward_add(&x, 2, 4, 4, &mut out);
+        assert!(out.iter().zip(&x).all(|(o, v)| (o - (v + 1.0)).abs() < 1e-5), "{out:?}");
+    }
+}
