@@ -12,7 +12,8 @@
 //! baseline (`BENCH_DIFFUSION_STEPS`, default 10), random weights, at batch 1 unless
 //! `BENCH_OBJECTIVE_BATCHES=1,100`. The device is `EVALHARNESS_DEVICE` (see
 //! `world_model::device`). `decoder` times the frame decoder alone, burn's
-//! convolutions against the direct CPU kernels (`world_model::cpu_decoder`), at
+//! convolutions against the CPU kernels (`world_model::cpu_decoder`; Winograd's
+//! algorithm since session 21, the direct 3x3 kernel under `EVALHARNESS_CONV=direct`), at
 //! batch 1 and 50 on the shipped autoencoder (`BENCH_AUTOENCODER=DIR`);
 //! `BENCH_DECODER_CHANNELS=8,16,32,32` adds a decoder of those widths (random
 //! weights) on the direct kernels, to price a narrower decoder before training one.

@@ -11,6 +11,7 @@
 //! portable Rust. Only inference uses it (no gradients). Maps of even size go
 //! through [`crate::winograd`] instead, which needs fewer multiply-adds.
 
+pub use crate::elementwise::{Norm, exp, lane_sum};
 use crate::winograd::Winograd3x3;
 
 /// Output pixels per tile (two 8-lane AVX registers).
@@ -146,62 +147,6 @@ impl Padded {
             }
         }
     }
-}
-
-/// The sum of `f(v)` over `xs`: runs of 512 values summed in 8 f32 lanes (which
-/// vectorises), the runs' totals in f64.
-#[inline(always)]
-pub fn lane_sum(xs: &[f32], f: impl Fn(f32) -> f32) -> f64 {
-    let mut total = 0.0f64;
-    for run in xs.chunks(512) {
-        let mut lanes = [0.0f32; 8];
-        let mut it = run.chunks_exact(8);
-        for c in &mut it {
-            for (l, &v) in lanes.iter_mut().zip(c) {
-                *l += f(v);
-            }
-        }
-        total += lanes.iter().map(|&l| f64::from(l)).sum::<f64>();
-        total += it.remainder().iter().map(|&v| f64::from(f(v))).sum::<f64>();
-    }
-    total
-}
-
-/// `e^x` for f32 without a library call, so loops over it vectorise (Cephes' `expf`:
-/// x = n ln 2 + r with |r| <= ln 2 / 2, a degree-7 polynomial for e^r, 2^n from the
-/// exponent bits). Within a few ulp of `f32::exp` on [-87, 88); clamped outside.
-#[inline(always)]
-pub fn exp(x: f32) -> f32 {
-    const LOG2E: f32 = std::f32::consts::LOG2_E;
-    // 1.5 · 2^23: adding it rounds to an integer, which then sits in the low mantissa bits.
-    const MAGIC: f32 = 12_582_912.0;
-    let x = x.clamp(-87.0, 88.0);
-    let shifted = x * LOG2E + MAGIC;
-    let n = shifted - MAGIC;
-    let r = x - n * 0.693_359_4 - n * -2.121_944_4e-4;
-    let z = r * r;
-    let p = (((((1.987_569_2e-4 * r + 1.398_199_9e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2) * r
-        + 1.666_666_5e-1)
-        * r
-        + 0.5)
-        * z
-        + r
-        + 1.0;
-    let bits = shifted.to_bits().wrapping_sub(MAGIC.to_bits()).wrapping_add(127) << 23;
-    p * f32::from_bits(bits)
-}
-
-/// GroupNorm parameters.
-#[derive(Clone, Debug)]
-pub struct Norm {
-    /// Groups.
-    pub groups: usize,
-    /// Per-channel scale γ.
-    pub gamma: Vec<f32>,
-    /// Per-channel shift β.
-    pub beta: Vec<f32>,
-    /// Added to the variance.
-    pub eps: f64,
 }
 
 /// A 3x3, stride-1, padding-1 convolution with its weights laid out per tile:
@@ -470,19 +415,6 @@ mod tests {
         assert_eq!(p.row_mut(0, 1), &[1.0, 1.0, 2.0, 2.0]);
         // The border stays zero: the row above the first is all zeros.
         assert!(p.data[..p.stride].iter().all(|&v| v == 0.0));
-    }
-
-    #[test]
-    fn exp_is_within_a_few_ulp_of_the_library() {
-        let mut worst = 0.0f32;
-        for i in -87_000..88_000 {
-            let x = i as f32 / 1000.0 + 0.000_37;
-            let (a, e) = (exp(x), x.exp());
-            worst = worst.max(((a - e) / e).abs());
-        }
-        assert!(worst < 3e-7, "relative error {worst}");
-        // Clamped, not overflowing: e^-100 -> e^-87 (tiny), e^100 -> e^88 (finite).
-        assert!(exp(-100.0) < 2e-38 && exp(100.0).is_finite());
     }
 
     #[test]

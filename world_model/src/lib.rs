@@ -5,10 +5,10 @@
 //! - [`drift`]: the drifting loss; [`drift_step`]: a batch's drifting loss (fields,
 //!   self-forcing); [`motion`]: its motion weighting; [`unet`]: the action-conditioned U-Net;
 //! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer; [`codec`]:
-//!   autoencoder latents or pixels, the space the U-Net works in; [`cpu_decoder`] +
-//!   [`direct_conv`] + [`winograd`]: the decoder on direct CPU kernels, for inference; [`cpu_kernels`]:
-//!   whole-batch kernels (GEMM, GroupNorm, im2col) of the CPU U-Nets ([`unet::cpu`]),
-//!   [`winograd_batch`] their 3x3 convolutions;
+//!   autoencoder latents or pixels, the space the U-Net works in;
+//! - CPU inference kernels: [`cpu_decoder`] + [`direct_conv`] + [`winograd`], the decoder;
+//!   [`cpu_kernels`] + [`winograd_batch`], the U-Net ([`unet::cpu`]): whole-batch GEMM,
+//!   GroupNorm, im2col and Winograd convolutions; [`elementwise`]: `exp` and statistics;
 //! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
 //!   (drifting, MSE and diffusion objectives); [`context_noise`]: corrupted training histories;
 //! - [`model`]: a trained world model for inference; [`eval`]: video-quality metrics;
@@ -24,6 +24,7 @@ pub mod device;
 pub mod direct_conv;
 pub mod drift;
 pub mod drift_step;
+pub mod elementwise;
 pub mod error;
 pub mod eval;
 pub mod latents;
