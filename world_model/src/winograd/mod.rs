@@ -182,7 +182,6 @@ fn transform_input_impl(x: &Padded, ty: usize, s: &mut Scratch, at: usize) {
                     dr.iter_mut().zip(src).for_each(|(a, &b)| *a = b);
                 }
             }
-            // Along x: t[r][j][tile].
             // Tile k reads bordered columns 2k .. 2k + 3 of each row.
             let cols: [[[f32; LANES]; 4]; 4] =
                 std::array::from_fn(|r| std::array::from_fn(|q| std::array::from_fn(|k| d[r][2 * k + q])));
