@@ -15,7 +15,8 @@ use burn::tensor::Tensor;
 
 use crate::autoencoder::{Autoencoder, ResBlock};
 use crate::cpu_kernels::values;
-use crate::direct_conv::{Conv3x3, Norm, Padded};
+use crate::direct_conv::{Conv3x3, Norm, Padded, winograd_enabled};
+use crate::winograd::upsample::Upsample3x3;
 
 /// Why a network cannot be run by the direct kernels (a layer they do not support).
 #[derive(Debug, thiserror::Error)]
@@ -41,6 +42,32 @@ struct Block {
     conv2: Conv3x3,
 }
 
+/// A `dec_up` layer: nearest 2x upsampling, then a 3x3 convolution.
+#[derive(Clone, Debug)]
+struct UpConv {
+    /// On the upsampled map (`EVALHARNESS_CONV=direct`, or odd sides).
+    conv: Conv3x3,
+    /// Per output phase on the small map.
+    phases: Upsample3x3,
+}
+
+impl UpConv {
+    /// `src` `[cin, h, w]` upsampled and convolved: `[cout, 2h, 2w]`.
+    fn forward(&self, src: &[f32], h: usize, w: usize) -> Vec<f32> {
+        let mut out = vec![0.0; self.conv.cout() * 4 * h * w];
+        if Upsample3x3::supports(h, w) && winograd_enabled() {
+            let mut pad = Padded::zeros(self.conv.cin(), h, w);
+            pad.fill(src, false);
+            self.phases.forward(&pad, &mut out);
+        } else {
+            let mut pad = Padded::zeros(self.conv.cin(), 2 * h, 2 * w);
+            pad.fill(src, true);
+            self.conv.forward(&pad, None, &mut out);
+        }
+        out
+    }
+}
+
 /// The decoder's weights, laid out for the direct kernels.
 #[derive(Clone, Debug)]
 pub struct CpuDecoder {
@@ -48,7 +75,7 @@ pub struct CpuDecoder {
     latent_size: usize,
     dec_in: Conv3x3,
     blocks: Vec<Block>,
-    ups: Vec<Conv3x3>,
+    ups: Vec<UpConv>,
     norm: Norm,
     out: Conv3x3,
 }
@@ -76,8 +103,15 @@ impl CpuDecoder {
                 .map(|(i, b)| block(b, &format!("dec_blocks.{i}")))
                 .collect::<Result<_, _>>()?,
             ups: (ae.dec_up.iter().enumerate())
-                .map(|(i, c)| conv3x3_of(c, &format!("dec_up.{i}")))
-                .collect::<Result<_, _>>()?,
+                .map(|(i, c)| {
+                    let layer = format!("dec_up.{i}");
+                    let w = conv3x3_weights(c, &layer)?;
+                    Ok(UpConv {
+                        conv: Conv3x3::new(w.cin, w.cout, &w.weight, w.bias.as_deref()),
+                        phases: Upsample3x3::new(w.cin, w.cout, &w.weight, w.bias.as_deref()),
+                    })
+                })
+                .collect::<Result<_, UnsupportedLayer>>()?,
             norm: norm_of(&ae.dec_norm, "dec_norm")?,
             out: conv3x3_of(&ae.dec_out, "dec_out")?,
             dec_in,
@@ -109,11 +143,8 @@ impl CpuDecoder {
         self.dec_in.forward(&pad, None, &mut h);
         h = self.block(&self.blocks[0], h, side);
         for (up, block) in self.ups.iter().zip(&self.blocks[1..]) {
+            h = up.forward(&h, side, side); // nearest 2x, then the conv
             side *= 2;
-            let mut pad = Padded::zeros(up.cin(), side, side);
-            pad.fill(&h, true); // nearest 2x
-            h = vec![0.0; up.cout() * side * side];
-            up.forward(&pad, None, &mut h);
             h = self.block(block, h, side);
         }
         let mut pad = Padded::zeros(self.out.cin(), side, side);
@@ -141,6 +172,24 @@ impl CpuDecoder {
 /// # Errors
 /// [`UnsupportedLayer`] for any other convolution or non-f32 weights.
 pub fn conv3x3_of(c: &Conv2d, layer: &str) -> Result<Conv3x3, UnsupportedLayer> {
+    let w = conv3x3_weights(c, layer)?;
+    Ok(Conv3x3::new(w.cin, w.cout, &w.weight, w.bias.as_deref()))
+}
+
+/// A 3x3 convolution's weights as burn holds them.
+struct ConvWeights {
+    cin: usize,
+    cout: usize,
+    /// `[cout, cin, 3, 3]`
+    weight: Vec<f32>,
+    bias: Option<Vec<f32>>,
+}
+
+/// The weights of a 3x3, stride-1, padding-1 burn convolution.
+///
+/// # Errors
+/// [`UnsupportedLayer`] for any other convolution or non-f32 weights.
+fn conv3x3_weights(c: &Conv2d, layer: &str) -> Result<ConvWeights, UnsupportedLayer> {
     let err = |message: &str| UnsupportedLayer::new(layer, message);
     let padded_one = matches!(c.padding, PaddingConfig2d::Explicit(1, 1, 1, 1));
     if c.kernel_size != [3, 3] || c.stride != [1, 1] || c.dilation != [1, 1] || c.groups != 1 || !padded_one {
@@ -150,7 +199,7 @@ pub fn conv3x3_of(c: &Conv2d, layer: &str) -> Result<Conv3x3, UnsupportedLayer> 
     let [cout, cin, _, _] = w.dims();
     let weight = values(w, layer)?;
     let bias = c.bias.as_ref().map(|b| values(b.val(), layer)).transpose()?;
-    Ok(Conv3x3::new(cin, cout, &weight, bias.as_deref()))
+    Ok(ConvWeights { cin, cout, weight, bias })
 }
 
 /// A burn GroupNorm's parameters as a [`Norm`].

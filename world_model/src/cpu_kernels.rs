@@ -15,7 +15,8 @@ use burn::nn::Linear;
 use burn::tensor::{Distribution, Tensor};
 
 use crate::cpu_decoder::UnsupportedLayer;
-use crate::direct_conv::{Norm, exp, lane_sum};
+use crate::direct_conv::{Norm, exp};
+use crate::elementwise::mean_var;
 
 /// A burn tensor's values as f32, or why not.
 pub fn values<const D: usize>(t: Tensor<D>, layer: &str) -> Result<Vec<f32>, UnsupportedLayer> {
@@ -200,7 +201,7 @@ pub fn group_norm_cols(
     act: impl Fn(f32) -> f32 + Copy,
 ) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if crate::elementwise::has_avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
         // requirement of calling a function compiled with those features.
         #[allow(unsafe_code)]
@@ -227,8 +228,7 @@ fn group_norm_cols_avx2(
     group_norm_cols_impl(x, norm, n, frames, plane, film, act);
 }
 
-/// Statistics in two passes (sum, then squared deviations), each in 8 f32 lanes per
-/// channel row and f64 across rows ([`lane_sum`]); then the fused output pass.
+/// Statistics by [`mean_var`] over the group's channel rows; then the fused output pass.
 #[inline(always)]
 fn group_norm_cols_impl(
     x: &mut [f32],
@@ -247,9 +247,7 @@ fn group_norm_cols_impl(
     for g in 0..norm.groups {
         for smp in 0..n {
             let rows = || (g * per..(g + 1) * per).map(|ch| ch * cols + smp * l);
-            let mean = rows().map(|r| lane_sum(&x[r..r + l], |v| v)).sum::<f64>() / count;
-            let m = mean as f32;
-            let var = rows().map(|r| lane_sum(&x[r..r + l], |v| (v - m) * (v - m))).sum::<f64>() / count;
+            let (mean, var) = mean_var(|| rows().map(|r| &x[r..r + l]), count);
             let inv = 1.0 / (var + norm.eps).sqrt();
             for (ch, r) in (g * per..).zip(rows()) {
                 let a = (inv * f64::from(norm.gamma[ch])) as f32;

@@ -11,7 +11,8 @@
 //! portable Rust. Only inference uses it (no gradients). Maps of even size go
 //! through [`crate::winograd`] instead, which needs fewer multiply-adds.
 
-pub use crate::elementwise::{Norm, exp, lane_sum};
+use crate::elementwise::mean_var;
+pub use crate::elementwise::{Norm, exp};
 use crate::winograd::Winograd3x3;
 
 /// Output pixels per tile (two 8-lane AVX registers).
@@ -101,7 +102,7 @@ impl Padded {
     /// group of `c / groups` channels, biased variance, then the affine per channel.
     pub fn fill_norm_silu(&mut self, src: &[f32], norm: &Norm) {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        if crate::elementwise::has_avx2_fma() {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
             // requirement of calling a function compiled with those features.
             #[allow(unsafe_code)]
@@ -120,8 +121,7 @@ impl Padded {
         self.fill_norm_silu_impl(src, norm);
     }
 
-    /// Two passes for the statistics (sum, then squared deviations from the mean), each
-    /// summed in 8 f32 lanes per row and in f64 across rows, then one for the output.
+    /// The statistics by [`mean_var`], then one pass for the output.
     #[inline(always)]
     fn fill_norm_silu_impl(&mut self, src: &[f32], norm: &Norm) {
         let (c, h, w) = (self.c, self.h, self.w);
@@ -130,9 +130,7 @@ impl Padded {
         let n = (per * plane) as f64;
         for g in 0..norm.groups {
             let part = &src[g * per * plane..(g + 1) * per * plane];
-            let mean = lane_sum(part, |v| v) / n;
-            let m = mean as f32;
-            let var = lane_sum(part, |v| (v - m) * (v - m)) / n;
+            let (mean, var) = mean_var(|| std::iter::once(part), n);
             let inv = 1.0 / (var + norm.eps).sqrt();
             for ch in g * per..(g + 1) * per {
                 let scale = (inv * f64::from(norm.gamma[ch])) as f32;
@@ -222,7 +220,7 @@ impl Conv3x3 {
         debug_assert_eq!(x.c, self.cin);
         debug_assert_eq!(out.len(), self.cout * x.h * x.w);
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        if crate::elementwise::has_avx2_fma() {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
             // requirement of calling a function compiled with those features.
             #[allow(unsafe_code)]
@@ -374,11 +372,7 @@ mod tests {
         out
     }
 
-    fn values(n: usize, seed: u32) -> Vec<f32> {
-        (0..n)
-            .map(|i| (((i as u32).wrapping_mul(2_654_435_761) ^ seed) % 1000) as f32 / 500.0 - 1.0)
-            .collect()
-    }
+    use crate::elementwise::test_values as values;
 
     #[test]
     fn matches_the_definition_on_odd_sizes_and_channel_counts() {

@@ -61,6 +61,37 @@ pub struct Norm {
     pub eps: f64,
 }
 
+/// Mean and biased variance of all the values in `parts` (`count` of them), in two
+/// passes — the sum, then the squared deviations from the mean — each part by
+/// [`lane_sum`], the parts' totals in f64: GroupNorm's statistics.
+#[inline(always)]
+pub fn mean_var<'a, I: Iterator<Item = &'a [f32]>>(parts: impl Fn() -> I, count: f64) -> (f64, f64) {
+    let mean = parts().map(|p| lane_sum(p, |v| v)).sum::<f64>() / count;
+    let m = mean as f32;
+    let var = parts().map(|p| lane_sum(p, |v| (v - m) * (v - m))).sum::<f64>() / count;
+    (mean, var)
+}
+
+/// Whether this CPU has AVX2 and FMA, which every kernel compiled with
+/// `#[target_feature(enable = "avx2,fma")]` needs before it may be called (std caches
+/// the detection, so this is cheap on a hot path).
+#[cfg(target_arch = "x86_64")]
+pub fn has_avx2_fma() -> bool {
+    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+}
+
+/// Never on other architectures (the AVX2 kernels are not compiled there).
+#[cfg(not(target_arch = "x86_64"))]
+pub fn has_avx2_fma() -> bool {
+    false
+}
+
+/// `n` deterministic test values in [-1, 1), scrambled by `seed`.
+#[cfg(test)]
+pub(crate) fn test_values(n: usize, seed: u32) -> Vec<f32> {
+    (0..n).map(|i| (((i as u32).wrapping_mul(2_654_435_761) ^ seed) % 1000) as f32 / 500.0 - 1.0).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

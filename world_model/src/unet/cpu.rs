@@ -290,7 +290,7 @@ impl Attn {
     /// `x + proj(MHA(qkv(GN(x))))`, attention over each frame's `h·w` positions.
     fn forward(&self, x: &Video) -> Video {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        if crate::elementwise::has_avx2_fma() {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
             // requirement of calling a function compiled with those features.
             #[allow(unsafe_code)]

@@ -1,7 +1,7 @@
 //! The AVX2 + FMA kernels of [`super`]: the input and output transforms with
 //! explicit shuffles (the stride-2 tile columns of a bordered row split into even
 //! and odd lanes) and the register-tiled products. Called only after
-//! `is_x86_feature_detected!` has confirmed both features.
+//! [`crate::elementwise::has_avx2_fma`] has confirmed both features.
 
 use super::{LANES, OUT, Pass, Scratch, VECS, Winograd3x3};
 use crate::direct_conv::Padded;
@@ -161,24 +161,26 @@ pub(super) fn transform_output_avx2(
 }
 
 /// The matrix products with AVX2 + FMA: a 4-channel x 24-tile block of sums in twelve
-/// registers through the whole reduction (fewer tiles at the end of a pass).
+/// registers through the whole reduction (fewer tiles at the end of a pass). For each of
+/// `points` positions `p`, `m[·, p, ·] = u[p]ᵀ v[·, p, ·]`: `u` `[points, blocks, cin, 4]`,
+/// `v` `[cin, points, nk]`, `m` `[blocks · 4, points, nk]` (`nk` a whole number of vectors).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[allow(unsafe_code)]
-pub(super) fn multiply_avx2_fma(k: &Winograd3x3, s: &mut Scratch) {
-    let (cin, nk) = (k.cin, s.tiles);
-    let blocks = s.cout4 / OUT;
-    for p in 0..16 {
-        let v = &s.v[p * nk..];
+pub(super) fn products_avx2_fma(u: &[f32], cin: usize, points: usize, v: &[f32], m: &mut [f32], nk: usize) {
+    let blocks = u.len() / (points * cin * OUT);
+    let stride = points * nk;
+    for p in 0..points {
+        let v = &v[p * nk..];
         for b in 0..blocks {
-            let wb = &k.u[(p * blocks + b) * cin * OUT..][..cin * OUT];
-            let m = &mut s.m[(b * OUT * 16 + p) * nk..];
+            let wb = &u[(p * blocks + b) * cin * OUT..][..cin * OUT];
+            let m = &mut m[(b * OUT * points + p) * nk..];
             let mut t = 0;
             while t < nk {
                 match (nk - t) / LANES {
-                    1 => block::<1>(wb, v, m, cin, nk, t),
-                    2 => block::<2>(wb, v, m, cin, nk, t),
-                    _ => block::<VECS>(wb, v, m, cin, nk, t),
+                    1 => block::<1>(wb, v, m, cin, stride, nk, t),
+                    2 => block::<2>(wb, v, m, cin, stride, nk, t),
+                    _ => block::<VECS>(wb, v, m, cin, stride, nk, t),
                 }
                 t += LANES * VECS.min((nk - t) / LANES);
             }
@@ -186,16 +188,23 @@ pub(super) fn multiply_avx2_fma(k: &Winograd3x3, s: &mut Scratch) {
     }
 }
 
-/// One register block: `N` vectors of tiles from tile `t`, 4 output channels.
+/// One register block: `N` vectors of tiles from tile `t`, 4 output channels; rows
+/// (input channels of `v`, output channels of `m`) are `stride` floats apart.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[allow(unsafe_code)]
-fn block<const N: usize>(wb: &[f32], v: &[f32], m: &mut [f32], cin: usize, nk: usize, t: usize) {
+fn block<const N: usize>(
+    wb: &[f32],
+    v: &[f32],
+    m: &mut [f32],
+    cin: usize,
+    stride: usize,
+    nk: usize,
+    t: usize,
+) {
     use std::arch::x86_64::{
         _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_storeu_ps,
     };
-    // Rows (input channels of `v`, output channels of `m`) are 16 runs of `nk` tiles apart.
-    let stride = 16 * nk;
     assert!(wb.len() >= cin * OUT && t + N * LANES <= nk);
     assert!(v.len() >= (cin - 1) * stride + nk && m.len() >= (OUT - 1) * stride + nk);
     let mut acc = [[_mm256_setzero_ps(); N]; OUT];

@@ -21,6 +21,7 @@
 mod algebra;
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+pub mod upsample;
 
 pub(crate) use algebra::{input_2d, output_2d, transform_filter};
 
@@ -98,18 +99,27 @@ impl Winograd3x3 {
 
     /// `m[p] = u[p]ᵀ v[p]` for each of the 16 positions: `[cout, tiles] = [cout, cin] · [cin, tiles]`.
     fn multiply(&self, s: &mut Scratch) {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-            // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
-            // requirement of calling a function compiled with those features.
-            #[allow(unsafe_code)]
-            unsafe {
-                avx2::multiply_avx2_fma(self, s)
-            };
-            return;
-        }
-        multiply_portable(self, s);
+        products(&self.u, self.cin, 16, &s.v, &mut s.m, s.tiles);
     }
+}
+
+/// For each of `points` positions `p`: `m[·, p, ·] = u[p]ᵀ v[·, p, ·]`, where `u` is
+/// `[points, blocks, cin, 4]`, `v` `[cin, points, nk]` and `m` `[blocks · 4, points, nk]`
+/// (`nk` a whole number of 8-tile vectors): the Winograd-domain products of
+/// [`Winograd3x3`] (16 points) and of [`upsample::Upsample3x3`] (9 points).
+fn products(u: &[f32], cin: usize, points: usize, v: &[f32], m: &mut [f32], nk: usize) {
+    debug_assert!(nk.is_multiple_of(LANES));
+    #[cfg(target_arch = "x86_64")]
+    if crate::elementwise::has_avx2_fma() {
+        // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
+        // requirement of calling a function compiled with those features.
+        #[allow(unsafe_code)]
+        unsafe {
+            avx2::products_avx2_fma(u, cin, points, v, m, nk)
+        };
+        return;
+    }
+    products_portable(u, cin, points, v, m, nk);
 }
 
 /// Per-pass buffers: transformed inputs `v` `[cin, 16, tiles]` and products `m`
@@ -118,7 +128,6 @@ impl Winograd3x3 {
 #[derive(Default)]
 struct Scratch {
     cin: usize,
-    cout4: usize,
     /// Tiles per pass, rounded up to whole register tiles.
     tiles: usize,
     /// Tiles per tile row.
@@ -131,7 +140,7 @@ thread_local! {
     /// The buffers of this thread's last convolution, reused by the next (they are
     /// large enough that fresh ones cost page faults and zeroing on every call).
     static SCRATCH: std::cell::Cell<Scratch> = const {
-        std::cell::Cell::new(Scratch { cin: 0, cout4: 0, tiles: 0, row_tiles: 0, v: Vec::new(), m: Vec::new() })
+        std::cell::Cell::new(Scratch { cin: 0, tiles: 0, row_tiles: 0, v: Vec::new(), m: Vec::new() })
     };
 }
 
@@ -144,14 +153,14 @@ impl Scratch {
         self.v.resize(16 * cin * tiles, 0.0);
         // One run of 8 more: a row's last, partial run of tiles is loaded whole.
         self.m.resize(16 * cout4 * tiles + LANES, 0.0);
-        Self { cin, cout4, tiles, row_tiles, ..self }
+        Self { cin, tiles, row_tiles, ..self }
     }
 }
 
 /// `Bᵀ d B` of every 4x4 input tile of tile row `ty`, into `s.v` from tile `at` on.
 fn transform_input(x: &Padded, ty: usize, s: &mut Scratch, at: usize) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if crate::elementwise::has_avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         #[allow(unsafe_code)]
         unsafe {
@@ -206,7 +215,7 @@ struct Pass {
 /// `Aᵀ m A` for every tile of the pass, plus bias and residual, into `out`.
 fn transform_output(k: &Winograd3x3, s: &Scratch, pass: &Pass, residual: Option<&[f32]>, out: &mut [f32]) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if crate::elementwise::has_avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         #[allow(unsafe_code)]
         unsafe {
@@ -274,24 +283,24 @@ fn put(dst: &mut [f32], src: &[f32], n: usize) {
     }
 }
 
-/// The matrix products in plain Rust (CPUs without AVX2 + FMA).
-fn multiply_portable(k: &Winograd3x3, s: &mut Scratch) {
-    let (cin, nk) = (k.cin, s.tiles);
-    let blocks = s.cout4 / OUT;
-    for p in 0..16 {
+/// [`products`] in plain Rust (CPUs without AVX2 + FMA).
+fn products_portable(u: &[f32], cin: usize, points: usize, v: &[f32], m: &mut [f32], nk: usize) {
+    let blocks = u.len() / (points * cin * OUT);
+    let mut acc = vec![0.0f32; nk];
+    for p in 0..points {
         for b in 0..blocks {
-            let wb = &k.u[(p * blocks + b) * cin * OUT..][..cin * OUT];
+            let wb = &u[(p * blocks + b) * cin * OUT..][..cin * OUT];
             for j in 0..OUT {
-                let dst = ((b * OUT + j) * 16 + p) * nk;
-                let mut acc = vec![0.0f32; nk];
+                acc.fill(0.0);
                 for ci in 0..cin {
                     let wv = wb[ci * OUT + j];
-                    let v = &s.v[(ci * 16 + p) * nk..][..nk];
+                    let v = &v[(ci * points + p) * nk..][..nk];
                     for (a, &x) in acc.iter_mut().zip(v) {
                         *a += wv * x;
                     }
                 }
-                s.m[dst..dst + nk].copy_from_slice(&acc);
+                let dst = ((b * OUT + j) * points + p) * nk;
+                m[dst..dst + nk].copy_from_slice(&acc);
             }
         }
     }
@@ -302,11 +311,7 @@ mod tests {
     use super::*;
     use crate::direct_conv::Conv3x3;
 
-    fn values(n: usize, seed: u32) -> Vec<f32> {
-        (0..n)
-            .map(|i| (((i as u32).wrapping_mul(2_654_435_761) ^ seed) % 1000) as f32 / 500.0 - 1.0)
-            .collect()
-    }
+    use crate::elementwise::test_values as values;
 
     #[test]
     fn matches_the_direct_kernel() {
@@ -337,7 +342,7 @@ mod tests {
             let tiles = (TILES_PER_PASS / (w / 2)).clamp(1, h / 2) * w / 2;
             let mut s = Scratch::default().resize(cin, cout.div_ceil(OUT) * OUT, tiles, w / 2);
             transform_input(&p, 0, &mut s, 0);
-            multiply_portable(&k, &mut s);
+            products_portable(&k.u, cin, 16, &s.v, &mut s.m, s.tiles);
             let portable = s.m.clone();
             k.multiply(&mut s);
             assert!(portable.iter().zip(&s.m).all(|(a, e)| (a - e).abs() < 1e-4));

@@ -12,6 +12,9 @@
 //! keeps the GEMMs wide. Equal to the im2col convolution to float rounding
 //! (tested below).
 
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+
 use crate::cpu_kernels::matmul;
 use crate::winograd::{Winograd3x3, input_2d, output_2d, transform_filter};
 
@@ -53,31 +56,19 @@ impl BatchWinograd {
     /// # Shapes
     /// `x`: `[cin, imgs, h, w]` -> `out`: `[cout, imgs, h, w]` (accumulated)
     pub fn forward_add(&self, x: &[f32], imgs: usize, h: usize, w: usize, out: &mut [f32]) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::elementwise::has_avx2_fma() {
+            return self.run(x, imgs, h, w, out, true);
+        }
+        self.run(x, imgs, h, w, out, false);
+    }
+
+    /// Chunks of images: transforms in, 16 GEMMs, transforms out. `simd`: the AVX2
+    /// transforms (only when the CPU has them).
+    fn run(&self, x: &[f32], imgs: usize, h: usize, w: usize, out: &mut [f32], simd: bool) {
         debug_assert!(Self::supports(h, w));
         debug_assert_eq!(x.len(), self.cin * imgs * h * w);
         debug_assert_eq!(out.len(), self.cout * imgs * h * w);
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-            // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
-            // requirement of calling a function compiled with those features.
-            #[allow(unsafe_code)]
-            unsafe {
-                self.forward_add_avx2(x, imgs, h, w, out)
-            };
-            return;
-        }
-        self.forward_add_impl(x, imgs, h, w, out);
-    }
-
-    /// [`BatchWinograd::forward_add`] compiled for AVX2 + FMA (the transforms vectorise).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn forward_add_avx2(&self, x: &[f32], imgs: usize, h: usize, w: usize, out: &mut [f32]) {
-        self.forward_add_impl(x, imgs, h, w, out);
-    }
-
-    #[inline(always)]
-    fn forward_add_impl(&self, x: &[f32], imgs: usize, h: usize, w: usize, out: &mut [f32]) {
         let (cin, cout) = (self.cin, self.cout);
         let per_img = (h / 2) * (w / 2);
         // Images per chunk: a whole number of 8-lane runs where the budget allows.
@@ -91,13 +82,13 @@ impl BatchWinograd {
             let n = per.min(imgs - i0);
             let geo = Geometry { imgs, h, w, i0, n, lanes: n.div_ceil(LANES) * LANES };
             let tiles = per_img * geo.lanes;
-            transform_input(x, cin, &geo, &mut buf, &mut v[..16 * cin * tiles]);
+            transform_input(x, cin, &geo, &mut buf, &mut v[..16 * cin * tiles], simd);
             for p in 0..16 {
                 let a = &self.u[p * cout * cin..][..cout * cin];
                 let b = &v[p * cin * tiles..][..cin * tiles];
                 matmul(cout, cin, tiles, a, b, &mut m[p * cout * tiles..][..cout * tiles], false);
             }
-            transform_output(&m[..16 * cout * tiles], cout, &geo, &mut buf, out);
+            transform_output(&m[..16 * cout * tiles], cout, &geo, &mut buf, out, simd);
         }
     }
 }
@@ -120,8 +111,17 @@ struct Geometry {
 /// of the chunk's images, into `v` `[16, c, tiles]` with tiles ordered (ty, tx, image):
 /// each channel is first copied image-innermost into `buf` (`[h + 2, w + 2, lanes]`,
 /// zero border), so a tile position's values for 8 images are one vector.
-#[inline(always)]
-fn transform_input(x: &[f32], c: usize, g: &Geometry, buf: &mut [f32], v: &mut [f32]) {
+fn transform_input(x: &[f32], c: usize, g: &Geometry, buf: &mut [f32], v: &mut [f32], simd: bool) {
+    #[cfg(target_arch = "x86_64")]
+    if simd {
+        // SAFETY: `simd` is only set when the CPU has AVX2 and FMA ([`BatchWinograd::forward_add`]).
+        #[allow(unsafe_code)]
+        unsafe {
+            avx2::transform_input_avx2(x, c, g, buf, v)
+        };
+        return;
+    }
+    let _ = simd;
     let (h, w, l) = (g.h, g.w, g.lanes);
     let (th, tw, pw) = (h / 2, w / 2, w + 2);
     let tiles = th * tw * l;
@@ -161,8 +161,17 @@ fn transform_input(x: &[f32], c: usize, g: &Geometry, buf: &mut [f32], v: &mut [
 
 /// `Aᵀ m A` of every tile of `m` (`[16, c, tiles]`, as [`transform_input`] orders
 /// them), added to the chunk's images in `out` (`[c, imgs, h, w]`) through `buf`.
-#[inline(always)]
-fn transform_output(m: &[f32], c: usize, g: &Geometry, buf: &mut [f32], out: &mut [f32]) {
+fn transform_output(m: &[f32], c: usize, g: &Geometry, buf: &mut [f32], out: &mut [f32], simd: bool) {
+    #[cfg(target_arch = "x86_64")]
+    if simd {
+        // SAFETY: `simd` is only set when the CPU has AVX2 and FMA ([`BatchWinograd::forward_add`]).
+        #[allow(unsafe_code)]
+        unsafe {
+            avx2::transform_output_avx2(m, c, g, buf, out)
+        };
+        return;
+    }
+    let _ = simd;
     let (h, w, l) = (g.h, g.w, g.lanes);
     let (th, tw) = (h / 2, w / 2);
     let tiles = th * tw * l;
@@ -198,18 +207,22 @@ mod tests {
     use super::*;
     use crate::cpu_kernels::Conv2dShape;
 
-    fn values(n: usize, seed: u32) -> Vec<f32> {
-        (0..n)
-            .map(|i| (((i as u32).wrapping_mul(2_654_435_761) ^ seed) % 1000) as f32 / 500.0 - 1.0)
-            .collect()
-    }
+    use crate::elementwise::test_values as values;
 
     #[test]
     fn matches_im2col_and_gemm() {
         // One tile, several images per chunk, non-square, channel counts that are not
         // multiples of anything.
-        for (cin, cout, imgs, h, w) in [(1, 1, 1, 2, 2), (3, 5, 7, 6, 6), (8, 4, 3, 12, 12), (5, 6, 2, 4, 10)]
-        {
+        // 19 images of 12x12: two full runs of 8 images (8x8 transposes over 144 = 18 · 8
+        // pixels) and a partial one; 6x6: 36 pixels, a partial block of 4.
+        for (cin, cout, imgs, h, w) in [
+            (1, 1, 1, 2, 2),
+            (3, 5, 7, 6, 6),
+            (8, 4, 3, 12, 12),
+            (5, 6, 2, 4, 10),
+            (4, 3, 19, 12, 12),
+            (2, 3, 17, 6, 6),
+        ] {
             let wt = values(cout * cin * 9, 7);
             let x = values(cin * imgs * h * w, 3);
             // The reference: im2col + GEMM, as the U-Net's other path computes it.
@@ -219,10 +232,16 @@ mod tests {
             let start = values(cout * imgs * h * w, 5);
             let mut want = start.clone();
             matmul(cout, cin * 9, imgs * h * w, &wt, &col, &mut want, true);
-            let mut got = start;
-            BatchWinograd::new(cin, cout, &wt).forward_add(&x, imgs, h, w, &mut got);
-            for (i, (a, e)) in got.iter().zip(&want).enumerate() {
-                assert!((a - e).abs() < 1e-4, "{cin}->{cout} {imgs}x{h}x{w} at {i}: {a} vs {e}");
+            let k = BatchWinograd::new(cin, cout, &wt);
+            for simd in [false, cfg!(target_arch = "x86_64") && crate::elementwise::has_avx2_fma()] {
+                let mut got = start.clone();
+                k.run(&x, imgs, h, w, &mut got, simd);
+                for (i, (a, e)) in got.iter().zip(&want).enumerate() {
+                    assert!(
+                        (a - e).abs() < 1e-4,
+                        "{cin}->{cout} {imgs}x{h}x{w} simd {simd} at {i}: {a} vs {e}"
+                    );
+                }
             }
         }
     }
