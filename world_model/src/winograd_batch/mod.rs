@@ -75,9 +75,13 @@ impl BatchWinograd {
         let fit = (CHUNK / (16 * cin.max(cout) * per_img)).max(1);
         let per = if fit >= LANES { fit / LANES * LANES } else { fit }.min(imgs.div_ceil(LANES) * LANES);
         let lanes = per.div_ceil(LANES) * LANES;
-        let mut v = vec![0.0f32; 16 * cin * per_img * lanes];
-        let mut m = vec![0.0f32; 16 * cout * per_img * lanes];
-        let mut buf = vec![0.0f32; (h + 2) * (w + 2) * lanes];
+        // Every value a chunk reads from these is written first in that chunk (`buf`'s
+        // border and padding lanes are zeroed by the input transform), so stale values
+        // from an earlier call never matter.
+        let [mut v, mut m, mut buf] = BUFFERS.take();
+        v.resize(16 * cin * per_img * lanes, 0.0);
+        m.resize(16 * cout * per_img * lanes, 0.0);
+        buf.resize((h + 2) * (w + 2) * lanes, 0.0);
         for i0 in (0..imgs).step_by(per) {
             let n = per.min(imgs - i0);
             let geo = Geometry { imgs, h, w, i0, n, lanes: n.div_ceil(LANES) * LANES };
@@ -90,7 +94,14 @@ impl BatchWinograd {
             }
             transform_output(&m[..16 * cout * tiles], cout, &geo, &mut buf, out, simd);
         }
+        BUFFERS.set([v, m, buf]);
     }
+}
+
+thread_local! {
+    /// This thread's transform buffers (`v`, `m`, `buf` of [`BatchWinograd::run`]), kept
+    /// from call to call: allocating them zeroed was a memset of a few MB per convolution.
+    static BUFFERS: std::cell::Cell<[Vec<f32>; 3]> = const { std::cell::Cell::new([Vec::new(), Vec::new(), Vec::new()]) };
 }
 
 /// Images per vector.
