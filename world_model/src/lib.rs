@@ -6,7 +6,8 @@
 //!   self-forcing); [`motion`]: its motion weighting; [`unet`]: the action-conditioned U-Net;
 //! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer; [`codec`]:
 //!   autoencoder latents or pixels, the space the U-Net works in;
-//! - CPU inference kernels: [`cpu_decoder`] + [`direct_conv`] + [`winograd`], the decoder;
+//! - CPU inference kernels: [`cpu_decoder`] + [`direct_conv`] + [`winograd`] (with
+//!   [`winograd::upsample`] for its upsampling layers), the decoder;
 //!   [`cpu_kernels`] + [`winograd_batch`], the U-Net ([`unet::cpu`]): whole-batch GEMM,
 //!   GroupNorm, im2col and Winograd convolutions; [`elementwise`]: `exp` and statistics;
 //! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
