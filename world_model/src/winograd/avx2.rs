@@ -3,52 +3,82 @@
 //! and odd lanes) and the register-tiled products. Called only after
 //! [`crate::elementwise::has_avx2_fma`] has confirmed both features.
 
+use std::arch::x86_64::{
+    __m256, _mm256_add_ps, _mm256_castpd_ps, _mm256_castps_pd, _mm256_fmadd_ps, _mm256_loadu_ps,
+    _mm256_permute2f128_ps, _mm256_permute4x64_pd, _mm256_set1_ps, _mm256_setzero_ps, _mm256_shuffle_ps,
+    _mm256_storeu_ps, _mm256_sub_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps,
+};
+
 use super::{LANES, OUT, Pass, Scratch, VECS, Winograd3x3};
 use crate::direct_conv::Padded;
 
-/// [`transform_input_impl`] with AVX2 intrinsics: the even and odd columns of each
-/// row are split with two shuffles each, and all 16 transformed runs of 8 tiles stay
-/// in registers until stored.
-#[cfg(target_arch = "x86_64")]
+/// `[a0 a2 a4 a6 b0 b2 b4 b6]` and `[a1 a3 a5 a7 b1 b3 b5 b7]`.
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+fn split(a: __m256, b: __m256) -> (__m256, __m256) {
+    let e = _mm256_shuffle_ps::<0x88>(a, b); // [a0 a2 b0 b2 | a4 a6 b4 b6]
+    let o = _mm256_shuffle_ps::<0xDD>(a, b); // [a1 a3 b1 b3 | a5 a7 b5 b7]
+    (
+        _mm256_castpd_ps(_mm256_permute4x64_pd::<0xD8>(_mm256_castps_pd(e))),
+        _mm256_castpd_ps(_mm256_permute4x64_pd::<0xD8>(_mm256_castps_pd(o))),
+    )
+}
+
+/// The first four columns of 8 stride-2 tiles starting at `src[0]`: `[d0, d1, d2, d3]`,
+/// lane `k` of `dq` being `src[2k + q]`. Fewer than 18 values left in `src` (the end of
+/// a bordered row) are read through `buf`, zero-padded. Shared by this module's input
+/// transform and [`super::upsample`]'s.
+#[inline]
 #[target_feature(enable = "avx2,fma")]
 #[allow(unsafe_code)]
+pub(super) fn tile_columns(src: &[f32], buf: &mut [f32; 2 * LANES + 2]) -> [__m256; 4] {
+    let d: &[f32] = if src.len() >= buf.len() {
+        &src[..buf.len()]
+    } else {
+        buf.fill(0.0);
+        buf.iter_mut().zip(src).for_each(|(a, &b)| *a = b);
+        buf
+    };
+    // SAFETY: `d` holds 18 floats, so loads at offsets 0, 8, 2 and 10 are in bounds.
+    unsafe {
+        let p = d.as_ptr();
+        let (d0, d1) = split(_mm256_loadu_ps(p), _mm256_loadu_ps(p.add(8)));
+        let (d2, d3) = split(_mm256_loadu_ps(p.add(2)), _mm256_loadu_ps(p.add(10)));
+        [d0, d1, d2, d3]
+    }
+}
+
+/// Stores the first `n` (at most 8) lanes of `val` at the start of `dst`: one vector
+/// store for a whole run, through a bounce buffer for a row's last, partial one.
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+#[allow(unsafe_code)]
+pub(super) fn store_run(dst: &mut [f32], n: usize, val: __m256) {
+    if n == LANES {
+        let d = &mut dst[..LANES];
+        // SAFETY: `d` holds 8 floats.
+        unsafe { _mm256_storeu_ps(d.as_mut_ptr(), val) };
+    } else {
+        let mut tail = [0.0f32; LANES];
+        // SAFETY: `tail` holds 8 floats.
+        unsafe { _mm256_storeu_ps(tail.as_mut_ptr(), val) };
+        dst[..n].copy_from_slice(&tail[..n]);
+    }
+}
+
+/// [`transform_input_impl`] with AVX2 intrinsics: the even and odd columns of each
+/// row are split with two shuffles each ([`tile_columns`]), and all 16 transformed
+/// runs of 8 tiles stay in registers until stored.
+#[target_feature(enable = "avx2,fma")]
 pub(super) fn transform_input_avx2(x: &Padded, ty: usize, s: &mut Scratch, at: usize) {
-    use std::arch::x86_64::{
-        __m256, _mm256_add_ps, _mm256_castpd_ps, _mm256_castps_pd, _mm256_loadu_ps, _mm256_permute4x64_pd,
-        _mm256_shuffle_ps, _mm256_storeu_ps, _mm256_sub_ps,
-    };
-    // [a0 a2 a4 a6 b0 b2 b4 b6] and [a1 a3 a5 a7 b1 b3 b5 b7].
-    let split = |a: __m256, b: __m256| {
-        let e = _mm256_shuffle_ps::<0x88>(a, b); // [a0 a2 b0 b2 | a4 a6 b4 b6]
-        let o = _mm256_shuffle_ps::<0xDD>(a, b); // [a1 a3 b1 b3 | a5 a7 b5 b7]
-        (
-            _mm256_castpd_ps(_mm256_permute4x64_pd::<0xD8>(_mm256_castps_pd(e))),
-            _mm256_castpd_ps(_mm256_permute4x64_pd::<0xD8>(_mm256_castps_pd(o))),
-        )
-    };
     let (tw, cin, nk) = (s.row_tiles, s.cin, s.tiles);
     let mut buf = [0.0f32; 2 * LANES + 2];
-    let mut tail = [0.0f32; LANES];
     for ci in 0..cin {
         for x0 in (0..tw).step_by(LANES) {
             let n = LANES.min(tw - x0);
             // Row r's transform along x: [d0 - d2, d1 + d2, d2 - d1, d1 - d3] for 8 tiles.
             let mut along_x = |r: usize| {
-                let src = &x.bordered_row(ci, 2 * ty + r)[2 * x0..];
-                let d: &[f32] = if src.len() >= buf.len() {
-                    &src[..buf.len()]
-                } else {
-                    buf.fill(0.0);
-                    buf.iter_mut().zip(src).for_each(|(a, &b)| *a = b);
-                    &buf
-                };
-                // SAFETY: `d` holds 18 floats, so loads at offsets 0, 8, 2 and 10 are in bounds.
-                let (d0, d1, d2, d3) = unsafe {
-                    let p = d.as_ptr();
-                    let (d0, d1) = split(_mm256_loadu_ps(p), _mm256_loadu_ps(p.add(8)));
-                    let (d2, d3) = split(_mm256_loadu_ps(p.add(2)), _mm256_loadu_ps(p.add(10)));
-                    (d0, d1, d2, d3)
-                };
+                let [d0, d1, d2, d3] = tile_columns(&x.bordered_row(ci, 2 * ty + r)[2 * x0..], &mut buf);
                 [_mm256_sub_ps(d0, d2), _mm256_add_ps(d1, d2), _mm256_sub_ps(d2, d1), _mm256_sub_ps(d1, d3)]
             };
             let t0 = along_x(0);
@@ -56,18 +86,7 @@ pub(super) fn transform_input_avx2(x: &Padded, ty: usize, s: &mut Scratch, at: u
             let t2 = along_x(2);
             let t3 = along_x(3);
             let base = ci * 16 * nk + at + x0;
-            let mut store = |p: usize, v: __m256| {
-                let at = p * nk + base;
-                if n == LANES {
-                    let d = &mut s.v[at..at + LANES];
-                    // SAFETY: `d` holds 8 floats.
-                    unsafe { _mm256_storeu_ps(d.as_mut_ptr(), v) };
-                } else {
-                    // SAFETY: `tail` holds 8 floats.
-                    unsafe { _mm256_storeu_ps(tail.as_mut_ptr(), v) };
-                    s.v[at..at + n].copy_from_slice(&tail[..n]);
-                }
-            };
+            let mut store = |p: usize, v: __m256| store_run(&mut s.v[p * nk + base..], n, v);
             // Along y: v[i * 4 + j] from column j of the four rows.
             for j in 0..4 {
                 store(j, _mm256_sub_ps(t0[j], t2[j]));
@@ -82,7 +101,6 @@ pub(super) fn transform_input_avx2(x: &Padded, ty: usize, s: &mut Scratch, at: u
 /// [`transform_output_impl`] with AVX2 intrinsics: 16 runs of 8 products loaded,
 /// transformed in registers, interleaved into two rows of 16 pixels with unpack and
 /// lane permutes.
-#[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[allow(unsafe_code)]
 pub(super) fn transform_output_avx2(
@@ -92,10 +110,6 @@ pub(super) fn transform_output_avx2(
     residual: Option<&[f32]>,
     out: &mut [f32],
 ) {
-    use std::arch::x86_64::{
-        _mm256_add_ps, _mm256_loadu_ps, _mm256_permute2f128_ps, _mm256_set1_ps, _mm256_storeu_ps,
-        _mm256_sub_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps,
-    };
     let (tw, nk) = (s.row_tiles, s.tiles);
     let (h, w) = (pass.h, pass.w);
     let mut px = [0.0f32; 2 * LANES];
@@ -164,7 +178,6 @@ pub(super) fn transform_output_avx2(
 /// registers through the whole reduction (fewer tiles at the end of a pass). For each of
 /// `points` positions `p`, `m[·, p, ·] = u[p]ᵀ v[·, p, ·]`: `u` `[points, blocks, cin, 4]`,
 /// `v` `[cin, points, nk]`, `m` `[blocks · 4, points, nk]` (`nk` a whole number of vectors).
-#[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[allow(unsafe_code)]
 pub(super) fn products_avx2_fma(u: &[f32], cin: usize, points: usize, v: &[f32], m: &mut [f32], nk: usize) {
@@ -190,7 +203,6 @@ pub(super) fn products_avx2_fma(u: &[f32], cin: usize, points: usize, v: &[f32],
 
 /// One register block: `N` vectors of tiles from tile `t`, 4 output channels; rows
 /// (input channels of `v`, output channels of `m`) are `stride` floats apart.
-#[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[allow(unsafe_code)]
 fn block<const N: usize>(
@@ -202,9 +214,6 @@ fn block<const N: usize>(
     nk: usize,
     t: usize,
 ) {
-    use std::arch::x86_64::{
-        _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_set1_ps, _mm256_setzero_ps, _mm256_storeu_ps,
-    };
     assert!(wb.len() >= cin * OUT && t + N * LANES <= nk);
     assert!(v.len() >= (cin - 1) * stride + nk && m.len() >= (OUT - 1) * stride + nk);
     let mut acc = [[_mm256_setzero_ps(); N]; OUT];

@@ -50,21 +50,8 @@ impl Winograd3x3 {
     /// From burn's layout: `weight` `[cout, cin, 3, 3]`, `bias` `[cout]` (zeros when absent).
     pub fn new(cin: usize, cout: usize, weight: &[f32], bias: Option<&[f32]>) -> Self {
         debug_assert_eq!(weight.len(), cout * cin * 9);
-        let blocks = cout.div_ceil(OUT);
-        let mut u = vec![0.0; 16 * blocks * cin * OUT];
-        for co in 0..cout {
-            for ci in 0..cin {
-                let ut = transform_filter(&weight[(co * cin + ci) * 9..][..9]);
-                for (p, &val) in ut.iter().enumerate() {
-                    u[((p * blocks + co / OUT) * cin + ci) * OUT + co % OUT] = val;
-                }
-            }
-        }
-        let mut b = vec![0.0; cout];
-        if let Some(bias) = bias {
-            b.copy_from_slice(bias);
-        }
-        Self { cin, cout, u, bias: b }
+        let u = pack_filters(cin, cout, |co, ci| transform_filter(&weight[(co * cin + ci) * 9..][..9]));
+        Self { cin, cout, u, bias: bias_or_zeros(cout, bias) }
     }
 
     /// Whether a `h` x `w` map can be convolved this way (whole 2x2 tiles).
@@ -101,6 +88,30 @@ impl Winograd3x3 {
     fn multiply(&self, s: &mut Scratch) {
         products(&self.u, self.cin, 16, &s.v, &mut s.m, s.tiles);
     }
+}
+
+/// Transformed filters laid out for [`products`]: `[P, cout / 4, cin, 4]`, zero-padded
+/// to whole blocks of output channels; `filter(co, ci)` gives one filter's `P` points.
+fn pack_filters<const P: usize>(
+    cin: usize,
+    cout: usize,
+    filter: impl Fn(usize, usize) -> [f32; P],
+) -> Vec<f32> {
+    let blocks = cout.div_ceil(OUT);
+    let mut u = vec![0.0; P * blocks * cin * OUT];
+    for co in 0..cout {
+        for ci in 0..cin {
+            for (p, &val) in filter(co, ci).iter().enumerate() {
+                u[((p * blocks + co / OUT) * cin + ci) * OUT + co % OUT] = val;
+            }
+        }
+    }
+    u
+}
+
+/// `bias` as a vector of `cout` values, zeros when absent.
+fn bias_or_zeros(cout: usize, bias: Option<&[f32]>) -> Vec<f32> {
+    bias.map_or_else(|| vec![0.0; cout], <[f32]>::to_vec)
 }
 
 /// For each of `points` positions `p`: `m[·, p, ·] = u[p]ᵀ v[·, p, ·]`, where `u` is

@@ -49,15 +49,48 @@ fn transpose8(r: [__m256; 8]) -> [__m256; 8] {
     ]
 }
 
+/// Visits `n` images × `hw` pixels: `block(dst, j0, p0)` for every whole 8 × 8 block,
+/// then `elem(dst, j, p)` for the pixels and images left over. The partition
+/// [`to_lanes`] and [`add_from_lanes`] share.
+#[inline(always)]
+fn by_blocks(
+    n: usize,
+    hw: usize,
+    dst: &mut [f32],
+    mut block: impl FnMut(&mut [f32], usize, usize),
+    mut elem: impl FnMut(&mut [f32], usize, usize),
+) {
+    let (full_j, full_p) = (n / LANES * LANES, hw / LANES * LANES);
+    for j0 in (0..full_j).step_by(LANES) {
+        for p0 in (0..full_p).step_by(LANES) {
+            block(dst, j0, p0);
+        }
+        for p in full_p..hw {
+            for j in j0..j0 + LANES {
+                elem(dst, j, p);
+            }
+        }
+    }
+    for j in full_j..n {
+        for p in 0..hw {
+            elem(dst, j, p);
+        }
+    }
+}
+
 /// `n` planes of `hw` pixels (`planes`, `[n, hw]`) into `buf` `[hw, l]` (image innermost):
-/// 8x8 blocks by transposes, the rest element by element.
+/// 8x8 blocks by transposes, the rest element by element. Called once per channel; kept
+/// out of line so that the tile loop it precedes stays compact.
+#[inline(never)]
 #[target_feature(enable = "avx2,fma")]
 #[allow(unsafe_code)]
 fn to_lanes(planes: &[f32], n: usize, hw: usize, l: usize, buf: &mut [f32]) {
     assert!(planes.len() >= n * hw && buf.len() >= hw * l && n <= l);
-    let (full_j, full_p) = (n / LANES * LANES, hw / LANES * LANES);
-    for j0 in (0..full_j).step_by(LANES) {
-        for p0 in (0..full_p).step_by(LANES) {
+    by_blocks(
+        n,
+        hw,
+        buf,
+        |buf, j0, p0| {
             // SAFETY: j0 + 8 <= n and p0 + 8 <= hw, so each row read lies in `planes`
             // (asserted above); each column written, (p0 + k) · l + j0 + 8 <= hw · l, in `buf`.
             unsafe {
@@ -66,48 +99,33 @@ fn to_lanes(planes: &[f32], n: usize, hw: usize, l: usize, buf: &mut [f32]) {
                     _mm256_storeu_ps(buf.as_mut_ptr().add((p0 + k) * l + j0), *col);
                 }
             }
-        }
-        for p in full_p..hw {
-            for j in j0..j0 + LANES {
-                buf[p * l + j] = planes[j * hw + p];
-            }
-        }
-    }
-    for j in full_j..n {
-        for p in 0..hw {
-            buf[p * l + j] = planes[j * hw + p];
-        }
-    }
+        },
+        |buf, j, p| buf[p * l + j] = planes[j * hw + p],
+    );
 }
 
 /// Adds `buf` `[hw, l]` (image innermost) to `n` planes `[n, hw]`: the inverse of [`to_lanes`].
+#[inline(never)]
 #[target_feature(enable = "avx2,fma")]
 #[allow(unsafe_code)]
 fn add_from_lanes(buf: &[f32], n: usize, hw: usize, l: usize, planes: &mut [f32]) {
     assert!(planes.len() >= n * hw && buf.len() >= hw * l && n <= l);
-    let (full_j, full_p) = (n / LANES * LANES, hw / LANES * LANES);
-    for j0 in (0..full_j).step_by(LANES) {
-        for p0 in (0..full_p).step_by(LANES) {
+    by_blocks(
+        n,
+        hw,
+        planes,
+        |planes, j0, p0| {
             // SAFETY: as in `to_lanes`, with the roles of the two buffers swapped.
             unsafe {
                 let cols = std::array::from_fn(|k| _mm256_loadu_ps(buf.as_ptr().add((p0 + k) * l + j0)));
                 for (r, row) in transpose8(cols).iter().enumerate() {
-                    let dst = planes.as_mut_ptr().add((j0 + r) * hw + p0);
-                    _mm256_storeu_ps(dst, _mm256_add_ps(_mm256_loadu_ps(dst), *row));
+                    let d = planes.as_mut_ptr().add((j0 + r) * hw + p0);
+                    _mm256_storeu_ps(d, _mm256_add_ps(_mm256_loadu_ps(d), *row));
                 }
             }
-        }
-        for p in full_p..hw {
-            for j in j0..j0 + LANES {
-                planes[j * hw + p] += buf[p * l + j];
-            }
-        }
-    }
-    for j in full_j..n {
-        for p in 0..hw {
-            planes[j * hw + p] += buf[p * l + j];
-        }
-    }
+        },
+        |planes, j, p| planes[j * hw + p] += buf[p * l + j],
+    );
 }
 
 /// `Bᵀ` along one axis: `[d0 − d2, d1 + d2, d2 − d1, d1 − d3]`.
@@ -122,6 +140,21 @@ fn bt([d0, d1, d2, d3]: [__m256; 4]) -> [__m256; 4] {
 #[target_feature(enable = "avx2,fma")]
 fn at([m0, m1, m2, m3]: [__m256; 4]) -> [__m256; 2] {
     [_mm256_add_ps(_mm256_add_ps(m0, m1), m2), _mm256_sub_ps(_mm256_sub_ps(m1, m2), m3)]
+}
+
+/// Pixel `(y, x)` of images `j0 .. j0 + 8` from `buf` (`[h·w, lanes]`); zeros outside
+/// the image (`y` or `x` past the edge, or wrapped below zero).
+#[inline(always)]
+#[allow(unsafe_code)]
+fn lanes_at(buf: &[f32], g: &Geometry, y: usize, x: usize, j0: usize) -> __m256 {
+    if y < g.h && x < g.w {
+        let run = &buf[(y * g.w + x) * g.lanes + j0..][..LANES];
+        // SAFETY: `run` holds 8 floats.
+        unsafe { _mm256_loadu_ps(run.as_ptr()) }
+    } else {
+        // SAFETY: no memory is touched; the callers run only where AVX is available.
+        unsafe { _mm256_setzero_ps() }
+    }
 }
 
 /// [`super::transform_input`]: per channel, the chunk's images image-innermost in
@@ -144,13 +177,7 @@ pub(super) fn transform_input_avx2(x: &[f32], c: usize, g: &Geometry, buf: &mut 
                 for j0 in (0..l).step_by(LANES) {
                     // Input pixel (2ty + r − 1, 2tx + q − 1) of images j0 .. j0 + 8.
                     let px = |r: usize, q: usize| {
-                        let (y, xx) = ((2 * ty + r).wrapping_sub(1), (2 * tx + q).wrapping_sub(1));
-                        if y < h && xx < w {
-                            // SAFETY: (y · w + xx) · l + j0 + 8 <= hw · l = buf.len().
-                            unsafe { _mm256_loadu_ps(buf.as_ptr().add((y * w + xx) * l + j0)) }
-                        } else {
-                            _mm256_setzero_ps()
-                        }
+                        lanes_at(buf, g, (2 * ty + r).wrapping_sub(1), (2 * tx + q).wrapping_sub(1), j0)
                     };
                     let rows: [[__m256; 4]; 4] =
                         std::array::from_fn(|r| bt([px(r, 0), px(r, 1), px(r, 2), px(r, 3)]));

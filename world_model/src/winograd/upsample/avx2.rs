@@ -1,72 +1,36 @@
 //! The AVX2 transforms of [`super`]: 8 tiles per vector, the stride-2 tile columns
-//! of a bordered row split into even and odd lanes with shuffles, and the two
-//! column phases' outputs interleaved into runs of 32 pixels. Called only after
+//! of a bordered row split into even and odd lanes (the per-image Winograd kernel's
+//! [`tile_columns`]), and the two column phases' outputs interleaved into runs of 32
+//! pixels. Called only after
 //! [`crate::elementwise::has_avx2_fma`] has confirmed AVX2 and FMA.
 
 use std::arch::x86_64::{
     __m256, _mm256_add_ps, _mm256_castpd_ps, _mm256_castps_pd, _mm256_loadu_ps, _mm256_permute2f128_ps,
-    _mm256_permute4x64_pd, _mm256_set1_ps, _mm256_setzero_ps, _mm256_shuffle_ps, _mm256_storeu_ps,
-    _mm256_sub_ps, _mm256_unpackhi_pd, _mm256_unpackhi_ps, _mm256_unpacklo_pd, _mm256_unpacklo_ps,
+    _mm256_set1_ps, _mm256_setzero_ps, _mm256_storeu_ps, _mm256_sub_ps, _mm256_unpackhi_pd,
+    _mm256_unpackhi_ps, _mm256_unpacklo_pd, _mm256_unpacklo_ps,
 };
 
+use super::super::avx2::{store_run, tile_columns};
 use super::{LANES, Pass, Tiles, Upsample3x3};
 use crate::direct_conv::Padded;
 
-/// `[a0 a2 a4 a6 b0 b2 b4 b6]` and `[a1 a3 a5 a7 b1 b3 b5 b7]`.
-#[inline]
-#[target_feature(enable = "avx2,fma")]
-fn split(a: __m256, b: __m256) -> (__m256, __m256) {
-    let e = _mm256_shuffle_ps::<0x88>(a, b); // [a0 a2 b0 b2 | a4 a6 b4 b6]
-    let o = _mm256_shuffle_ps::<0xDD>(a, b); // [a1 a3 b1 b3 | a5 a7 b5 b7]
-    (
-        _mm256_castpd_ps(_mm256_permute4x64_pd::<0xD8>(_mm256_castps_pd(e))),
-        _mm256_castpd_ps(_mm256_permute4x64_pd::<0xD8>(_mm256_castps_pd(o))),
-    )
-}
-
 /// [`super::transform_input`] for 8 tiles at a time: each of the 3 rows' 17 columns
-/// split into the tiles' columns `d0, d1, d2`, `[d0 − d1, d1, d2 − d1]` along x, the
-/// same along y, 9 runs of 8 tiles stored.
+/// split into the tiles' columns `d0, d1, d2` ([`tile_columns`]), `[d0 − d1, d1, d2 − d1]`
+/// along x, the same along y, 9 runs of 8 tiles stored.
 #[target_feature(enable = "avx2,fma")]
-#[allow(unsafe_code)]
 pub(super) fn transform_input_avx2(x: &Padded, t: &Tiles, ty: usize, v: &mut [f32], at: usize) {
     let mut buf = [0.0f32; 2 * LANES + 2];
-    let mut tail = [0.0f32; LANES];
     for ci in 0..x.channels() {
         for x0 in (0..t.tw).step_by(LANES) {
             let n = LANES.min(t.tw - x0);
             let mut along_x = |r: usize| {
                 let src = &x.bordered_row(ci, 2 * ty + t.a + r)[2 * x0 + t.b..];
-                let d: &[f32] = if src.len() >= buf.len() {
-                    &src[..buf.len()]
-                } else {
-                    buf.fill(0.0);
-                    buf.iter_mut().zip(src).for_each(|(a, &b)| *a = b);
-                    &buf
-                };
-                // SAFETY: `d` holds 18 floats, so loads at offsets 0, 8, 2 and 10 are in bounds.
-                let (d0, d1, d2) = unsafe {
-                    let p = d.as_ptr();
-                    let (d0, d1) = split(_mm256_loadu_ps(p), _mm256_loadu_ps(p.add(8)));
-                    let (d2, _) = split(_mm256_loadu_ps(p.add(2)), _mm256_loadu_ps(p.add(10)));
-                    (d0, d1, d2)
-                };
+                let [d0, d1, d2, _] = tile_columns(src, &mut buf);
                 [_mm256_sub_ps(d0, d1), d1, _mm256_sub_ps(d2, d1)]
             };
             let (t0, t1, t2) = (along_x(0), along_x(1), along_x(2));
             let base = ci * 9 * t.nk + at + x0;
-            let mut store = |p: usize, val: __m256| {
-                let at = p * t.nk + base;
-                if n == LANES {
-                    let d = &mut v[at..at + LANES];
-                    // SAFETY: `d` holds 8 floats.
-                    unsafe { _mm256_storeu_ps(d.as_mut_ptr(), val) };
-                } else {
-                    // SAFETY: `tail` holds 8 floats.
-                    unsafe { _mm256_storeu_ps(tail.as_mut_ptr(), val) };
-                    v[at..at + n].copy_from_slice(&tail[..n]);
-                }
-            };
+            let mut store = |p: usize, val: __m256| store_run(&mut v[p * t.nk + base..], n, val);
             for j in 0..3 {
                 store(j, _mm256_sub_ps(t0[j], t1[j]));
                 store(3 + j, t1[j]);

@@ -17,7 +17,7 @@
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 
-use super::{LANES, OUT, TILES_PER_PASS, products};
+use super::{LANES, OUT, TILES_PER_PASS, Winograd3x3, bias_or_zeros, pack_filters, products};
 use crate::direct_conv::Padded;
 
 /// Tap rows (or columns) of the 3x3 filter that reach the phase's input row `r` (0:
@@ -72,30 +72,18 @@ impl Upsample3x3 {
     /// From burn's layout: `weight` `[cout, cin, 3, 3]`, `bias` `[cout]` (zeros when absent).
     pub fn new(cin: usize, cout: usize, weight: &[f32], bias: Option<&[f32]>) -> Self {
         debug_assert_eq!(weight.len(), cout * cin * 9);
-        let blocks = cout.div_ceil(OUT);
         let u = std::array::from_fn(|phase| {
-            let mut u = vec![0.0; 9 * blocks * cin * OUT];
-            for co in 0..cout {
-                for ci in 0..cin {
-                    let g = phase_filter(&weight[(co * cin + ci) * 9..][..9], phase / 2, phase % 2);
-                    for (p, &val) in transform_filter(&g).iter().enumerate() {
-                        u[((p * blocks + co / OUT) * cin + ci) * OUT + co % OUT] = val;
-                    }
-                }
-            }
-            u
+            pack_filters(cin, cout, |co, ci| {
+                transform_filter(&phase_filter(&weight[(co * cin + ci) * 9..][..9], phase / 2, phase % 2))
+            })
         });
-        let mut b = vec![0.0; cout];
-        if let Some(bias) = bias {
-            b.copy_from_slice(bias);
-        }
-        Self { cin, cout, u, bias: b }
+        Self { cin, cout, u, bias: bias_or_zeros(cout, bias) }
     }
 
     /// Whether an `h` x `w` input map can be upsampled and convolved this way (whole
     /// 2x2 tiles of each phase).
     pub fn supports(h: usize, w: usize) -> bool {
-        h.is_multiple_of(2) && w.is_multiple_of(2) && h > 0 && w > 0
+        Winograd3x3::supports(h, w)
     }
 
     /// Upsamples `x` 2x (nearest) and convolves it into `out`.
@@ -122,10 +110,17 @@ impl Upsample3x3 {
         let rows = (TILES_PER_PASS / tw).clamp(1, th);
         let nk = (rows * tw).div_ceil(LANES) * LANES;
         let cout4 = self.cout.div_ceil(OUT) * OUT;
-        // Values left in the tail from an earlier pass only meet tiles never written out.
-        let mut v = [vec![0.0; self.cin * 9 * nk], vec![0.0; self.cin * 9 * nk]];
+        // Kept per thread. Values left from an earlier pass or call only ever meet tiles
+        // that are never written out.
+        let [mut v0, mut v1, mut m0, mut m1] = BUFFERS.take();
+        for vb in [&mut v0, &mut v1] {
+            vb.resize(self.cin * 9 * nk, 0.0);
+        }
         // One run of 8 more: a row's last, partial run of tiles is loaded whole.
-        let mut m = [vec![0.0; cout4 * 9 * nk + LANES], vec![0.0; cout4 * 9 * nk + LANES]];
+        for mb in [&mut m0, &mut m1] {
+            mb.resize(cout4 * 9 * nk + LANES, 0.0);
+        }
+        let (mut v, mut m) = ([v0, v1], [m0, m1]);
         for a in 0..2 {
             for ty0 in (0..th).step_by(rows) {
                 let n = rows.min(th - ty0);
@@ -140,7 +135,17 @@ impl Upsample3x3 {
                 transform_output(self, &m, &pass, out, simd);
             }
         }
+        let ([v0, v1], [m0, m1]) = (v, m);
+        BUFFERS.set([v0, v1, m0, m1]);
     }
+}
+
+thread_local! {
+    /// This thread's transformed inputs and products (`v` and `m` of [`Upsample3x3::run`],
+    /// one pair per column phase), kept from call to call instead of allocated zeroed
+    /// for every upsampling layer of every frame.
+    static BUFFERS: std::cell::Cell<[Vec<f32>; 4]> =
+        const { std::cell::Cell::new([Vec::new(), Vec::new(), Vec::new(), Vec::new()]) };
 }
 
 /// Where a phase's tiles are: `nk` tiles per buffer, `tw` per tile row, output phase
