@@ -167,6 +167,11 @@ pub struct WmExportArgs {
     /// one from `train autoencoder --encoder-from`.
     #[arg(long)]
     pub autoencoder: Option<PathBuf>,
+    /// The inference strength α the exported model uses (an `--accentuation` model
+    /// only; a finite value >= 1): the one chosen on validation episodes, instead of
+    /// the run's `--alpha`. `rank --alpha` and `wm eval --alpha` still override it.
+    #[arg(long)]
+    pub alpha: Option<f32>,
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,

@@ -384,6 +384,17 @@ fn world_model_loss_variants_train_and_warm_start() {
     assert!(err.contains("--alpha"), "{err}");
     let (_, err) = expect_code(&wm(&dir.path().join("wm_alpha"), &["--steps", "1", "--alpha", "2"]), 2);
     assert!(err.contains("--alpha"), "{err}");
+    // `wm export --alpha` ships the α chosen on validation episodes (recorded in the export
+    // entry); for a model without accentuation it is refused.
+    let acc_ship = dir.path().join("ship_accent");
+    let exp = ["wm", "export", "--from", acc.to_str().unwrap(), "--out", acc_ship.to_str().unwrap()];
+    expect_code(&run(&[&exp[..], &["--alpha", "4"]].concat()), 0);
+    assert_eq!(read_json(&acc_ship.join("config.json"))["model"]["alpha"], 4.0);
+    assert_eq!(read_json(&acc_ship.join("provenance.json"))["exported"][0]["alpha"], 4.0);
+    let plain_ship = dir.path().join("ship_plain");
+    let plain = ["wm", "export", "--from", from, "--out", plain_ship.to_str().unwrap()];
+    let (_, err) = expect_code(&run(&[&plain[..], &["--alpha", "2"]].concat()), 2);
+    assert!(err.contains("--alpha 2") && err.contains("no accentuation") && !plain_ship.exists(), "{err}");
     // A warm start may add action maps and the anchor (zero-initialised input channels);
     // the run resumes with them, and a run without maps cannot start from it.
     let maps = dir.path().join("wm_maps");

@@ -72,6 +72,18 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
         );
     }
     let mut config = read_json(&a.from.join("config.json"))?;
+    if let Some(alpha) = a.alpha {
+        if config["model"]["alpha"].is_null() {
+            bail!(
+                "--alpha {alpha}: {} has no accentuation (only an --accentuation model takes an inference α)",
+                a.from.display()
+            );
+        }
+        if !alpha.is_finite() || alpha < 1.0 {
+            bail!("--alpha {alpha}: the inference strength α must be a finite value >= 1");
+        }
+        config["model"]["alpha"] = json!(alpha);
+    }
     let staged = Staged::new(&a.out, a.force)?;
     if let Some(ae) = config["model"]["autoencoder"].as_str() {
         let trained_on = a.from.join(ae);
@@ -108,8 +120,11 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
         }
     }
     let command: Vec<String> = std::env::args().collect();
-    let entry =
+    let mut entry =
         json!({"command": command.join(" "), "commit": git_commit(), "from": a.from.display().to_string()});
+    if let Some(alpha) = a.alpha {
+        entry["alpha"] = json!(alpha);
+    }
     append(&mut provenance["exported"], entry);
     write_json(&staged.file("provenance.json"), &provenance)?;
     let out = staged.commit()?;
