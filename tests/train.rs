@@ -394,7 +394,10 @@ fn world_model_loss_variants_train_and_warm_start() {
     let plain_ship = dir.path().join("ship_plain");
     let plain = ["wm", "export", "--from", from, "--out", plain_ship.to_str().unwrap()];
     let (_, err) = expect_code(&run(&[&plain[..], &["--alpha", "2"]].concat()), 2);
-    assert!(err.contains("--alpha 2") && err.contains("no accentuation") && !plain_ship.exists(), "{err}");
+    assert!(
+        err.contains("--alpha 2") && err.contains("not trained with --accentuation") && !plain_ship.exists(),
+        "{err}"
+    );
     // A warm start may add action maps and the anchor (zero-initialised input channels);
     // the run resumes with them, and a run without maps cannot start from it.
     let maps = dir.path().join("wm_maps");

@@ -54,7 +54,14 @@ fn check_same_encoder(trained_on: &Path, other: &Path, device: &burn::tensor::De
 /// `evalharness wm export`.
 pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
     let device = world_model::device::selected()?;
-    WorldModel::load(&a.from, &device).with_context(|| format!("--from {}", a.from.display()))?;
+    let mut source =
+        WorldModel::load(&a.from, &device).with_context(|| format!("--from {}", a.from.display()))?;
+    if let Some(alpha) = a.alpha {
+        // The check `rank --alpha` and `wm eval --alpha` make: an accentuated model, α >= 1.
+        source
+            .set_alpha(alpha)
+            .map_err(|e| anyhow::anyhow!("--alpha {alpha}: {e} ({})", a.from.display()))?;
+    }
     let prov_path = a.from.join("provenance.json");
     if !prov_path.is_file() {
         bail!(
@@ -73,15 +80,6 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
     }
     let mut config = read_json(&a.from.join("config.json"))?;
     if let Some(alpha) = a.alpha {
-        if config["model"]["alpha"].is_null() {
-            bail!(
-                "--alpha {alpha}: {} has no accentuation (only an --accentuation model takes an inference α)",
-                a.from.display()
-            );
-        }
-        if !alpha.is_finite() || alpha < 1.0 {
-            bail!("--alpha {alpha}: the inference strength α must be a finite value >= 1");
-        }
         config["model"]["alpha"] = json!(alpha);
     }
     let staged = Staged::new(&a.out, a.force)?;
