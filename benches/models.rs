@@ -33,7 +33,6 @@ use policies::dir::{Expectations, checkpoint_dirs, load_policy};
 use world_model::autoencoder::AutoencoderConfig;
 use world_model::codec::FrameCodec;
 use world_model::cpu_decoder::CpuDecoder;
-use world_model::latents::LatentStats;
 use world_model::model::{Objective, WorldModel, WorldModelConfig};
 use world_model::train_ae::load_autoencoder;
 use world_model::unet::UNetConfig;
@@ -79,17 +78,7 @@ fn world_model(c: &mut Criterion) {
 fn pixel_world_model(c: &mut Criterion) {
     let device = world_model::device::selected().expect("EVALHARNESS_DEVICE");
     let unet = UNetConfig::pusht_pixel();
-    let cfg = WorldModelConfig {
-        objective: Objective::Drifting,
-        latents: LatentStats { channels: 3, size: 96, mean: vec![0.0; 3], std: vec![1.0; 3] },
-        autoencoder: None,
-        future: 4,
-        sample_steps: 1,
-        prediction: None,
-        alpha: None,
-        goal_free: None,
-        unet: unet.clone(),
-    };
+    let cfg = WorldModelConfig::pixels(unet.clone(), 96);
     let wm = WorldModel::from_parts(cfg, FrameCodec::pixels(96), unet.init(&device), &device);
     chunk(c, "world_model_pixel_chunk", &wm, &env_batches("BENCH_PIXEL_BATCHES", &[1]));
 }

@@ -123,14 +123,16 @@ fn pipeline_end_to_end() {
     ];
     expect_code(&run(&args), 0);
     let e = read_json(&ev.join("eval.json"));
-    // The model's two rows, then the persistence reference on the same videos.
-    assert_eq!(e["models"].as_array().unwrap().len(), 4);
+    // The model's two rows, then the references on the same videos: persistence, and the
+    // model's autoencoder round-tripping the real future frames.
+    assert_eq!(e["models"].as_array().unwrap().len(), 6);
     assert_eq!(e["models"][0]["frames"], 60);
     assert_eq!(e["models"][1]["frames"], 64); // the whole 68-step episode after 4 context frames
-    for (row, frames) in [(2, 60), (3, 64)] {
-        assert_eq!(e["models"][row]["name"], "persistence");
+    for (row, name, frames) in [(2, "persistence", 60), (3, "persistence", 64), (4, "wm:autoencoder", 60)] {
+        assert_eq!(e["models"][row]["name"], name);
         assert_eq!(e["models"][row]["frames"], frames);
     }
+    assert_eq!(e["models"][5]["objective"], "round-trip");
     let ssim = e["models"][0]["ssim"].as_f64().unwrap();
     assert!((-1.0..=1.0).contains(&ssim), "{ssim}");
     assert!(ev.join("filmstrip.png").is_file());
@@ -352,7 +354,9 @@ fn pipeline_end_to_end() {
     let e = read_json(&ev.join("eval.json"));
     let names: Vec<&str> =
         e["models"].as_array().unwrap().iter().map(|m| m["name"].as_str().unwrap()).collect();
-    assert_eq!(names, ["wm", "wm", "wm_goal_free", "wm_goal_free", "persistence", "persistence"]);
+    let refs = ["persistence", "persistence", "wm:autoencoder", "wm:autoencoder"];
+    let refs = [&refs[..], &["wm_goal_free:autoencoder", "wm_goal_free:autoencoder"]].concat();
+    assert_eq!(names, [&["wm", "wm", "wm_goal_free", "wm_goal_free"][..], &refs[..]].concat());
     let out3 = dir.join("rank_goal_free");
     let mut args = base.to_vec();
     args[4] = s(&gf);

@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use scenarios::pusht::frame_score::FrameScorer;
 use serde_json::json;
 use world_model::data::{EpisodeData, Split};
-use world_model::eval::{EvalRow, View, evaluate, persistence};
+use world_model::eval::{EvalRow, View, evaluate, persistence, round_trip};
 use world_model::model::WorldModel;
 
 use super::goal_free;
@@ -22,6 +22,11 @@ const SCORE_NOTE: &str = "whole-episode videos: the recorded actions replayed fr
     score = max over the frames after the context of clip(coverage / 0.95, 0, 1), real and generated \
     frames read by the same frame scorer against the episode's goal; persistence = the last context frame";
 
+const REFERENCES_NOTE: &str = "references on the same videos: \"persistence\" repeats the last context \
+    frame (nothing moves); \"<model>:autoencoder\" (objective \"round-trip\", latent models only) is each \
+    real future frame encoded and decoded by that model's autoencoder, no dynamics: the best its rollouts \
+    could score, so the gap to it is the dynamics' error and its own gap to a perfect score the autoencoder's";
+
 /// One line of the text summary.
 fn print_row(row: &EvalRow, note: &str) {
     let horizon = if row.horizon == "64" { "64-frame:" } else { "episode: " };
@@ -29,6 +34,8 @@ fn print_row(row: &EvalRow, note: &str) {
         "{:<20} {:<9} {horizon} MSE {:.5} PSNR {:.2} SSIM {:.4} ({:.1} ms/frame){note}",
         row.name, row.objective, row.mse, row.psnr, row.ssim, row.ms_per_frame
     );
+    let curve: Vec<String> = row.ssim_curve.iter().map(|p| format!("{}: {:.3}", p.frame, p.ssim)).collect();
+    println!("{:<20} SSIM by generated frame  {}", "", curve.join("  "));
 }
 
 /// `evalharness wm eval`.
@@ -119,6 +126,17 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             rows.push(row);
         }
     }
+    for (name, wm) in &models {
+        let view = if wm.cfg.is_goal_free() { view.as_ref() } else { None };
+        for (starts, horizon) in [(&short, "64"), (&full, "episode")] {
+            if let Some(row) =
+                round_trip(wm, (name, view), &data, starts, horizon).filter(|_| !starts.is_empty())
+            {
+                print_row(&row, " (reference: its autoencoder's rendering of the real future)");
+                rows.push(row);
+            }
+        }
+    }
     if let Ok(sc) = &scoring {
         scores.push(sc.persistence(&data, &full_videos, k));
         for r in &scores {
@@ -141,6 +159,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         &staged.file("eval.json"),
         &json!({
             "models": rows,
+            "references_note": REFERENCES_NOTE,
             "open_loop_scores": scores,
             "open_loop_scores_note": scoring.as_ref().err().cloned().unwrap_or_else(|| SCORE_NOTE.into()),
             "data": a.data,

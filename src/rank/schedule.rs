@@ -144,8 +144,7 @@ mod tests {
     use harness::rng::Rng;
     use scenarios::pusht::PushTPhysics;
     use world_model::codec::FrameCodec;
-    use world_model::latents::LatentStats;
-    use world_model::model::{Objective, WorldModelConfig};
+    use world_model::model::WorldModelConfig;
     use world_model::unet::UNetConfig;
 
     use super::*;
@@ -183,17 +182,7 @@ mod tests {
         // a deterministic function of the batch.
         let device = Device::flex();
         let size = cfg.render.size as usize;
-        let wm_cfg = WorldModelConfig {
-            objective: Objective::Drifting,
-            unet: UNetConfig::new(3, 8, vec![1], vec![]).with_groups(4),
-            latents: LatentStats { channels: 3, size, mean: vec![0.0; 3], std: vec![1.0; 3] },
-            autoencoder: None,
-            future: 4,
-            sample_steps: 1,
-            prediction: None,
-            alpha: None,
-            goal_free: None,
-        };
+        let wm_cfg = WorldModelConfig::pixels(UNetConfig::new(3, 8, vec![1], vec![]).with_groups(4), size);
         let unet = wm_cfg.unet.init(&device);
         let wm = WorldModel::from_parts(wm_cfg, FrameCodec::pixels(size), unet, &device);
         let (good, bad) = (Fake { name: "good", fail: false }, Fake { name: "bad", fail: true });

@@ -39,6 +39,23 @@ pub struct EvalRow {
     pub frames: usize,
     /// Videos evaluated.
     pub videos: usize,
+    /// Mean SSIM at given generated frames (where along a rollout quality is lost).
+    pub ssim_curve: Vec<SsimPoint>,
+}
+
+/// Generated frames (0 = the first after the context) at which [`EvalRow::ssim_curve`]
+/// reports SSIM; those beyond a video's length are skipped for it.
+pub const SSIM_CURVE_AT: [usize; 8] = [0, 4, 8, 16, 32, 59, 128, 256];
+
+/// Mean SSIM of one generated frame index over the videos that reach it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SsimPoint {
+    /// Generated frame index (0 = the first after the context).
+    pub frame: usize,
+    /// Mean SSIM there.
+    pub ssim: f64,
+    /// Videos that reach it.
+    pub videos: usize,
 }
 
 /// One video's real and generated frames (HWC bytes), for filmstrips and scoring.
@@ -121,17 +138,23 @@ struct Tally {
     sums: [f64; 3],
     frames: usize,
     videos: usize,
+    /// SSIM sum and video count at each of [`SSIM_CURVE_AT`].
+    curve: [(f64, usize); SSIM_CURVE_AT.len()],
 }
 
 impl Tally {
     /// Adds one video: per-frame metrics averaged over its frames.
     fn add(&mut self, real: &[Vec<u8>], generated: &[Vec<u8>], size: usize) {
         let mut v = [0.0f64; 3];
-        for (r, x) in real.iter().zip(generated) {
+        for (j, (r, x)) in real.iter().zip(generated).enumerate() {
             let (m, p, q) = frame_metrics(r, x, size);
             v[0] += m;
             v[1] += p;
             v[2] += q;
+            if let Some(i) = SSIM_CURVE_AT.iter().position(|&f| f == j) {
+                self.curve[i].0 += q;
+                self.curve[i].1 += 1;
+            }
         }
         for (acc, x) in self.sums.iter_mut().zip(v) {
             *acc += x / real.len().max(1) as f64;
@@ -152,6 +175,12 @@ impl Tally {
             ms_per_frame: 1e3 * secs / self.frames.max(1) as f64,
             frames: self.frames,
             videos: self.videos,
+            ssim_curve: SSIM_CURVE_AT
+                .iter()
+                .zip(self.curve)
+                .filter(|(_, (_, n))| *n > 0)
+                .map(|(&frame, (sum, n))| SsimPoint { frame, ssim: sum / n as f64, videos: n })
+                .collect(),
         }
     }
 }
@@ -171,6 +200,43 @@ pub fn persistence(data: &EpisodeData, starts: &[(usize, usize)], k: usize, hori
         tally.add(&real_frames(data, t, k, len), &vec![last; len], data.size);
     }
     tally.row("persistence", "none", horizon, 0.0)
+}
+
+/// Frames encoded and decoded per batch by [`round_trip`].
+const ROUND_TRIP_BATCH: usize = 32;
+
+/// The latent family's ceiling: the real future frames of the same videos encoded and
+/// decoded by `wm`'s own autoencoder, with no dynamics. A rollout cannot be better than
+/// its decoder's rendering of the true future, so the row's distance from a perfect
+/// score is the autoencoder's share of the error and the model's distance from this
+/// row is the dynamics' share. Named `"<name>:autoencoder"`, objective `"round-trip"`;
+/// `None` for a pixel-space model (no codec, nothing lost). With a `view`, the model's
+/// input frames are round-tripped and completed, as its rollouts are.
+pub fn round_trip(
+    wm: &WorldModel,
+    (name, view): (&str, Option<&View>),
+    data: &EpisodeData,
+    starts: &[(usize, usize)],
+    horizon: &str,
+) -> Option<EvalRow> {
+    wm.cfg.autoencoder.as_ref()?;
+    let k = wm.cfg.unet.history;
+    let inputs = view.map_or(data, |v| v.inputs);
+    let device = wm.device().clone();
+    let (mut tally, t0) = (Tally::default(), Instant::now());
+    for &(t, len) in starts {
+        let steps: Vec<usize> = (t + k..t + k + len).collect();
+        let mut decoded = Vec::with_capacity(len);
+        for chunk in steps.chunks(ROUND_TRIP_BATCH) {
+            let z = wm.encode(inputs.frames_tensor(chunk, &device)); // [n, C, s, s]
+            decoded.extend(tensor_to_frames(wm.decode(z))); // n × [H, W, 3] bytes
+        }
+        if let Some(v) = view {
+            (v.complete)(t, &mut decoded);
+        }
+        tally.add(&real_frames(data, t, k, len), &decoded, data.size);
+    }
+    Some(tally.row(&format!("{name}:autoencoder"), "round-trip", horizon, t0.elapsed().as_secs_f64()))
 }
 
 /// What a model reads and how its frames are completed, when its inputs are not the
@@ -245,5 +311,26 @@ mod tests {
         // PSNR: frame 4: capped at 100; frame 5: 10·log10(255² / 10²) = 28.1308; mean 64.0654.
         assert!((row.psnr - 0.5 * (100.0 + 20.0 * (25.5f64).log10())).abs() < 1e-6, "{}", row.psnr);
         assert_eq!((row.frames, row.videos), (2, 1));
+        // SSIM by frame: frame 0 equals its real frame (SSIM 1); frame 1 is not a curve
+        // point, and frames 4, 8, … lie beyond this 2-frame video.
+        assert_eq!(row.ssim_curve, vec![SsimPoint { frame: 0, ssim: 1.0, videos: 1 }]);
+    }
+
+    #[test]
+    fn a_pixel_space_model_has_no_round_trip_reference() {
+        use crate::codec::FrameCodec;
+        use crate::model::WorldModelConfig;
+        use crate::unet::UNetConfig;
+        let device = burn::tensor::Device::flex();
+        let unet = UNetConfig { model_channels: 16, ..UNetConfig::pusht_latent(3) };
+        let cfg = WorldModelConfig::pixels(unet.clone(), 8);
+        let wm = WorldModel::from_parts(cfg, FrameCodec::pixels(8), unet.init(&device), &device);
+        let data = EpisodeData {
+            frames: vec![0; 6 * 192],
+            actions: vec![0.0; 12],
+            size: 8,
+            episodes: std::iter::once(0..6).collect(),
+        };
+        assert!(round_trip(&wm, ("wm", None), &data, &[(0, 2)], "64").is_none());
     }
 }

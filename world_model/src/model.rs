@@ -96,6 +96,25 @@ impl WorldModelConfig {
         self.goal_free == Some(true)
     }
 
+    /// A one-pass drifting model on raw 3-channel frames of `size`² (no autoencoder,
+    /// unit normalisation): the pixel family's shape, for tests and benchmarks.
+    pub fn pixels(unet: UNetConfig, size: usize) -> Self {
+        let latents = LatentStats { channels: 3, size, mean: vec![0.0; 3], std: vec![1.0; 3] };
+        let (future, sample_steps) = (4, 1);
+        let objective = Objective::Drifting;
+        Self {
+            objective,
+            unet,
+            latents,
+            autoencoder: None,
+            future,
+            sample_steps,
+            prediction: None,
+            alpha: None,
+            goal_free: None,
+        }
+    }
+
     /// The `"model"` entry of `dir/config.json`.
     ///
     /// # Errors
@@ -380,18 +399,7 @@ mod tests {
         // one-pass model it was warm-started from predicts from the same noise.
         let device = Device::flex();
         let unet_cfg = UNetConfig { model_channels: 32, ..UNetConfig::pusht_latent(3) };
-        let latents = LatentStats { channels: 3, size: 8, mean: vec![0.0; 3], std: vec![1.0; 3] };
-        let one_pass = WorldModelConfig {
-            objective: Objective::Drifting,
-            unet: unet_cfg.clone(),
-            latents,
-            autoencoder: None,
-            future: 4,
-            sample_steps: 1,
-            prediction: None,
-            alpha: None,
-            goal_free: None,
-        };
+        let one_pass = WorldModelConfig::pixels(unet_cfg.clone(), 8);
         let diffusion = WorldModelConfig {
             objective: Objective::Diffusion,
             unet: UNetConfig { timestep_embedding: true, ..unet_cfg.clone() },
