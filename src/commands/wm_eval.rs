@@ -129,9 +129,10 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
     for (name, wm) in &models {
         let view = if wm.cfg.is_goal_free() { view.as_ref() } else { None };
         for (starts, horizon) in [(&short, "64"), (&full, "episode")] {
-            if let Some(row) =
-                round_trip(wm, (name, view), &data, starts, horizon).filter(|_| !starts.is_empty())
-            {
+            if starts.is_empty() {
+                continue;
+            }
+            if let Some(row) = round_trip(wm, (name, view), &data, starts, horizon) {
                 print_row(&row, " (reference: its autoencoder's rendering of the real future)");
                 rows.push(row);
             }
