@@ -95,11 +95,13 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         }
     };
     let view = goal_free.as_ref().map(|(inputs, _)| View { inputs, complete: &complete });
+    // What each model reads: the goal-free view for a goal-free model, the dataset otherwise.
+    let view_for = |wm: &WorldModel| if wm.cfg.is_goal_free() { view.as_ref() } else { None };
     let (mut scores, mut full_videos) = (Vec::new(), Vec::new());
     let mut rows = Vec::new();
     let mut strip_rows: Vec<Vec<Vec<u8>>> = Vec::new();
     for (name, wm) in &models {
-        let view = if wm.cfg.is_goal_free() { view.as_ref() } else { None };
+        let view = view_for(wm);
         tracing::info!(model = %name, videos = short.len(), "64-frame rollouts");
         let (row, videos) = evaluate(wm, (name, view), &data, &short, "64", a.batch, a.seed);
         if strip_rows.is_empty() {
@@ -127,7 +129,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         }
     }
     for (name, wm) in &models {
-        let view = if wm.cfg.is_goal_free() { view.as_ref() } else { None };
+        let view = view_for(wm);
         for (starts, horizon) in [(&short, "64"), (&full, "episode")] {
             if starts.is_empty() {
                 continue;

@@ -99,16 +99,13 @@ impl WorldModelConfig {
     /// A one-pass drifting model on raw 3-channel frames of `size`² (no autoencoder,
     /// unit normalisation): the pixel family's shape, for tests and benchmarks.
     pub fn pixels(unet: UNetConfig, size: usize) -> Self {
-        let latents = LatentStats { channels: 3, size, mean: vec![0.0; 3], std: vec![1.0; 3] };
-        let (future, sample_steps) = (4, 1);
-        let objective = Objective::Drifting;
         Self {
-            objective,
+            objective: Objective::Drifting,
             unet,
-            latents,
+            latents: LatentStats { channels: 3, size, mean: vec![0.0; 3], std: vec![1.0; 3] },
             autoencoder: None,
-            future,
-            sample_steps,
+            future: 4,
+            sample_steps: 1,
             prediction: None,
             alpha: None,
             goal_free: None,
