@@ -260,7 +260,9 @@ pub struct RankArgs {
     /// Bootstrap replicates for the CIs.
     #[arg(long, default_value_t = 2000)]
     pub bootstrap: usize,
-    /// Continue a run in `--out`, skipping finished episodes.
+    /// Continue a run in `--out`, skipping finished episodes; with a larger
+    /// `--episodes`, extend a finished run (only the new seeds run; the files equal a
+    /// straight run's when the saved count is a whole number of batches).
     #[arg(long)]
     pub resume: bool,
     /// Replace an existing `--out`.

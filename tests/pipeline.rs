@@ -275,6 +275,33 @@ fn pipeline_end_to_end() {
     let (_, err) = expect_code(&run(&other), 2);
     assert!(err.contains("batch (saved: 2, now: 3)"), "{err}");
     assert_eq!(std::fs::read_to_string(out.join("episodes.jsonl")).unwrap(), rows);
+    // More episodes extend a run that ends on a whole batch: 2 episodes at --batch 2,
+    // grown to 3, give exactly the straight 3-episode run (seeds 0-1 and 2 are its two
+    // batches). Fewer episodes, or growing a run that ends in a part batch, are refused.
+    fn with_episodes<'a>(args: &[&'a str], n: &'a str) -> Vec<&'a str> {
+        let mut args = args.to_vec();
+        let at = args.iter().position(|x| *x == "--episodes").unwrap() + 1;
+        args[at] = n;
+        args
+    }
+    let strip = |mut v: serde_json::Value| {
+        v.as_object_mut().unwrap().remove("timing");
+        v
+    };
+    let (_, err) = expect_code(&run(&with_episodes(&again, "2")), 2);
+    assert!(err.contains("--episodes 2 would drop"), "{err}");
+    let (_, err) = expect_code(&run(&with_episodes(&again, "5")), 2);
+    assert!(err.contains("part batch"), "{err}");
+    let grown = dir.join("rank_grown");
+    let mut short = with_episodes(&base, "2");
+    short.extend(["--out", s(&grown), "--no-report"]);
+    expect_code(&run(&short), 1);
+    assert_eq!(std::fs::read_to_string(grown.join("episodes.jsonl")).unwrap().lines().count(), 2 * 2 * 2);
+    let mut grow = with_episodes(&short, "3");
+    grow.push("--resume");
+    expect_code(&run(&grow), 1);
+    assert_eq!(std::fs::read(grown.join("episodes.parquet")).unwrap(), parquet);
+    assert_eq!(strip(read_json(&grown.join("results.json"))), strip(res.clone()));
 
     // One thread gives the same rows and results (timings aside).
     let out1 = dir.join("rank1");
@@ -283,10 +310,6 @@ fn pipeline_end_to_end() {
     expect_code(&run(&args1), 1);
     assert_eq!(std::fs::read_to_string(out1.join("episodes.jsonl")).unwrap(), rows);
     assert_eq!(std::fs::read(out1.join("episodes.parquet")).unwrap(), parquet);
-    let strip = |mut v: serde_json::Value| {
-        v.as_object_mut().unwrap().remove("timing");
-        v
-    };
     assert_eq!(strip(read_json(&out1.join("results.json"))), strip(res));
 
     // Two shards merged give exactly the unsharded rows and results (timings aside).

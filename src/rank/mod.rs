@@ -12,6 +12,7 @@ pub mod merge;
 pub mod paired;
 pub mod report;
 pub mod results;
+mod resume;
 pub mod scene;
 mod schedule;
 pub mod start;
@@ -30,7 +31,7 @@ use serde_json::{Value, json};
 use world_model::model::WorldModel;
 
 use crate::cli::RankArgs;
-use crate::output::{read_json, write_json};
+use crate::output::write_json;
 use crate::progress;
 use paired::Setup;
 use results::{EpisodeRow, append_rows, read_rows, summarise};
@@ -82,7 +83,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         "checkpoints": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
     });
     if a.resume {
-        check_resumed_config(&a.out.join("config.json"), &config)?;
+        resume::check_config(&a.out.join("config.json"), &config)?;
     }
     write_json(&a.out.join("config.json"), &config)?;
     let mut rows = read_rows(&jsonl)?;
@@ -330,48 +331,4 @@ fn print_summary(res: &Value, out: &Path) {
         f("regret_at_1")
     );
     println!("results: {}", out.join("results.json").display());
-}
-
-/// Refuses to resume a run under different settings (episodes, seeds, policies, world
-/// model and its α, batch size, ...): the finished rows would silently mix with new
-/// ones. The batch size counts because the kernels' float rounding depends on the
-/// matrix shapes, so an episode run in a batch of another size can come out slightly
-/// different, and a resumed run would no longer equal a straight one bit for bit.
-/// The bootstrap count may change (the statistics are recomputed from all rows). A
-/// run without a saved config (killed before writing it) resumes freely.
-fn check_resumed_config(path: &Path, config: &Value) -> Result<()> {
-    const FREE_ON_RESUME: [&str; 2] = ["command", "bootstrap"];
-    let short = |v: &Value| {
-        let text = v.to_string();
-        if text.chars().count() > 60 {
-            format!("{}…", text.chars().take(60).collect::<String>())
-        } else {
-            text
-        }
-    };
-    if !path.is_file() {
-        return Ok(());
-    }
-    let saved = read_json(path)?;
-    let differs: Vec<String> = config
-        .as_object()
-        .into_iter()
-        .flatten()
-        .filter(|(k, v)| !FREE_ON_RESUME.contains(&k.as_str()) && saved.get(k.as_str()) != Some(*v))
-        .map(|(k, v)| {
-            format!(
-                "{k} (saved: {}, now: {})",
-                short(saved.get(k.as_str()).unwrap_or(&Value::Null)),
-                short(v)
-            )
-        })
-        .collect();
-    if !differs.is_empty() {
-        bail!(
-            "--resume: {} was written with other settings: {}; pass the same options, or --force to start over",
-            path.display(),
-            differs.join("; ")
-        );
-    }
-    Ok(())
 }

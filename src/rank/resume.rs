@@ -1,0 +1,155 @@
+//! What `rank --resume` accepts: the same run continued, or a finished run grown to
+//! more episodes per policy. Anything else would mix the rows of two experiments in
+//! one `episodes.jsonl`, so it is refused with each differing setting named.
+
+use std::path::Path;
+
+use anyhow::{Result, bail};
+use serde_json::Value;
+
+use crate::output::read_json;
+
+/// Settings a resumed run may change: the command line itself, and the bootstrap
+/// count (the statistics are recomputed from all rows).
+const FREE_ON_RESUME: [&str; 2] = ["command", "bootstrap"];
+
+/// Refuses to resume a run under different settings (seeds, policies, world model and
+/// its α, batch size, ...). The batch size counts because the kernels' float rounding
+/// depends on the matrix shapes, so an episode run in a batch of another size can come
+/// out slightly different, and a resumed run would no longer equal a straight one bit
+/// for bit.
+///
+/// `--episodes` may grow (never shrink): the seeds are `seed_start ..
+/// seed_start + episodes` cut into batches from the first, so when the saved count is
+/// a whole number of batches, the new seeds form batches of their own, exactly the
+/// ones a straight run of the larger count has. A count that ends in a part batch, or
+/// a sharded run (whose share of the batches depends on their number), cannot grow
+/// that way and is refused. A run without a saved config (killed before writing it)
+/// resumes freely.
+pub(super) fn check_config(path: &Path, config: &Value) -> Result<()> {
+    if !path.is_file() {
+        return Ok(());
+    }
+    let saved = read_json(path)?;
+    let differs: Vec<String> = config
+        .as_object()
+        .into_iter()
+        .flatten()
+        .filter(|(k, v)| {
+            !FREE_ON_RESUME.contains(&k.as_str())
+                && k.as_str() != "episodes"
+                && saved.get(k.as_str()) != Some(*v)
+        })
+        .map(|(k, v)| {
+            format!(
+                "{k} (saved: {}, now: {})",
+                short(saved.get(k.as_str()).unwrap_or(&Value::Null)),
+                short(v)
+            )
+        })
+        .collect();
+    if !differs.is_empty() {
+        bail!(
+            "--resume: {} was written with other settings: {}; pass the same options, or --force to start over",
+            path.display(),
+            differs.join("; ")
+        );
+    }
+    check_growth(path, &saved, config)
+}
+
+/// The `--episodes` rule of [`check_config`] (the other settings already agree).
+fn check_growth(path: &Path, saved: &Value, config: &Value) -> Result<()> {
+    let (was, now) = (saved["episodes"].as_u64(), config["episodes"].as_u64());
+    if was == now {
+        return Ok(());
+    }
+    let (Some(was), Some(now)) = (was, now) else {
+        bail!("--resume: {} has no valid \"episodes\" ({})", path.display(), saved["episodes"]);
+    };
+    if now < was {
+        bail!(
+            "--resume: {} holds a run of {was} episodes per policy, and --episodes {now} would drop \
+             some; pass --episodes {was} (or more, to extend it)",
+            path.display()
+        );
+    }
+    let batch = config["batch"].as_u64().unwrap_or(1).max(1);
+    if was % batch != 0 {
+        bail!(
+            "--resume --episodes {now}: the saved run's {was} episodes end in a part batch of \
+             --batch {batch}, which a straight run of {now} would fill with other seeds (and \
+             round differently), so this run cannot be extended bit for bit; start a new one \
+             (--force or another --out), or run the extra seeds with --seed-start {}",
+            saved["seed_start"].as_u64().unwrap_or(0) + was
+        );
+    }
+    if config["shard"] != serde_json::json!([0, 1]) {
+        bail!(
+            "--resume --episodes {now}: {} is one shard of a run, and a shard's share of the \
+             batches changes with their number; extend the merged run instead",
+            path.display()
+        );
+    }
+    tracing::info!(from = was, to = now, "extending the run: only the new seeds are run");
+    Ok(())
+}
+
+/// A setting's value for an error message, cut at 60 characters.
+fn short(v: &Value) -> String {
+    let text = v.to_string();
+    if text.chars().count() > 60 { format!("{}…", text.chars().take(60).collect::<String>()) } else { text }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn saved(dir: &Path, episodes: u64, shard: [u64; 2]) -> std::path::PathBuf {
+        let path = dir.join("config.json");
+        let cfg = json!({"command": "rank", "episodes": episodes, "batch": 50, "seed_start": 100,
+            "shard": shard, "bootstrap": 2000});
+        std::fs::write(&path, cfg.to_string()).unwrap();
+        path
+    }
+
+    fn now(episodes: u64, shard: [u64; 2]) -> Value {
+        json!({"command": "rank --resume", "episodes": episodes, "batch": 50, "seed_start": 100,
+            "shard": shard, "bootstrap": 100})
+    }
+
+    #[test]
+    fn a_finished_run_of_whole_batches_grows() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = saved(dir.path(), 100, [0, 1]);
+        check_config(&path, &now(100, [0, 1])).unwrap();
+        check_config(&path, &now(250, [0, 1])).unwrap();
+    }
+
+    #[test]
+    fn shrinking_a_part_batch_and_a_shard_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = saved(dir.path(), 100, [0, 1]);
+        let err = check_config(&path, &now(60, [0, 1])).unwrap_err().to_string();
+        assert!(err.contains("--episodes 60 would drop"), "{err}");
+        // 120 = 2 whole batches of 50 and a part batch of 20: seeds 100..220 would be
+        // batched 100..150, 150..200, 200..250 by a straight run of 150.
+        let path = saved(dir.path(), 120, [0, 1]);
+        let err = check_config(&path, &now(150, [0, 1])).unwrap_err().to_string();
+        assert!(err.contains("part batch") && err.contains("--seed-start 220"), "{err}");
+        let path = saved(dir.path(), 100, [1, 2]);
+        let err = check_config(&path, &now(200, [1, 2])).unwrap_err().to_string();
+        assert!(err.contains("one shard"), "{err}");
+    }
+
+    #[test]
+    fn other_settings_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = saved(dir.path(), 100, [0, 1]);
+        let mut other = now(200, [0, 1]);
+        other["seed_start"] = json!(7);
+        let err = check_config(&path, &other).unwrap_err().to_string();
+        assert!(err.contains("seed_start (saved: 100, now: 7)") && !err.contains("episodes"), "{err}");
+    }
+}
