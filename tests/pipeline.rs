@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::util::{expect_code, read_json, run};
+use crate::util::{expect_code, read_json, run, with_flag};
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -263,41 +263,29 @@ fn pipeline_end_to_end() {
     assert_eq!(std::fs::read_to_string(out.join("episodes.jsonl")).unwrap(), rows);
     // Resuming under other settings would mix rows of two experiments: refused, and the
     // finished rows stay.
-    let mut other = again.clone();
-    let at = other.iter().position(|a| *a == "--max-steps").unwrap() + 1;
-    other[at] = "7";
-    let (_, err) = expect_code(&run(&other), 2);
+    let (_, err) = expect_code(&run(&with_flag(&again, "--max-steps", "7")), 2);
     assert!(err.contains("--resume") && err.contains("max_steps (saved: "), "{err}");
     // So is another batch size: the kernels' rounding depends on it.
-    let mut other = again.clone();
-    let at = other.iter().position(|a| *a == "--batch").unwrap() + 1;
-    other[at] = "3";
-    let (_, err) = expect_code(&run(&other), 2);
+    let (_, err) = expect_code(&run(&with_flag(&again, "--batch", "3")), 2);
     assert!(err.contains("batch (saved: 2, now: 3)"), "{err}");
     assert_eq!(std::fs::read_to_string(out.join("episodes.jsonl")).unwrap(), rows);
     // More episodes extend a run that ends on a whole batch: 2 episodes at --batch 2,
     // grown to 3, give exactly the straight 3-episode run (seeds 0-1 and 2 are its two
     // batches). Fewer episodes, or growing a run that ends in a part batch, are refused.
-    fn with_episodes<'a>(args: &[&'a str], n: &'a str) -> Vec<&'a str> {
-        let mut args = args.to_vec();
-        let at = args.iter().position(|x| *x == "--episodes").unwrap() + 1;
-        args[at] = n;
-        args
-    }
     let strip = |mut v: serde_json::Value| {
         v.as_object_mut().unwrap().remove("timing");
         v
     };
-    let (_, err) = expect_code(&run(&with_episodes(&again, "2")), 2);
+    let (_, err) = expect_code(&run(&with_flag(&again, "--episodes", "2")), 2);
     assert!(err.contains("--episodes 2 would drop"), "{err}");
-    let (_, err) = expect_code(&run(&with_episodes(&again, "5")), 2);
+    let (_, err) = expect_code(&run(&with_flag(&again, "--episodes", "5")), 2);
     assert!(err.contains("part batch"), "{err}");
     let grown = dir.join("rank_grown");
-    let mut short = with_episodes(&base, "2");
+    let mut short = with_flag(&base, "--episodes", "2");
     short.extend(["--out", s(&grown), "--no-report"]);
     expect_code(&run(&short), 1);
     assert_eq!(std::fs::read_to_string(grown.join("episodes.jsonl")).unwrap().lines().count(), 2 * 2 * 2);
-    let mut grow = with_episodes(&short, "3");
+    let mut grow = with_flag(&short, "--episodes", "3");
     grow.push("--resume");
     expect_code(&run(&grow), 1);
     assert_eq!(std::fs::read(grown.join("episodes.parquet")).unwrap(), parquet);

@@ -15,6 +15,14 @@ pub fn run(args: &[&str]) -> Output {
     evalharness().args(args).output().expect("evalharness runs")
 }
 
+/// `args` with the value after `flag` replaced by `value` (the flag must be there).
+pub fn with_flag<'a>(args: &[&'a str], flag: &str, value: &'a str) -> Vec<&'a str> {
+    let mut args = args.to_vec();
+    let at = args.iter().position(|a| *a == flag).unwrap_or_else(|| panic!("{flag} not in {args:?}")) + 1;
+    args[at] = value;
+    args
+}
+
 /// Asserts exit code `code` and returns (stdout, stderr).
 pub fn expect_code(out: &Output, code: i32) -> (String, String) {
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
