@@ -4,8 +4,19 @@
 //! but the device value. The CPU build (the default, what CI runs) has Flex
 //! only. A binary built with `--features cuda` also has burn's CUDA backend,
 //! chosen at run time with `EVALHARNESS_DEVICE=cuda` (or `cuda:N` for GPU N);
-//! asking for a backend the binary was not built with is an error that says how
-//! to build it, never a silent fall-back to the CPU.
+//! one built with `--features wgpu` has burn's wgpu backend (WGSL shaders; on Linux
+//! it runs on Vulkan), chosen with `EVALHARNESS_DEVICE=wgpu` (the adapter wgpu
+//! prefers) or `wgpu:N` (discrete GPU N). Asking for a backend the binary was not
+//! built with is an error that says how to build it, never a silent fall-back to
+//! the CPU.
+//!
+//! Why two GPU features: burn's CUDA backend does not build on a machine without
+//! internet access to GitHub (its `cubecl-llvm` build script downloads LLVM), so a
+//! GPU binary made on such a machine is a wgpu one; Vulkan drivers come with
+//! NVIDIA's, and Mesa's lavapipe is meant to run the same binary on a CPU for a
+//! check (the feature-gated test below; not yet run, BENCHMARKS.md session 26). burn's
+//! `vulkan` feature (SPIR-V shaders instead of WGSL) was tried first and crashed
+//! inside lavapipe (Mesa 22.3 and 25.0) while autotuning its matmul kernels.
 
 use burn::tensor::Device;
 
@@ -30,7 +41,8 @@ pub fn selected() -> Result<Device, DeviceError> {
     parse(&std::env::var(ENV).unwrap_or_default())
 }
 
-/// Parses a device name: `""`, `cpu` or `flex` → Flex; `cuda` or `cuda:N` → CUDA GPU N.
+/// Parses a device name: `""`, `cpu` or `flex` → Flex; `cuda` or `cuda:N` → CUDA GPU N;
+/// `wgpu` → the adapter wgpu prefers, `wgpu:N` → discrete GPU N.
 ///
 /// # Errors
 /// [`DeviceError`] for an unknown name or a backend not compiled in.
@@ -41,17 +53,46 @@ pub fn parse(value: &str) -> Result<Device, DeviceError> {
         "" | "cpu" | "flex" => return Ok(Device::flex()),
         _ => {}
     }
-    let Some(rest) = v.strip_prefix("cuda") else {
-        return Err(err("unknown device (use cpu, cuda or cuda:N)".into()));
+    let unknown = || err("unknown device (use cpu, cuda, cuda:N, wgpu or wgpu:N)".into());
+    let (backend, rest) = if let Some(rest) = v.strip_prefix("cuda") {
+        (Gpu::Cuda, rest)
+    } else if let Some(rest) = v.strip_prefix("wgpu") {
+        (Gpu::Wgpu, rest)
+    } else {
+        return Err(unknown());
     };
     let index = match rest.strip_prefix(':') {
-        None if rest.is_empty() => 0,
-        Some(n) => n.parse::<usize>().map_err(|_| err(format!("'{n}' is not a GPU index")))?,
-        None => return Err(err("unknown device (use cpu, cuda or cuda:N)".into())),
+        None if rest.is_empty() => None,
+        Some(n) => Some(n.parse::<usize>().map_err(|_| err(format!("'{n}' is not a GPU index")))?),
+        None => return Err(unknown()),
     };
-    cuda(index).ok_or_else(|| {
-        err("this binary has no GPU backend: build it with `cargo build --release --features cuda`".into())
+    let device = match backend {
+        Gpu::Cuda => cuda(index.unwrap_or(0)),
+        Gpu::Wgpu => wgpu(index),
+    };
+    device.ok_or_else(|| {
+        let feature = backend.feature();
+        err(format!(
+            "this binary has no {feature} backend: build it with `cargo build --release --features {feature}`"
+        ))
     })
+}
+
+/// The GPU backends a binary may be built with.
+#[derive(Clone, Copy)]
+enum Gpu {
+    Cuda,
+    Wgpu,
+}
+
+impl Gpu {
+    /// The cargo feature that compiles the backend in.
+    fn feature(self) -> &'static str {
+        match self {
+            Gpu::Cuda => "cuda",
+            Gpu::Wgpu => "wgpu",
+        }
+    }
 }
 
 #[cfg(feature = "cuda")]
@@ -61,6 +102,20 @@ fn cuda(index: usize) -> Option<Device> {
 
 #[cfg(not(feature = "cuda"))]
 fn cuda(_index: usize) -> Option<Device> {
+    None
+}
+
+/// `None` → the adapter wgpu's heuristics prefer (the only one on lavapipe);
+/// `Some(n)` → discrete GPU `n`.
+#[cfg(feature = "wgpu")]
+fn wgpu(index: Option<usize>) -> Option<Device> {
+    use burn::tensor::DeviceKind;
+    let kind = index.map_or(DeviceKind::DefaultDevice, DeviceKind::DiscreteGpu);
+    Some(Device::wgpu(kind))
+}
+
+#[cfg(not(feature = "wgpu"))]
+fn wgpu(_index: Option<usize>) -> Option<Device> {
     None
 }
 
@@ -77,9 +132,47 @@ mod tests {
         assert!(bad.starts_with("EVALHARNESS_DEVICE=tpu: unknown device"), "{bad}");
         assert!(parse("cuda:x").unwrap_err().to_string().contains("'x' is not a GPU index"));
         assert!(parse("cudax").is_err());
+        assert!(parse("wgpu:").is_err());
+        assert!(parse("wgpux").unwrap_err().to_string().contains("unknown device"));
         if cfg!(not(feature = "cuda")) {
             let msg = parse("cuda:1").unwrap_err().to_string();
-            assert!(msg.contains("--features cuda"), "{msg}");
+            assert!(msg.contains("no cuda backend") && msg.contains("--features cuda"), "{msg}");
         }
+        if cfg!(not(feature = "wgpu")) {
+            let msg = parse("WGPU:0").unwrap_err().to_string();
+            assert!(msg.contains("no wgpu backend") && msg.contains("--features wgpu"), "{msg}");
+        }
+    }
+
+    /// Built with `--features wgpu` only, and run where a Vulkan driver is
+    /// (lavapipe on a CPU: `apt-get install mesa-vulkan-drivers`): the same U-Net
+    /// weights and inputs give the same chunk on wgpu as on Flex, up to f32
+    /// rounding in a different order of operations.
+    #[cfg(feature = "wgpu")]
+    #[test]
+    fn wgpu_predicts_what_flex_predicts() {
+        use crate::unet::UNetConfig;
+        use burn::module::Module;
+        use burn::tensor::{Distribution, Tensor};
+        let (cpu, gpu) = (Device::flex(), parse("wgpu").expect("built with wgpu"));
+        let unet = UNetConfig { model_channels: 32, ..UNetConfig::pusht_latent(8) }.init(&cpu);
+        let noise = Tensor::<5>::random([2, 8, 4, 12, 12], Distribution::Default, &cpu);
+        let hist = Tensor::<5>::random([2, 8, 4, 12, 12], Distribution::Default, &cpu);
+        let act = Tensor::<3>::random([2, 4, 2], Distribution::Default, &cpu);
+        let want = unet.forward(noise.clone(), hist.clone(), act.clone(), None, None); // [2, 8, 4, 12, 12]
+        let got = unet.fork(&gpu).forward(
+            noise.to_device(&gpu),
+            hist.to_device(&gpu),
+            act.to_device(&gpu),
+            None,
+            None,
+        );
+        let got = got.to_device(&cpu);
+        let scale: f32 = want.clone().abs().max().into_scalar();
+        let diff: f32 = (want - got).abs().max().into_scalar();
+        assert!(
+            scale > 0.0 && diff <= 1e-4 * scale.max(1.0),
+            "wgpu differs from Flex by {diff} (scale {scale})"
+        );
     }
 }
