@@ -54,11 +54,10 @@ pub fn parse(value: &str) -> Result<Device, DeviceError> {
         _ => {}
     }
     let unknown = || err("unknown device (use cpu, cuda, cuda:N, wgpu or wgpu:N)".into());
-    let (backend, rest) = if let Some(rest) = v.strip_prefix("cuda") {
-        (Gpu::Cuda, rest)
-    } else if let Some(rest) = v.strip_prefix("wgpu") {
-        (Gpu::Wgpu, rest)
-    } else {
+    // A GPU name is its cargo feature's name, with an optional `:N`.
+    let Some((backend, rest)) =
+        [Gpu::Cuda, Gpu::Wgpu].into_iter().find_map(|g| v.strip_prefix(g.feature()).map(|rest| (g, rest)))
+    else {
         return Err(unknown());
     };
     let index = match rest.strip_prefix(':') {
@@ -86,7 +85,7 @@ enum Gpu {
 }
 
 impl Gpu {
-    /// The cargo feature that compiles the backend in.
+    /// The cargo feature that compiles the backend in, also its name in `EVALHARNESS_DEVICE`.
     fn feature(self) -> &'static str {
         match self {
             Gpu::Cuda => "cuda",
