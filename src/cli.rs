@@ -6,7 +6,9 @@ use clap::{Args, Parser, Subcommand};
 
 use crate::commands::RendererKind;
 
+mod plan;
 mod train;
+pub use plan::*;
 pub use train::*;
 
 /// Rank robot-policy checkpoints offline in a learned world model (DriftWorld),
@@ -71,6 +73,10 @@ pub enum Command {
     Wm(WmCommand),
     /// Rank policy checkpoints in the world model, checked against MuJoCo (paired episodes).
     Rank(RankArgs),
+    /// GPC-RANK planning: a policy proposes several action chunks per decision, the
+    /// world model imagines each, the best is executed in MuJoCo; against no planning
+    /// and against MuJoCo imagining the same proposals, on the same seeds.
+    Plan(PlanArgs),
     /// Write scripted-policy checkpoints: the expert acting from frames, with action
     /// noise and lag, one per combination — a graded policy set without training.
     Scripted(ScriptedArgs),

@@ -7,6 +7,7 @@
 mod cli;
 mod commands;
 mod output;
+mod plan;
 mod policy_kinds;
 mod progress;
 mod rank;

@@ -1,6 +1,6 @@
 //! The whole pipeline on tiny inputs: dataset → autoencoder → world model →
 //! policy → `wm eval`, `simulate --policy`, `rank` (resume, jobs, a corrupt
-//! checkpoint among good ones, gates).
+//! checkpoint among good ones, gates), `plan`.
 
 use std::path::{Path, PathBuf};
 
@@ -377,6 +377,9 @@ fn pipeline_end_to_end() {
     // Resuming a goal-free run without the flag keeps it goal-free (its config wins).
     expect_code(&run(&[&train[..], &["--resume", "--steps", "2"]].concat()), 0);
     assert_eq!(read_json(&gf.join("config.json"))["model"]["goal_free"], true);
+
+    // GPC-RANK planning with the same models.
+    crate::plan::check(dir, &wm, &gf, &pol.join("epoch-0001"));
 }
 
 #[test]

@@ -3,6 +3,7 @@
 mod agreement;
 mod dataset;
 mod pipeline;
+mod plan;
 mod simulate;
 mod train;
 mod util;

@@ -17,6 +17,7 @@ pub mod mj_render;
 pub mod path;
 pub mod perceive;
 pub mod physics;
+pub mod plan_cost;
 pub mod render;
 pub mod rollout;
 pub mod scripted;

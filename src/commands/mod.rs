@@ -46,6 +46,7 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         }
         Command::Agreement(a) => agreement::run(a),
         Command::Rank(a) => crate::rank::run(a, cli.quiet),
+        Command::Plan(a) => crate::plan::run(a, cli.quiet),
         Command::Merge(a) => crate::rank::merge::run(&a.shards, &a.out, a.force, a.no_report),
         Command::Report(a) => {
             let html = crate::rank::report::write_report(&a.out)?;

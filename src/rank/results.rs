@@ -162,11 +162,11 @@ pub fn read_rows(path: &Path) -> Result<Vec<EpisodeRow>> {
         .collect()
 }
 
-/// Appends rows to `episodes.jsonl` and flushes.
+/// Appends rows (of `rank` or `plan`) to an `episodes.jsonl`, synced, so a killed run keeps its finished batches.
 ///
 /// # Errors
 /// I/O failures naming the file.
-pub fn append_rows(path: &Path, rows: &[EpisodeRow]) -> Result<()> {
+pub fn append_rows<T: Serialize>(path: &Path, rows: &[T]) -> Result<()> {
     let mut f = std::fs::OpenOptions::new()
         .create(true)
         .append(true)

@@ -1,0 +1,202 @@
+//! `evalharness plan`: GPC-RANK (DriftWorld spec §11) on Push-T. A diffusion
+//! policy proposes several action chunks per decision; a planner imagines each and
+//! executes the best in MuJoCo. Three planners run on the same seeds: `none` (the
+//! policy alone), `world-model` (GPC-RANK) and `simulator` (the same ranking with
+//! perfect imagination), so the run measures what planning in the world model
+//! gains over the policy and how much of the simulator's gain it keeps.
+//!
+//! Output folder: `config.json` (resolved arguments), `episodes.jsonl` (appended as
+//! batches finish), `episodes.csv` (sorted), `results.json` (per planner: mean
+//! score and success rate with 95% CIs, the paired difference from `none`; for the
+//! world model, how often its pick matched the simulator's and what its picks
+//! cost in truth); `filmstrips/<planner>_seed<S>.png` for the first `--record`
+//! seeds (per decision: the real frame; the world model's and the simulator's last
+//! frame of the proposal picked).
+
+mod episodes;
+mod imagine;
+mod results;
+
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use harness::policy::Policy;
+use policies::diffusion::DiffusionPolicy;
+use policies::dir::{diffusion_config, diffusion_weights, read_policy_file};
+use scenarios::pusht::PushTPhysics;
+use serde_json::json;
+use world_model::model::WorldModel;
+
+use crate::cli::{PlanArgs, Planner};
+use crate::output::write_json;
+use crate::progress;
+use episodes::{Ctx, PlanRow, Timing, run_batch};
+
+/// Loads the proposing policy with chunks of `len` actions (it still predicts its
+/// whole horizon; only the slice it returns is longer).
+fn load_proposer(
+    a: &PlanArgs,
+    image_size: usize,
+    device: &burn::tensor::Device,
+) -> Result<(DiffusionPolicy, usize, usize)> {
+    let dir = &a.policy;
+    // The kind first: other kinds' policy.json has other fields.
+    let kind = crate::output::read_json(&dir.join("policy.json"))
+        .with_context(|| format!("policy {}", dir.display()))?["kind"]
+        .as_str()
+        .unwrap_or("?")
+        .to_string();
+    if kind != "diffusion" {
+        bail!(
+            "{}: plan needs a diffusion policy (its sampling noise makes the proposals), this one is kind \"{kind}\"",
+            dir.display()
+        );
+    }
+    let file = read_policy_file(dir)?;
+    let mut cfg = diffusion_config(dir, &file)?;
+    if cfg.net.image_size != image_size {
+        bail!("{}: takes {0}x{0} frames, the scenario renders {image_size}x{image_size}", dir.display());
+    }
+    let max = cfg.max_action_horizon();
+    let imagine = a.imagine.unwrap_or(max);
+    let execute = a.execute.unwrap_or(cfg.action_horizon);
+    for (flag, v) in [("--imagine", imagine), ("--execute", execute)] {
+        if v == 0 || v > max {
+            bail!(
+                "{flag} {v}: policy {} predicts {max} actions from the current step (horizon {}, {} observations)",
+                dir.display(),
+                cfg.horizon,
+                cfg.net.obs_horizon
+            );
+        }
+    }
+    let net = diffusion_weights(dir, &cfg, device)?;
+    cfg.action_horizon = imagine.max(execute);
+    let name =
+        dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+    Ok((DiffusionPolicy::new(name, cfg, file.normalisation, net, device), imagine, execute))
+}
+
+/// `evalharness plan`.
+pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
+    if a.episodes == 0 || a.max_steps == 0 || a.batch == 0 || a.proposals == 0 {
+        bail!("--episodes, --max-steps, --batch and --proposals must be positive");
+    }
+    if !(a.spread.is_finite() && a.spread > 0.0) {
+        bail!("--spread {}: must be a positive number", a.spread);
+    }
+    if !(a.margin.is_finite() && a.margin >= 0.0) {
+        bail!("--margin {}: must be a number >= 0", a.margin);
+    }
+    let mut planners = a.planners.clone();
+    planners.sort();
+    planners.dedup();
+    if planners.is_empty() {
+        bail!("--planners: name at least one of none, world-model, simulator");
+    }
+    if a.out.exists() {
+        if !a.force {
+            bail!("{} already exists (pass --force to replace it)", a.out.display());
+        }
+        std::fs::remove_dir_all(&a.out).with_context(|| format!("removing {}", a.out.display()))?;
+    }
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let cfg = crate::scenario::load_pusht(&a.scenario)?;
+    let model = PushTPhysics::compile(&cfg)?;
+    let device = world_model::device::selected()?;
+    let wm = if planners.contains(&Planner::WorldModel) {
+        let mut wm = WorldModel::load(&a.world_model, &device)
+            .with_context(|| format!("loading world model {}", a.world_model.display()))?;
+        if let Some(alpha) = a.alpha {
+            wm.set_alpha(alpha).map_err(|e| anyhow::anyhow!("--alpha: {e} ({})", a.world_model.display()))?;
+        }
+        if wm.image_size() != cfg.render.size as usize {
+            bail!(
+                "world model {} generates {1}x{1} frames, the scenario renders {2}x{2}",
+                a.world_model.display(),
+                wm.image_size(),
+                cfg.render.size
+            );
+        }
+        Some(wm)
+    } else {
+        None
+    };
+    let (policy, imagine, execute) = load_proposer(a, cfg.render.size as usize, &device)?;
+    let config = json!({
+        "command": std::env::args().collect::<Vec<_>>().join(" "),
+        "scenario": a.scenario, "policy": a.policy,
+        "world_model": wm.as_ref().map(|_| &a.world_model),
+        "world_model_config": wm.as_ref().map(|w| serde_json::to_value(&w.cfg)).transpose()?,
+        "planners": planners.iter().map(|p| p.name()).collect::<Vec<_>>(),
+        "proposals": a.proposals, "imagine": imagine, "execute": execute, "spread": a.spread, "margin": a.margin,
+        "cost": "mean distance (world units) of the last imagined frame's block pixels from the goal T",
+        "episodes": a.episodes, "seed_start": a.seed_start, "max_steps": a.max_steps,
+        "batch": a.batch, "seed": a.seed, "bootstrap": a.bootstrap, "record": a.record,
+    });
+    write_json(&a.out.join("config.json"), &config)?;
+    let seeds: Vec<u64> = (0..a.episodes as u64).map(|i| a.seed_start + i).collect();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.jobs.max(1))
+        .build()
+        .context("starting worker threads")?;
+    let ctx = Ctx {
+        cfg: &cfg,
+        model: &model,
+        policy: &policy,
+        wm: wm.as_ref(),
+        proposals: a.proposals,
+        imagine,
+        execute,
+        spread: a.spread,
+        margin: a.margin,
+        master_seed: a.seed,
+        max_steps: a.max_steps,
+        pool: &pool,
+        record: &seeds[..a.record.min(seeds.len())],
+    };
+    let jsonl = a.out.join("episodes.jsonl");
+    let filmstrips = a.out.join("filmstrips");
+    if a.record > 0 {
+        std::fs::create_dir_all(&filmstrips).with_context(|| format!("creating {}", filmstrips.display()))?;
+    }
+    let pb = progress::bar((planners.len() * a.episodes) as u64, "plan", quiet);
+    let started = Instant::now();
+    let mut rows: Vec<PlanRow> = Vec::new();
+    let mut timing = Timing::default();
+    for &planner in &planners {
+        for batch in seeds.chunks(a.batch) {
+            let out = run_batch(&ctx, planner, batch)
+                .with_context(|| format!("planner {} on seeds {:?}", planner.name(), batch))?;
+            crate::rank::results::append_rows(&jsonl, &out.rows)?;
+            timing.add(&out.timing);
+            for (seed, rec) in &out.records {
+                let png = filmstrips.join(format!("{}_seed{seed}.png", planner.name()));
+                results::write_strip(&png, rec, ctx.cfg.render.size as usize)?;
+            }
+            rows.extend(out.rows);
+            pb.inc(batch.len() as u64);
+        }
+        tracing::info!(planner = planner.name(), "done");
+    }
+    pb.finish_and_clear();
+    let mut res = results::summarise(&rows, &planners, a.bootstrap, a.seed);
+    res["policy"] = json!(policy.name());
+    res["proposals"] = json!(a.proposals);
+    res["imagine"] = json!(imagine);
+    res["execute"] = json!(execute);
+    res["episodes"] = json!(a.episodes);
+    res["seed_start"] = json!(a.seed_start);
+    res["timing"] = json!({
+        "wall_seconds": started.elapsed().as_secs_f64(),
+        "policy_seconds": timing.policy_s,
+        "world_model_seconds": timing.world_model_s,
+        "world_model_ms_per_frame": 1e3 * timing.world_model_s / timing.frames.max(1) as f64,
+        "sim_seconds": timing.sim_s,
+    });
+    write_json(&a.out.join("results.json"), &res)?;
+    results::write_csv(&a.out.join("episodes.csv"), &rows)?;
+    results::print_summary(&res, &a.out);
+    Ok(ExitCode::SUCCESS)
+}
