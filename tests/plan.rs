@@ -76,6 +76,23 @@ pub fn check(dir: &Path, wm: &Path, gf: &Path, policy: &Path) {
     expect_code(&run(&args1), 0);
     assert_eq!(std::fs::read_to_string(out1.join("episodes.csv")).unwrap(), csv);
 
+    // --resume redoes nothing; a 2-episode run grown to 3 equals the straight run; other
+    // settings are refused, naming them.
+    let mut again = args.clone();
+    again.push("--resume");
+    expect_code(&run(&again), 0);
+    assert_eq!(std::fs::read_to_string(out.join("episodes.csv")).unwrap(), csv);
+    let grown = dir.join("plan_grown");
+    let mut short = with_flag(&base, "--episodes", "2");
+    short.extend(["--out", s(&grown)]);
+    expect_code(&run(&short), 0);
+    let mut grow = with_flag(&short, "--episodes", "3");
+    grow.push("--resume");
+    expect_code(&run(&grow), 0);
+    assert_eq!(std::fs::read_to_string(grown.join("episodes.csv")).unwrap(), csv);
+    let (_, err) = expect_code(&run(&with_flag(&again, "--proposals", "2")), 2);
+    assert!(err.contains("proposals (saved: 3, now: 2)"), "{err}");
+
     // A goal-free world model plans too (the goal is drawn onto its frames before scoring).
     let out_gf = dir.join("plan_gf");
     let mut a = with_flag(&base, "--world-model", s(gf));

@@ -99,4 +99,8 @@ pub struct PlanArgs {
     /// Replace an existing `--out`.
     #[arg(long)]
     pub force: bool,
+    /// Continue a run in `--out` under the same settings, skipping finished batches; with a
+    /// larger `--episodes`, extend a finished run (as `rank --resume`).
+    #[arg(long, conflicts_with = "force")]
+    pub resume: bool,
 }

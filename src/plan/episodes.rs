@@ -61,9 +61,10 @@ pub struct BatchOut {
 }
 
 /// One planned episode.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PlanRow {
-    pub planner: &'static str,
+    pub planner: String,
     pub seed: u64,
     /// max_t clip(coverage / success coverage, 0, 1).
     pub score: f64,
@@ -190,7 +191,7 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
             scorer: FrameScorer::new(ctx.cfg, &goal, size),
             cost: GoalDistance::new(ctx.cfg, &goal, size),
             row: PlanRow {
-                planner: planner.name(),
+                planner: planner.name().to_string(),
                 seed,
                 score: (cov / thr).clamp(0.0, 1.0),
                 max_coverage: cov,

@@ -6,7 +6,7 @@
 //! gains over the policy and how much of the simulator's gain it keeps.
 //!
 //! Output folder: `config.json` (resolved arguments), `episodes.jsonl` (appended as
-//! batches finish), `episodes.csv` (sorted), `results.json` (per planner: mean
+//! batches finish; `--resume` skips the batches it holds), `episodes.csv` (sorted), `results.json` (per planner: mean
 //! score and success rate with 95% CIs, the paired difference from `none`; for the
 //! world model, how often its pick matched the simulator's and what its picks
 //! cost in truth); `filmstrips/<planner>_seed<S>.png` for the first `--record`
@@ -95,9 +95,12 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     if planners.is_empty() {
         bail!("--planners: name at least one of none, world-model, simulator");
     }
-    if a.out.exists() {
+    if a.out.exists() && !a.resume {
         if !a.force {
-            bail!("{} already exists (pass --force to replace it)", a.out.display());
+            bail!(
+                "{} already exists (pass --resume to continue it or --force to replace it)",
+                a.out.display()
+            );
         }
         std::fs::remove_dir_all(&a.out).with_context(|| format!("removing {}", a.out.display()))?;
     }
@@ -135,6 +138,9 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         "episodes": a.episodes, "seed_start": a.seed_start, "max_steps": a.max_steps,
         "batch": a.batch, "seed": a.seed, "bootstrap": a.bootstrap, "record": a.record,
     });
+    if a.resume {
+        crate::rank::resume::check_config(&a.out.join("config.json"), &config)?;
+    }
     write_json(&a.out.join("config.json"), &config)?;
     let seeds: Vec<u64> = (0..a.episodes as u64).map(|i| a.seed_start + i).collect();
     let pool = rayon::ThreadPoolBuilder::new()
@@ -163,10 +169,17 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     }
     let pb = progress::bar((planners.len() * a.episodes) as u64, "plan", quiet);
     let started = Instant::now();
-    let mut rows: Vec<PlanRow> = Vec::new();
+    let mut rows: Vec<PlanRow> = crate::rank::results::read_rows(&jsonl)?;
     let mut timing = Timing::default();
     for &planner in &planners {
         for batch in seeds.chunks(a.batch) {
+            let done = |s: &u64| rows.iter().any(|r| r.planner == planner.name() && r.seed == *s);
+            if batch.iter().all(done) {
+                pb.inc(batch.len() as u64);
+                continue;
+            }
+            // A batch is appended whole, so a part of one is from a run killed while writing.
+            rows.retain(|r| !(r.planner == planner.name() && batch.contains(&r.seed)));
             let out = run_batch(&ctx, planner, batch)
                 .with_context(|| format!("planner {} on seeds {:?}", planner.name(), batch))?;
             crate::rank::results::append_rows(&jsonl, &out.rows)?;

@@ -75,7 +75,7 @@ pub fn summarise(rows: &[PlanRow], planners: &[Planner], bootstrap: usize, seed:
 /// The file cannot be written.
 pub fn write_csv(path: &Path, rows: &[PlanRow]) -> Result<()> {
     let mut sorted: Vec<&PlanRow> = rows.iter().collect();
-    sorted.sort_by_key(|r| (r.planner, r.seed));
+    sorted.sort_by(|x, y| (&x.planner, x.seed).cmp(&(&y.planner, y.seed)));
     let mut w = csv::Writer::from_path(path).with_context(|| format!("creating {}", path.display()))?;
     w.write_record([
         "planner",
@@ -94,7 +94,7 @@ pub fn write_csv(path: &Path, rows: &[PlanRow]) -> Result<()> {
     let opt = |v: Option<String>| v.unwrap_or_default();
     for r in sorted {
         w.write_record([
-            r.planner.to_string(),
+            r.planner.clone(),
             r.seed.to_string(),
             format!("{:.6}", r.score),
             format!("{:.6}", r.max_coverage),

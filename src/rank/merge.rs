@@ -45,7 +45,7 @@ pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Resu
         if run_key(&cfg) != key {
             bail!("{}: not a shard of the same run as {}", s.display(), shards[0].display());
         }
-        for r in read_rows(&s.join("episodes.jsonl"))? {
+        for r in read_rows::<EpisodeRow>(&s.join("episodes.jsonl"))? {
             match rows.iter().find(|x| x.policy == r.policy && x.seed == r.seed && x.branch == r.branch) {
                 Some(x) if *x != r => {
                     bail!("{}: policy {} seed {} differs between shards", s.display(), r.policy, r.seed)

@@ -12,7 +12,7 @@ pub mod merge;
 pub mod paired;
 pub mod report;
 pub mod results;
-mod resume;
+pub(crate) mod resume;
 pub mod scene;
 mod schedule;
 pub mod start;
@@ -86,7 +86,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         resume::check_config(&a.out.join("config.json"), &config)?;
     }
     write_json(&a.out.join("config.json"), &config)?;
-    let mut rows = read_rows(&jsonl)?;
+    let mut rows: Vec<EpisodeRow> = read_rows(&jsonl)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.jobs.max(1))
         .build()

@@ -40,7 +40,7 @@ pub fn write_report(out: &Path) -> Result<PathBuf> {
         .with_context(|| format!("{}: not an evalharness rank results file", results_path.display()))?;
     let config = read_json(&out.join("config.json"))?;
     let mut plots = write_plots(&out.join("plots"), &summary)?;
-    let rows = super::results::read_rows(&out.join("episodes.jsonl"))?;
+    let rows = super::results::read_rows::<super::results::EpisodeRow>(&out.join("episodes.jsonl"))?;
     let max_steps = results["max_steps"].as_f64().unwrap_or(300.0);
     let series: Vec<TimeSeries> = summary
         .policies

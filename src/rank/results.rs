@@ -148,7 +148,7 @@ impl EpisodeRow {
 ///
 /// # Errors
 /// An unreadable file or a malformed line, naming the file and line.
-pub fn read_rows(path: &Path) -> Result<Vec<EpisodeRow>> {
+pub fn read_rows<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Vec<T>> {
     if !path.exists() {
         return Ok(Vec::new());
     }

@@ -1,4 +1,4 @@
-//! What `rank --resume` accepts: the same run continued, or a finished run grown to
+//! What `rank --resume` (and `plan --resume`) accepts: the same run continued, or a finished run grown to
 //! more episodes per policy. Anything else would mix the rows of two experiments in
 //! one `episodes.jsonl`, so it is refused with each differing setting named.
 
@@ -26,7 +26,7 @@ const FREE_ON_RESUME: [&str; 2] = ["command", "bootstrap"];
 /// a sharded run (whose share of the batches depends on their number), cannot grow
 /// that way and is refused. A run without a saved config (killed before writing it)
 /// resumes freely.
-pub(super) fn check_config(path: &Path, config: &Value) -> Result<()> {
+pub(crate) fn check_config(path: &Path, config: &Value) -> Result<()> {
     if !path.is_file() {
         return Ok(());
     }
@@ -84,7 +84,7 @@ fn check_growth(path: &Path, saved: &Value, config: &Value) -> Result<()> {
             saved["seed_start"].as_u64().unwrap_or(0) + was
         );
     }
-    if config["shard"] != serde_json::json!([0, 1]) {
+    if config.get("shard").is_some_and(|s| *s != serde_json::json!([0, 1])) {
         bail!(
             "--resume --episodes {now}: {} is one shard of a run, and a shard's share of the \
              batches changes with their number; extend the merged run instead",
