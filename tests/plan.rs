@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use crate::util::{expect_code, read_json, run, with_flag};
+use crate::util::{expect_code, read_json, run, scenario_variant, with_flag};
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -114,7 +114,7 @@ pub fn check(dir: &Path, wm: &Path, gf: &Path, policy: &Path) {
     // kind without sampling noise, a missing world model.
     let (_, err) = expect_code(&run(&args), 2);
     assert!(err.contains("already exists"), "{err}");
-    let bad = [dir.join("plan_bad"), dir.join("plan_bad2"), dir.join("plan_bad3")];
+    let bad = [dir.join("plan_bad"), dir.join("plan_bad2"), dir.join("plan_bad3"), dir.join("plan_bad4")];
     let mut a = base.to_vec();
     a.extend(["--out", s(&bad[0]), "--imagine", "16"]);
     let (_, err) = expect_code(&run(&a), 2);
@@ -124,6 +124,13 @@ pub fn check(dir: &Path, wm: &Path, gf: &Path, policy: &Path) {
     a.extend(["--out", s(&bad[1])]);
     let (_, err) = expect_code(&run(&a), 2);
     assert!(err.contains("noise000-lag0") && err.contains("kind \"scripted\""), "{err}");
+    // A scenario rendering 64x64 frames: the 96x96 policy is refused, naming both sizes
+    // (only the planners without a world model run, so the policy is what is checked).
+    let small = scenario_variant(dir, "small.toml", "size = 96 ", "size = 64 ");
+    let mut a = base.to_vec();
+    a.extend(["--out", s(&bad[3]), "--scenario", s(&small), "--planners", "none"]);
+    let (_, err) = expect_code(&run(&a), 2);
+    assert!(err.contains("takes 96x96 frames, the scenario renders 64x64"), "{err}");
     let missing = dir.join("no_wm");
     let mut a = with_flag(&base, "--world-model", s(&missing));
     a.extend(["--out", s(&bad[2])]);

@@ -33,8 +33,9 @@ use crate::output::write_json;
 use crate::progress;
 use episodes::{Ctx, PlanRow, Timing, run_batch};
 
-/// Loads the proposing policy with chunks of `len` actions (it still predicts its
-/// whole horizon; only the slice it returns is longer).
+/// Loads the proposing policy, returning chunks of max(imagine, execute) actions (it
+/// still predicts its whole horizon; only the slice it returns is longer), with the
+/// resolved `--imagine` and `--execute`.
 fn load_proposer(
     a: &PlanArgs,
     image_size: usize,
@@ -56,7 +57,11 @@ fn load_proposer(
     let file = read_policy_file(dir)?;
     let mut cfg = diffusion_config(dir, &file)?;
     if cfg.net.image_size != image_size {
-        bail!("{}: takes {0}x{0} frames, the scenario renders {image_size}x{image_size}", dir.display());
+        bail!(
+            "{}: takes {1}x{1} frames, the scenario renders {image_size}x{image_size}",
+            dir.display(),
+            cfg.net.image_size
+        );
     }
     let max = cfg.max_action_horizon();
     let imagine = a.imagine.unwrap_or(max);
