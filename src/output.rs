@@ -7,6 +7,21 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 
+/// Prepares a run's output folder that `--resume` can continue: an existing `out` is
+/// kept with `resume`, replaced with `force`, refused otherwise; then created.
+///
+/// # Errors
+/// An existing folder without either flag, or a failure to remove or create it.
+pub fn run_dir(out: &Path, resume: bool, force: bool) -> Result<()> {
+    if out.exists() && !resume {
+        if !force {
+            bail!("{} already exists (pass --resume to continue it or --force to replace it)", out.display());
+        }
+        std::fs::remove_dir_all(out).with_context(|| format!("removing {}", out.display()))?;
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))
+}
+
 /// A staging directory for an output folder.
 pub struct Staged {
     target: PathBuf,

@@ -124,6 +124,11 @@ pub struct Expectations {
     pub action_dim: usize,
 }
 
+/// A checkpoint's name: its folder's name (the whole path when it has none).
+pub fn checkpoint_name(dir: &Path) -> String {
+    dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned())
+}
+
 /// Loads one checkpoint folder.
 ///
 /// # Errors
@@ -137,8 +142,7 @@ pub fn load_policy(
 ) -> Result<Box<dyn Policy>, PolicyLoadError> {
     let err = |m: String| PolicyLoadError::new(dir, m);
     let file = read_policy_file(dir)?;
-    let name =
-        dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+    let name = checkpoint_name(dir);
     match file.kind.as_str() {
         "diffusion" => {
             let cfg = diffusion_config(dir, &file)?;

@@ -38,8 +38,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let mut summary: Vec<Value> = Vec::new();
     let mut ok = true;
     for d in &dirs {
-        let name =
-            d.file_name().map_or_else(|| d.display().to_string(), |n| n.to_string_lossy().into_owned());
+        let name = policies::dir::checkpoint_name(d);
         let started = Instant::now();
         let rows: Result<Vec<EpisodeRow>> = (|| {
             let policy = crate::policy_kinds::load_any(d, expect, &device, &cfg, &model)?;

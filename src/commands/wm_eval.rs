@@ -45,8 +45,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         .world_models
         .iter()
         .map(|p| {
-            let name =
-                p.file_name().map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into_owned());
+            let name = policies::dir::checkpoint_name(p);
             let mut wm = WorldModel::load(p, &device).with_context(|| format!("loading {}", p.display()))?;
             if let Some(alpha) = a.alpha {
                 wm.set_alpha(alpha).map_err(|e| anyhow::anyhow!("--alpha: {e} ({})", p.display()))?;

@@ -31,6 +31,8 @@ use world_model::model::WorldModel;
 
 use super::imagine::{self, Decision, Imagined};
 use crate::cli::Planner;
+use crate::rank::paired::{obs_of, push};
+use crate::rank::start::{Seen, Timing};
 
 /// What the planners share.
 pub struct Ctx<'a> {
@@ -85,30 +87,11 @@ pub struct PlanRow {
     pub regret_random: Option<f64>,
 }
 
-/// Wall-clock split of a batch.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Timing {
-    pub policy_s: f64,
-    pub world_model_s: f64,
-    pub sim_s: f64,
-    /// Frames the world model generated.
-    pub frames: u64,
-}
-
-impl Timing {
-    pub fn add(&mut self, o: &Timing) {
-        self.policy_s += o.policy_s;
-        self.world_model_s += o.world_model_s;
-        self.sim_s += o.sim_s;
-        self.frames += o.frames;
-    }
-}
-
 /// One episode's live state.
 pub(super) struct Live {
     pub(super) env: PushTEnv,
     /// Frames and agent positions the policy sees (with the goal), oldest first.
-    pub(super) seen: VecDeque<(Vec<u8>, [f32; 2])>,
+    pub(super) seen: VecDeque<Seen>,
     /// The world model's history frames (without the goal for a goal-free model).
     pub(super) wm_hist: VecDeque<Vec<u8>>,
     /// The first frame as the world model sees it (its anchor).
@@ -216,18 +199,8 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
     while steps < ctx.max_steps && !active.is_empty() {
         // Proposals, k per active episode, episode-major.
         let tp = Instant::now();
-        let obs: Vec<Observation> = active
-            .iter()
-            .flat_map(|&i| {
-                let l = &live[i];
-                let ob = Observation {
-                    frames: l.seen.iter().map(|(f, _)| f.clone()).collect(),
-                    agent_pos: l.seen.iter().map(|(_, p)| *p).collect(),
-                    size,
-                };
-                std::iter::repeat_n(ob, k)
-            })
-            .collect();
+        let obs: Vec<Observation> =
+            active.iter().flat_map(|&i| std::iter::repeat_n(obs_of(&live[i].seen, size), k)).collect();
         let mut rngs: Vec<Rng> = active
             .iter()
             .flat_map(|&i| {
@@ -254,9 +227,7 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
             timing.sim_s += ts.elapsed().as_secs_f64();
             Some(c)
         };
-        let empty = Imagined { costs: Vec::new(), frames: Vec::new() };
-        let sim_out = sim_costs.as_ref().unwrap_or(&empty);
-        let sim = sim_out.costs.as_slice();
+        let sim = sim_costs.as_ref().map_or(&[][..], |o| o.costs.as_slice());
         let mut wm_out = None;
         let picks: Vec<usize> = match (planner, wm) {
             (Planner::WorldModel, Some(w)) => {
@@ -301,7 +272,6 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
         // Execute the picks in MuJoCo.
         let ts = Instant::now();
         let e = ctx.execute.min(ctx.max_steps - steps);
-        let keep_wm = wm_k;
         let mut pos_of = vec![None; live.len()];
         for (p, &i) in active.iter().enumerate() {
             pos_of[i] = Some(p);
@@ -310,9 +280,7 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
             live.par_iter_mut()
                 .zip(pos_of.par_iter())
                 .map(|(l, p)| match p {
-                    Some(p) => {
-                        execute(l, &chunks[p * k + picks[*p]][..e], &raster, o, keep_wm, goal_free, thr)
-                    }
+                    Some(p) => execute(l, &chunks[p * k + picks[*p]][..e], &raster, o, wm_k, goal_free, thr),
                     None => Ok(()),
                 })
                 .collect()
@@ -364,13 +332,6 @@ fn execute(
         }
     }
     Ok(())
-}
-
-fn push<T>(q: &mut VecDeque<T>, item: T, keep: usize) {
-    q.push_back(item);
-    while q.len() > keep {
-        q.pop_front();
-    }
 }
 
 #[cfg(test)]

@@ -46,11 +46,13 @@ pub struct Decision<'a> {
 /// # Errors
 /// A diverging imagined simulation, naming the episode seed.
 pub fn in_simulator(ctx: &Ctx, d: &Decision, raster: &Rasterizer) -> Result<Imagined> {
-    let jobs: Vec<(usize, usize)> = d.active.iter().flat_map(|&i| (0..d.k).map(move |j| (i, j))).collect();
+    // The episode of each proposal, in proposal order.
+    let owner: Vec<usize> = d.active.iter().flat_map(|&i| std::iter::repeat_n(i, d.k)).collect();
     let out: Vec<(Option<f64>, Vec<u8>)> = ctx.pool.install(|| {
-        jobs.par_iter()
+        owner
+            .par_iter()
             .enumerate()
-            .map(|(q, &(i, _))| {
+            .map(|(q, &i)| {
                 let l = &d.live[i];
                 let mut env = PushTEnv::new(ctx.model.clone(), ctx.cfg);
                 env.set_state(&l.env.state());

@@ -23,15 +23,15 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use harness::policy::Policy;
 use policies::diffusion::DiffusionPolicy;
-use policies::dir::{diffusion_config, diffusion_weights, read_policy_file};
+use policies::dir::{checkpoint_name, diffusion_config, diffusion_weights, read_policy_file};
 use scenarios::pusht::PushTPhysics;
 use serde_json::json;
-use world_model::model::WorldModel;
 
 use crate::cli::{PlanArgs, Planner};
 use crate::output::write_json;
 use crate::progress;
-use episodes::{Ctx, PlanRow, Timing, run_batch};
+use crate::rank::start::Timing;
+use episodes::{Ctx, PlanRow, run_batch};
 
 /// Loads the proposing policy, returning chunks of max(imagine, execute) actions (it
 /// still predicts its whole horizon; only the slice it returns is longer), with the
@@ -78,8 +78,7 @@ fn load_proposer(
     }
     let net = diffusion_weights(dir, &cfg, device)?;
     cfg.action_horizon = imagine.max(execute);
-    let name =
-        dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+    let name = checkpoint_name(dir);
     Ok((DiffusionPolicy::new(name, cfg, file.normalisation, net, device), imagine, execute))
 }
 
@@ -100,25 +99,12 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     if planners.is_empty() {
         bail!("--planners: name at least one of none, world-model, simulator");
     }
-    if a.out.exists() && !a.resume {
-        if !a.force {
-            bail!(
-                "{} already exists (pass --resume to continue it or --force to replace it)",
-                a.out.display()
-            );
-        }
-        std::fs::remove_dir_all(&a.out).with_context(|| format!("removing {}", a.out.display()))?;
-    }
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    crate::output::run_dir(&a.out, a.resume, a.force)?;
     let cfg = crate::scenario::load_pusht(&a.scenario)?;
     let model = PushTPhysics::compile(&cfg)?;
     let device = world_model::device::selected()?;
     let wm = if planners.contains(&Planner::WorldModel) {
-        let mut wm = WorldModel::load(&a.world_model, &device)
-            .with_context(|| format!("loading world model {}", a.world_model.display()))?;
-        if let Some(alpha) = a.alpha {
-            wm.set_alpha(alpha).map_err(|e| anyhow::anyhow!("--alpha: {e} ({})", a.world_model.display()))?;
-        }
+        let wm = crate::rank::load_world_model(&a.world_model, a.alpha, &device)?;
         if wm.image_size() != cfg.render.size as usize {
             bail!(
                 "world model {} generates {1}x{1} frames, the scenario renders {2}x{2}",

@@ -22,7 +22,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use policies::dir::{Expectations, checkpoint_dirs};
+use policies::dir::{Expectations, checkpoint_dirs, checkpoint_name};
 use reports::episodes::{EpisodeRecord, write_episodes_parquet};
 
 use crate::policy_kinds::load_any;
@@ -55,24 +55,11 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         bail!("--episodes, --max-steps and --batch must be positive");
     }
     let jsonl = a.out.join("episodes.jsonl");
-    if a.out.exists() && !a.resume {
-        if !a.force {
-            bail!(
-                "{} already exists (pass --resume to continue it or --force to replace it)",
-                a.out.display()
-            );
-        }
-        std::fs::remove_dir_all(&a.out).with_context(|| format!("removing {}", a.out.display()))?;
-    }
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    crate::output::run_dir(&a.out, a.resume, a.force)?;
     let cfg = crate::scenario::load_pusht(&a.scenario)?;
     let model = PushTPhysics::compile(&cfg)?;
     let device = world_model::device::selected()?;
-    let mut wm = WorldModel::load(&a.world_model, &device)
-        .with_context(|| format!("loading world model {}", a.world_model.display()))?;
-    if let Some(alpha) = a.alpha {
-        wm.set_alpha(alpha).map_err(|e| anyhow::anyhow!("--alpha: {e} ({})", a.world_model.display()))?;
-    }
+    let wm = load_world_model(&a.world_model, a.alpha, &device)?;
     let dirs = checkpoint_dirs(&a.policies)?;
     let config = json!({
         "command": std::env::args().collect::<Vec<_>>().join(" "),
@@ -103,8 +90,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     // then run all their batches on the workers.
     let mut loaded: Vec<(usize, Box<dyn harness::policy::Policy>)> = Vec::new();
     for (pi, dir) in dirs.iter().enumerate() {
-        let name =
-            dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+        let name = checkpoint_name(dir);
         names.push(name.clone());
         match load_any(dir, expect, &device, &cfg, &model) {
             Ok(p) => loaded.push((pi, p)),
@@ -189,6 +175,23 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     gates(a, &res, &failed)
 }
 
+/// Loads the world model in `dir`, with `--alpha` applied when given.
+///
+/// # Errors
+/// An unloadable model, or an α it cannot take, naming the folder.
+pub(crate) fn load_world_model(
+    dir: &Path,
+    alpha: Option<f32>,
+    device: &burn::tensor::Device,
+) -> Result<WorldModel> {
+    let mut wm =
+        WorldModel::load(dir, device).with_context(|| format!("loading world model {}", dir.display()))?;
+    if let Some(alpha) = alpha {
+        wm.set_alpha(alpha).map_err(|e| anyhow::anyhow!("--alpha: {e} ({})", dir.display()))?;
+    }
+    Ok(wm)
+}
+
 /// Replays each policy's best- and worst-agreeing episodes with frame recording.
 fn rollouts(
     a: &RankArgs,
@@ -204,8 +207,7 @@ fn rollouts(
     let expect = Expectations { image_size: setup.cfg.render.size as usize, action_dim: 2 };
     let mut index = Vec::new();
     for d in dirs {
-        let name =
-            d.file_name().map_or_else(|| d.display().to_string(), |n| n.to_string_lossy().into_owned());
+        let name = checkpoint_name(d);
         if failed.contains(&name.as_str()) {
             continue;
         }

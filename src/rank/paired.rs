@@ -51,7 +51,8 @@ struct ChunkOut {
     steps: Vec<(Vec<u8>, StepRow)>,
 }
 
-fn obs_of(hist: &VecDeque<Seen>, size: usize) -> Observation {
+/// The observation of an episode's last frames (oldest first) and agent positions.
+pub(crate) fn obs_of(hist: &VecDeque<Seen>, size: usize) -> Observation {
     Observation {
         frames: hist.iter().map(|(f, _)| f.clone()).collect(),
         agent_pos: hist.iter().map(|(_, p)| *p).collect(),
@@ -59,7 +60,8 @@ fn obs_of(hist: &VecDeque<Seen>, size: usize) -> Observation {
     }
 }
 
-fn push(hist: &mut VecDeque<Seen>, item: Seen, keep: usize) {
+/// Appends `item` and keeps the newest `keep` items.
+pub(crate) fn push<T>(hist: &mut VecDeque<T>, item: T, keep: usize) {
     hist.push_back(item);
     while hist.len() > keep {
         hist.pop_front();

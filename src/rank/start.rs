@@ -20,7 +20,7 @@ use scenarios::pusht::{PushTConfig, PushTEnv};
 use super::results::EpisodeRow;
 
 /// A frame and the agent position seen with it.
-pub(super) type Seen = (Vec<u8>, [f32; 2]);
+pub(crate) type Seen = (Vec<u8>, [f32; 2]);
 
 /// Wall-clock split of a batch.
 #[derive(Clone, Copy, Debug, Default)]
