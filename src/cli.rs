@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand};
 
 use crate::commands::RendererKind;
+use crate::commands::wm_eval_windows::Windows;
 
 mod plan;
 mod train;
@@ -196,9 +197,16 @@ pub struct WmEvalArgs {
     /// was trained on (e.g. `collect --policy` rollouts kept for diagnosis).
     #[arg(long)]
     pub all_episodes: bool,
-    /// Held-out episodes for the 64-frame rollouts (4 real + 60 generated).
+    /// 64-frame videos to roll out (4 real + 60 generated), one per held-out episode
+    /// with `--windows first`.
     #[arg(long, default_value_t = 20)]
     pub episodes: usize,
+    /// Where the 64-frame videos start: `first` = each episode's opening (approach and
+    /// first contact, the hardest stretch); `random` = windows drawn uniformly over
+    /// every position of the held-out episodes from `--seed` (the authors' protocol,
+    /// the one paper numbers are measured on).
+    #[arg(long, value_enum, default_value_t = Windows::First)]
+    pub windows: Windows,
     /// Held-out episodes rolled out from start to end.
     #[arg(long, default_value_t = 4)]
     pub full_episodes: usize,

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use serde_json::json;
 
-use crate::util::{expect_code, read_json, run, scenario_variant};
+use crate::util::{copy_dir, expect_code, read_json, run, scenario_variant};
 
 /// 10 short explorer episodes (episode 9 is the held-out one).
 fn tiny_dataset(dir: &Path, scenario: Option<&Path>) -> std::path::PathBuf {
@@ -533,6 +533,34 @@ fn world_model_loss_variants_train_and_warm_start() {
     let args = ["wm", "eval", "--world-model", swapped.to_str().unwrap(), "--data", long.to_str().unwrap()];
     let few = ["--episodes", "1", "--full-episodes", "0", "--out", ev.to_str().unwrap()];
     expect_code(&run(&[&args[..], &few[..]].concat()), 0);
+    // `--windows random` (the authors' protocol): windows drawn over every position
+    // of the held-out episodes (index % 10 == 9), recorded with their start frames.
+    let ev = dir.path().join("eval_random");
+    let random = ["--episodes", "3", "--full-episodes", "0", "--windows", "random", "--seed", "5"];
+    expect_code(&run(&[&args[..], &random[..], &["--out", ev.to_str().unwrap()]].concat()), 0);
+    let eval = read_json(&ev.join("eval.json"));
+    assert_eq!((&eval["windows_64"], &eval["videos_64"]), (&json!("random"), &json!(3)));
+    let episodes: Vec<u64> =
+        eval["episodes_64"].as_array().unwrap().iter().map(|e| e.as_u64().unwrap()).collect();
+    assert!(episodes.iter().all(|e| e % 10 == 9), "{episodes:?}");
+    assert_eq!(eval["starts_64"].as_array().unwrap().len(), 3);
+    // A model whose output goes non-finite (a latent scale of 1e-38 blows the encoded
+    // history up to ~1e37, and the U-Net's GroupNorm overflows) stops `wm eval` with
+    // exit 2, naming the model and the frames, and leaves no results behind.
+    let blown = dir.path().join("ship").join("wm_blown");
+    copy_dir(&swapped, &blown);
+    let mut cfg = read_json(&blown.join("config.json"));
+    cfg["model"]["latents"]["std"][0] = json!(1e-38);
+    std::fs::write(blown.join("config.json"), cfg.to_string()).unwrap();
+    let ev = dir.path().join("eval_blown");
+    let args = ["wm", "eval", "--world-model", blown.to_str().unwrap(), "--data", long.to_str().unwrap()];
+    let few = ["--episodes", "1", "--full-episodes", "0", "--out", ev.to_str().unwrap()];
+    let (_, err) = expect_code(&run(&[&args[..], &few[..]].concat()), 2);
+    assert!(
+        err.contains("world model wm_blown") && err.contains("non-finite latents in generated frames 0..4"),
+        "{err}"
+    );
+    assert!(!ev.exists(), "a failed evaluation left {}", ev.display());
     let other = dir.path().join("ae_other");
     let o = other.to_str().unwrap();
     expect_code(

@@ -56,6 +56,15 @@ pub fn tree_bytes(dir: &Path) -> Vec<(String, Vec<u8>)> {
     out
 }
 
+/// Copies every file under `from` to the same relative path under `to`.
+pub fn copy_dir(from: &Path, to: &Path) {
+    for (rel, bytes) in tree_bytes(from) {
+        let path = to.join(rel);
+        std::fs::create_dir_all(path.parent().expect("a file has a parent")).expect("writable temp dir");
+        std::fs::write(path, bytes).expect("writable temp dir");
+    }
+}
+
 /// Writes `dir/name`: the shipped `scenarios/pusht.toml` with `from` replaced by `to`.
 pub fn scenario_variant(dir: &Path, name: &str, from: &str, to: &str) -> std::path::PathBuf {
     let shipped = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/pusht.toml"))

@@ -17,6 +17,7 @@ mod train_policy;
 mod train_wm;
 mod wm_eval;
 mod wm_eval_score;
+pub mod wm_eval_windows;
 mod wm_export;
 
 use std::process::ExitCode;

@@ -12,6 +12,7 @@ use world_model::model::WorldModel;
 
 use super::goal_free;
 use super::wm_eval_score::Scoring;
+use super::wm_eval_windows::{self, Windows};
 use crate::cli::WmEvalArgs;
 use crate::output::{Staged, write_json};
 
@@ -62,12 +63,11 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         .filter(|(i, _)| a.all_episodes || Split::HeldOut.contains(*i))
         .map(|(i, r)| (i, r.clone()))
         .collect();
-    let pick = |min: usize, n: usize| -> Vec<&(usize, std::ops::Range<usize>)> {
-        held.iter().filter(|(_, r)| r.len() >= min).take(n).collect()
-    };
-    let (short_eps, full_eps) = (pick(k + 60, a.episodes), pick(k + 1, a.full_episodes));
-    let short: Vec<(usize, usize)> = short_eps.iter().map(|(_, r)| (r.start, 60)).collect();
-    let full: Vec<(usize, usize)> = full_eps.iter().map(|(_, r)| (r.start, r.len() - k)).collect();
+    let short_windows = wm_eval_windows::choose(&held, k + 60, a.episodes, a.windows, a.seed);
+    let full_windows = wm_eval_windows::choose(&held, k + 1, a.full_episodes, Windows::First, a.seed);
+    let short: Vec<(usize, usize)> = short_windows.iter().map(|w| (w.start, 60)).collect();
+    let full: Vec<(usize, usize)> =
+        full_windows.iter().map(|w| (w.start, data.episodes[w.episode].len() - k)).collect();
     let which = if a.all_episodes { "episode" } else { "held-out episode" };
     if short.is_empty() {
         bail!("{}: no {which} has {} frames", a.data.display(), k + 60);
@@ -102,7 +102,8 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
     for (name, wm) in &models {
         let view = view_for(wm);
         tracing::info!(model = %name, videos = short.len(), "64-frame rollouts");
-        let (row, videos) = evaluate(wm, (name, view), &data, &short, "64", a.batch, a.seed);
+        let (row, videos) =
+            evaluate(wm, (name, view), &data, &short, "64", a.batch, a.seed).map_err(anyhow::Error::msg)?;
         if strip_rows.is_empty() {
             strip_rows.push(videos[0].real.iter().step_by(STRIP_EVERY).cloned().collect());
         }
@@ -111,7 +112,8 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         rows.push(row);
         if !full.is_empty() {
             tracing::info!(model = %name, videos = full.len(), "full-episode rollouts");
-            let (row, videos) = evaluate(wm, (name, view), &data, &full, "episode", a.batch, a.seed);
+            let (row, videos) = evaluate(wm, (name, view), &data, &full, "episode", a.batch, a.seed)
+                .map_err(anyhow::Error::msg)?;
             print_row(&row, "");
             rows.push(row);
             if let Ok(sc) = &scoring {
@@ -166,10 +168,12 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             "open_loop_scores_note": scoring.as_ref().err().cloned().unwrap_or_else(|| SCORE_NOTE.into()),
             "data": a.data,
             "episodes_from": if a.all_episodes { "all episodes (--all-episodes)" } else { "held-out episodes (index % 10 == 9)" },
-            "episodes_64": short_eps.iter().map(|(i, _)| i).collect::<Vec<_>>(),
-            "episodes_whole": full_eps.iter().map(|(i, _)| i).collect::<Vec<_>>(),
+            "windows_64": a.windows,
+            "episodes_64": short_windows.iter().map(|w| w.episode).collect::<Vec<_>>(),
+            "starts_64": short_windows.iter().map(|w| w.start).collect::<Vec<_>>(),
+            "episodes_whole": full_windows.iter().map(|w| w.episode).collect::<Vec<_>>(),
             "videos_64": short.len(), "videos_episode": full.len(), "batch": a.batch, "seed": a.seed,
-            "filmstrip": format!("row 1: real frames of the {which} at step {}, every {STRIP_EVERY}th after the 4 context frames; then one row per model", short[0].0),
+            "filmstrip": format!("row 1: real frames of the {which} {} from step {}, every {STRIP_EVERY}th after the 4 context frames; then one row per model", short_windows[0].episode, short[0].0),
         }),
     )?;
     let out = staged.commit()?;

@@ -6,8 +6,8 @@
 //!
 //! [`GoalDistance`]: scenarios::pusht::plan_cost::GoalDistance
 
-use anyhow::{Result, bail};
-use burn::tensor::{Tensor, TensorData};
+use anyhow::{Result, anyhow};
+use burn::tensor::Tensor;
 use harness::policy::ActionChunk;
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
@@ -15,8 +15,8 @@ use rayon::prelude::*;
 use scenarios::pusht::PushTEnv;
 use scenarios::pusht::render::Rasterizer;
 use world_model::data::tensor_to_frames;
-use world_model::latents::normalise_action;
 use world_model::model::WorldModel;
+use world_model::rollout::Rollout;
 
 use super::episodes::{Ctx, Live};
 
@@ -97,8 +97,9 @@ pub fn in_world_model(ctx: &Ctx, wm: &WorldModel, d: &Decision, size: usize) -> 
     let per = |t: Tensor<5>, n: usize| -> Tensor<5> {
         t.unsqueeze_dim::<6>(1).expand([a, k, n, c, ls, ls]).reshape([b, n, c, ls, ls])
     };
-    let mut zh = per(z.clone().narrow(1, 0, hist), hist); // [b, K, C, s, s]
+    let zh = per(z.clone().narrow(1, 0, hist), hist); // [b, K, C, s, s]
     let anchor = per(z.narrow(1, hist, 1), 1).reshape([b, c, ls, ls]); // [b, C, s, s]
+    let mut roll = Rollout::new(zh, anchor);
     let mut rngs: Vec<Rng> = d
         .active
         .iter()
@@ -108,27 +109,13 @@ pub fn in_world_model(ctx: &Ctx, wm: &WorldModel, d: &Decision, size: usize) -> 
             Rng::new(derive(ctx.master_seed, &[fnv1a(name), seed, d.index, j, fnv1a("world_model")]))
         })
         .collect();
-    let mut done = 0;
     let mut last = None;
-    while done < ctx.imagine {
-        let f = f_max.min(ctx.imagine - done);
-        let acts: Vec<f32> = d
-            .chunks
-            .iter()
-            .flat_map(|ch| ch[done..done + f].iter().flat_map(|x| x.map(normalise_action)))
-            .collect();
-        let act = Tensor::<3>::from_data(TensorData::new(acts, [b, f, 2]), &device);
-        let pred = wm.predict(zh.clone(), anchor.clone(), act, &mut rngs); // [b, f, C, s, s]
-        let check: f32 = pred.clone().abs().sum().into_scalar();
-        if !check.is_finite() {
-            bail!(
-                "world model produced non-finite latents imagining proposals of policy {name} at decision {}",
-                d.index
-            );
-        }
-        last = Some(pred.clone().narrow(1, f - 1, 1).reshape([b, c, ls, ls]));
-        zh = Tensor::cat(vec![zh, pred], 1).narrow(1, f, hist);
-        done += f;
+    while roll.generated() < ctx.imagine {
+        let (done, f) = (roll.generated(), f_max.min(ctx.imagine - roll.generated()));
+        let pred = roll
+            .step(wm, f, |q, j| d.chunks[q][done + j], &mut rngs)
+            .map_err(|e| anyhow!("imagining proposals of policy {name} at decision {}: {e}", d.index))?; // [b, f, C, s, s]
+        last = Some(pred.narrow(1, f - 1, 1).reshape([b, c, ls, ls]));
     }
     let Some(last) = last else { return Ok(Imagined { costs: vec![None; b], frames: vec![Vec::new(); b] }) };
     let mut frames = tensor_to_frames(wm.decode(last));

@@ -23,7 +23,6 @@ use std::collections::VecDeque;
 use std::time::Instant;
 
 use anyhow::{Result, anyhow, bail};
-use burn::tensor::{Tensor, TensorData};
 use harness::policy::{ActionChunk, Observation, Policy};
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
@@ -31,8 +30,8 @@ use rayon::prelude::*;
 use scenarios::pusht::render::Rasterizer;
 use scenarios::pusht::rollout::{Episode, StepRow};
 use world_model::data::tensor_to_frames;
-use world_model::latents::normalise_action;
 use world_model::model::WorldModel;
+use world_model::rollout::Rollout;
 
 use super::results::{Branch, EpisodeRow};
 pub use super::start::{BranchOut, Setup, Start, Timing};
@@ -287,8 +286,8 @@ pub fn wm_branch(
     let z0 = wm.encode(policies::diffusion::frames_to_tensor(&refs, size, &device)); // [n, C, s, s]
     let [_, c, ls, _] = z0.dims();
     // Latent histories and anchors (the first frame) of the active episodes, in `active`'s order.
-    let mut anchor = z0.clone(); // [a, C, s, s]
-    let mut zh = z0.unsqueeze_dim::<5>(1).expand([n, k, c, ls, ls]); // [a, K, C, s, s]
+    let anchor = z0.clone(); // [a, C, s, s]
+    let mut roll = Rollout::new(z0.unsqueeze_dim::<5>(1).expand([n, k, c, ls, ls]), anchor); // [a, K, C, s, s]
     timing.world_model_s += tw.elapsed().as_secs_f64();
     let mut steps = 0;
     let mut active: Vec<usize> = (0..n).collect();
@@ -300,16 +299,9 @@ pub fn wm_branch(
         let mut done = 0;
         while done < len {
             let f = f_max.min(len - done);
-            let acts: Vec<f32> = chunks
-                .iter()
-                .flat_map(|ch| ch[done..done + f].iter().flat_map(|a| a.map(normalise_action)))
-                .collect();
-            let act = Tensor::<3>::from_data(TensorData::new(acts, [a, f, 2]), &device);
-            let pred = wm.predict(zh.clone(), anchor.clone(), act, &mut sub); // [a, f, C, s, s]
-            let check: f32 = pred.clone().abs().sum().into_scalar();
-            if !check.is_finite() {
-                bail!("world model produced non-finite latents for policy {name} at step {}", steps + done);
-            }
+            let pred = roll.step(wm, f, |p, j| chunks[p][done + j], &mut sub).map_err(|e| {
+                anyhow!("policy {name}, episode steps {}..{}: {e}", steps + done, steps + done + f)
+            })?; // [a, f, C, s, s]
             // Decode only the frames the policy will see (the chunk's last `o`): decoding
             // is the most expensive part of the branch. They are also the frames scored.
             let first_seen = len.saturating_sub(o).max(done).min(done + f) - done;
@@ -328,7 +320,6 @@ pub fn wm_branch(
                     }
                 }
             }
-            zh = Tensor::cat(vec![zh, pred], 1).narrow(1, f, k);
             timing.frames += (a * f) as u64;
             done += f;
         }
@@ -347,8 +338,7 @@ pub fn wm_branch(
         if next.len() < active.len() && !next.is_empty() {
             let kept: Vec<usize> =
                 active.iter().enumerate().filter(|(_, i)| next.contains(i)).map(|(p, _)| p).collect();
-            zh = Tensor::cat(kept.iter().map(|&p| zh.clone().narrow(0, p, 1)).collect(), 0);
-            anchor = Tensor::cat(kept.iter().map(|&p| anchor.clone().narrow(0, p, 1)).collect(), 0);
+            roll.keep(&kept);
         }
         active = next;
         timing.world_model_s += tw.elapsed().as_secs_f64();

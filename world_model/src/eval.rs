@@ -8,15 +8,14 @@
 
 use std::time::Instant;
 
-use burn::tensor::{Tensor, TensorData};
 use harness::image::{psnr, ssim};
 use harness::rng::Rng;
 use harness::seed::derive;
 use serde::Serialize;
 
 use crate::data::{EpisodeData, tensor_to_frames};
-use crate::latents::normalise_action;
 use crate::model::WorldModel;
+use crate::rollout::Rollout;
 
 /// The metrics of one model at one horizon.
 #[derive(Clone, Debug, Serialize)]
@@ -68,8 +67,14 @@ pub struct Video {
     pub generated: Vec<Vec<u8>>,
 }
 
+/// One video's frames, HWC bytes each.
+pub type Frames = Vec<Vec<u8>>;
+
 /// Rolls out `len` frames after a 4-frame real context for each start step in
 /// `starts` (batched); returns the generated frames per video and the seconds spent.
+///
+/// # Errors
+/// Non-finite latents, naming the video (its first context step) and the frames.
 ///
 /// # Panics
 /// Never for valid inputs; `starts` must leave `3 + len` frames in each episode.
@@ -79,7 +84,7 @@ pub fn rollout(
     starts: &[usize],
     len: usize,
     seed: u64,
-) -> (Vec<Vec<Vec<u8>>>, f64) {
+) -> Result<(Vec<Frames>, f64), String> {
     let device = wm.device().clone();
     let (k, f_max) = (wm.cfg.unet.history, wm.cfg.future);
     let b = starts.len();
@@ -91,34 +96,31 @@ pub fn rollout(
     let t0 = Instant::now();
     let z = wm.encode(data.frames_tensor(&ctx, &device)); // [b k, C, s, s]
     let [_, c, s, _] = z.dims();
-    let mut hist = z.reshape([b, k, c, s, s]);
+    let hist = z.reshape([b, k, c, s, s]); // [b, K, C, s, s]
     // Each video's episode's first frame; a model without an anchor ignores it.
     let anchor = if wm.uses_anchor() {
         wm.encode(data.frames_tensor(&firsts, &device)) // [b, C, s, s]
     } else {
         hist.clone().narrow(1, 0, 1).reshape([b, c, s, s])
     };
+    let mut roll = Rollout::new(hist, anchor);
     let mut rngs: Vec<Rng> = starts.iter().map(|&t| Rng::new(derive(seed, &[t as u64]))).collect();
-    let mut out: Vec<Vec<Vec<u8>>> = vec![Vec::with_capacity(len); b];
-    let mut done = 0;
-    while done < len {
-        let f = f_max.min(len - done);
+    let mut out: Vec<Frames> = vec![Vec::with_capacity(len); b];
+    while roll.generated() < len {
+        let (done, f) = (roll.generated(), f_max.min(len - roll.generated()));
         // a_{t+k-1+done+j} drives frame t+k+done+j.
-        let acts: Vec<f32> = starts
-            .iter()
-            .flat_map(|&t| (0..f).flat_map(move |j| [0, 1].map(|d| (t + k - 1 + done + j, d))))
-            .map(|(i, d)| normalise_action(data.actions[i * 2 + d]))
-            .collect();
-        let act = Tensor::<3>::from_data(TensorData::new(acts, [b, f, 2]), &device);
-        let pred = wm.predict(hist.clone(), anchor.clone(), act, &mut rngs); // [b, f, C, s, s]
-        let frames = tensor_to_frames(wm.decode(pred.clone().reshape([b * f, c, s, s])));
+        let action =
+            |r: usize, j: usize| [0, 1].map(|d| data.actions[(starts[r] + k - 1 + done + j) * 2 + d]);
+        let pred = roll.step(wm, f, action, &mut rngs).map_err(|e| {
+            let videos: Vec<String> = starts.iter().map(usize::to_string).collect();
+            format!("{e} (a batch of videos whose context starts at steps {})", videos.join(", "))
+        })?; // [b, f, C, s, s]
+        let frames = tensor_to_frames(wm.decode(pred.reshape([b * f, c, s, s])));
         for (i, fr) in frames.into_iter().enumerate() {
             out[i / f].push(fr);
         }
-        hist = Tensor::cat(vec![hist, pred], 1).narrow(1, f, k);
-        done += f;
     }
-    (out, t0.elapsed().as_secs_f64())
+    Ok((out, t0.elapsed().as_secs_f64()))
 }
 
 /// Per-frame metrics of generated vs real frames: (mse on [-1, 1], psnr, ssim).
@@ -254,6 +256,9 @@ pub struct View<'a> {
 /// (or to its episode's end when `len` is `None`), in batches of `batch`; with a
 /// `view`, the model reads `view.inputs` and its frames are completed before the
 /// comparison with `data`'s.
+///
+/// # Errors
+/// A rollout with non-finite latents, naming the model and the videos.
 pub fn evaluate(
     wm: &WorldModel,
     (name, view): (&str, Option<&View>),
@@ -262,7 +267,7 @@ pub fn evaluate(
     horizon: &str,
     batch: usize,
     seed: u64,
-) -> (EvalRow, Vec<Video>) {
+) -> Result<(EvalRow, Vec<Video>), String> {
     let k = wm.cfg.unet.history;
     let (mut tally, mut secs) = (Tally::default(), 0.0);
     let mut videos = Vec::new();
@@ -273,7 +278,8 @@ pub fn evaluate(
         for chunk in group.chunks(batch.max(1)) {
             let len = chunk[0].1;
             let st: Vec<usize> = chunk.iter().map(|&(t, _)| t).collect();
-            let (videos_gen, s) = rollout(wm, view.map_or(data, |v| v.inputs), &st, len, seed);
+            let (videos_gen, s) = rollout(wm, view.map_or(data, |v| v.inputs), &st, len, seed)
+                .map_err(|e| format!("world model {name}: {e}"))?;
             secs += s;
             for (&t, mut g) in st.iter().zip(videos_gen) {
                 if let Some(v) = view {
@@ -285,7 +291,7 @@ pub fn evaluate(
             }
         }
     }
-    (tally.row(name, wm.cfg.objective.name(), horizon, secs), videos)
+    Ok((tally.row(name, wm.cfg.objective.name(), horizon, secs), videos))
 }
 
 #[cfg(test)]

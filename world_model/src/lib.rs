@@ -12,7 +12,8 @@
 //!   GroupNorm, im2col and Winograd convolutions; [`elementwise`]: `exp` and statistics;
 //! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
 //!   (drifting, MSE and diffusion objectives); [`context_noise`]: corrupted training histories;
-//! - [`model`]: a trained world model for inference; [`eval`]: video-quality metrics;
+//! - [`model`]: a trained world model for inference; [`rollout`]: autoregressive
+//!   generation, chunk by chunk; [`eval`]: video-quality metrics;
 //! - [`data`]: datasets with a held-out split.
 
 pub mod autoencoder;
@@ -32,6 +33,7 @@ pub mod latents;
 pub mod model;
 pub mod motion;
 pub mod optim;
+pub mod rollout;
 pub mod train_ae;
 pub mod train_wm;
 pub mod unet;
