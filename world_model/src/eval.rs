@@ -40,6 +40,21 @@ pub struct EvalRow {
     pub videos: usize,
     /// Mean SSIM at given generated frames (where along a rollout quality is lost).
     pub ssim_curve: Vec<SsimPoint>,
+    /// Each video's own means, by its first context step (which videos lose the quality).
+    pub per_video: Vec<VideoMetrics>,
+}
+
+/// One video's per-frame metrics averaged over its generated frames.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct VideoMetrics {
+    /// Step index (in the dataset) of its first context frame.
+    pub start: usize,
+    /// Mean MSE on [-1, 1] pixels.
+    pub mse: f64,
+    /// Mean PSNR (dB).
+    pub psnr: f64,
+    /// Mean SSIM.
+    pub ssim: f64,
 }
 
 /// Generated frames (0 = the first after the context) at which [`EvalRow::ssim_curve`]
@@ -142,11 +157,13 @@ struct Tally {
     videos: usize,
     /// SSIM sum and video count at each of [`SSIM_CURVE_AT`].
     curve: [(f64, usize); SSIM_CURVE_AT.len()],
+    per_video: Vec<VideoMetrics>,
 }
 
 impl Tally {
-    /// Adds one video: per-frame metrics averaged over its frames.
-    fn add(&mut self, real: &[Vec<u8>], generated: &[Vec<u8>], size: usize) {
+    /// Adds the video whose context starts at step `start`: per-frame metrics
+    /// averaged over its frames.
+    fn add(&mut self, start: usize, real: &[Vec<u8>], generated: &[Vec<u8>], size: usize) {
         let mut v = [0.0f64; 3];
         for (j, (r, x)) in real.iter().zip(generated).enumerate() {
             let (m, p, q) = frame_metrics(r, x, size);
@@ -158,9 +175,11 @@ impl Tally {
                 self.curve[i].1 += 1;
             }
         }
+        let v = v.map(|x| x / real.len().max(1) as f64);
         for (acc, x) in self.sums.iter_mut().zip(v) {
-            *acc += x / real.len().max(1) as f64;
+            *acc += x;
         }
+        self.per_video.push(VideoMetrics { start, mse: v[0], psnr: v[1], ssim: v[2] });
         self.frames += real.len();
         self.videos += 1;
     }
@@ -183,6 +202,11 @@ impl Tally {
                 .filter(|(_, (_, n))| *n > 0)
                 .map(|(&frame, (sum, n))| SsimPoint { frame, ssim: sum / n as f64, videos: n })
                 .collect(),
+            per_video: {
+                let mut v = self.per_video.clone();
+                v.sort_by_key(|m| m.start);
+                v
+            },
         }
     }
 }
@@ -199,7 +223,7 @@ pub fn persistence(data: &EpisodeData, starts: &[(usize, usize)], k: usize, hori
     let mut tally = Tally::default();
     for &(t, len) in starts {
         let last = data.frame(t + k - 1).to_vec();
-        tally.add(&real_frames(data, t, k, len), &vec![last; len], data.size);
+        tally.add(t, &real_frames(data, t, k, len), &vec![last; len], data.size);
     }
     tally.row("persistence", "none", horizon, 0.0)
 }
@@ -236,7 +260,7 @@ pub fn round_trip(
         if let Some(v) = view {
             (v.complete)(t, &mut decoded);
         }
-        tally.add(&real_frames(data, t, k, len), &decoded, data.size);
+        tally.add(t, &real_frames(data, t, k, len), &decoded, data.size);
     }
     Some(tally.row(&format!("{name}:autoencoder"), "round-trip", horizon, t0.elapsed().as_secs_f64()))
 }
@@ -286,7 +310,7 @@ pub fn evaluate(
                     (v.complete)(t, &mut g);
                 }
                 let real = real_frames(data, t, k, len);
-                tally.add(&real, &g, data.size);
+                tally.add(t, &real, &g, data.size);
                 videos.push(Video { start: t, real, generated: g });
             }
         }
@@ -320,6 +344,17 @@ mod tests {
         // SSIM by frame: frame 0 equals its real frame (SSIM 1); frame 1 is not a curve
         // point, and frames 4, 8, … lie beyond this 2-frame video.
         assert_eq!(row.ssim_curve, vec![SsimPoint { frame: 0, ssim: 1.0, videos: 1 }]);
+        // One video, so its own means are the row's.
+        assert_eq!(row.per_video, vec![VideoMetrics { start: 0, mse: row.mse, psnr: row.psnr, ssim: row.ssim }]);
+        // Two videos, given out of order: the one from step 1 (context 1..5, last context
+        // frame 4, video = frame 5) has MSE (10 / 127.5)² = 0.0061515; rows come sorted
+        // by start, and the row's MSE is the mean of the two videos' means.
+        let row = persistence(&data, &[(1, 1), (0, 2)], 4, "64");
+        let mse: Vec<(usize, f64)> = row.per_video.iter().map(|v| (v.start, v.mse)).collect();
+        let one = (10.0f64 / 127.5).powi(2);
+        assert_eq!(mse.iter().map(|m| m.0).collect::<Vec<_>>(), vec![0, 1]);
+        assert!((mse[0].1 - 0.5 * one).abs() < 1e-12 && (mse[1].1 - one).abs() < 1e-12, "{mse:?}");
+        assert!((row.mse - 0.75 * one).abs() < 1e-12, "{}", row.mse);
     }
 
     #[test]
