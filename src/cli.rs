@@ -207,6 +207,11 @@ pub struct WmEvalArgs {
     /// the one paper numbers are measured on).
     #[arg(long, value_enum, default_value_t = Windows::First)]
     pub windows: Windows,
+    /// Roll out the 64-frame video whose context starts at this dataset step instead
+    /// (repeat the flag; e.g. a `start` from `eval.json`'s `per_video`, to see one
+    /// failure's filmstrip). Overrides `--windows` and `--episodes`.
+    #[arg(long = "start")]
+    pub starts: Vec<usize>,
     /// Held-out episodes rolled out from start to end.
     #[arg(long, default_value_t = 4)]
     pub full_episodes: usize,

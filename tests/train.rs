@@ -544,6 +544,24 @@ fn world_model_loss_variants_train_and_warm_start() {
         eval["episodes_64"].as_array().unwrap().iter().map(|e| e.as_u64().unwrap()).collect();
     assert!(episodes.iter().all(|e| e % 10 == 9), "{episodes:?}");
     assert_eq!(eval["starts_64"].as_array().unwrap().len(), 3);
+    // `--start` re-runs one of those videos; step 0 (episode 0, trained on) is refused.
+    let start = eval["starts_64"][1].as_u64().unwrap().to_string();
+    let ev = dir.path().join("eval_start");
+    expect_code(
+        &run(&[&args[..], &["--start", &start, "--full-episodes", "0", "--out", ev.to_str().unwrap()]]
+            .concat()),
+        0,
+    );
+    let eval = read_json(&ev.join("eval.json"));
+    assert_eq!(
+        (&eval["windows_64"], &eval["starts_64"][0]),
+        (&json!("given (--start)"), &json!(start.parse::<u64>().unwrap()))
+    );
+    let (_, err) = expect_code(
+        &run(&[&args[..], &["--start", "0", "--out", ev.to_str().unwrap(), "--force"]].concat()),
+        2,
+    );
+    assert!(err.contains("--start 0: no held-out episode holds step 0"), "{err}");
     // A model whose output goes non-finite (a latent scale of 1e-38 blows the encoded
     // history up to ~1e37, and the U-Net's GroupNorm overflows) stops `wm eval` with
     // exit 2, naming the model and the frames, and leaves no results behind.

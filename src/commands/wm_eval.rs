@@ -63,12 +63,16 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         .filter(|(i, _)| a.all_episodes || Split::HeldOut.contains(*i))
         .map(|(i, r)| (i, r.clone()))
         .collect();
-    let short_windows = wm_eval_windows::choose(&held, k + 60, a.episodes, a.windows, a.seed);
+    let which = if a.all_episodes { "episode" } else { "held-out episode" };
+    let short_windows = if a.starts.is_empty() {
+        wm_eval_windows::choose(&held, k + 60, a.episodes, a.windows, a.seed)
+    } else {
+        wm_eval_windows::at(&held, k + 60, &a.starts, which).map_err(anyhow::Error::msg)?
+    };
     let full_windows = wm_eval_windows::choose(&held, k + 1, a.full_episodes, Windows::First, a.seed);
     let short: Vec<(usize, usize)> = short_windows.iter().map(|w| (w.start, 60)).collect();
     let full: Vec<(usize, usize)> =
         full_windows.iter().map(|w| (w.start, data.episodes[w.episode].len() - k)).collect();
-    let which = if a.all_episodes { "episode" } else { "held-out episode" };
     if short.is_empty() {
         bail!("{}: no {which} has {} frames", a.data.display(), k + 60);
     }
@@ -168,7 +172,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             "open_loop_scores_note": scoring.as_ref().err().cloned().unwrap_or_else(|| SCORE_NOTE.into()),
             "data": a.data,
             "episodes_from": if a.all_episodes { "all episodes (--all-episodes)" } else { "held-out episodes (index % 10 == 9)" },
-            "windows_64": a.windows,
+            "windows_64": if a.starts.is_empty() { json!(a.windows) } else { json!("given (--start)") },
             "episodes_64": short_windows.iter().map(|w| w.episode).collect::<Vec<_>>(),
             "starts_64": short_windows.iter().map(|w| w.start).collect::<Vec<_>>(),
             "episodes_whole": full_windows.iter().map(|w| w.episode).collect::<Vec<_>>(),

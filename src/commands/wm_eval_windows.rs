@@ -65,6 +65,42 @@ pub fn choose(
     }
 }
 
+/// The windows of `len` frames that start at the given steps (`--start`), each
+/// checked to lie inside one of `episodes`, ordered by start frame (the filmstrip
+/// shows the first).
+///
+/// # Errors
+/// A step outside every episode, or too close to its episode's end, named with the
+/// episode's range.
+pub fn at(
+    episodes: &[(usize, Range<usize>)],
+    len: usize,
+    starts: &[usize],
+    which: &str,
+) -> Result<Vec<Window>, String> {
+    starts
+        .iter()
+        .map(|&start| {
+            let Some((i, r)) = episodes.iter().find(|(_, r)| r.contains(&start)) else {
+                return Err(format!("--start {start}: no {which} holds step {start}"));
+            };
+            if start + len > r.end {
+                return Err(format!(
+                    "--start {start}: {which} {i} (steps {}..{}) ends {} steps after it; a video needs {len}",
+                    r.start,
+                    r.end,
+                    r.end - start
+                ));
+            }
+            Ok(Window { episode: *i, start })
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map(|mut w| {
+            w.sort_by_key(|w| w.start);
+            w
+        })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -80,6 +116,17 @@ mod tests {
         let w = choose(&episodes(), 3, 5, Windows::First, 0);
         assert_eq!(w, vec![Window { episode: 0, start: 0 }, Window { episode: 2, start: 7 }]);
         assert_eq!(choose(&episodes(), 3, 1, Windows::First, 0).len(), 1);
+    }
+
+    #[test]
+    fn explicit_starts_are_checked_against_their_episode() {
+        let w = at(&episodes(), 3, &[8, 1], "held-out episode").unwrap();
+        assert_eq!(w, vec![Window { episode: 0, start: 1 }, Window { episode: 2, start: 8 }]);
+        // Step 9 leaves 2 frames (9, 10) in episode 2; step 11 is in no episode.
+        let err = at(&episodes(), 3, &[9], "held-out episode").unwrap_err();
+        assert_eq!(err, "--start 9: held-out episode 2 (steps 7..11) ends 2 steps after it; a video needs 3");
+        let err = at(&episodes(), 3, &[11], "held-out episode").unwrap_err();
+        assert_eq!(err, "--start 11: no held-out episode holds step 11");
     }
 
     #[test]

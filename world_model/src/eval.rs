@@ -345,7 +345,10 @@ mod tests {
         // point, and frames 4, 8, … lie beyond this 2-frame video.
         assert_eq!(row.ssim_curve, vec![SsimPoint { frame: 0, ssim: 1.0, videos: 1 }]);
         // One video, so its own means are the row's.
-        assert_eq!(row.per_video, vec![VideoMetrics { start: 0, mse: row.mse, psnr: row.psnr, ssim: row.ssim }]);
+        assert_eq!(
+            row.per_video,
+            vec![VideoMetrics { start: 0, mse: row.mse, psnr: row.psnr, ssim: row.ssim }]
+        );
         // Two videos, given out of order: the one from step 1 (context 1..5, last context
         // frame 4, video = frame 5) has MSE (10 / 127.5)² = 0.0061515; rows come sorted
         // by start, and the row's MSE is the mean of the two videos' means.
