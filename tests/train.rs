@@ -544,6 +544,13 @@ fn world_model_loss_variants_train_and_warm_start() {
         eval["episodes_64"].as_array().unwrap().iter().map(|e| e.as_u64().unwrap()).collect();
     assert!(episodes.iter().all(|e| e % 10 == 9), "{episodes:?}");
     assert_eq!(eval["starts_64"].as_array().unwrap().len(), 3);
+    // Every video falls in one block-motion bin, each with a mean SSIM per row.
+    let bins = eval["ssim_by_block_motion"]["bins"].as_array().unwrap().clone();
+    assert_eq!(bins.iter().map(|b| b["videos"].as_u64().unwrap()).sum::<u64>(), 3, "{bins:?}");
+    assert!(
+        bins.iter().filter(|b| b["videos"] != 0).all(|b| b["ssim"].as_array().unwrap().len() >= 2),
+        "{bins:?}"
+    );
     // `--start` re-runs one of those videos; step 0 (episode 0, trained on) is refused.
     let start = eval["starts_64"][1].as_u64().unwrap().to_string();
     let ev = dir.path().join("eval_start");

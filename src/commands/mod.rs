@@ -16,6 +16,7 @@ mod train;
 mod train_policy;
 mod train_wm;
 mod wm_eval;
+mod wm_eval_motion;
 mod wm_eval_score;
 pub mod wm_eval_windows;
 mod wm_export;

@@ -1,6 +1,7 @@
 //! `evalharness wm eval`: compares world models' rollouts with held-out episodes
 //! and writes `eval.json` and a filmstrip (real row above each model's row).
 
+use std::collections::HashMap;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
@@ -11,6 +12,8 @@ use world_model::eval::{EvalRow, View, evaluate, persistence, round_trip};
 use world_model::model::WorldModel;
 
 use super::goal_free;
+use super::goal_free::DatasetScene;
+use super::wm_eval_motion;
 use super::wm_eval_score::Scoring;
 use super::wm_eval_windows::{self, Windows};
 use crate::cli::WmEvalArgs;
@@ -37,6 +40,41 @@ fn print_row(row: &EvalRow, note: &str) {
     );
     let curve: Vec<String> = row.ssim_curve.iter().map(|p| format!("{}: {:.3}", p.frame, p.ssim)).collect();
     println!("{:<20} SSIM by generated frame  {}", "", curve.join("  "));
+}
+
+/// The 64-frame rows' SSIM by block motion (printed, and for `eval.json`), from the
+/// dataset's state rows; a note saying why not for a dataset without them.
+fn motion_breakdown(
+    a: &WmEvalArgs,
+    data: &EpisodeData,
+    short: &[(usize, usize)],
+    k: usize,
+    rows: &[EvalRow],
+) -> Result<serde_json::Value> {
+    let scene = match DatasetScene::load(&a.data)? {
+        Ok(scene) if scene.len() >= data.len() => scene,
+        Ok(scene) => {
+            return Ok(
+                json!({"note": format!("not available: {} state rows for {} frames", scene.len(), data.len())}),
+            );
+        }
+        Err(why) => return Ok(json!({"note": format!("not available: {why}")})),
+    };
+    let shape = scene.cfg.shape();
+    let motion: HashMap<usize, f64> = short
+        .iter()
+        .map(|&(t, len)| {
+            let poses = (t + k..t + k + len).map(|i| scene.state(i).block);
+            (t, wm_eval_motion::block_motion(&shape, &scene.state(t + k - 1).block, poses))
+        })
+        .collect();
+    let bins = wm_eval_motion::by_motion(rows, &motion);
+    for b in &bins {
+        let to = b.to.map_or_else(|| "inf".to_string(), |t| t.to_string());
+        let ssim: Vec<String> = b.ssim.iter().map(|(n, s)| format!("{n} {s:.4}")).collect();
+        println!("block motion [{}, {to}): {:>4} videos  {}", b.from, b.videos, ssim.join("  "));
+    }
+    Ok(json!({"note": wm_eval_motion::NOTE, "bins": bins}))
 }
 
 /// `evalharness wm eval`.
@@ -161,6 +199,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             println!("{:<20} coverage real/imagined by frame  {}", "", curve.join("  "));
         }
     }
+    let by_motion = motion_breakdown(a, &data, &short, k, &rows)?;
     let strip = reports::png::filmstrip(&strip_rows, data.size, data.size);
     reports::png::write_png(&staged.file("filmstrip.png"), &strip.pixels, strip.width, strip.height)?;
     write_json(
@@ -168,6 +207,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         &json!({
             "models": rows,
             "references_note": REFERENCES_NOTE,
+            "ssim_by_block_motion": by_motion,
             "open_loop_scores": scores,
             "open_loop_scores_note": scoring.as_ref().err().cloned().unwrap_or_else(|| SCORE_NOTE.into()),
             "data": a.data,
