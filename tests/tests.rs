@@ -4,6 +4,7 @@ mod agreement;
 mod dataset;
 mod pipeline;
 mod plan;
+mod shipped;
 mod simulate;
 mod train;
 mod util;

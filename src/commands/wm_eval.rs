@@ -72,7 +72,8 @@ fn motion_breakdown(
     for b in &bins {
         let to = b.to.map_or_else(|| "inf".to_string(), |t| t.to_string());
         let ssim: Vec<String> = b.ssim.iter().map(|(n, s)| format!("{n} {s:.4}")).collect();
-        println!("block motion [{}, {to}): {:>4} videos  {}", b.from, b.videos, ssim.join("  "));
+        let line = format!("block motion [{}, {to}): {:>4} videos  {}", b.from, b.videos, ssim.join("  "));
+        println!("{}", line.trim_end());
     }
     Ok(json!({"note": wm_eval_motion::NOTE, "bins": bins}))
 }

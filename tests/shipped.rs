@@ -1,0 +1,59 @@
+//! The trained checkpoints the project ships under `checkpoints/pusht/`: each
+//! autoencoder and world model says where it came from (the developers' guide asks
+//! for command, seed, commit, data and final metrics), and a world model's
+//! autoencoder path leads to a shipped autoencoder.
+
+use std::path::{Path, PathBuf};
+
+use crate::util::read_json;
+
+/// The shipped autoencoder and world-model folders.
+fn shipped_models() -> Vec<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/pusht");
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(&root)
+        .expect("checkpoints/pusht is shipped")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n == "autoencoder" || n.starts_with("world_model"))
+        })
+        .collect();
+    dirs.sort();
+    dirs
+}
+
+#[test]
+fn shipped_models_carry_provenance_and_find_their_autoencoder() {
+    let dirs = shipped_models();
+    let names: Vec<String> =
+        dirs.iter().map(|d| d.file_name().unwrap().to_string_lossy().into_owned()).collect();
+    for want in ["autoencoder", "world_model", "world_model_diffusion", "world_model_mse", "world_model_sf"] {
+        assert!(names.iter().any(|n| n == want), "checkpoints/pusht/{want} missing from {names:?}");
+    }
+    for dir in &dirs {
+        let prov = read_json(&dir.join("provenance.json"));
+        for key in ["command", "seed", "commit", "data", "steps", "metrics"] {
+            assert!(!prov[key].is_null(), "{}: provenance.json has no \"{key}\"", dir.display());
+        }
+        assert!(
+            prov["command"].as_str().unwrap().contains(" train "),
+            "{}: {}",
+            dir.display(),
+            prov["command"]
+        );
+        let weights = if dir.ends_with("autoencoder") { "model.bpk" } else { "ema.bpk" };
+        assert!(dir.join(weights).is_file(), "{}: no {weights}", dir.display());
+        if dir.ends_with("autoencoder") {
+            continue;
+        }
+        let cfg = read_json(&dir.join("config.json"));
+        let ae = dir.join(cfg["model"]["autoencoder"].as_str().expect("a latent-space model"));
+        assert!(
+            ae.join("config.json").is_file(),
+            "{}: autoencoder {} not found",
+            dir.display(),
+            ae.display()
+        );
+    }
+}
