@@ -544,6 +544,11 @@ fn world_model_loss_variants_train_and_warm_start() {
         eval["episodes_64"].as_array().unwrap().iter().map(|e| e.as_u64().unwrap()).collect();
     assert!(episodes.iter().all(|e| e % 10 == 9), "{episodes:?}");
     assert_eq!(eval["starts_64"].as_array().unwrap().len(), 3);
+    // Each row's SSIM interval holds its SSIM.
+    for m in eval["models"].as_array().unwrap() {
+        let (ssim, ci) = (m["ssim"].as_f64().unwrap(), m["ssim_ci"].as_array().unwrap());
+        assert!(ci[0].as_f64().unwrap() <= ssim + 1e-12 && ssim <= ci[1].as_f64().unwrap() + 1e-12, "{m}");
+    }
     // Every video falls in one block-motion bin, each with a mean SSIM per row.
     let bins = eval["ssim_by_block_motion"]["bins"].as_array().unwrap().clone();
     assert_eq!(bins.iter().map(|b| b["videos"].as_u64().unwrap()).sum::<u64>(), 3, "{bins:?}");

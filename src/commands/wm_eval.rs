@@ -19,6 +19,9 @@ use super::wm_eval_windows::{self, Windows};
 use crate::cli::WmEvalArgs;
 use crate::output::{Staged, write_json};
 
+/// Bootstrap replicates of each row's SSIM interval.
+const SSIM_BOOTSTRAP: usize = 2000;
+
 /// Frames shown per filmstrip row (every 4th generated frame).
 const STRIP_EVERY: usize = 4;
 
@@ -198,6 +201,23 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
                 .map(|c| format!("{}: {:.2}/{:.2}", c.frame, c.real, c.imagined))
                 .collect();
             println!("{:<20} coverage real/imagined by frame  {}", "", curve.join("  "));
+        }
+    }
+    // SSIM intervals by episode: resample episodes, since windows of one episode overlap.
+    let episode_of: HashMap<usize, usize> =
+        short_windows.iter().chain(&full_windows).map(|w| (w.start, w.episode)).collect();
+    for row in &mut rows {
+        let mut by_episode: HashMap<usize, Vec<f64>> = HashMap::new();
+        for v in &row.per_video {
+            by_episode.entry(episode_of.get(&v.start).copied().unwrap_or(v.start)).or_default().push(v.ssim);
+        }
+        let mut clusters: Vec<(usize, Vec<f64>)> = by_episode.into_iter().collect();
+        clusters.sort_by_key(|c| c.0);
+        let clusters: Vec<Vec<f64>> = clusters.into_iter().map(|c| c.1).collect();
+        row.ssim_ci = harness::metrics::bootstrap::clustered_mean_ci(&clusters, SSIM_BOOTSTRAP, a.seed);
+        if let Some([lo, hi]) = row.ssim_ci {
+            let horizon = if row.horizon == "64" { "64-frame" } else { "episode" };
+            println!("{:<20} {horizon:<8} SSIM 95% CI [{lo:.4}, {hi:.4}] (episodes resampled)", row.name);
         }
     }
     let by_motion = motion_breakdown(a, &data, &short, k, &rows)?;

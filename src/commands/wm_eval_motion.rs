@@ -120,6 +120,7 @@ mod tests {
                 .iter()
                 .map(|&(start, ssim)| VideoMetrics { start, mse: 0.0, psnr: 0.0, ssim })
                 .collect(),
+            ssim_ci: None,
         }
     }
 

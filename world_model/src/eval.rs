@@ -42,6 +42,9 @@ pub struct EvalRow {
     pub ssim_curve: Vec<SsimPoint>,
     /// Each video's own means, by its first context step (which videos lose the quality).
     pub per_video: Vec<VideoMetrics>,
+    /// 95% interval of `ssim`, when the caller knows which episode each video is from
+    /// (a bootstrap over episodes: windows of one episode overlap).
+    pub ssim_ci: Option<[f64; 2]>,
 }
 
 /// One video's per-frame metrics averaged over its generated frames.
@@ -207,6 +210,7 @@ impl Tally {
                 v.sort_by_key(|m| m.start);
                 v
             },
+            ssim_ci: None,
         }
     }
 }

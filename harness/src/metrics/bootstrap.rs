@@ -69,6 +69,39 @@ pub fn mean_ci(values: &[f64], b: usize, seed: u64) -> Option<[f64; 2]> {
     Some([percentile(&mut means, 0.025)?, percentile(&mut means, 0.975)?])
 }
 
+/// Percentile 95% interval of the mean of all values in `clusters` over `b` seeded
+/// replicates that resample whole clusters with replacement (the mean of each
+/// replicate is over the values of the clusters it drew). For correlated values that
+/// come in groups, such as overlapping video windows of one episode, where resampling
+/// single values would make the interval too narrow. `None` without any value.
+///
+/// ```
+/// // Two clusters with means 0.9 and 1.0 (1 and 3 values): every replicate's mean lies
+/// // between 0.9 and 1.0, and the all-values mean (0.9 + 3) / 4 = 0.975 is inside.
+/// let ci = harness::metrics::bootstrap::clustered_mean_ci(&[vec![0.9], vec![1.0; 3]], 500, 1).unwrap();
+/// assert!(0.9 <= ci[0] && ci[0] <= 0.975 && 0.975 <= ci[1] && ci[1] <= 1.0, "{ci:?}");
+/// ```
+pub fn clustered_mean_ci(clusters: &[Vec<f64>], b: usize, seed: u64) -> Option<[f64; 2]> {
+    let clusters: Vec<&Vec<f64>> = clusters.iter().filter(|c| !c.is_empty()).collect();
+    if clusters.is_empty() {
+        return None;
+    }
+    let mut s = Stream(derive(seed, &[0x63_6c75_7374_6572])); // "cluster"
+    let n = clusters.len();
+    let mut means: Vec<f64> = (0..b)
+        .map(|_| {
+            let (mut sum, mut count) = (0.0, 0usize);
+            for _ in 0..n {
+                let c = clusters[s.below(n)];
+                sum += c.iter().sum::<f64>();
+                count += c.len();
+            }
+            sum / count as f64
+        })
+        .collect();
+    Some([percentile(&mut means, 0.025)?, percentile(&mut means, 0.975)?])
+}
+
 /// 95% intervals of every agreement metric.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct AgreementCi {

@@ -65,3 +65,26 @@ fn regret_hand_computed() {
     assert!((regret_at_1(&[0.1, 0.9, 0.5], &[0.8, 0.6, 0.7]) - 0.2).abs() < 1e-12);
     assert_eq!(regret_at_1(&[1., 2., 3.], &[1., 2., 3.]), 0.0);
 }
+
+#[test]
+fn clustered_bootstrap_resamples_whole_clusters() {
+    use super::bootstrap::{clustered_mean_ci, mean_ci};
+    // One cluster: every replicate draws it, so the interval is its mean exactly.
+    let one = clustered_mean_ci(&[vec![0.2, 0.4]], 200, 3).unwrap();
+    assert!((one[0] - 0.3).abs() < 1e-12 && (one[1] - 0.3).abs() < 1e-12, "{one:?}");
+    assert_eq!(clustered_mean_ci(&[vec![], vec![]], 200, 3), None);
+    // Deterministic per seed, different across seeds.
+    let clusters: Vec<Vec<f64>> = (0..20).map(|i| vec![f64::from(i) / 20.0; 1 + i as usize % 4]).collect();
+    let a = clustered_mean_ci(&clusters, 500, 7).unwrap();
+    assert_eq!(Some(a), clustered_mean_ci(&clusters, 500, 7));
+    assert_ne!(Some(a), clustered_mean_ci(&clusters, 500, 8));
+    // Ten clusters of ten equal values: as variable as ten single values, so the
+    // interval is far wider than a bootstrap that treats the 100 values as independent:
+    // the values' SD is 2.87, so the SE of the mean is 2.87 / √10 = 0.91 by cluster and
+    // 2.87 / √100 = 0.29 by value, a ratio of √10 = 3.2 in the widths.
+    let ten: Vec<Vec<f64>> = (0..10).map(|i| vec![f64::from(i); 10]).collect();
+    let flat: Vec<f64> = ten.iter().flatten().copied().collect();
+    let (c, f) = (clustered_mean_ci(&ten, 2000, 1).unwrap(), mean_ci(&flat, 2000, 1).unwrap());
+    assert!(c[0] < 4.5 && 4.5 < c[1], "{c:?}");
+    assert!(c[1] - c[0] > 2.5 * (f[1] - f[0]), "clustered {c:?} against independent {f:?}");
+}
