@@ -69,13 +69,18 @@ impl DatasetScene {
 }
 
 /// Replaces every frame of `data` (loaded from `path`) by the same scene rendered
-/// without the goal; returns the dataset's scene (for drawing the goals back).
+/// without the goal; `loaded` is [`DatasetScene::load`]'s answer for `path`. Returns
+/// the dataset's scene (for drawing the goals back).
 ///
 /// # Errors
 /// A dataset without evalharness's scenario and state, or whose state rows do not
 /// match its frames.
-pub fn strip_goal(path: &Path, data: &mut EpisodeData) -> Result<DatasetScene> {
-    let scene = DatasetScene::load(path)?.map_err(|why| {
+pub fn strip_goal<'s>(
+    path: &Path,
+    loaded: &'s Result<DatasetScene, String>,
+    data: &mut EpisodeData,
+) -> Result<&'s DatasetScene> {
+    let scene = loaded.as_ref().map_err(|why| {
         anyhow!(
             "{}: a goal-free world model needs frames re-rendered from the state, but {why}",
             path.display()
@@ -112,7 +117,8 @@ mod tests {
         super::super::collect::run(&c, true).unwrap();
         let mut data = EpisodeData::load(&path, 96).unwrap();
         let original = data.frames.clone();
-        let scene = strip_goal(&path, &mut data).unwrap();
+        let loaded = DatasetScene::load(&path).unwrap();
+        let scene = strip_goal(&path, &loaded, &mut data).unwrap();
         assert_eq!(scene.len(), data.len());
         let n = 96 * 96 * 3;
         for i in 0..data.len() {

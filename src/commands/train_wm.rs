@@ -133,7 +133,8 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     let goal_free = saved.as_ref().map_or(a.goal_free, WorldModelConfig::is_goal_free);
     if goal_free {
         tracing::info!("re-rendering the frames without the goal (from data/state)");
-        super::goal_free::strip_goal(&a.data, &mut data)?;
+        let scene = super::goal_free::DatasetScene::load(&a.data)?;
+        super::goal_free::strip_goal(&a.data, &scene, &mut data)?;
     }
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let model_cfg = match saved {

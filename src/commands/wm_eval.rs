@@ -48,20 +48,18 @@ fn print_row(row: &EvalRow, note: &str) {
 /// The 64-frame rows' SSIM by block motion (printed, and for `eval.json`), from the
 /// dataset's state rows; a note saying why not for a dataset without them.
 fn motion_breakdown(
-    a: &WmEvalArgs,
+    scene: &Result<DatasetScene, String>,
     data: &EpisodeData,
     short: &[(usize, usize)],
     k: usize,
     rows: &[EvalRow],
-) -> Result<serde_json::Value> {
-    let scene = match DatasetScene::load(&a.data)? {
+) -> serde_json::Value {
+    let scene = match scene {
         Ok(scene) if scene.len() >= data.len() => scene,
         Ok(scene) => {
-            return Ok(
-                json!({"note": format!("not available: {} state rows for {} frames", scene.len(), data.len())}),
-            );
+            return json!({"note": format!("not available: {} state rows for {} frames", scene.len(), data.len())});
         }
-        Err(why) => return Ok(json!({"note": format!("not available: {why}")})),
+        Err(why) => return json!({"note": format!("not available: {why}")}),
     };
     let shape = scene.cfg.shape();
     let motion: HashMap<usize, f64> = short
@@ -78,7 +76,7 @@ fn motion_breakdown(
         let line = format!("block motion [{}, {to}): {:>4} videos  {}", b.from, b.videos, ssim.join("  "));
         println!("{}", line.trim_end());
     }
-    Ok(json!({"note": wm_eval_motion::NOTE, "bins": bins}))
+    json!({"note": wm_eval_motion::NOTE, "bins": bins})
 }
 
 /// `evalharness wm eval`.
@@ -119,8 +117,14 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         bail!("{}: no {which} has {} frames", a.data.display(), k + 60);
     }
     let staged = Staged::new(&a.out, a.force)?;
-    let scoring =
-        if full.is_empty() { Err("no whole-episode videos".into()) } else { Scoring::load(&a.data, 96)? };
+    // The dataset's scenario and state rows, read once: for the goal-free view, the
+    // open-loop scores and the SSIM by block motion.
+    let scene = DatasetScene::load(&a.data)?;
+    let scoring = match &scene {
+        _ if full.is_empty() => Err("no whole-episode videos".to_string()),
+        Ok(scene) => Ok(Scoring::new(scene, 96)),
+        Err(why) => Err(why.clone()),
+    };
     if let Err(why) = &scoring {
         tracing::warn!("no open-loop score check: {why}");
     }
@@ -128,7 +132,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
     // frames gets its episode's goal drawn back before any comparison or scoring.
     let goal_free = if models.iter().any(|(_, wm)| wm.cfg.is_goal_free()) {
         let mut inputs = data.clone();
-        let scene = goal_free::strip_goal(&a.data, &mut inputs)?;
+        let scene = goal_free::strip_goal(&a.data, &scene, &mut inputs)?;
         Some((inputs, scene))
     } else {
         None
@@ -220,7 +224,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             println!("{:<20} {horizon:<8} SSIM 95% CI [{lo:.4}, {hi:.4}] (episodes resampled)", row.name);
         }
     }
-    let by_motion = motion_breakdown(a, &data, &short, k, &rows)?;
+    let by_motion = motion_breakdown(&scene, &data, &short, k, &rows);
     let strip = reports::png::filmstrip(&strip_rows, data.size, data.size);
     reports::png::write_png(&staged.file("filmstrip.png"), &strip.pixels, strip.width, strip.height)?;
     write_json(

@@ -10,7 +10,6 @@
 //! 0, 1), as in `rank`. On datasets of policy rollouts (`collect --policy`) this
 //! shows, without the closed loop, whether a model follows what weak policies do.
 
-use anyhow::Result;
 use scenarios::pusht::frame_score::FrameScorer;
 use serde::Serialize;
 use world_model::data::EpisodeData;
@@ -19,8 +18,8 @@ use world_model::eval::Video;
 use super::goal_free::DatasetScene;
 
 /// What scoring a dataset's frames needs: its scenario and the goal at every step.
-pub struct Scoring {
-    scene: DatasetScene,
+pub struct Scoring<'s> {
+    scene: &'s DatasetScene,
     size: usize,
 }
 
@@ -68,14 +67,10 @@ struct Scored {
     coverage: Vec<(f64, f64)>,
 }
 
-impl Scoring {
-    /// Reads the goal columns and the scenario of the dataset at `path`; `None` (with
-    /// the reason) for a dataset without them (not collected by evalharness).
-    ///
-    /// # Errors
-    /// An unreadable state array.
-    pub fn load(path: &std::path::Path, size: usize) -> Result<Result<Self, String>> {
-        Ok(DatasetScene::load(path)?.map(|scene| Self { scene, size }))
+impl<'s> Scoring<'s> {
+    /// Scores frames of `size` pixels against the goals of the dataset's `scene`.
+    pub fn new(scene: &'s DatasetScene, size: usize) -> Self {
+        Self { scene, size }
     }
 
     /// The scorer of the video starting at dataset step `start`.

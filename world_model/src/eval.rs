@@ -152,15 +152,13 @@ fn frame_metrics(real: &[u8], generated: &[u8], size: usize) -> (f64, f64, f64) 
     (mse, psnr(real, generated).min(100.0), ssim(real, generated, size, size, 3).unwrap_or(0.0))
 }
 
-/// Per-video metric sums, averaged into an [`EvalRow`].
+/// Per-video metrics (in the order added), averaged into an [`EvalRow`].
 #[derive(Default)]
 struct Tally {
-    sums: [f64; 3],
+    per_video: Vec<VideoMetrics>,
     frames: usize,
-    videos: usize,
     /// SSIM sum and video count at each of [`SSIM_CURVE_AT`].
     curve: [(f64, usize); SSIM_CURVE_AT.len()],
-    per_video: Vec<VideoMetrics>,
 }
 
 impl Tally {
@@ -179,37 +177,34 @@ impl Tally {
             }
         }
         let v = v.map(|x| x / real.len().max(1) as f64);
-        for (acc, x) in self.sums.iter_mut().zip(v) {
-            *acc += x;
-        }
         self.per_video.push(VideoMetrics { start, mse: v[0], psnr: v[1], ssim: v[2] });
         self.frames += real.len();
-        self.videos += 1;
     }
 
-    fn row(&self, name: &str, objective: &str, horizon: &str, secs: f64) -> EvalRow {
-        let n = self.videos.max(1) as f64;
+    fn row(mut self, name: &str, objective: &str, horizon: &str, secs: f64) -> EvalRow {
+        // Means over videos, summed in the order the videos were added.
+        let n = self.per_video.len().max(1) as f64;
+        let mean = |f: fn(&VideoMetrics) -> f64| self.per_video.iter().map(f).sum::<f64>() / n;
+        let (mse, psnr, ssim) = (mean(|v| v.mse), mean(|v| v.psnr), mean(|v| v.ssim));
+        let videos = self.per_video.len();
+        self.per_video.sort_by_key(|m| m.start);
         EvalRow {
             name: name.to_string(),
             objective: objective.to_string(),
             horizon: horizon.to_string(),
-            mse: self.sums[0] / n,
-            psnr: self.sums[1] / n,
-            ssim: self.sums[2] / n,
+            mse,
+            psnr,
+            ssim,
             ms_per_frame: 1e3 * secs / self.frames.max(1) as f64,
             frames: self.frames,
-            videos: self.videos,
+            videos,
             ssim_curve: SSIM_CURVE_AT
                 .iter()
                 .zip(self.curve)
                 .filter(|(_, (_, n))| *n > 0)
                 .map(|(&frame, (sum, n))| SsimPoint { frame, ssim: sum / n as f64, videos: n })
                 .collect(),
-            per_video: {
-                let mut v = self.per_video.clone();
-                v.sort_by_key(|m| m.start);
-                v
-            },
+            per_video: self.per_video,
             ssim_ci: None,
         }
     }
