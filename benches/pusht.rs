@@ -44,7 +44,7 @@ fn physics(c: &mut Criterion) {
 
 fn render(c: &mut Criterion) {
     let cfg = PushTConfig::default();
-    let (state, goal) = initial_state(&cfg, 1);
+    let (state, goal) = initial_state(&cfg, 1).unwrap();
     let mut g = c.benchmark_group("pusht_render");
     for size in [96usize, 256] {
         let r = Rasterizer::with_size(&cfg, size);

@@ -65,6 +65,18 @@ pub enum ScenarioError {
         /// What failed.
         message: String,
     },
+    /// Rejection sampling of a reset found no admissible state.
+    #[error(
+        "seed {seed}: no initial state after {draws} draws; the scenario's '{field}' admits none (lower it)"
+    )]
+    ImpossibleReset {
+        /// Episode seed.
+        seed: u64,
+        /// Draws made.
+        draws: u32,
+        /// The field that rules every draw out.
+        field: String,
+    },
     /// An action that is NaN or infinite.
     #[error("non-finite action {action:?} at seed {seed}, step {step}")]
     BadAction {

@@ -142,8 +142,8 @@ pub struct AgreementArgs {
     /// CSV with columns policy,predicted,actual (one row per episode or per policy).
     #[arg(long)]
     pub csv: PathBuf,
-    /// Bootstrap replicates for the 95% intervals.
-    #[arg(long, default_value_t = 2000)]
+    /// Bootstrap replicates for the 95% intervals (1 to 1,000,000).
+    #[arg(long, default_value_t = 2000, value_parser = bootstrap_replicates)]
     pub bootstrap: usize,
     /// Bootstrap seed.
     #[arg(long, default_value_t = 0)]
@@ -276,8 +276,8 @@ pub struct RankArgs {
     /// Master seed of the policies' sampling noise and of the bootstrap.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Bootstrap replicates for the CIs.
-    #[arg(long, default_value_t = 2000)]
+    /// Bootstrap replicates for the CIs (1 to 1,000,000).
+    #[arg(long, default_value_t = 2000, value_parser = bootstrap_replicates)]
     pub bootstrap: usize,
     /// Continue a run in `--out`, skipping finished episodes; with a larger
     /// `--episodes`, extend a finished run (only the new seeds run; the files equal a
@@ -290,8 +290,8 @@ pub struct RankArgs {
     /// Run only part i of n (0-based; whole batches), e.g. `--shard 0/4`.
     #[arg(long)]
     pub shard: Option<String>,
-    /// Exit 1 if the Pearson correlation is below this.
-    #[arg(long)]
+    /// Exit 1 if the Pearson correlation is below this (a number in [-1, 1]).
+    #[arg(long, value_parser = correlation, allow_negative_numbers = true)]
     pub min_pearson: Option<f64>,
     /// Exit 1 if there are more rank inversions than this.
     #[arg(long)]
@@ -352,6 +352,31 @@ pub struct ScenarioArgs {
     /// Control-step lag applied to the expert's actions.
     #[arg(long, default_value_t = 0)]
     pub lag: usize,
+}
+
+/// The most bootstrap replicates a command takes: 500x the default, and a bound on
+/// the memory the replicates need.
+pub const MAX_BOOTSTRAP: usize = 1_000_000;
+
+/// Parses `--bootstrap`: a count from 1 to [`MAX_BOOTSTRAP`].
+pub fn bootstrap_replicates(s: &str) -> Result<usize, String> {
+    let n: usize = s.parse().map_err(|e| format!("{e}"))?;
+    if (1..=MAX_BOOTSTRAP).contains(&n) {
+        Ok(n)
+    } else {
+        Err(format!("{n} replicates: give 1 to {MAX_BOOTSTRAP}"))
+    }
+}
+
+/// Parses a correlation threshold (`--min-pearson`): a finite number in [-1, 1]; NaN
+/// would compare false and switch the gate off.
+pub fn correlation(s: &str) -> Result<f64, String> {
+    let r: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if r.is_finite() && (-1.0..=1.0).contains(&r) {
+        Ok(r)
+    } else {
+        Err(format!("{s} is not a correlation: give a number in [-1, 1]"))
+    }
 }
 
 fn default_jobs() -> usize {

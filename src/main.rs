@@ -6,6 +6,8 @@
 
 mod cli;
 mod commands;
+#[cfg(test)]
+mod fuzz;
 mod output;
 mod plan;
 mod policy_kinds;
@@ -22,13 +24,34 @@ fn main() -> ExitCode {
     let args = cli::Cli::parse();
     init_logging(args.verbose, args.quiet);
     scenarios::route_mujoco_logs();
-    match commands::run(&args) {
-        Ok(code) => code,
-        Err(e) => {
+    // `evalharness dataset info X | head -1`: once the reader is gone, `println!`
+    // panics on the broken pipe. Like ripgrep, exit quietly (0) instead: no panic
+    // message, and the unwinding still runs every guard's clean-up.
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if !is_broken_pipe(info.payload()) {
+            default_hook(info);
+        }
+    }));
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| commands::run(&args))) {
+        Ok(Ok(code)) => code,
+        Ok(Err(e)) => {
             eprintln!("error: {e:#}");
             ExitCode::from(2)
         }
+        Err(payload) if is_broken_pipe(payload.as_ref()) => ExitCode::SUCCESS,
+        Err(payload) => std::panic::resume_unwind(payload),
     }
+}
+
+/// Whether a panic is the standard library's "failed printing to stdout: Broken pipe".
+fn is_broken_pipe(payload: &(dyn std::any::Any + Send)) -> bool {
+    let text = payload
+        .downcast_ref::<String>()
+        .map(String::as_str)
+        .or_else(|| payload.downcast_ref::<&str>().copied())
+        .unwrap_or_default();
+    text.starts_with("failed printing to std") && text.contains("Broken pipe")
 }
 
 /// Logs go to stderr (stdout carries results only); `RUST_LOG` overrides the level.

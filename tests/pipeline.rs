@@ -343,9 +343,19 @@ fn pipeline_end_to_end() {
     std::fs::remove_file(out2.join("report.html")).unwrap();
     expect_code(&run(&["report", s(&out2)]), 0);
     assert_eq!(std::fs::read_to_string(out2.join("report.html")).unwrap(), html);
-    ok.extend(["--force", "--max-inversions", "0", "--min-pearson", "1.01"]);
-    let (_, err) = expect_code(&run(&ok), 1);
-    assert!(err.contains("gate failed: Pearson"), "{err}");
+    // A gate above every correlation is refused as a setting; one at 1 fails unless the
+    // two policies' scores lie on a rising line (their r is +1, -1 or undefined).
+    let (_, err) = expect_code(&run(&[&ok[..], &["--force", "--min-pearson", "1.01"]].concat()), 2);
+    assert!(err.contains("[-1, 1]"), "{err}");
+    let r = read_json(&out2.join("results.json"))["agreement"]["pearson"].as_f64();
+    ok.extend(["--force", "--max-inversions", "0", "--min-pearson", "1"]);
+    if r == Some(1.0) {
+        expect_code(&run(&ok), 0);
+    } else {
+        let (_, err) = expect_code(&run(&ok), 1);
+        assert!(err.contains("gate failed: Pearson"), "{err}");
+        assert!(!err.contains("Some("), "{err}");
+    }
 
     // A goal-free world model: trained on the frames re-rendered without the goal (its
     // config and provenance say so), compared by `wm eval` with the others on the real

@@ -4,6 +4,7 @@ mod agreement;
 mod dataset;
 mod pipeline;
 mod plan;
+mod reliability;
 mod shipped;
 mod simulate;
 mod train;

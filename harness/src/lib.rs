@@ -2,17 +2,23 @@
 //!
 //! - [`policy`] + [`rng`]: the batched policy interface and the caller-owned noise streams;
 //! - [`image`]: PSNR and SSIM as scikit-image computes them on 8-bit frames;
-//! - [`seed`]: deterministic seed derivation (episode RNGs never depend on thread order);
+//! - [`seed`]: deterministic seed derivation (episode RNGs never depend on thread order),
+//!   and checked seed ranges;
+//! - [`fingerprint`]: content hashes of model folders, checked on resume;
 //! - [`metrics`]: agreement metrics between predicted and true policy scores, with CIs;
+//! - [`results`]: the typed rows and `results.json` of a ranking run, shared by the
+//!   commands that write them and the reports that read them;
 //! - [`runfile`]: a training run's config, written at the start and read back on resume;
 //! - [`stop`]: Ctrl-C / SIGTERM as a cooperative stop that trainers poll between steps;
 //! - [`zarr`] and [`replay`]: the diffusion_policy / GPC replay-buffer dataset layout.
 
 pub mod blosc;
+pub mod fingerprint;
 pub mod image;
 pub mod metrics;
 pub mod policy;
 pub mod replay;
+pub mod results;
 pub mod rng;
 pub mod runfile;
 pub mod seed;

@@ -88,16 +88,16 @@ pub struct ReplayWriter {
 }
 
 impl ReplayWriter {
-    /// Starts a dataset at `path` (refused if it exists, unless `force`).
+    /// Starts a dataset at `path` (refused if it exists, unless `force`: then the old
+    /// one is replaced by [`ReplayWriter::finish`], never before).
     ///
     /// # Errors
     /// [`ReplayError::Exists`], or I/O errors naming the folder.
     pub fn create(path: &Path, spec: ReplaySpec, force: bool) -> Result<Self, ReplayError> {
-        if path.exists() {
-            if !force {
-                return Err(ReplayError::Exists(path.to_path_buf()));
-            }
-            fs::remove_dir_all(path).map_err(|source| ReplayError::Io { path: path.into(), source })?;
+        // With `force`, an existing dataset is replaced only by `finish`, once the new
+        // one is complete.
+        if path.exists() && !force {
+            return Err(ReplayError::Exists(path.to_path_buf()));
         }
         let mut tmp = path.as_os_str().to_owned();
         tmp.push(".partial");
@@ -176,6 +176,10 @@ impl ReplayWriter {
         ends.append(&self.ends.iter().flat_map(|e| e.to_le_bytes()).collect::<Vec<u8>>())?;
         ends.finish()?;
         write_group(&self.tmp, Some(attrs))?;
+        if self.path.exists() {
+            fs::remove_dir_all(&self.path)
+                .map_err(|source| ReplayError::Io { path: self.path.clone(), source })?;
+        }
         fs::rename(&self.tmp, &self.path)
             .map_err(|source| ReplayError::Io { path: self.path.clone(), source })?;
         Ok(self.path)
@@ -198,6 +202,17 @@ pub struct ReplayReader {
     pub attrs: Value,
 }
 
+/// Whether the dataset was written by evalharness, whose writer never omits a chunk
+/// (its older datasets declare fill value 0 all the same).
+fn written_here(attrs: &Value) -> bool {
+    attrs.get("evalharness").is_some()
+}
+
+/// `a`, read with missing chunks as errors when `complete`.
+fn complete_if(a: ArrayReader, complete: bool) -> ArrayReader {
+    if complete { a.all_chunks_written() } else { a }
+}
+
 impl ReplayReader {
     /// Opens and validates a dataset.
     ///
@@ -208,12 +223,14 @@ impl ReplayReader {
         if !path.join(".zgroup").is_file() {
             return Err(layout("no .zgroup (not a zarr v2 group)".into()));
         }
+        let attrs = read_attrs(path)?;
+        let ours = written_here(&attrs);
         let open = |name: &str| {
             let p = path.join(name);
             if !p.join(".zarray").is_file() {
                 return Err(layout(format!("missing array {name}")));
             }
-            Ok(ArrayReader::open(&p)?)
+            Ok(complete_if(ArrayReader::open(&p)?, ours))
         };
         let img = open("data/img")?;
         let action = open("data/action")?;
@@ -240,7 +257,6 @@ impl ReplayReader {
                 ends.last()
             )));
         }
-        let attrs = read_attrs(path)?;
         Ok(Self { path: path.to_path_buf(), img, action, state, episode_ends: ends, attrs })
     }
 
@@ -269,7 +285,7 @@ impl ReplayReader {
         if !p.join(".zarray").is_file() {
             return Ok(None);
         }
-        let a = ArrayReader::open(&p)?;
+        let a = complete_if(ArrayReader::open(&p)?, written_here(&self.attrs));
         let v = a.read_f64()?;
         if v.len() != self.steps() {
             return Err(ReplayError::Layout {
@@ -334,7 +350,7 @@ impl ReplayReader {
                     reason: format!("missing array data/{name}"),
                 });
             }
-            ep.extras.push(floats(&ArrayReader::open(&p)?)?);
+            ep.extras.push(floats(&complete_if(ArrayReader::open(&p)?, written_here(&self.attrs)))?);
         }
         Ok(ep)
     }

@@ -26,6 +26,47 @@ pub const fn fnv1a(s: &str) -> u64 {
     h
 }
 
+/// The most episodes per policy one run accepts: far beyond any evaluation (the
+/// paper's use 50 to 100), small enough that the per-episode bookkeeping of a run
+/// (seeds, rows, progress) is allocated without risk.
+pub const MAX_EPISODES: u64 = 10_000_000;
+
+/// A refused `--seed-start` / `--episodes` pair.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SeedRangeError {
+    /// No episodes asked for.
+    #[error("--episodes must be at least 1")]
+    Empty,
+    /// More episodes than [`MAX_EPISODES`].
+    #[error("--episodes {0} is more than the {MAX_EPISODES} one run takes; split it with --seed-start")]
+    TooMany(u64),
+    /// The last seed would pass `u64::MAX` and wrap around to the training seeds at 0.
+    #[error("--seed-start {start} with --episodes {count} runs past the last seed ({max}); seeds would wrap around to 0", max = u64::MAX)]
+    Overflow {
+        /// First seed.
+        start: u64,
+        /// Episodes.
+        count: u64,
+    },
+}
+
+/// The seeds `start, start + 1, …` of `count` episodes, refusing an empty, huge or
+/// wrapping range.
+///
+/// # Errors
+/// [`SeedRangeError`] saying which.
+pub fn range(start: u64, count: u64) -> Result<std::ops::RangeInclusive<u64>, SeedRangeError> {
+    if count == 0 {
+        return Err(SeedRangeError::Empty);
+    }
+    if count > MAX_EPISODES {
+        return Err(SeedRangeError::TooMany(count));
+    }
+    // The last seed is start + count - 1: it must not pass u64::MAX.
+    let end = start.checked_add(count - 1).ok_or(SeedRangeError::Overflow { start, count })?;
+    Ok(start..=end)
+}
+
 /// A seed derived from a master seed and a sequence of parts.
 ///
 /// ```
@@ -61,5 +102,17 @@ mod tests {
     fn order_of_parts_matters() {
         assert_ne!(derive(1, &[2, 3]), derive(1, &[3, 2]));
         assert_ne!(derive(1, &[2]), derive(2, &[2]));
+    }
+
+    #[test]
+    fn seed_ranges_never_wrap() {
+        assert_eq!(range(100_000, 3), Ok(100_000..=100_002));
+        // The last seed may be u64::MAX itself, never one past it.
+        assert_eq!(range(u64::MAX, 1), Ok(u64::MAX..=u64::MAX));
+        assert_eq!(range(u64::MAX, 2), Err(SeedRangeError::Overflow { start: u64::MAX, count: 2 }));
+        assert_eq!(range(u64::MAX - 1, 2), Ok(u64::MAX - 1..=u64::MAX));
+        assert_eq!(range(0, 0), Err(SeedRangeError::Empty));
+        assert_eq!(range(0, 100_000_000_000), Err(SeedRangeError::TooMany(100_000_000_000)));
+        assert!(range(u64::MAX, 2).unwrap_err().to_string().contains("wrap around"));
     }
 }

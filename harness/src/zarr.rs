@@ -8,11 +8,14 @@
 //! files made by those projects load here and ours load there.
 
 use std::fs;
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
+
+mod codec;
+use codec::{decode, fill_bytes};
 
 /// Errors of the zarr store, each naming the array or file.
 #[derive(Debug, thiserror::Error)]
@@ -41,6 +44,16 @@ pub enum ZarrError {
         /// What it uses.
         what: String,
     },
+    /// A chunk file that is not there, in an array whose chunks are all written.
+    #[error(
+        "{array}: chunk '{key}' is missing (the array has no fill value for missing chunks; the dataset is incomplete)"
+    )]
+    MissingChunk {
+        /// The array folder.
+        array: PathBuf,
+        /// The chunk key (its file name).
+        key: String,
+    },
     /// A chunk that does not decode to the expected size.
     #[error("{path}: corrupt chunk: {message}")]
     Corrupt {
@@ -50,6 +63,10 @@ pub enum ZarrError {
         message: String,
     },
 }
+
+/// The largest chunk this reader decodes (1 GiB; evalharness writes ~2.8 MB image
+/// chunks).
+pub const MAX_CHUNK_BYTES: usize = 1 << 30;
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ZarrError + '_ {
     move |source| ZarrError::Io { path: path.to_path_buf(), source }
@@ -252,13 +269,13 @@ impl ArrayWriter {
         shape.extend(&self.row_shape);
         let mut chunks = vec![self.chunk_rows];
         chunks.extend(&self.row_shape);
-        let fill = if self.dtype == DType::F32 || self.dtype == DType::F64 { json!(0.0) } else { json!(0) };
         let meta = ArrayMeta {
             shape,
             chunks,
             dtype: self.dtype.code().into(),
             compressor: Some(json!({"id": "zlib", "level": 3})),
-            fill_value: Some(fill),
+            // Every chunk is written: a missing one means a damaged store, not zeros.
+            fill_value: None,
             filters: None,
             order: "C".into(),
             zarr_format: 2,
@@ -270,6 +287,12 @@ impl ArrayWriter {
 }
 
 /// An array opened for reading.
+///
+/// A chunk file that is not there is an error ([`ZarrError::MissingChunk`]) unless the
+/// array declares a fill value and its writer may omit chunks: then the chunk reads as
+/// that value, with a warning naming it. evalharness's own writer writes every chunk,
+/// so its datasets are read with [`ArrayReader::all_chunks_written`], and writes
+/// `fill_value: null`.
 #[derive(Clone, Debug)]
 pub struct ArrayReader {
     dir: PathBuf,
@@ -277,6 +300,8 @@ pub struct ArrayReader {
     pub meta: ArrayMeta,
     /// Its element type.
     pub dtype: DType,
+    /// The bytes of one element of the fill value; `None`: a missing chunk is an error.
+    fill: Option<Vec<u8>>,
 }
 
 impl ArrayReader {
@@ -304,7 +329,36 @@ impl ArrayReader {
                 meta.chunks, meta.shape
             )));
         }
-        Ok(Self { dir: dir.to_path_buf(), meta, dtype })
+        // A chunk is decoded whole: refuse metadata whose chunk would not fit in memory
+        // (a damaged `.zarray`) before anything is allocated for it.
+        let chunk_bytes = meta
+            .chunks
+            .iter()
+            .try_fold(dtype.size(), |acc, &d| acc.checked_mul(d))
+            .filter(|&b| b <= MAX_CHUNK_BYTES);
+        let rows_fit = meta.shape.iter().try_fold(dtype.size(), |acc, &d| acc.checked_mul(d)).is_some();
+        if chunk_bytes.is_none() || !rows_fit || meta.chunks[0] == 0 {
+            return Err(unsupported(format!(
+                "chunks {:?} of shape {:?}: a chunk must hold 1 to {MAX_CHUNK_BYTES} bytes",
+                meta.chunks, meta.shape
+            )));
+        }
+        let fill = match meta.fill_value.as_ref().filter(|v| !v.is_null()) {
+            None => None,
+            Some(v) => Some(fill_bytes(dtype, v).ok_or_else(|| ZarrError::Meta {
+                path: p.clone(),
+                message: format!("fill_value {v} is not a {} value", dtype.code()),
+            })?),
+        };
+        Ok(Self { dir: dir.to_path_buf(), meta, dtype, fill })
+    }
+
+    /// The same array, read as one whose writer never omits a chunk: a missing chunk is
+    /// an error whatever its fill value says.
+    #[must_use]
+    pub fn all_chunks_written(mut self) -> Self {
+        self.fill = None;
+        self
     }
 
     /// Number of rows (first axis).
@@ -338,7 +392,17 @@ impl ArrayReader {
             let path = self.dir.join(&key);
             let raw = match fs::read(&path) {
                 Ok(bytes) => decode(&path, &bytes, self.meta.compressor.as_ref(), rb * cr)?,
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => vec![0u8; rb * cr],
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => match &self.fill {
+                    None => return Err(ZarrError::MissingChunk { array: self.dir.clone(), key }),
+                    Some(one) => {
+                        tracing::warn!(
+                            array = %self.dir.display(),
+                            chunk = %key,
+                            "chunk missing: read as the array's fill value"
+                        );
+                        one.repeat(rb * cr / one.len().max(1))
+                    }
+                },
                 Err(e) => return Err(ZarrError::Io { path, source: e }),
             };
             if raw.len() != rb * cr {
@@ -376,36 +440,4 @@ pub fn bytes_to_f64(raw: &[u8], dtype: DType) -> Vec<f64> {
             DType::I64 => i64::from_le_bytes(b.try_into().unwrap_or([0; 8])) as f64,
         })
         .collect()
-}
-
-fn decode(
-    path: &Path,
-    bytes: &[u8],
-    compressor: Option<&Value>,
-    expected: usize,
-) -> Result<Vec<u8>, ZarrError> {
-    let corrupt = |m: String| ZarrError::Corrupt { path: path.to_path_buf(), message: m };
-    let Some(c) = compressor.filter(|c| !c.is_null()) else {
-        return Ok(bytes.to_vec());
-    };
-    let id = c.get("id").and_then(Value::as_str).unwrap_or("");
-    let mut out = Vec::with_capacity(expected);
-    match id {
-        "zlib" => {
-            flate2::read::ZlibDecoder::new(bytes)
-                .read_to_end(&mut out)
-                .map_err(|e| corrupt(e.to_string()))?;
-        }
-        "gzip" => {
-            flate2::read::GzDecoder::new(bytes).read_to_end(&mut out).map_err(|e| corrupt(e.to_string()))?;
-        }
-        "blosc" => out = crate::blosc::decompress(bytes).map_err(corrupt)?,
-        other => {
-            return Err(ZarrError::Unsupported {
-                path: path.to_path_buf(),
-                what: format!("compressor '{other}'"),
-            });
-        }
-    }
-    Ok(out)
 }

@@ -25,6 +25,7 @@
 
 use std::path::{Path, PathBuf};
 
+use harness::results::EpisodeRow;
 use polars::prelude::*;
 
 /// A problem writing or reading the table, naming the file.
@@ -37,45 +38,12 @@ pub struct TableError {
     pub message: String,
 }
 
-/// One episode of one branch.
-#[derive(Clone, Debug, PartialEq)]
-pub struct EpisodeRecord {
-    /// Policy name.
-    pub policy: String,
-    /// Episode seed.
-    pub seed: u64,
-    /// `sim` (MuJoCo) or `world_model`.
-    pub branch: String,
-    /// Episode score.
-    pub score: f64,
-    /// Max coverage.
-    pub max_coverage: f64,
-    /// Final coverage.
-    pub final_coverage: f64,
-    /// Success.
-    pub success: bool,
-    /// Control steps.
-    pub steps: u32,
-    /// Final block pose (MuJoCo branch).
-    pub final_block: Option<[f64; 3]>,
-    /// Goal pose.
-    pub goal: [f64; 3],
-    /// Frame scorer's mean absolute error (MuJoCo branch).
-    pub scorer_abs_error: Option<f64>,
-    /// Block area of the last seen frame, as a fraction of the T's.
-    pub block_area: Option<f64>,
-    /// Fraction of the goal T that frame still shows.
-    pub goal_kept: Option<f64>,
-    /// Fraction of the agent's disk that frame shows (capped at 1).
-    pub agent_kept: Option<f64>,
-}
-
 /// The rows as a data frame (in the given order).
 ///
 /// # Errors
 /// A polars error if the columns cannot be assembled (not expected for any rows).
-pub fn episodes_frame(rows: &[EpisodeRecord]) -> PolarsResult<DataFrame> {
-    let f = |g: fn(&EpisodeRecord) -> f64| rows.iter().map(g).collect::<Vec<f64>>();
+pub fn episodes_frame(rows: &[&EpisodeRow]) -> PolarsResult<DataFrame> {
+    let f = |g: fn(&EpisodeRow) -> f64| rows.iter().map(|r| g(r)).collect::<Vec<f64>>();
     let block = |k: usize| rows.iter().map(|r| r.final_block.map(|b| b[k])).collect::<Vec<Option<f64>>>();
     let goal = |k: usize| rows.iter().map(|r| r.goal[k]).collect::<Vec<f64>>();
     DataFrame::new(
@@ -88,7 +56,7 @@ pub fn episodes_frame(rows: &[EpisodeRecord]) -> PolarsResult<DataFrame> {
             Column::new("max_coverage".into(), f(|r| r.max_coverage)),
             Column::new("final_coverage".into(), f(|r| r.final_coverage)),
             Column::new("success".into(), rows.iter().map(|r| r.success).collect::<Vec<bool>>()),
-            Column::new("steps".into(), rows.iter().map(|r| r.steps).collect::<Vec<u32>>()),
+            Column::new("steps".into(), rows.iter().map(|r| r.steps as u32).collect::<Vec<u32>>()),
             Column::new("final_block_x".into(), block(0)),
             Column::new("final_block_y".into(), block(1)),
             Column::new("final_block_theta".into(), block(2)),
@@ -110,7 +78,7 @@ pub fn episodes_frame(rows: &[EpisodeRecord]) -> PolarsResult<DataFrame> {
 ///
 /// # Errors
 /// [`TableError`] naming `path` if it cannot be created or written.
-pub fn write_episodes_parquet(path: &Path, rows: &[EpisodeRecord]) -> Result<(), TableError> {
+pub fn write_episodes_parquet(path: &Path, rows: &[&EpisodeRow]) -> Result<(), TableError> {
     let err = |m: String| TableError { path: path.to_path_buf(), message: m };
     let mut df = episodes_frame(rows).map_err(|e| err(e.to_string()))?;
     let file = std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
@@ -131,33 +99,17 @@ pub fn read_episodes_parquet(path: &Path) -> Result<DataFrame, TableError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use harness::results::Branch;
 
-    fn rows() -> Vec<EpisodeRecord> {
-        let r = EpisodeRecord {
-            policy: "epoch-0002".into(),
-            seed: 100_000,
-            branch: "sim".into(),
-            score: 0.5,
-            max_coverage: 0.475,
-            final_coverage: 0.4,
-            success: false,
-            steps: 300,
-            final_block: Some([250.0, 260.0, 0.5]),
-            goal: [256.0, 256.0, 0.785],
-            scorer_abs_error: Some(0.01),
-            block_area: Some(0.98),
-            goal_kept: Some(0.95),
-            agent_kept: Some(0.99),
-        };
-        let w = EpisodeRecord {
-            branch: "world_model".into(),
-            final_block: None,
-            scorer_abs_error: None,
-            block_area: None,
-            goal_kept: None,
-            agent_kept: Some(0.02),
-            ..r.clone()
-        };
+    fn rows() -> Vec<EpisodeRow> {
+        let r = EpisodeRow::new("epoch-0002", 100_000, Branch::Sim, 0.5, 0.475, 0.4, 0.95, 300)
+            .with_poses(Some([250.0, 260.0, 0.5]), [256.0, 256.0, 0.785])
+            .with_scorer_error(Some(0.01))
+            .with_scene_checks(Some([0.98, 0.95, 0.99]));
+        let mut w =
+            EpisodeRow { branch: Branch::WorldModel, final_block: None, scorer_abs_error: None, ..r.clone() };
+        w = w.with_scene_checks(None);
+        w.agent_kept = Some(0.02);
         vec![r, w]
     }
 
@@ -165,7 +117,7 @@ mod tests {
     fn round_trips_with_types_and_nulls() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("episodes.parquet");
-        write_episodes_parquet(&path, &rows()).unwrap();
+        write_episodes_parquet(&path, &rows().iter().collect::<Vec<_>>()).unwrap();
         let df = read_episodes_parquet(&path).unwrap();
         assert_eq!(df.height(), 2);
         assert_eq!(df.width(), 18);
@@ -182,7 +134,7 @@ mod tests {
         assert_eq!(df.column("success").unwrap().bool().unwrap().get(0), Some(false));
         // Same rows, same bytes.
         let again = dir.path().join("again.parquet");
-        write_episodes_parquet(&again, &rows()).unwrap();
+        write_episodes_parquet(&again, &rows().iter().collect::<Vec<_>>()).unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), std::fs::read(&again).unwrap());
     }
 

@@ -173,7 +173,7 @@ mod tests {
             "scenario": "pusht", "world_model": "<wm>", "episodes": 1, "seed_start": 0,
             "policies": [], "agreement": {}, "failed_policies": [{"policy": "x", "error": "a<b"}],
         });
-        let s = Summary::from_results(&r).unwrap();
+        let s = Summary::from_results(&crate::summary::fixture(r));
         let html = report_html(&s, &Extras::default());
         assert!(html.contains("&lt;wm&gt;") && html.contains("a&lt;b"));
         assert!(!html.contains("http://") && !html.contains("https://") && !html.contains("src=\"/"));

@@ -2,7 +2,8 @@
 //! of both branches with their CIs, and the agreement metrics with theirs.
 //! Plain data, so that the plots, tables and HTML never touch JSON paths.
 
-use serde_json::Value;
+use harness::metrics::bootstrap::AgreementCi;
+use harness::results::{BranchStats, RankResults};
 
 /// An estimate with an optional 95% interval.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -14,8 +15,8 @@ pub struct Est {
 }
 
 impl Est {
-    fn from(v: &Value, ci: &Value) -> Option<Self> {
-        Some(Self { value: v.as_f64()?, ci: pair(ci) })
+    fn new(value: f64, ci: Option<[f64; 2]>) -> Self {
+        Self { value, ci }
     }
 
     /// `0.812 [0.78, 0.84]`.
@@ -25,11 +26,6 @@ impl Est {
             None => format!("{:.d$}", self.value, d = digits),
         }
     }
-}
-
-fn pair(v: &Value) -> Option<[f64; 2]> {
-    let a = v.as_array()?;
-    Some([a.first()?.as_f64()?, a.get(1)?.as_f64()?])
 }
 
 /// One branch of one policy.
@@ -42,11 +38,8 @@ pub struct BranchScores {
 }
 
 impl BranchScores {
-    fn from(v: &Value) -> Option<Self> {
-        Some(Self {
-            mean: Est::from(&v["mean"], &v["ci95"])?,
-            success: Est::from(&v["success_rate"], &v["success_ci95"])?,
-        })
+    fn from(b: &BranchStats) -> Self {
+        Self { mean: Est::new(b.mean, b.ci95), success: Est::new(b.success_rate, Some(b.success_ci95)) }
     }
 }
 
@@ -93,46 +86,34 @@ pub struct Summary {
 }
 
 impl Summary {
-    /// Reads a parsed `results.json`; `None` names nothing, so callers say which file.
-    pub fn from_results(r: &Value) -> Option<Self> {
-        let policies = r["policies"]
-            .as_array()?
-            .iter()
-            .map(|p| {
-                Some(PolicyScores {
-                    name: p["name"].as_str()?.to_string(),
-                    sim: BranchScores::from(&p["sim"])?,
-                    world_model: BranchScores::from(&p["world_model"])?,
-                    episodes: p["sim"]["episodes"].as_u64().unwrap_or(0),
-                })
-            })
-            .collect::<Option<Vec<_>>>()?;
-        let ag = &r["agreement"];
-        let est = |k: &str| Est::from(&ag[k], &ag["ci95"][k]);
-        Some(Self {
-            policies,
-            pearson: est("pearson"),
-            spearman: est("spearman"),
-            kendall: est("kendall_tau_b"),
-            inversions: est("rank_inversions"),
-            mmrv: est("mmrv"),
-            regret: est("regret_at_1"),
-            scenario: r["scenario"].as_str().unwrap_or("?").to_string(),
-            world_model: r["world_model"].as_str().unwrap_or("?").to_string(),
-            episodes: r["episodes"].as_u64().unwrap_or(0),
-            seed_start: r["seed_start"].as_u64().unwrap_or(0),
-            failed: r["failed_policies"]
-                .as_array()
-                .into_iter()
-                .flatten()
-                .map(|f| {
-                    (
-                        f["policy"].as_str().unwrap_or("?").to_string(),
-                        f["error"].as_str().unwrap_or("").to_string(),
-                    )
+    /// What the report shows of a run's results.
+    pub fn from_results(r: &RankResults) -> Self {
+        let ag = &r.agreement;
+        let ci = |pick: fn(&AgreementCi) -> Option<[f64; 2]>| ag.ci95.as_ref().and_then(pick);
+        let est = |v: Option<f64>, c: Option<[f64; 2]>| v.map(|v| Est::new(v, c));
+        Self {
+            policies: r
+                .policies
+                .iter()
+                .map(|p| PolicyScores {
+                    name: p.name.clone(),
+                    sim: BranchScores::from(&p.sim),
+                    world_model: BranchScores::from(&p.world_model),
+                    episodes: p.sim.episodes as u64,
                 })
                 .collect(),
-        })
+            pearson: est(ag.pearson, ci(|c| c.pearson)),
+            spearman: est(ag.spearman, ci(|c| c.spearman)),
+            kendall: est(ag.kendall_tau_b, ci(|c| c.kendall_tau_b)),
+            inversions: est(ag.rank_inversions.map(|k| k as f64), ci(|c| c.rank_inversions)),
+            mmrv: est(ag.mmrv, ci(|c| c.mmrv)),
+            regret: est(ag.regret_at_1, ci(|c| c.regret_at_1)),
+            scenario: r.scenario.clone(),
+            world_model: r.world_model.display().to_string(),
+            episodes: r.episodes as u64,
+            seed_start: r.seed_start,
+            failed: r.failed_policies.iter().map(|f| (f.policy.clone(), f.error.clone())).collect(),
+        }
     }
 
     /// The agreement metrics as (label, estimate, decimals) for tables and captions;
@@ -149,6 +130,53 @@ impl Summary {
     }
 }
 
+/// Test fixtures: a `results.json` given in part (policies, agreement and a few
+/// top-level fields), completed with neutral values, as the typed results.
+#[cfg(test)]
+pub(crate) fn fixture(partial: serde_json::Value) -> RankResults {
+    let mut v = serde_json::json!({
+        "scenario": "pusht", "world_model": "wm", "episodes": 1, "seed_start": 0, "max_steps": 300,
+        "policies": [], "failed_policies": [],
+        "timing": {"wall_seconds": 0.0, "sim_seconds": 0.0, "world_model_seconds": 0.0,
+            "world_model_ms_per_frame": 0.0, "policy_seconds": 0.0, "note": ""},
+    });
+    for (k, x) in partial.as_object().expect("an object") {
+        v[k] = x.clone();
+    }
+    let metrics = [
+        "pearson",
+        "spearman",
+        "kendall_tau_b",
+        "rank_inversions",
+        "rank_inversion_fraction",
+        "mmrv",
+        "regret_at_1",
+        "ci95",
+    ];
+    for k in metrics {
+        if v["agreement"].get(k).is_none() {
+            v["agreement"][k] = serde_json::Value::Null;
+        }
+    }
+    if v["agreement"]["ci95"].is_object() && v["agreement"]["ci95"].get("replicates").is_none() {
+        v["agreement"]["ci95"]["replicates"] = serde_json::json!(0);
+    }
+    for p in v["policies"].as_array_mut().into_iter().flatten() {
+        for b in ["sim", "world_model"] {
+            if p[b].get("episodes").is_none() {
+                p[b]["episodes"] = serde_json::json!(1);
+            }
+            if p[b]["success_ci95"].is_null() {
+                p[b]["success_ci95"] = serde_json::json!([0.0, 1.0]);
+            }
+        }
+        if p.get("frame_scorer_mean_abs_error").is_none() {
+            p["frame_scorer_mean_abs_error"] = serde_json::json!(0.0);
+        }
+    }
+    serde_json::from_value(v).expect("a complete results.json")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -161,14 +189,16 @@ mod tests {
                 "sim": {"mean": 0.5, "ci95": [0.4, 0.6], "success_rate": 0.5, "success_ci95": [0.1, 0.9], "episodes": 2},
                 "world_model": {"mean": 0.4, "ci95": null, "success_rate": 0.0, "success_ci95": [0.0, 0.6]}}],
             "agreement": {"pearson": null, "rank_inversions": 0, "mmrv": 0.0, "regret_at_1": 0.0,
-                          "ci95": {"mmrv": [0.0, 0.1]}},
+                          "ci95": {"pearson": null, "spearman": null, "kendall_tau_b": null,
+                                   "rank_inversions": null, "mmrv": [0.0, 0.1], "regret_at_1": null, "replicates": 10}},
             "failed_policies": [{"policy": "c", "error": "bad"}],
         });
-        let s = Summary::from_results(&r).unwrap();
+        let s = Summary::from_results(&fixture(r));
         assert_eq!(s.policies[0].sim.mean.fmt(2), "0.50 [0.40, 0.60]");
         assert_eq!(s.policies[0].world_model.mean.fmt(2), "0.40");
         assert_eq!(s.pearson, None);
         assert_eq!(s.mmrv.unwrap().ci, Some([0.0, 0.1]));
+        assert_eq!(s.inversions.unwrap().value, 0.0);
         assert_eq!(s.failed, vec![("c".to_string(), "bad".to_string())]);
     }
 }

@@ -136,7 +136,7 @@ mod tests {
                 "world_model": {"mean": 0.4, "ci95": [0.3, 0.5], "success_rate": 0.0, "success_ci95": [0.0, 0.6]}}],
             "agreement": {"pearson": 0.9, "ci95": {"pearson": [0.8, 0.95]}},
         });
-        let s = Summary::from_results(&r).unwrap();
+        let s = Summary::from_results(&crate::summary::fixture(r));
         let t = latex_table(&s);
         for needle in [
             "\\toprule",
@@ -169,7 +169,7 @@ mod tests {
                 "world_model": {"mean": 0.125, "ci95": null, "success_rate": 1.0, "success_ci95": null}}],
             "agreement": {},
         });
-        let csv = summary_csv(&Summary::from_results(&r).unwrap()).unwrap();
+        let csv = summary_csv(&Summary::from_results(&crate::summary::fixture(r))).unwrap();
         // RFC 4180: a field with a comma or quote is quoted, inner quotes doubled.
         assert_eq!(
             csv.lines().nth(1),

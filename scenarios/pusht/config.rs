@@ -197,7 +197,11 @@ impl PushTConfig {
             }
         }
         let t = &self.timing;
-        if t.control_hz == 0 || t.mujoco_substeps == 0 || !t.physics_hz.is_multiple_of(t.control_hz.max(1)) {
+        if t.physics_hz == 0
+            || t.control_hz == 0
+            || t.mujoco_substeps == 0
+            || !t.physics_hz.is_multiple_of(t.control_hz)
+        {
             return Err(bad(
                 "timing",
                 format!(
@@ -205,6 +209,18 @@ impl PushTConfig {
                     t.physics_hz, t.control_hz
                 ),
             ));
+        }
+        let d = self.reset.min_agent_block_distance;
+        if !(d.is_finite() && d >= 0.0) {
+            return Err(bad(
+                "reset.min_agent_block_distance",
+                format!("must be a finite number >= 0, got {d}"),
+            ));
+        }
+        // Rejection sampling must find a state: try the first seed now, so an
+        // impossible `reset` section is refused at load, not at some episode.
+        if let Err(e) = super::initial_state(self, 0) {
+            return Err(bad("reset.min_agent_block_distance", e.to_string()));
         }
         if self.task.max_steps == 0 || self.task.success_coverage > 1.0 {
             return Err(bad("task", "max_steps >= 1 and success_coverage <= 1".into()));
@@ -234,6 +250,21 @@ mod tests {
         let err = PushTConfig::from_toml_str(&text, Path::new("x.toml")).unwrap_err();
         let msg = err.to_string();
         assert!(msg.contains("x.toml") && msg.contains("blur"), "{msg}");
+    }
+
+    #[test]
+    fn zero_physics_rate_and_an_impossible_reset_are_refused() {
+        // physics_hz = 0 is a multiple of every control_hz (0 = 0 x 10): it used to pass.
+        let text = DEFAULT_TOML.replace("physics_hz = 100", "physics_hz = 0");
+        assert_ne!(text, DEFAULT_TOML);
+        let err = PushTConfig::from_toml_str(&text, Path::new("z.toml")).unwrap_err().to_string();
+        assert!(err.contains("physics_hz (0)"), "{err}");
+        // No agent position in the 512-unit world is 9000 units from the block.
+        let text =
+            DEFAULT_TOML.replace("min_agent_block_distance = 90.0", "min_agent_block_distance = 9000.0");
+        assert_ne!(text, DEFAULT_TOML);
+        let err = PushTConfig::from_toml_str(&text, Path::new("z.toml")).unwrap_err().to_string();
+        assert!(err.contains("reset.min_agent_block_distance") && err.contains("seed 0"), "{err}");
     }
 
     #[test]

@@ -219,7 +219,7 @@ mod tests {
         let cfg = cfg();
         let raster = Rasterizer::new(&cfg);
         for seed in 0..8 {
-            let (mut state, goal) = initial_state(&cfg, seed);
+            let (mut state, goal) = initial_state(&cfg, seed).unwrap();
             // Half the scenes with the block half over the goal (edges crossing its rim).
             if seed % 2 == 0 {
                 state.block = Pose2 { x: goal.x + 25.0, y: goal.y - 15.0, theta: goal.theta + 0.4 };
@@ -250,7 +250,7 @@ mod tests {
     fn block_area_of_an_empty_floor_is_zero_and_of_a_red_frame_is_large() {
         let cfg = cfg();
         let raster = Rasterizer::new(&cfg);
-        let (_, goal) = initial_state(&cfg, 5);
+        let (_, goal) = initial_state(&cfg, 5).unwrap();
         let scorer = FrameScorer::new(&cfg, &goal, raster.size());
         let n = raster.size() * raster.size();
         assert_eq!(scorer.block_area(&vec![255; n * 3]), 0.0);
@@ -269,7 +269,7 @@ mod tests {
     fn estimate_tracks_exact_coverage_on_rendered_frames() {
         let cfg = cfg();
         let raster = Rasterizer::new(&cfg);
-        let (mut state, goal) = initial_state(&cfg, 3);
+        let (mut state, goal) = initial_state(&cfg, 3).unwrap();
         let scorer = FrameScorer::new(&cfg, &goal, raster.size());
         // Slide the block onto the goal in steps: coverage goes from ~0 to 1.
         let start = state.block;
@@ -300,7 +300,7 @@ mod tests {
     fn the_agent_shows_wherever_it_is() {
         let cfg = cfg();
         let raster = Rasterizer::new(&cfg);
-        let (mut state, goal) = initial_state(&cfg, 3);
+        let (mut state, goal) = initial_state(&cfg, 3).unwrap();
         let scorer = FrameScorer::new(&cfg, &goal, raster.size());
         // Positions over the world, a corner by the walls included. The disk covers
         // π·(15·96/512)² = 24.85 pixels; its anti-aliased rim on white counts in

@@ -124,7 +124,7 @@ mod tests {
         };
         let raster = Rasterizer::new(&cfg);
         for seed in [0, 5] {
-            let (state, goal) = super::super::initial_state(&cfg, seed);
+            let (state, goal) = super::super::initial_state(&cfg, seed).unwrap();
             let a = mj.render(&state, &goal).unwrap();
             let b = raster.render(&state, &goal);
             // MJ_RENDER_DUMP=DIR writes each pair side by side as a PPM, to look at.

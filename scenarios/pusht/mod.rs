@@ -66,7 +66,11 @@ pub fn score(cfg: &PushTConfig, block: &Pose2, goal: &Pose2) -> Score {
 /// Draw order as GPC's reset: agent x, y; block x, y; block θ = N(0,1)·2π − π;
 /// goal x, y; goal θ; then the agent is redrawn while it is closer than
 /// `min_agent_block_distance` to the block's centre or its disk touches the T.
-pub fn initial_state(cfg: &PushTConfig, seed: u64) -> (PushTState, Pose2) {
+///
+/// # Errors
+/// [`ScenarioError::ImpossibleReset`] when [`MAX_RESET_DRAWS`] draws of the agent
+/// never satisfy those conditions (a scenario whose `reset` fields admit no state).
+pub fn initial_state(cfg: &PushTConfig, seed: u64) -> Result<(PushTState, Pose2), ScenarioError> {
     let stream = harness::seed::derive(seed, &[harness::seed::fnv1a("pusht/reset")]);
     let mut rng = ChaCha8Rng::seed_from_u64(stream);
     let r = &cfg.reset;
@@ -88,11 +92,26 @@ pub fn initial_state(cfg: &PushTConfig, seed: u64) -> (PushTState, Pose2) {
         let d = (a[0] - block.x).hypot(a[1] - block.y);
         d >= r.min_agent_block_distance && shape.distance(block.inverse_apply(a)) > cfg.agent.radius + 1.0
     };
+    let mut draws = 1;
     while !clear(agent) {
+        if draws == MAX_RESET_DRAWS {
+            return Err(ScenarioError::ImpossibleReset {
+                seed,
+                draws,
+                field: "reset.min_agent_block_distance".into(),
+            });
+        }
         agent = [uni(&mut rng, r.agent_range), uni(&mut rng, r.agent_range)];
+        draws += 1;
     }
-    (PushTState { agent, agent_vel: [0.0; 2], block }, goal)
+    Ok((PushTState { agent, agent_vel: [0.0; 2], block }, goal))
 }
+
+/// Draws of the agent's position [`initial_state`] makes before it gives up. A
+/// feasible scenario needs a handful (the shipped one: under 2 on average); a
+/// million makes a wrongly refused seed practically impossible while bounding the
+/// time an impossible `reset` section takes to ~0.1 s.
+pub const MAX_RESET_DRAWS: u32 = 1_000_000;
 
 /// One Push-T episode in MuJoCo.
 pub struct PushTEnv {
@@ -108,7 +127,14 @@ impl PushTEnv {
     /// An environment on a compiled model (see [`PushTPhysics::compile`]); call
     /// [`PushTEnv::reset`] before stepping.
     pub fn new(model: Arc<MjModel>, cfg: &PushTConfig) -> Self {
-        let (state, goal) = initial_state(cfg, 0);
+        // A placeholder until `reset` (a validated config always resets seed 0).
+        let (state, goal) = initial_state(cfg, 0).unwrap_or_else(|_| {
+            let c = cfg.world.size / 2.0;
+            (
+                PushTState { agent: [c, c], agent_vel: [0.0; 2], block: Pose2::new(c, c, 0.0) },
+                Pose2::new(c, c, 0.0),
+            )
+        });
         let mut physics = PushTPhysics::new(model.clone(), cfg);
         physics.set_state(&state);
         Self { model, cfg: cfg.clone(), physics, goal, seed: 0, step: 0 }
@@ -119,7 +145,7 @@ impl PushTEnv {
     /// # Errors
     /// [`ScenarioError::NonFinite`] if that first step diverges.
     pub fn reset(&mut self, seed: u64) -> Result<(), ScenarioError> {
-        let (state, goal) = initial_state(&self.cfg, seed);
+        let (state, goal) = initial_state(&self.cfg, seed)?;
         self.physics.set_state(&state);
         self.physics.physics_step(state.agent);
         self.goal = goal;

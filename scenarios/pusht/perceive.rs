@@ -354,7 +354,7 @@ mod tests {
         let (raster, perceiver) = (Rasterizer::new(&cfg), Perceiver::new(&cfg, 96));
         let (mut worst_pos, mut worst_deg) = (0.0f64, 0.0f64);
         for seed in 0..20 {
-            let (state, goal) = initial_state(&cfg, seed);
+            let (state, goal) = initial_state(&cfg, seed).unwrap();
             let frame = raster.render(&state, &goal);
             let p = perceiver.perceive(&frame, Some(state.agent)).expect("the block is visible");
             for (est, truth) in [(p.block, state.block), (p.goal, goal)] {

@@ -73,7 +73,7 @@ mod tests {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("pusht.toml");
         let cfg = PushTConfig::from_file(&path).unwrap();
         let raster = Rasterizer::new(&cfg);
-        let (state, goal) = initial_state(&cfg, 3);
+        let (state, goal) = initial_state(&cfg, 3).unwrap();
         (cfg, raster, goal, state)
     }
 

@@ -374,7 +374,7 @@ mod tests {
         for size in [96, 61] {
             let r = Rasterizer::with_size(&cfg, size);
             for seed in 0..12 {
-                let (mut state, goal) = super::super::initial_state(&cfg, seed);
+                let (mut state, goal) = super::super::initial_state(&cfg, seed).unwrap();
                 // Park the agent against the block now and then, and near a wall.
                 if seed % 3 == 0 {
                     state.agent = state.block.apply([0.0, 90.0]);
@@ -391,7 +391,7 @@ mod tests {
     fn rendering_is_deterministic() {
         let cfg = PushTConfig::default();
         let r = Rasterizer::new(&cfg);
-        let (state, goal) = super::super::initial_state(&cfg, 3);
+        let (state, goal) = super::super::initial_state(&cfg, 3).unwrap();
         assert_eq!(r.render(&state, &goal), r.render(&state, &goal));
     }
 }

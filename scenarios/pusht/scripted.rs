@@ -231,7 +231,7 @@ mod tests {
     }
 
     fn observe(cfg: &PushTConfig, seed: u64) -> Observation {
-        let (state, goal) = initial_state(cfg, seed);
+        let (state, goal) = initial_state(cfg, seed).unwrap();
         let frame = Rasterizer::new(cfg).render(&state, &goal);
         let p = [state.agent[0] as f32, state.agent[1] as f32];
         Observation { frames: vec![frame.clone(), frame], agent_pos: vec![p, p], size: 96 }

@@ -84,7 +84,7 @@ pub struct PlanArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Bootstrap replicates for the CIs.
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = 2000, value_parser = crate::cli::bootstrap_replicates)]
     pub bootstrap: usize,
     /// Threads for the simulator's rollouts (results do not depend on it).
     #[arg(long, default_value_t = 2)]

@@ -17,14 +17,14 @@ use serde_json::json;
 use crate::cli::AgreementArgs;
 
 /// One policy's rows.
-struct PolicyRows {
+pub(crate) struct PolicyRows {
     name: String,
     predicted: Vec<f64>,
     actual: Vec<f64>,
 }
 
 /// Per-policy episode scores read from the CSV, in order of first appearance.
-fn read_csv(path: &Path) -> Result<Vec<PolicyRows>> {
+pub(crate) fn read_csv(path: &Path) -> Result<Vec<PolicyRows>> {
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .from_path(path)

@@ -128,9 +128,9 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };
     let runner = Runner::new(cfg, c.jobs, c.max_steps, perturbation)?;
     let size = runner.cfg.render.size as usize;
-    let mut writer = ReplayWriter::create(&args.out, replay_spec(size), c.force)?;
     let work: Vec<(u64, BehaviourKind)> =
-        (0..c.episodes).map(|i| (c.seed_start + i, draw(&mix, c.seed_start + i))).collect();
+        harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, draw(&mix, seed))).collect();
+    let mut writer = ReplayWriter::create(&args.out, replay_spec(size), c.force)?;
     let pb = progress::bar(c.episodes, "collect", quiet);
     let mut episodes = Vec::new();
     runner.run(

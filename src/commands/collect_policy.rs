@@ -47,8 +47,9 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
     let dirs = checkpoint_dirs(dir)?;
     let size = cfg.render.size as usize;
     let expect = Expectations { image_size: size, action_dim: 2 };
+    crate::output::check_apart(&args.out, &[("--policy", dir)])?;
+    let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();
     let mut writer = ReplayWriter::create(&args.out, replay_spec(size), c.force)?;
-    let seeds: Vec<u64> = (0..c.episodes).map(|i| c.seed_start + i).collect();
     let pool =
         rayon::ThreadPoolBuilder::new().num_threads(c.jobs.max(1)).build().context("starting threads")?;
     let pb = progress::bar(dirs.len() as u64 * c.episodes, "collect", quiet);

@@ -76,6 +76,8 @@ pub fn run(inputs: &[PathBuf], out: &Path, force: bool, quiet: bool) -> Result<E
     if inputs.len() < 2 {
         bail!("dataset merge needs at least two input datasets, got {}", inputs.len());
     }
+    let apart: Vec<(&str, &Path)> = inputs.iter().map(|p| ("dataset", p.as_path())).collect();
+    crate::output::check_apart(out, &apart)?;
     let readers = inputs
         .iter()
         .map(|p| ReplayReader::open(p).with_context(|| format!("opening dataset {}", p.display())))

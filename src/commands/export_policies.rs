@@ -59,6 +59,11 @@ pub fn run(a: &ExportPoliciesArgs) -> Result<ExitCode> {
     if !taken.is_empty() {
         bail!("--add: {} already holds {}", a.out.display(), taken.join(", "));
     }
+    // `--add` moves new checkpoints into `--out`, so only plain replacing must stay
+    // apart from `--from`.
+    if !a.add {
+        crate::output::check_apart(&a.out, &[("--from", &a.from)])?;
+    }
     let out = Staged::new(&a.out, a.force || a.add)?;
     let command: Vec<String> = std::env::args().collect();
     let (command, commit) = (command.join(" "), git_commit());

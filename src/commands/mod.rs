@@ -1,6 +1,6 @@
 //! One module per subcommand; [`run`] dispatches.
 
-mod agreement;
+pub(crate) mod agreement;
 mod collect;
 mod collect_policy;
 mod dataset;

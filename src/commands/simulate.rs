@@ -43,6 +43,8 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
         anyhow::bail!("--gif-size must be in 16..=1024, got {}", args.gif_size);
     }
     let runner = Runner::new(cfg, c.jobs, c.max_steps, Perturbation { noise: c.noise, lag: c.lag })?;
+    let work: Vec<(u64, BehaviourKind)> =
+        harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, kind)).collect();
     let out = Staged::new(&args.out, c.force)?;
     write_json(
         &out.file("config.json"),
@@ -63,7 +65,6 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let mut jsonl = BufWriter::new(
         std::fs::File::create(&jsonl_path).with_context(|| format!("creating {}", jsonl_path.display()))?,
     );
-    let work: Vec<(u64, BehaviourKind)> = (0..c.episodes).map(|i| (c.seed_start + i, kind)).collect();
     let pb = progress::bar(c.episodes, "simulate", quiet);
     let mut per_episode = Vec::new();
     let mut crosscheck = None;

@@ -30,7 +30,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let dirs = checkpoint_dirs(dir)?;
     let out = Staged::new(&args.out, c.force)?;
     let expect = Expectations { image_size: cfg.render.size as usize, action_dim: 2 };
-    let seeds: Vec<u64> = (0..c.episodes).map(|i| c.seed_start + i).collect();
+    let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();
     let pool =
         rayon::ThreadPoolBuilder::new().num_threads(c.jobs.max(1)).build().context("starting threads")?;
     let pb = progress::bar((dirs.len() as u64) * c.episodes, "simulate", quiet);
@@ -58,8 +58,8 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
                 let stats = branch_stats(&refs, 2000, 0);
                 println!(
                     "{name:<16} mean score {:.3}  success {:.1}%  ({:.0} s)",
-                    stats["mean"].as_f64().unwrap_or(f64::NAN),
-                    100.0 * stats["success_rate"].as_f64().unwrap_or(f64::NAN),
+                    stats.mean,
+                    100.0 * stats.success_rate,
                     started.elapsed().as_secs_f64()
                 );
                 if args.record_scores {
@@ -89,7 +89,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
 /// Writes `provenance.json` into a checkpoint: its training provenance plus the measured score.
 fn record(
     dir: &std::path::Path,
-    stats: &Value,
+    stats: &harness::results::BranchStats,
     seed_start: u64,
     episodes: u64,
     max_steps: usize,
@@ -104,8 +104,8 @@ fn record(
             "epoch": file["epoch"], "step": file["step"], "train_loss": file["train_loss"],
             "mujoco_score": {
                 "seeds": [seed_start, seed_start + episodes - 1], "max_steps": max_steps,
-                "mean": stats["mean"], "ci95": stats["ci95"],
-                "success_rate": stats["success_rate"], "success_ci95": stats["success_ci95"],
+                "mean": stats.mean, "ci95": stats.ci95,
+                "success_rate": stats.success_rate, "success_ci95": stats.success_ci95,
                 "measured_with": args.join(" "), "commit": git_commit(),
             },
         }),

@@ -6,7 +6,7 @@
 
 use std::process::ExitCode;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use serde_json::json;
 use world_model::autoencoder::AutoencoderConfig;
 use world_model::data::EpisodeData;
@@ -123,19 +123,28 @@ pub(super) fn refuse_contradicting_flags(
     )
 }
 
-/// Checks a training run's output folder: an existing one needs `--resume` (and then
-/// its checkpoint, `state` relative to it) or `--force` (which removes it).
-pub(super) fn prepare_out(out: &std::path::Path, resume: bool, force: bool, state: &str) -> Result<()> {
-    if out.exists() && !resume {
-        if !force {
-            bail!("{} already exists (pass --resume to continue it or --force to replace it)", out.display());
+/// Checks a training run's inputs and output folder, then prepares it: an existing
+/// one needs `--resume` (and then its checkpoint, `state` relative to it) or `--force`
+/// (which moves it aside until the new run completes, see
+/// [`crate::output::RunDir`]). Each input (with its flag) must exist and lie apart
+/// from the output.
+pub(super) fn prepare_out(
+    out: &std::path::Path,
+    resume: bool,
+    force: bool,
+    state: &'static str,
+    inputs: &[(&str, &std::path::Path)],
+) -> Result<crate::output::RunDir> {
+    for (flag, p) in inputs {
+        if !p.exists() {
+            bail!("{flag} {}: no such file or folder", p.display());
         }
-        std::fs::remove_dir_all(out).with_context(|| format!("removing {}", out.display()))?;
     }
+    crate::output::check_apart(out, inputs)?;
     if resume && !out.join(state).is_file() {
         bail!("--resume: {} has no checkpoint ({state})", out.display());
     }
-    Ok(())
+    crate::output::RunDir::prepare(out, resume, force, state)
 }
 
 /// The `data` entry of a world-model or autoencoder provenance file.
@@ -151,7 +160,9 @@ pub fn data_provenance(path: &std::path::Path, episodes: usize, frames: usize) -
 
 /// `evalharness train autoencoder`.
 pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
-    prepare_out(&a.out, a.session.resume, a.session.force, "state.json")?;
+    let mut inputs: Vec<(&str, &std::path::Path)> = vec![("--data", &a.data)];
+    inputs.extend(a.encoder_from.as_deref().map(|p| ("--encoder-from", p)));
+    let out_dir = prepare_out(&a.out, a.session.resume, a.session.force, "state.json", &inputs)?;
     let from_step = read_step(&a.out);
     let decoder_channels = match a.decoder_channels.as_deref() {
         None => None,
@@ -252,6 +263,7 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
         outcome.mse,
         a.out.display()
     );
+    out_dir.finish(outcome.finished)?;
     Ok(ExitCode::SUCCESS)
 }
 

@@ -33,7 +33,10 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         policy = s.config.clone();
     }
     // Checked before `--force` clears the output folder.
-    prepare_out(&a.out, a.session.resume, a.session.force, ".train/state.json")?;
+    let mut inputs: Vec<(&str, &std::path::Path)> = vec![("--data", &a.data)];
+    inputs.extend(a.init_from.as_deref().map(|p| ("--init-from", p)));
+    inputs.extend(a.encoder_from.as_deref().map(|p| ("--encoder-from", p)));
+    let out_dir = prepare_out(&a.out, a.session.resume, a.session.force, ".train/state.json", &inputs)?;
     let behaviour = (a.behaviour != "all").then_some(a.behaviour.as_str());
     tracing::info!(data = %a.data.display(), ?behaviour, "loading demonstrations");
     let demos = Demos::load(&a.data, behaviour, a.episodes, policy.net.image_size)?;
@@ -122,6 +125,7 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         outcome.loss,
         a.out.display()
     );
+    out_dir.finish(outcome.step >= outcome.total)?;
     Ok(ExitCode::SUCCESS)
 }
 

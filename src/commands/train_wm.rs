@@ -112,7 +112,10 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             bail!("--init-from {} is the output folder itself", dir.display());
         }
     }
-    prepare_out(&a.out, a.session.resume, a.session.force, "state.json")?;
+    let mut inputs: Vec<(&str, &Path)> = vec![("--data", &a.data)];
+    inputs.extend(a.autoencoder.as_deref().map(|p| ("--autoencoder", p)));
+    inputs.extend(a.init_from.as_deref().map(|p| ("--init-from", p)));
+    let out_dir = prepare_out(&a.out, a.session.resume, a.session.force, "state.json", &inputs)?;
     let from_step = read_step(&a.out);
     if a.session.resume {
         check_resume_flags(a, &cfg)?;
@@ -236,6 +239,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         outcome.eval_mse,
         a.out.display()
     );
+    out_dir.finish(outcome.finished)?;
     Ok(ExitCode::SUCCESS)
 }
 

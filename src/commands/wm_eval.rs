@@ -116,6 +116,9 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
     if short.is_empty() {
         bail!("{}: no {which} has {} frames", a.data.display(), k + 60);
     }
+    let mut apart: Vec<(&str, &std::path::Path)> = vec![("--data", &a.data)];
+    apart.extend(a.world_models.iter().map(|m| ("--world-model", m.as_path())));
+    crate::output::check_apart(&a.out, &apart)?;
     let staged = Staged::new(&a.out, a.force)?;
     // The dataset's scenario and state rows, read once: for the goal-free view, the
     // open-loop scores and the SSIM by block motion.

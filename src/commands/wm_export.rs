@@ -82,6 +82,9 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
     if let Some(alpha) = a.alpha {
         config["model"]["alpha"] = json!(alpha);
     }
+    let mut apart: Vec<(&str, &std::path::Path)> = vec![("--from", &a.from)];
+    apart.extend(a.autoencoder.as_deref().map(|p| ("--autoencoder", p)));
+    crate::output::check_apart(&a.out, &apart)?;
     let staged = Staged::new(&a.out, a.force)?;
     if let Some(ae) = config["model"]["autoencoder"].as_str() {
         let trained_on = a.from.join(ae);

@@ -17,6 +17,7 @@ mod episodes;
 mod imagine;
 mod results;
 
+use std::path::Path;
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -84,9 +85,10 @@ fn load_proposer(
 
 /// `evalharness plan`.
 pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
-    if a.episodes == 0 || a.max_steps == 0 || a.batch == 0 || a.proposals == 0 {
-        bail!("--episodes, --max-steps, --batch and --proposals must be positive");
+    if a.max_steps == 0 || a.batch == 0 || a.proposals == 0 {
+        bail!("--max-steps, --batch and --proposals must be positive");
     }
+    let seeds: Vec<u64> = harness::seed::range(a.seed_start, a.episodes as u64)?.collect();
     if !(a.spread.is_finite() && a.spread > 0.0) {
         bail!("--spread {}: must be a positive number", a.spread);
     }
@@ -99,7 +101,6 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     if planners.is_empty() {
         bail!("--planners: name at least one of none, world-model, simulator");
     }
-    crate::output::run_dir(&a.out, a.resume, a.force)?;
     let cfg = crate::scenario::load_pusht(&a.scenario)?;
     let model = PushTPhysics::compile(&cfg)?;
     let device = world_model::device::selected()?;
@@ -118,6 +119,29 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         None
     };
     let (policy, imagine, execute) = load_proposer(a, cfg.render.size as usize, &device)?;
+    // Every input is checked; only now is the output folder touched.
+    let mut fingerprints = serde_json::Map::new();
+    fingerprints.insert("policy".into(), json!(harness::fingerprint::folder(&a.policy)?));
+    let mut apart: Vec<(&str, &Path)> = vec![("--policy", &a.policy)];
+    let ae_dir = wm.as_ref().and_then(|w| w.cfg.autoencoder.as_ref()).map(|ae| a.world_model.join(ae));
+    if wm.is_some() {
+        apart.push(("--world-model", &a.world_model));
+        fingerprints.insert("world_model".into(), json!(harness::fingerprint::folder(&a.world_model)?));
+    }
+    if let Some(ae) = &ae_dir {
+        apart.push(("autoencoder folder", ae));
+        fingerprints.insert("autoencoder".into(), json!(harness::fingerprint::folder(ae)?));
+    }
+    crate::output::check_apart(&a.out, &apart)?;
+    let jsonl = a.out.join("episodes.jsonl");
+    if a.resume && jsonl.exists() && !a.out.join("config.json").is_file() {
+        bail!(
+            "--resume: {} has episodes but no config.json, so the settings its rows were run with \
+             are unknown; start a new run (--force or another --out)",
+            a.out.display()
+        );
+    }
+    let out_dir = crate::output::RunDir::prepare(&a.out, a.resume, a.force, "episodes.jsonl")?;
     let config = json!({
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "scenario": a.scenario, "policy": a.policy,
@@ -128,12 +152,12 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         "cost": "mean distance (world units) of the last imagined frame's block pixels from the goal T",
         "episodes": a.episodes, "seed_start": a.seed_start, "max_steps": a.max_steps,
         "batch": a.batch, "seed": a.seed, "bootstrap": a.bootstrap, "record": a.record,
+        "fingerprints": fingerprints,
     });
     if a.resume {
         crate::rank::resume::check_config(&a.out.join("config.json"), &config)?;
     }
     write_json(&a.out.join("config.json"), &config)?;
-    let seeds: Vec<u64> = (0..a.episodes as u64).map(|i| a.seed_start + i).collect();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.jobs.max(1))
         .build()
@@ -153,24 +177,24 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         pool: &pool,
         record: &seeds[..a.record.min(seeds.len())],
     };
-    let jsonl = a.out.join("episodes.jsonl");
     let filmstrips = a.out.join("filmstrips");
     if a.record > 0 {
         std::fs::create_dir_all(&filmstrips).with_context(|| format!("creating {}", filmstrips.display()))?;
     }
     let pb = progress::bar((planners.len() * a.episodes) as u64, "plan", quiet);
     let started = Instant::now();
-    let mut rows: Vec<PlanRow> = crate::rank::results::read_rows(&jsonl)?;
+    let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
+    let mut rows: Vec<PlanRow> =
+        crate::rank::results::resume_rows(&jsonl, |r| episodes::whole_batches(r, &batches))?;
     let mut timing = Timing::default();
     for &planner in &planners {
-        for batch in seeds.chunks(a.batch) {
+        for &batch in &batches {
             let done = |s: &u64| rows.iter().any(|r| r.planner == planner.name() && r.seed == *s);
             if batch.iter().all(done) {
                 pb.inc(batch.len() as u64);
                 continue;
             }
-            // A batch is appended whole, so a part of one is from a run killed while writing.
-            rows.retain(|r| !(r.planner == planner.name() && batch.contains(&r.seed)));
+            // Batches are appended whole, and `resume_rows` dropped any part of one.
             let out = run_batch(&ctx, planner, batch)
                 .with_context(|| format!("planner {} on seeds {:?}", planner.name(), batch))?;
             crate::rank::results::append_rows(&jsonl, &out.rows)?;
@@ -201,6 +225,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     });
     write_json(&a.out.join("results.json"), &res)?;
     results::write_csv(&a.out.join("episodes.csv"), &rows)?;
+    out_dir.finish(true)?;
     results::print_summary(&res, &a.out);
     Ok(ExitCode::SUCCESS)
 }

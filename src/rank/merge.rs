@@ -5,11 +5,13 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use serde_json::{Value, json};
 
+use harness::results::{FailedPolicy, RankResults, RunTiming};
+
 use super::results::{EpisodeRow, append_rows, read_rows, summarise};
-use crate::output::{read_json, write_json};
+use crate::output::{Staged, read_json, write_json};
 
 /// The run-defining part of a config (everything but the shard and the command).
 fn run_key(cfg: &Value) -> Value {
@@ -21,6 +23,53 @@ fn run_key(cfg: &Value) -> Value {
     c
 }
 
+/// Checks that the shards are exactly one complete set: `rank --shard i/n` outputs
+/// with the same n, every i from 0 to n − 1 once. A missing shard would leave
+/// policies with too few episodes, a repeated one count nothing twice but hide the
+/// missing one.
+///
+/// # Errors
+/// A folder without a valid `shard` in its config, counts that differ, or an index
+/// missing or repeated, naming the folders.
+fn check_complete_set(shards: &[PathBuf]) -> Result<()> {
+    let mut seen: Vec<Option<&PathBuf>> = Vec::new();
+    let mut n_first: Option<(u64, &PathBuf)> = None;
+    for s in shards {
+        let cfg = read_json(&s.join("config.json"))?;
+        let (Some(i), Some(n)) = (cfg["shard"][0].as_u64(), cfg["shard"][1].as_u64()) else {
+            bail!("{}: config.json has no \"shard\": [i, n] (not a rank output)", s.display());
+        };
+        match n_first {
+            None => {
+                n_first = Some((n, s));
+                seen = vec![None; n as usize];
+            }
+            Some((n0, s0)) if n0 != n => {
+                bail!(
+                    "{} is shard {i}/{n} but {} is one of {n0}: not shards of one split",
+                    s.display(),
+                    s0.display()
+                )
+            }
+            Some(_) => {}
+        }
+        let Some(slot) = seen.get_mut(i as usize) else {
+            bail!("{}: shard {i}/{n} is out of range", s.display());
+        };
+        if let Some(other) = slot {
+            bail!("{} and {} are both shard {i}/{n}; give each shard once", other.display(), s.display());
+        }
+        *slot = Some(s);
+    }
+    let missing: Vec<String> =
+        seen.iter().enumerate().filter(|(_, s)| s.is_none()).map(|(i, _)| i.to_string()).collect();
+    if !missing.is_empty() {
+        let n = seen.len();
+        bail!("shard {} of {n} missing: a merge needs all {n} shards of the run", missing.join(", "));
+    }
+    Ok(())
+}
+
 /// Merges shard folders into `out`.
 ///
 /// # Errors
@@ -29,17 +78,23 @@ pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Resu
     if shards.is_empty() {
         bail!("give at least one shard folder");
     }
-    if out.exists() {
-        if !force {
-            bail!("{} already exists (pass --force to replace it)", out.display());
-        }
-        std::fs::remove_dir_all(out).with_context(|| format!("removing {}", out.display()))?;
-    }
+    let inputs: Vec<(&str, &Path)> = shards.iter().map(|s| ("shard", s.as_path())).collect();
+    crate::output::check_apart(out, &inputs)?;
     let first = read_json(&shards[0].join("config.json"))?;
     let key = run_key(&first);
+    check_complete_set(shards)?;
     let mut rows: Vec<EpisodeRow> = Vec::new();
-    let (mut failed, mut timing) = (Vec::<Value>::new(), [0.0f64; 5]);
+    let mut failed: Vec<FailedPolicy> = Vec::new();
+    let mut timing = RunTiming {
+        wall_seconds: 0.0,
+        sim_seconds: 0.0,
+        world_model_seconds: 0.0,
+        world_model_ms_per_frame: 0.0,
+        policy_seconds: 0.0,
+        note: format!("summed over {} shards", shards.len()),
+    };
     let mut frames = 0.0;
+    let mut first_res: Option<RankResults> = None;
     for s in shards {
         let cfg = read_json(&s.join("config.json"))?;
         if run_key(&cfg) != key {
@@ -54,25 +109,24 @@ pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Resu
                 None => rows.push(r),
             }
         }
-        let res = read_json(&s.join("results.json"))?;
-        for f in res["failed_policies"].as_array().into_iter().flatten() {
+        let res = RankResults::read(&s.join("results.json"))?;
+        for f in &res.failed_policies {
             if !failed.contains(f) {
                 failed.push(f.clone());
             }
         }
-        let t = &res["timing"];
-        for (acc, k) in timing.iter_mut().zip([
-            "wall_seconds",
-            "sim_seconds",
-            "world_model_seconds",
-            "policy_seconds",
-            "world_model_ms_per_frame",
-        ]) {
-            *acc += t[k].as_f64().unwrap_or(0.0);
+        let t = &res.timing;
+        timing.wall_seconds += t.wall_seconds;
+        timing.sim_seconds += t.sim_seconds;
+        timing.world_model_seconds += t.world_model_seconds;
+        timing.policy_seconds += t.policy_seconds;
+        if t.world_model_ms_per_frame > 0.0 {
+            frames += t.world_model_seconds * 1e3 / t.world_model_ms_per_frame;
         }
-        frames += t["world_model_seconds"].as_f64().unwrap_or(0.0) * 1e3
-            / t["world_model_ms_per_frame"].as_f64().filter(|v| *v > 0.0).unwrap_or(f64::INFINITY);
+        first_res.get_or_insert(res);
     }
+    let Some(first_res) = first_res else { bail!("give at least one shard folder") };
+    timing.world_model_ms_per_frame = 1e3 * timing.world_model_seconds / frames.max(1.0);
     let names: Vec<String> = first["checkpoints"]
         .as_array()
         .into_iter()
@@ -82,30 +136,25 @@ pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Resu
         .collect();
     let order = |p: &str| names.iter().position(|n| n == p).unwrap_or(usize::MAX);
     rows.sort_by_key(|r| (order(&r.policy), r.seed, r.branch));
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    append_rows(&out.join("episodes.jsonl"), &rows)?;
-    let failed_names: Vec<&str> = failed.iter().filter_map(|f| f["policy"].as_str()).collect();
+    // Everything is written into OUT.partial and moved into place at the end.
+    let staged = Staged::new(out, force)?;
+    let tmp = staged.dir().to_path_buf();
+    append_rows(&tmp.join("episodes.jsonl"), &rows)?;
+    let failed_names: Vec<&str> = failed.iter().map(|f| f.policy.as_str()).collect();
     let ok: Vec<String> = names.iter().filter(|n| !failed_names.contains(&n.as_str())).cloned().collect();
     let bootstrap = first["bootstrap"].as_u64().unwrap_or(2000) as usize;
-    let mut res = summarise(&rows, &ok, bootstrap, first["seed"].as_u64().unwrap_or(0));
-    for k in ["scenario", "world_model", "episodes", "seed_start", "max_steps"] {
-        res[k] = first[k].clone();
-    }
-    res["failed_policies"] = json!(failed);
-    res["timing"] = json!({
-        "wall_seconds": timing[0], "sim_seconds": timing[1], "world_model_seconds": timing[2],
-        "world_model_ms_per_frame": 1e3 * timing[2] / frames.max(1.0), "policy_seconds": timing[3],
-        "note": format!("summed over {} shards", shards.len()),
-    });
-    write_json(&out.join("results.json"), &res)?;
+    let (policies, agreement) = summarise(&rows, &ok, bootstrap, first["seed"].as_u64().unwrap_or(0));
+    let res = RankResults { policies, agreement, failed_policies: failed, timing, ..first_res };
+    write_json(&tmp.join("results.json"), &res.to_json()?)?;
     let mut cfg = first.clone();
     cfg["shard"] = json!([0, 1]);
     cfg["merged_from"] = json!(shards);
-    write_json(&out.join("config.json"), &cfg)?;
-    super::write_tables(out, &rows)?;
+    write_json(&tmp.join("config.json"), &cfg)?;
+    super::write_tables(&tmp, &rows)?;
     if !no_report {
-        super::report::write_report(out)?;
+        super::report::write_report(&tmp)?;
     }
+    staged.commit()?;
     println!("merged {} shards: {} rows -> {}", shards.len(), rows.len(), out.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -16,6 +16,7 @@ pub(crate) mod resume;
 pub mod scene;
 mod schedule;
 pub mod start;
+mod summary;
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -23,19 +24,21 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use policies::dir::{Expectations, checkpoint_dirs, checkpoint_name};
-use reports::episodes::{EpisodeRecord, write_episodes_parquet};
 
 use crate::policy_kinds::load_any;
+use harness::results::{FailedPolicy, RankResults, RunTiming};
 use scenarios::pusht::PushTPhysics;
 use serde_json::{Value, json};
 use world_model::model::WorldModel;
+use world_model::rollout::NonFiniteLatents;
 
 use crate::cli::RankArgs;
 use crate::output::write_json;
 use crate::progress;
 use paired::Setup;
-use results::{EpisodeRow, append_rows, read_rows, summarise};
+use results::{EpisodeRow, append_rows, summarise};
 use schedule::Batch;
+pub(crate) use summary::write_tables;
 
 /// Parses `--shard i/n`.
 fn parse_shard(s: Option<&str>) -> Result<(usize, usize)> {
@@ -51,16 +54,29 @@ fn parse_shard(s: Option<&str>) -> Result<(usize, usize)> {
 /// `evalharness rank`.
 pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     let (shard, shards) = parse_shard(a.shard.as_deref())?;
-    if a.episodes == 0 || a.max_steps == 0 || a.batch == 0 {
-        bail!("--episodes, --max-steps and --batch must be positive");
+    if a.max_steps == 0 || a.batch == 0 {
+        bail!("--max-steps and --batch must be positive");
     }
-    let jsonl = a.out.join("episodes.jsonl");
-    crate::output::run_dir(&a.out, a.resume, a.force)?;
+    let seeds: Vec<u64> = harness::seed::range(a.seed_start, a.episodes as u64)?.collect();
+    // Every input is checked before the output folder is touched.
     let cfg = crate::scenario::load_pusht(&a.scenario)?;
     let model = PushTPhysics::compile(&cfg)?;
     let device = world_model::device::selected()?;
     let wm = load_world_model(&a.world_model, a.alpha, &device)?;
     let dirs = checkpoint_dirs(&a.policies)?;
+    let inputs = model_inputs(&a.world_model, &wm, &dirs)?;
+    let mut apart: Vec<(&str, &Path)> = vec![("--policies", &a.policies), ("--world-model", &a.world_model)];
+    apart.extend(inputs.iter().map(|(_, dir, _)| ("model folder", dir.as_path())));
+    crate::output::check_apart(&a.out, &apart)?;
+    let jsonl = a.out.join("episodes.jsonl");
+    if a.resume && jsonl.exists() && !a.out.join("config.json").is_file() {
+        bail!(
+            "--resume: {} has episodes but no config.json, so the settings its rows were run with \
+             are unknown; start a new run (--force or another --out)",
+            a.out.display()
+        );
+    }
+    let out_dir = crate::output::RunDir::prepare(&a.out, a.resume, a.force, "episodes.jsonl")?;
     let config = json!({
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "scenario": a.scenario, "policies": a.policies, "world_model": a.world_model,
@@ -68,22 +84,22 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         "episodes": a.episodes, "seed_start": a.seed_start, "max_steps": a.max_steps,
         "batch": a.batch, "seed": a.seed, "bootstrap": a.bootstrap, "shard": [shard, shards],
         "checkpoints": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
+        "fingerprints": inputs.iter().map(|(k, _, f)| (k.clone(), json!(f))).collect::<serde_json::Map<_, _>>(),
     });
     if a.resume {
         resume::check_config(&a.out.join("config.json"), &config)?;
     }
     write_json(&a.out.join("config.json"), &config)?;
-    let mut rows: Vec<EpisodeRow> = read_rows(&jsonl)?;
+    let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
+    let mut rows: Vec<EpisodeRow> = results::resume_rows(&jsonl, |r| resume::whole_batches(r, &batches))?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.jobs.max(1))
         .build()
         .context("starting worker threads")?;
     let setup = Setup { cfg: &cfg, model: &model, master_seed: a.seed, max_steps: a.max_steps };
     let expect = Expectations { image_size: cfg.render.size as usize, action_dim: 2 };
-    let seeds: Vec<u64> = (0..a.episodes as u64).map(|i| a.seed_start + i).collect();
-    let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
     let pb = progress::bar((dirs.len() * a.episodes) as u64, "rank", quiet);
-    let mut failed: Vec<Value> = Vec::new();
+    let mut failed: Vec<FailedPolicy> = Vec::new();
     let mut names = Vec::new();
     let started = Instant::now();
     // Load every policy first (a policy that fails to load is reported and left out),
@@ -96,7 +112,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
             Ok(p) => loaded.push((pi, p)),
             Err(e) => {
                 tracing::error!("{e}; continuing with the other policies");
-                failed.push(json!({"policy": name, "error": e.to_string()}));
+                failed.push(FailedPolicy { policy: name, error: e.to_string() });
                 pb.inc(a.episodes as u64);
             }
         }
@@ -131,36 +147,54 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
                 rows.extend(new);
                 pb.inc(todo.len() as u64);
             }
+            // The world model failing is not the policy's fault and would fail every
+            // policy alike: stop the run once, naming the model.
+            Err(e) if e.chain().any(|c| c.downcast_ref::<NonFiniteLatents>().is_some()) => {
+                bail!(
+                    "world model {}: {} (while imagining policy {name}'s seeds {todo:?}); \
+                     the rows of the batches before this one are kept",
+                    a.world_model.display(),
+                    e.chain()
+                        .find_map(|c| c.downcast_ref::<NonFiniteLatents>())
+                        .map_or_else(String::new, |n| n.to_string())
+                );
+            }
             Err(e) => {
                 tracing::error!("policy {name}: {e:#}; continuing with the other policies");
-                failed.push(json!({"policy": name, "error": format!("{e:#}")}));
+                failed.push(FailedPolicy { policy: name.clone(), error: format!("{e:#}") });
             }
         }
         Ok(())
     };
     let timing = schedule::run_batches(&policies, &jobs, &setup, &wm, a.jobs, &mut done)?;
     pb.finish_and_clear();
-    let failed_names: Vec<&str> = failed.iter().filter_map(|f| f["policy"].as_str()).collect();
+    let failed_names: Vec<&str> = failed.iter().map(|f| f.policy.as_str()).collect();
     let ok_names: Vec<String> =
         names.iter().filter(|n| !failed_names.contains(&n.as_str())).cloned().collect();
-    let mut res = summarise(&rows, &ok_names, a.bootstrap, a.seed);
-    let wall = started.elapsed().as_secs_f64();
-    res["scenario"] = json!(a.scenario);
-    res["world_model"] = json!(a.world_model);
-    res["episodes"] = json!(a.episodes);
-    res["seed_start"] = json!(a.seed_start);
-    res["max_steps"] = json!(a.max_steps);
-    res["failed_policies"] = json!(failed);
-    res["timing"] = json!({
-        "wall_seconds": wall,
-        "sim_seconds": timing.sim_s,
-        "world_model_seconds": timing.world_model_s,
-        "world_model_ms_per_frame": 1e3 * timing.world_model_s / timing.frames.max(1) as f64,
-        "policy_seconds": timing.policy_s,
-        "note": "this session only (a resumed run times its own part)",
-    });
-    write_json(&a.out.join("results.json"), &res)?;
+    let (policies, agreement) = summarise(&rows, &ok_names, a.bootstrap, a.seed);
+    let res = RankResults {
+        scenario: a.scenario.clone(),
+        world_model: a.world_model.clone(),
+        episodes: a.episodes,
+        seed_start: a.seed_start,
+        max_steps: a.max_steps,
+        policies,
+        agreement,
+        failed_policies: failed.clone(),
+        timing: RunTiming {
+            wall_seconds: started.elapsed().as_secs_f64(),
+            sim_seconds: timing.sim_s,
+            world_model_seconds: timing.world_model_s,
+            world_model_ms_per_frame: 1e3 * timing.world_model_s / timing.frames.max(1) as f64,
+            policy_seconds: timing.policy_s,
+            note: "this process only (a resumed run times its own part)".into(),
+        },
+    };
+    write_json(&a.out.join("results.json"), &res.to_json()?)?;
     write_tables(&a.out, &rows)?;
+    // The results are complete (the report can be made again from them with
+    // `evalharness report`): a run this one replaced can go.
+    out_dir.finish(true)?;
     if !a.no_report {
         if shards == 1 {
             rollouts(a, &dirs, &rows, &failed_names, &setup, &wm, &pool)?;
@@ -168,11 +202,35 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         let html = report::write_report(&a.out)?;
         tracing::info!(report = %html.display(), "report written");
     }
-    if let Some((text, true)) = scene::scene_note(&res) {
+    if let Some((text, true)) = scene::scene_note(&res.policies) {
         tracing::warn!("{text}");
     }
-    print_summary(&res, &a.out);
-    gates(a, &res, &failed)
+    summary::print(&res, &a.out);
+    summary::gates(a.min_pearson, a.max_inversions, &res)
+}
+
+/// The model folders a run depends on, each as (name in `config.json`'s
+/// `fingerprints`, folder, content fingerprint): every policy checkpoint, the world
+/// model and its autoencoder.
+///
+/// # Errors
+/// A folder that cannot be read, naming it.
+pub(crate) fn model_inputs(
+    wm_dir: &Path,
+    wm: &WorldModel,
+    dirs: &[std::path::PathBuf],
+) -> Result<Vec<(String, std::path::PathBuf, String)>> {
+    let mut out = vec![("world_model".to_string(), wm_dir.to_path_buf())];
+    if let Some(ae) = &wm.cfg.autoencoder {
+        out.push(("autoencoder".to_string(), wm_dir.join(ae)));
+    }
+    out.extend(dirs.iter().map(|d| (format!("policy {}", checkpoint_name(d)), d.clone())));
+    out.into_iter()
+        .map(|(k, d)| {
+            let f = harness::fingerprint::folder(&d)?;
+            Ok((k, d, f))
+        })
+        .collect()
 }
 
 /// Loads the world model in `dir`, with `--alpha` applied when given.
@@ -221,116 +279,4 @@ fn rollouts(
     }
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     write_json(&dir.join("index.json"), &Value::Array(index))
-}
-
-/// Exit 1 when a gate fails (or a policy failed), 0 otherwise.
-fn gates(a: &RankArgs, res: &Value, failed: &[Value]) -> Result<ExitCode> {
-    let mut ok = true;
-    if let Some(min) = a.min_pearson {
-        let r = res["agreement"]["pearson"].as_f64();
-        if r.is_none_or(|r| r < min) {
-            eprintln!("gate failed: Pearson {r:?} < --min-pearson {min}");
-            ok = false;
-        }
-    }
-    if let Some(max) = a.max_inversions {
-        let k = res["agreement"]["rank_inversions"].as_u64().unwrap_or(u64::MAX);
-        if k > max {
-            eprintln!("gate failed: {k} rank inversions > --max-inversions {max}");
-            ok = false;
-        }
-    }
-    if !failed.is_empty() {
-        eprintln!("{} policies failed (see results.json \"failed_policies\")", failed.len());
-        ok = false;
-    }
-    Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
-}
-
-/// Writes `episodes.csv` and `episodes.parquet` into `out`: the rows sorted by
-/// (policy, seed, branch).
-pub(crate) fn write_tables(out: &Path, rows: &[EpisodeRow]) -> Result<()> {
-    let mut sorted: Vec<&EpisodeRow> = rows.iter().collect();
-    sorted.sort_by(|x, y| (&x.policy, x.seed, x.branch).cmp(&(&y.policy, y.seed, y.branch)));
-    write_csv(&out.join("episodes.csv"), &sorted)?;
-    let records: Vec<EpisodeRecord> = sorted
-        .iter()
-        .map(|r| EpisodeRecord {
-            policy: r.policy.clone(),
-            seed: r.seed,
-            branch: r.branch.as_str().to_string(),
-            score: r.score,
-            max_coverage: r.max_coverage,
-            final_coverage: r.final_coverage,
-            success: r.success,
-            steps: r.steps as u32,
-            final_block: r.final_block,
-            goal: r.goal,
-            scorer_abs_error: r.scorer_abs_error,
-            block_area: r.block_area,
-            goal_kept: r.goal_kept,
-            agent_kept: r.agent_kept,
-        })
-        .collect();
-    write_episodes_parquet(&out.join("episodes.parquet"), &records)?;
-    Ok(())
-}
-
-fn write_csv(path: &Path, sorted: &[&EpisodeRow]) -> Result<()> {
-    let mut w = csv::Writer::from_path(path).with_context(|| format!("creating {}", path.display()))?;
-    w.write_record([
-        "policy",
-        "seed",
-        "branch",
-        "score",
-        "max_coverage",
-        "final_coverage",
-        "success",
-        "steps",
-    ])?;
-    for r in sorted {
-        let branch = r.branch.as_str().to_string();
-        w.write_record([
-            r.policy.clone(),
-            r.seed.to_string(),
-            branch,
-            format!("{:.6}", r.score),
-            format!("{:.6}", r.max_coverage),
-            format!("{:.6}", r.final_coverage),
-            r.success.to_string(),
-            r.steps.to_string(),
-        ])?;
-    }
-    w.flush().with_context(|| format!("writing {}", path.display()))
-}
-
-fn print_summary(res: &Value, out: &Path) {
-    println!(
-        "{:<16} {:>10} {:>12} {:>12} {:>10} {:>11}",
-        "policy", "MuJoCo", "world model", "block kept", "goal kept", "agent kept"
-    );
-    for p in res["policies"].as_array().into_iter().flatten() {
-        let wm = |k: &str| p["world_model"][k].as_f64().unwrap_or(f64::NAN);
-        println!(
-            "{:<16} {:>10.3} {:>12.3} {:>12.2} {:>10.2} {:>11.2}",
-            p["name"].as_str().unwrap_or("?"),
-            p["sim"]["mean"].as_f64().unwrap_or(f64::NAN),
-            wm("mean"),
-            wm("block_area"),
-            wm("goal_kept"),
-            wm("agent_kept")
-        );
-    }
-    let ag = &res["agreement"];
-    let f = |k: &str| ag[k].as_f64().map_or("n/a".to_string(), |v| format!("{v:.3}"));
-    println!(
-        "Pearson {}  Spearman {}  Kendall tau_b {}  inversions {}  MMRV {}  regret@1 {}",
-        f("pearson"),
-        f("spearman"),
-        f("kendall_tau_b"),
-        ag["rank_inversions"],
-        f("mmrv"),
-        f("regret_at_1")
-    );
-    println!("results: {}", out.join("results.json").display());
 }

@@ -33,7 +33,7 @@ use world_model::data::tensor_to_frames;
 use world_model::model::WorldModel;
 use world_model::rollout::Rollout;
 
-use super::results::{Branch, EpisodeRow};
+use super::results::{Branch, EpisodeRow, WithScene};
 pub use super::start::{BranchOut, Setup, Start, Timing};
 use super::start::{Seen, Track, still_active};
 
@@ -300,7 +300,11 @@ pub fn wm_branch(
         while done < len {
             let f = f_max.min(len - done);
             let pred = roll.step(wm, f, |p, j| chunks[p][done + j], &mut sub).map_err(|e| {
-                anyhow!("policy {name}, episode steps {}..{}: {e}", steps + done, steps + done + f)
+                anyhow::Error::new(e).context(format!(
+                    "policy {name}, episode steps {}..{}",
+                    steps + done,
+                    steps + done + f
+                ))
             })?; // [a, f, C, s, s]
             // Decode only the frames the policy will see (the chunk's last `o`): decoding
             // is the most expensive part of the branch. They are also the frames scored.

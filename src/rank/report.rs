@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
+use harness::results::RankResults;
 use reports::html::{Extras, report_html};
 use reports::plots::write_plots;
 use reports::summary::Summary;
@@ -34,14 +35,12 @@ fn provenance(dir: &Path) -> String {
 /// # Errors
 /// Missing or malformed input files (named), or unwritable outputs.
 pub fn write_report(out: &Path) -> Result<PathBuf> {
-    let results_path = out.join("results.json");
-    let results = read_json(&results_path)?;
-    let summary = Summary::from_results(&results)
-        .with_context(|| format!("{}: not an evalharness rank results file", results_path.display()))?;
+    let results = RankResults::read(&out.join("results.json"))?;
+    let summary = Summary::from_results(&results);
     let config = read_json(&out.join("config.json"))?;
     let mut plots = write_plots(&out.join("plots"), &summary)?;
     let rows = super::results::read_rows::<super::results::EpisodeRow>(&out.join("episodes.jsonl"))?;
-    let max_steps = results["max_steps"].as_f64().unwrap_or(300.0);
+    let max_steps = results.max_steps as f64;
     let series: Vec<TimeSeries> = summary
         .policies
         .iter()
@@ -65,15 +64,7 @@ pub fn write_report(out: &Path) -> Result<PathBuf> {
     std::fs::write(out.join("table.tex"), latex_table(&summary)).context("writing table.tex")?;
     let csv = summary_csv(&summary).context("building summary.csv")?;
     std::fs::write(out.join("summary.csv"), csv).context("writing summary.csv")?;
-    let filmstrips: Vec<(PathBuf, String)> = read_json(&out.join("filmstrips/index.json"))
-        .ok()
-        .and_then(|v| v.as_array().cloned())
-        .unwrap_or_default()
-        .iter()
-        .filter_map(|f| {
-            Some((out.join("filmstrips").join(f["png"].as_str()?), f["caption"].as_str()?.to_string()))
-        })
-        .collect();
+    let (filmstrips, filmstrip_problems) = filmstrips(out);
     let mut prov: Vec<(String, String)> = Vec::new();
     if let Some(wm) = config["world_model"].as_str() {
         prov.push((format!("world model {wm}"), provenance(Path::new(wm))));
@@ -81,28 +72,23 @@ pub fn write_report(out: &Path) -> Result<PathBuf> {
     for c in config["checkpoints"].as_array().into_iter().flatten().filter_map(Value::as_str) {
         prov.push((format!("policy {c}"), provenance(Path::new(c))));
     }
-    let t = &results["timing"];
+    let t = &results.timing;
     let mut notes = vec![format!(
-        "Timing (this session): wall {:.0} s; MuJoCo branch {:.0} s; world-model branch {:.0} s ({:.1} ms per generated frame); policies {:.0} s.",
-        t["wall_seconds"].as_f64().unwrap_or(f64::NAN),
-        t["sim_seconds"].as_f64().unwrap_or(f64::NAN),
-        t["world_model_seconds"].as_f64().unwrap_or(f64::NAN),
-        t["world_model_ms_per_frame"].as_f64().unwrap_or(f64::NAN),
-        t["policy_seconds"].as_f64().unwrap_or(f64::NAN),
+        "Timing (this run): wall {:.0} s; MuJoCo branch {:.0} s; world-model branch {:.0} s ({:.1} ms per generated frame); policies {:.0} s.",
+        t.wall_seconds, t.sim_seconds, t.world_model_seconds, t.world_model_ms_per_frame, t.policy_seconds,
     )];
-    let errs: Vec<f64> = results["policies"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(|p| p["frame_scorer_mean_abs_error"].as_f64())
-        .collect();
+    let errs: Vec<f64> = results.policies.iter().map(|p| p.frame_scorer_mean_abs_error).collect();
     if !errs.is_empty() {
         notes.push(format!(
             "The world-model branch is scored from frames (goal mask × block colour). On real rendered frames its coverage differs from the exact polygon coverage by {:.4} on average.",
             errs.iter().sum::<f64>() / errs.len() as f64
         ));
     }
-    if let Some((text, _)) = super::scene::scene_note(&results) {
+    for problem in filmstrip_problems {
+        tracing::warn!("{problem}");
+        notes.push(format!("Filmstrips: {problem}."));
+    }
+    if let Some((text, _)) = super::scene::scene_note(&results.policies) {
         notes.push(text);
     }
     notes.push("Score = max over the episode of clip(coverage / 0.95, 0, 1); success = coverage > 0.95 at some step.".into());
@@ -112,4 +98,35 @@ pub fn write_report(out: &Path) -> Result<PathBuf> {
     std::fs::write(&html, report_html(&summary, &extras))
         .with_context(|| format!("writing {}", html.display()))?;
     Ok(html)
+}
+
+/// The filmstrips `filmstrips/index.json` lists, as (PNG, caption), and what is wrong
+/// with it: an index that does not parse, entries without a `png` or `caption`, and
+/// listed PNGs that are missing (each left out). No index: no filmstrips, no problem
+/// (runs with `--no-report`, shards).
+fn filmstrips(out: &Path) -> (Vec<(PathBuf, String)>, Vec<String>) {
+    let path = out.join("filmstrips/index.json");
+    if !path.exists() {
+        return (Vec::new(), Vec::new());
+    }
+    let list = match read_json(&path) {
+        Ok(Value::Array(list)) => list,
+        Ok(_) => return (Vec::new(), vec![format!("{} is not a list; none shown", path.display())]),
+        Err(e) => return (Vec::new(), vec![format!("{e:#}; none shown")]),
+    };
+    let (mut strips, mut problems) = (Vec::new(), Vec::new());
+    for (i, f) in list.iter().enumerate() {
+        match (f["png"].as_str(), f["caption"].as_str()) {
+            (Some(png), Some(caption)) => {
+                let file = out.join("filmstrips").join(png);
+                if file.is_file() {
+                    strips.push((file, caption.to_string()));
+                } else {
+                    problems.push(format!("{} (listed in {}) is missing", file.display(), path.display()));
+                }
+            }
+            _ => problems.push(format!("{} entry {i} has no \"png\" or \"caption\"", path.display())),
+        }
+    }
+    (strips, problems)
 }

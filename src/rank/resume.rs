@@ -2,11 +2,13 @@
 //! more episodes per policy. Anything else would mix the rows of two experiments in
 //! one `episodes.jsonl`, so it is refused with each differing setting named.
 
+use std::collections::HashMap;
 use std::path::Path;
 
 use anyhow::{Result, bail};
 use serde_json::Value;
 
+use super::results::{Branch, EpisodeRow};
 use crate::output::read_json;
 
 /// Settings a resumed run may change: the command line itself, and the bootstrap
@@ -24,13 +26,15 @@ const FREE_ON_RESUME: [&str; 2] = ["command", "bootstrap"];
 /// a whole number of batches, the new seeds form batches of their own, exactly the
 /// ones a straight run of the larger count has. A count that ends in a part batch, or
 /// a sharded run (whose share of the batches depends on their number), cannot grow
-/// that way and is refused. A run without a saved config (killed before writing it)
-/// resumes freely.
+/// that way and is refused. The content fingerprints of the models must match. A
+/// folder without a saved config resumes only when it holds no rows either (the
+/// caller refuses rows without settings).
 pub(crate) fn check_config(path: &Path, config: &Value) -> Result<()> {
     if !path.is_file() {
         return Ok(());
     }
     let saved = read_json(path)?;
+    check_fingerprints(path, &saved, config)?;
     let differs: Vec<String> = config
         .as_object()
         .into_iter()
@@ -38,6 +42,7 @@ pub(crate) fn check_config(path: &Path, config: &Value) -> Result<()> {
         .filter(|(k, v)| {
             !FREE_ON_RESUME.contains(&k.as_str())
                 && k.as_str() != "episodes"
+                && k.as_str() != "fingerprints"
                 && saved.get(k.as_str()) != Some(*v)
         })
         .map(|(k, v)| {
@@ -56,6 +61,52 @@ pub(crate) fn check_config(path: &Path, config: &Value) -> Result<()> {
         );
     }
     check_growth(path, &saved, config)
+}
+
+/// Refuses to resume when a model folder's content changed since the saved run (new
+/// weights under the same name would be mixed with the old ones' rows), naming each.
+fn check_fingerprints(path: &Path, saved: &Value, config: &Value) -> Result<()> {
+    let Some(now) = config.get("fingerprints").and_then(Value::as_object) else { return Ok(()) };
+    let Some(was) = saved.get("fingerprints").and_then(Value::as_object) else {
+        bail!(
+            "--resume: {} records no fingerprints of its models, so it cannot be checked that \
+             they are unchanged; start a new run (--force or another --out)",
+            path.display()
+        );
+    };
+    let changed: Vec<&str> = now
+        .iter()
+        .filter(|(k, v)| was.get(k.as_str()).is_some_and(|w| w != *v))
+        .map(|(k, _)| k.as_str())
+        .collect();
+    if !changed.is_empty() {
+        bail!(
+            "--resume: the content of {} changed since {} was written (its rows came from the \
+             old files); restore them, or start a new run (--force or another --out)",
+            changed.join(", "),
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// Marks the rows of whole batches, for [`super::results::resume_rows`]: a row is kept
+/// when its seed's batch (of this run's `batches`) holds, for its policy, exactly one
+/// MuJoCo and one world-model row per seed. Rows of partial or doubled batches, and
+/// of seeds outside the run, are not.
+pub(crate) fn whole_batches(rows: &[EpisodeRow], batches: &[&[u64]]) -> Vec<bool> {
+    let mut count: HashMap<(&str, u64, Branch), usize> = HashMap::new();
+    for r in rows {
+        *count.entry((r.policy.as_str(), r.seed, r.branch)).or_default() += 1;
+    }
+    let batch_of: HashMap<u64, usize> =
+        batches.iter().enumerate().flat_map(|(b, seeds)| seeds.iter().map(move |&s| (s, b))).collect();
+    let whole = |policy: &str, b: usize| {
+        batches[b].iter().all(|&s| {
+            [Branch::Sim, Branch::WorldModel].iter().all(|&br| count.get(&(policy, s, br)) == Some(&1))
+        })
+    };
+    rows.iter().map(|r| batch_of.get(&r.seed).is_some_and(|&b| whole(&r.policy, b))).collect()
 }
 
 /// The `--episodes` rule of [`check_config`] (the other settings already agree).
@@ -141,6 +192,57 @@ mod tests {
         let path = saved(dir.path(), 100, [1, 2]);
         let err = check_config(&path, &now(200, [1, 2])).unwrap_err().to_string();
         assert!(err.contains("one shard"), "{err}");
+    }
+
+    fn row(policy: &str, seed: u64, branch: Branch) -> EpisodeRow {
+        EpisodeRow::new(policy, seed, branch, 0.5, 0.5, 0.5, 0.95, 10)
+    }
+
+    #[test]
+    fn only_whole_batches_are_kept() {
+        // Seeds 10..14 in batches [10, 11], [12, 13]. Policy a: batch 0 whole, batch 1
+        // lacks seed 13's world-model row; policy b: batch 0 has seed 10's MuJoCo row
+        // twice; seed 99 is outside the run.
+        let batches: Vec<&[u64]> = vec![&[10, 11], &[12, 13]];
+        let (s, w) = (Branch::Sim, Branch::WorldModel);
+        let rows = vec![
+            row("a", 10, s),
+            row("a", 10, w),
+            row("a", 11, s),
+            row("a", 11, w),
+            row("a", 12, s),
+            row("a", 12, w),
+            row("a", 13, s),
+            row("b", 10, s),
+            row("b", 10, s),
+            row("b", 10, w),
+            row("b", 11, s),
+            row("b", 11, w),
+            row("a", 99, s),
+        ];
+        let keep = whole_batches(&rows, &batches);
+        assert_eq!(
+            keep,
+            [true, true, true, true, false, false, false, false, false, false, false, false, false]
+        );
+    }
+
+    #[test]
+    fn changed_model_content_is_refused_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("config.json");
+        let mut cfg = now(100, [0, 1]);
+        cfg["fingerprints"] = json!({"world_model": "sha256:aa", "policy p": "sha256:bb"});
+        std::fs::write(&path, cfg.to_string()).unwrap();
+        check_config(&path, &cfg).unwrap();
+        let mut other = cfg.clone();
+        other["fingerprints"]["policy p"] = json!("sha256:cc");
+        let err = check_config(&path, &other).unwrap_err().to_string();
+        assert!(err.contains("content of policy p changed"), "{err}");
+        // A run saved before fingerprints were recorded cannot be checked: refused.
+        std::fs::write(&path, now(100, [0, 1]).to_string()).unwrap();
+        let err = check_config(&path, &cfg).unwrap_err().to_string();
+        assert!(err.contains("records no fingerprints"), "{err}");
     }
 
     #[test]

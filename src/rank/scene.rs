@@ -14,7 +14,7 @@
 //! [`EpisodeRow::goal_kept`]: super::results::EpisodeRow::goal_kept
 //! [`EpisodeRow::agent_kept`]: super::results::EpisodeRow::agent_kept
 
-use serde_json::Value;
+use harness::results::PolicyResult;
 
 /// Below this mean (block area, or fraction of the goal or of the agent shown) a policy's
 /// imagined episodes end in frames that have lost the scene.
@@ -22,25 +22,17 @@ pub const DEGRADED: f64 = 0.5;
 
 /// The sentence on both checks, and whether it warns; `None` for runs that did not
 /// record them.
-pub fn scene_note(res: &Value) -> Option<(String, bool)> {
-    let pol = res["policies"].as_array()?;
-    let get = |p: &Value, b: &str, k: &str| p[b][k].as_f64();
+pub fn scene_note(pol: &[PolicyResult]) -> Option<(String, bool)> {
     // The agent check is absent in runs written before it existed.
     let wm: Vec<(&str, f64, f64, Option<f64>)> = pol
         .iter()
         .filter_map(|p| {
-            Some((
-                p["name"].as_str()?,
-                get(p, "world_model", "block_area")?,
-                get(p, "world_model", "goal_kept")?,
-                get(p, "world_model", "agent_kept"),
-            ))
+            let w = &p.world_model;
+            Some((p.name.as_str(), w.block_area?, w.goal_kept?, w.agent_kept))
         })
         .collect();
-    let sim: Vec<(f64, f64)> = pol
-        .iter()
-        .filter_map(|p| Some((get(p, "sim", "block_area")?, get(p, "sim", "goal_kept")?)))
-        .collect();
+    let sim: Vec<(f64, f64)> =
+        pol.iter().filter_map(|p| Some((p.sim.block_area?, p.sim.goal_kept?))).collect();
     if wm.is_empty() || sim.is_empty() {
         return None;
     }
@@ -60,7 +52,7 @@ pub fn scene_note(res: &Value) -> Option<(String, bool)> {
         mean(&mut sim.iter().map(|s| s.0)),
         mean(&mut sim.iter().map(|s| s.1)),
     );
-    let sim_agent: Vec<f64> = pol.iter().filter_map(|p| get(p, "sim", "agent_kept")).collect();
+    let sim_agent: Vec<f64> = pol.iter().filter_map(|p| p.sim.agent_kept).collect();
     let wm_agent: Vec<f64> = wm.iter().filter_map(|w| w.3).collect();
     if !sim_agent.is_empty() && wm_agent.len() == wm.len() {
         let (a_lo, a_hi) = range(&mut wm_agent.iter().copied());
@@ -86,7 +78,7 @@ pub fn scene_note(res: &Value) -> Option<(String, bool)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rank::results::{Branch, EpisodeRow, summarise};
+    use crate::rank::results::{Branch, EpisodeRow, WithScene, summarise};
     use scenarios::pusht::frame_score::SceneCheck;
 
     #[test]
@@ -114,9 +106,9 @@ mod tests {
             })
             .collect();
         let names = ["a".into(), "b".into(), "c".into()];
-        let s = summarise(&rows, &names, 100, 0);
-        assert!((s["policies"][0]["world_model"]["goal_kept"].as_f64().unwrap() - 0.3).abs() < 1e-12);
-        assert!((s["policies"][2]["world_model"]["agent_kept"].as_f64().unwrap() - 0.2).abs() < 1e-12);
+        let (s, _) = summarise(&rows, &names, 100, 0);
+        assert!((s[0].world_model.goal_kept.unwrap() - 0.3).abs() < 1e-12);
+        assert!((s[2].world_model.agent_kept.unwrap() - 0.2).abs() < 1e-12);
         let (text, warn) = scene_note(&s).unwrap();
         assert!(warn);
         // MuJoCo block area: policy means 1.06, 1.05, 1.05 → 1.0533; goal: (0.96 + 0.94 + 0.95) / 3
@@ -137,10 +129,10 @@ mod tests {
                 r
             })
             .collect();
-        let (text, _) = scene_note(&summarise(&older, &names, 100, 0)).unwrap();
+        let (text, _) = scene_note(&summarise(&older, &names, 100, 0).0).unwrap();
         assert!(!text.contains("agent's disk") && text.contains("episodes of a end"), "{text}");
         // Without the checks (older runs): no note.
         let plain: Vec<EpisodeRow> = rows.into_iter().map(|r| r.with_scene(None)).collect();
-        assert_eq!(scene_note(&summarise(&plain, &["a".into()], 100, 0)), None);
+        assert_eq!(scene_note(&summarise(&plain, &["a".into()], 100, 0).0), None);
     }
 }

@@ -116,7 +116,11 @@ pub fn run_batches(
                 if !dead[p] {
                     let result = pair(w, m, policies[p].name());
                     dead[p] = result.is_err();
-                    done(handed, result)?;
+                    if let Err(e) = done(handed, result) {
+                        // The run stops: workers take no further task.
+                        next.store(2 * batches.len(), Ordering::SeqCst);
+                        return Err(e);
+                    }
                 }
                 handed += 1;
             }

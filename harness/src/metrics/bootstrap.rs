@@ -103,7 +103,7 @@ pub fn clustered_mean_ci(clusters: &[Vec<f64>], b: usize, seed: u64) -> Option<[
 }
 
 /// 95% intervals of every agreement metric.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
 pub struct AgreementCi {
     /// Pearson r.
     pub pearson: Option<[f64; 2]>,

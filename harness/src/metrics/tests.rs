@@ -88,3 +88,25 @@ fn clustered_bootstrap_resamples_whole_clusters() {
     assert!(c[0] < 4.5 && 4.5 < c[1], "{c:?}");
     assert!(c[1] - c[0] > 2.5 * (f[1] - f[0]), "clustered {c:?} against independent {f:?}");
 }
+
+#[test]
+fn a_ranking_of_fewer_than_two_policies_reports_no_metrics() {
+    // One policy (or none) has no pair to invert: every metric is null, not a perfect 0.
+    for (pred, act, names) in [(&[][..], &[][..], &[][..]), (&[0.3][..], &[0.5][..], &["a"][..])] {
+        let j = agreement(pred, act).to_json(names, None);
+        for key in [
+            "pearson",
+            "spearman",
+            "kendall_tau_b",
+            "rank_inversions",
+            "rank_inversion_fraction",
+            "mmrv",
+            "regret_at_1",
+        ] {
+            assert!(j[key].is_null(), "{key}: {j}");
+        }
+    }
+    // Two policies in the same order: 0 inversions, MMRV 0, regret 0 (defined).
+    let j = agreement(&[0.1, 0.2], &[0.3, 0.4]).to_json(&["a", "b"], None);
+    assert_eq!((j["rank_inversions"].as_u64(), j["mmrv"].as_f64()), (Some(0), Some(0.0)));
+}

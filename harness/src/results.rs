@@ -1,0 +1,337 @@
+//! The typed results of a paired ranking run, shared by every crate that writes or
+//! reads them: `rank` and `merge` write `results.json` and `episodes.jsonl` with
+//! these types, `report` and the `reports` crate read them back.
+//!
+//! `results.json` is written through a [`serde_json::Value`], whose objects keep
+//! their keys in sorted order, so the file's layout does not depend on the order of
+//! the fields below. Reading names the field at fault
+//! (`policies[2].sim.mean: invalid type: string "x", expected f64`).
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::metrics::bootstrap::AgreementCi;
+
+/// Which branch an episode ran in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Branch {
+    /// The MuJoCo reference.
+    Sim,
+    /// The world model.
+    WorldModel,
+}
+
+impl Branch {
+    /// The name in every output file (`sim`, `world_model`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Branch::Sim => "sim",
+            Branch::WorldModel => "world_model",
+        }
+    }
+}
+
+/// One (policy, seed, branch) episode: a line of `episodes.jsonl`, a row of
+/// `episodes.csv` and `episodes.parquet`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EpisodeRow {
+    /// Policy (checkpoint folder name).
+    pub policy: String,
+    /// Episode seed.
+    pub seed: u64,
+    /// Branch.
+    pub branch: Branch,
+    /// Max reward over the rollout (clip(coverage / threshold, 0, 1)).
+    pub score: f64,
+    /// Max coverage over the rollout.
+    pub max_coverage: f64,
+    /// Coverage at the last step.
+    pub final_coverage: f64,
+    /// Whether the coverage ever exceeded the success threshold.
+    pub success: bool,
+    /// Control steps.
+    pub steps: usize,
+    /// Final block pose (x, y, θ); the world-model branch has none.
+    pub final_block: Option<[f64; 3]>,
+    /// Goal pose.
+    pub goal: [f64; 3],
+    /// Mean |frame-scorer coverage − exact coverage| on this episode's real frames (MuJoCo rows).
+    pub scorer_abs_error: Option<f64>,
+    /// Score so far (max reward) at the end of each action chunk.
+    #[serde(default)]
+    pub score_trace: Vec<f64>,
+    /// Block pixels in the last frame the policy saw, as a fraction of the T's area:
+    /// ≈ 1 in MuJoCo; in the world model, how much of the block its rollout kept.
+    /// Absent in runs written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub block_area: Option<f64>,
+    /// How much of the (static) goal T that frame still shows: ≈ 0.94–0.99 in
+    /// MuJoCo; lower when an imagined scene has faded or eroded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal_kept: Option<f64>,
+    /// Agent pixels in that frame as a fraction of the agent disk's area, capped at 1:
+    /// ≈ 1 in MuJoCo; near 0 when an imagined rollout lost the agent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub agent_kept: Option<f64>,
+}
+
+impl EpisodeRow {
+    /// A row with the scores; success is `max_cov > thr`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        policy: &str,
+        seed: u64,
+        branch: Branch,
+        score: f64,
+        max_cov: f64,
+        last_cov: f64,
+        thr: f64,
+        steps: usize,
+    ) -> Self {
+        Self {
+            policy: policy.to_string(),
+            seed,
+            branch,
+            score,
+            max_coverage: max_cov,
+            final_coverage: last_cov,
+            success: max_cov > thr,
+            steps,
+            final_block: None,
+            goal: [0.0; 3],
+            scorer_abs_error: None,
+            score_trace: Vec::new(),
+            block_area: None,
+            goal_kept: None,
+            agent_kept: None,
+        }
+    }
+
+    /// With the score trace.
+    pub fn with_trace(mut self, t: Vec<f64>) -> Self {
+        self.score_trace = t;
+        self
+    }
+
+    /// With the final block and the goal pose.
+    pub fn with_poses(mut self, block: Option<[f64; 3]>, goal: [f64; 3]) -> Self {
+        self.final_block = block;
+        self.goal = goal;
+        self
+    }
+
+    /// With the frame scorer's error.
+    pub fn with_scorer_error(mut self, e: Option<f64>) -> Self {
+        self.scorer_abs_error = e;
+        self
+    }
+
+    /// With the scene checks of the last frame the policy saw (block area, goal kept,
+    /// agent kept), or none.
+    pub fn with_scene_checks(mut self, checks: Option<[f64; 3]>) -> Self {
+        self.block_area = checks.map(|c| c[0]);
+        self.goal_kept = checks.map(|c| c[1]);
+        self.agent_kept = checks.map(|c| c[2]);
+        self
+    }
+}
+
+/// One branch of one policy in `results.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BranchStats {
+    /// Mean episode score.
+    pub mean: f64,
+    /// Its bootstrap 95% interval (none for fewer than one episode).
+    pub ci95: Option<[f64; 2]>,
+    /// Fraction of successful episodes.
+    pub success_rate: f64,
+    /// Its Wilson 95% interval.
+    pub success_ci95: [f64; 2],
+    /// Episodes.
+    pub episodes: usize,
+    /// Mean block area of the last seen frames (null when no row recorded it).
+    #[serde(default)]
+    pub block_area: Option<f64>,
+    /// Mean goal kept.
+    #[serde(default)]
+    pub goal_kept: Option<f64>,
+    /// Mean agent kept.
+    #[serde(default)]
+    pub agent_kept: Option<f64>,
+}
+
+/// One policy in `results.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PolicyResult {
+    /// Checkpoint name.
+    pub name: String,
+    /// The MuJoCo branch.
+    pub sim: BranchStats,
+    /// The world-model branch.
+    pub world_model: BranchStats,
+    /// Mean frame-scorer error on the MuJoCo branch's real frames.
+    pub frame_scorer_mean_abs_error: f64,
+}
+
+/// How well the world model's scores agree with MuJoCo's across policies. Every
+/// metric is null where undefined (fewer than two policies, constant scores).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AgreementSummary {
+    /// Pearson r.
+    pub pearson: Option<f64>,
+    /// Spearman ρ.
+    pub spearman: Option<f64>,
+    /// Kendall τ_b.
+    pub kendall_tau_b: Option<f64>,
+    /// Pairs ranked in the opposite order.
+    pub rank_inversions: Option<usize>,
+    /// Inversions over all pairs.
+    pub rank_inversion_fraction: Option<f64>,
+    /// Pairs tied in either ranking, by name.
+    #[serde(default)]
+    pub ties: Vec<[String; 2]>,
+    /// Mean maximum rank violation.
+    pub mmrv: Option<f64>,
+    /// True score lost by picking the world model's best.
+    pub regret_at_1: Option<f64>,
+    /// Bootstrap 95% intervals of the metrics.
+    pub ci95: Option<AgreementCi>,
+}
+
+/// A policy left out of the ranking, with why.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FailedPolicy {
+    /// Checkpoint name.
+    pub policy: String,
+    /// The error.
+    pub error: String,
+}
+
+/// Where a run's time went.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunTiming {
+    /// Wall clock.
+    pub wall_seconds: f64,
+    /// MuJoCo stepping and rendering.
+    pub sim_seconds: f64,
+    /// World-model prediction and decoding.
+    pub world_model_seconds: f64,
+    /// World-model time per generated frame.
+    pub world_model_ms_per_frame: f64,
+    /// Policy inference.
+    pub policy_seconds: f64,
+    /// What the times cover.
+    pub note: String,
+}
+
+/// `results.json` of `rank` and `merge`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RankResults {
+    /// Scenario name or file.
+    pub scenario: String,
+    /// World-model folder.
+    pub world_model: PathBuf,
+    /// Episodes per policy.
+    pub episodes: usize,
+    /// First episode seed.
+    pub seed_start: u64,
+    /// Control steps per episode.
+    pub max_steps: usize,
+    /// Ranked policies, in run order.
+    pub policies: Vec<PolicyResult>,
+    /// Agreement across them.
+    pub agreement: AgreementSummary,
+    /// Policies left out.
+    #[serde(default)]
+    pub failed_policies: Vec<FailedPolicy>,
+    /// Timing.
+    pub timing: RunTiming,
+}
+
+/// A `results.json` that cannot be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum ResultsError {
+    /// I/O on the file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// Not JSON, or a field missing or of the wrong type (by its path).
+    #[error("{path}: not a complete evalharness rank results file: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// The field's path and what is wrong with it.
+        message: String,
+    },
+}
+
+impl RankResults {
+    /// Reads `path`, naming the first field that is missing or of the wrong type.
+    ///
+    /// # Errors
+    /// [`ResultsError`] naming the file (and the field).
+    pub fn read(path: &Path) -> Result<Self, ResultsError> {
+        let text =
+            std::fs::read_to_string(path).map_err(|source| ResultsError::Io { path: path.into(), source })?;
+        let de = &mut serde_json::Deserializer::from_str(&text);
+        serde_path_to_error::deserialize(de).map_err(|e| {
+            let field = e.path().to_string();
+            let message =
+                if field == "." { e.inner().to_string() } else { format!("{field}: {}", e.inner()) };
+            ResultsError::Invalid { path: path.into(), message }
+        })
+    }
+
+    /// The JSON document, its objects' keys in sorted order.
+    ///
+    /// # Errors
+    /// Never for these types (serde_json's error is passed on all the same).
+    pub fn to_json(&self) -> Result<serde_json::Value, serde_json::Error> {
+        serde_json::to_value(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> serde_json::Value {
+        let branch = serde_json::json!({"mean": 0.5, "ci95": [0.4, 0.6], "success_rate": 0.5,
+            "success_ci95": [0.1, 0.9], "episodes": 2, "block_area": null, "goal_kept": null, "agent_kept": 1.0});
+        serde_json::json!({
+            "scenario": "pusht", "world_model": "wm", "episodes": 2, "seed_start": 5, "max_steps": 300,
+            "policies": [{"name": "a", "sim": branch, "world_model": branch, "frame_scorer_mean_abs_error": 0.01}],
+            "agreement": {"pearson": null, "spearman": null, "kendall_tau_b": null, "rank_inversions": null,
+                "rank_inversion_fraction": null, "ties": [], "mmrv": null, "regret_at_1": null, "ci95": null},
+            "failed_policies": [{"policy": "c", "error": "bad"}],
+            "timing": {"wall_seconds": 1.0, "sim_seconds": 0.5, "world_model_seconds": 0.25,
+                "world_model_ms_per_frame": 4.0, "policy_seconds": 0.1, "note": "n"},
+        })
+    }
+
+    #[test]
+    fn round_trips_and_names_a_damaged_field() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("results.json");
+        std::fs::write(&path, sample().to_string()).unwrap();
+        let r = RankResults::read(&path).unwrap();
+        assert_eq!(r.to_json().unwrap(), sample());
+        let mut bad = sample();
+        bad["policies"][0]["sim"]["mean"] = serde_json::json!("high");
+        std::fs::write(&path, bad.to_string()).unwrap();
+        let err = RankResults::read(&path).unwrap_err().to_string();
+        assert!(err.contains("policies[0].sim.mean: invalid type: string \"high\", expected f64"), "{err}");
+        let mut bad = sample();
+        bad.as_object_mut().unwrap().remove("agreement");
+        std::fs::write(&path, bad.to_string()).unwrap();
+        let err = RankResults::read(&path).unwrap_err().to_string();
+        assert!(err.contains("missing field `agreement`"), "{err}");
+    }
+}

@@ -1,0 +1,132 @@
+//! What a finished `rank` (or `merge`) leaves besides `results.json`: the sorted
+//! episode tables (`episodes.csv`, `episodes.parquet`), the per-policy table and
+//! agreement line on stdout, and the exit code of the gates.
+
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use harness::results::RankResults;
+use reports::episodes::write_episodes_parquet;
+
+use super::results::EpisodeRow;
+
+/// Exit 1 when a gate fails (or a policy failed, or fewer than two policies were
+/// ranked, so no agreement could be measured), 0 otherwise. Undefined metrics fail
+/// a gate that asks for them, and are printed as n/a.
+pub(super) fn gates(
+    min_pearson: Option<f64>,
+    max_inversions: Option<u64>,
+    res: &RankResults,
+) -> Result<ExitCode> {
+    let mut ok = true;
+    let ranked = res.policies.len();
+    if ranked < 2 {
+        eprintln!("only {ranked} policies were ranked: agreement needs at least 2 (its metrics are null)");
+        ok = false;
+    }
+    if let Some(min) = min_pearson {
+        match res.agreement.pearson {
+            Some(r) if r >= min => {}
+            Some(r) => {
+                eprintln!("gate failed: Pearson {r:.4} < --min-pearson {min}");
+                ok = false;
+            }
+            None => {
+                eprintln!("gate failed: Pearson is undefined (n/a) and --min-pearson {min} needs a value");
+                ok = false;
+            }
+        }
+    }
+    if let Some(max) = max_inversions {
+        match res.agreement.rank_inversions {
+            Some(k) if k as u64 <= max => {}
+            Some(k) => {
+                eprintln!("gate failed: {k} rank inversions > --max-inversions {max}");
+                ok = false;
+            }
+            None => {
+                eprintln!(
+                    "gate failed: rank inversions are undefined (n/a) and --max-inversions {max} needs a value"
+                );
+                ok = false;
+            }
+        }
+    }
+    if !res.failed_policies.is_empty() {
+        eprintln!("{} policies failed (see results.json \"failed_policies\")", res.failed_policies.len());
+        ok = false;
+    }
+    Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}
+
+/// Writes `episodes.csv` and `episodes.parquet` into `out`: the rows sorted by
+/// (policy, seed, branch).
+pub(crate) fn write_tables(out: &Path, rows: &[EpisodeRow]) -> Result<()> {
+    let mut sorted: Vec<&EpisodeRow> = rows.iter().collect();
+    sorted.sort_by(|x, y| (&x.policy, x.seed, x.branch).cmp(&(&y.policy, y.seed, y.branch)));
+    write_csv(&out.join("episodes.csv"), &sorted)?;
+    write_episodes_parquet(&out.join("episodes.parquet"), &sorted)?;
+    Ok(())
+}
+
+fn write_csv(path: &Path, sorted: &[&EpisodeRow]) -> Result<()> {
+    let mut w = csv::Writer::from_path(path).with_context(|| format!("creating {}", path.display()))?;
+    w.write_record([
+        "policy",
+        "seed",
+        "branch",
+        "score",
+        "max_coverage",
+        "final_coverage",
+        "success",
+        "steps",
+    ])?;
+    for r in sorted {
+        let branch = r.branch.as_str().to_string();
+        w.write_record([
+            r.policy.clone(),
+            r.seed.to_string(),
+            branch,
+            format!("{:.6}", r.score),
+            format!("{:.6}", r.max_coverage),
+            format!("{:.6}", r.final_coverage),
+            r.success.to_string(),
+            r.steps.to_string(),
+        ])?;
+    }
+    w.flush().with_context(|| format!("writing {}", path.display()))
+}
+
+/// The per-policy table and the agreement line (stdout carries results only).
+pub(super) fn print(res: &RankResults, out: &Path) {
+    println!(
+        "{:<16} {:>10} {:>12} {:>12} {:>10} {:>11}",
+        "policy", "MuJoCo", "world model", "block kept", "goal kept", "agent kept"
+    );
+    let or_nan = |v: Option<f64>| v.unwrap_or(f64::NAN);
+    for p in &res.policies {
+        let wm = &p.world_model;
+        println!(
+            "{:<16} {:>10.3} {:>12.3} {:>12.2} {:>10.2} {:>11.2}",
+            p.name,
+            p.sim.mean,
+            wm.mean,
+            or_nan(wm.block_area),
+            or_nan(wm.goal_kept),
+            or_nan(wm.agent_kept)
+        );
+    }
+    let ag = &res.agreement;
+    let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.3}"));
+    println!(
+        "Pearson {}  Spearman {}  Kendall tau_b {}  inversions {}  MMRV {}  regret@1 {}",
+        f(ag.pearson),
+        f(ag.spearman),
+        f(ag.kendall_tau_b),
+        ag.rank_inversions.map_or("n/a".to_string(), |k| k.to_string()),
+        f(ag.mmrv),
+        f(ag.regret_at_1)
+    );
+    println!("results: {}", out.join("results.json").display());
+}
