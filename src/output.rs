@@ -68,6 +68,23 @@ impl RunDir {
         Ok(dir)
     }
 
+    /// [`RunDir::prepare`] for a run that appends its rows to `episodes.jsonl` beside
+    /// the `config.json` they were run with (`rank`, `plan`): rows without that
+    /// config cannot be checked against the settings, so resuming them is refused.
+    ///
+    /// # Errors
+    /// As [`RunDir::prepare`], and rows without a `config.json` on `--resume`.
+    pub fn prepare_episodes(out: &Path, resume: bool, force: bool) -> Result<Self> {
+        if resume && out.join("episodes.jsonl").exists() && !out.join("config.json").is_file() {
+            bail!(
+                "--resume: {} has episodes but no config.json, so the settings its rows were run with \
+                 are unknown; start a new run (--force or another --out)",
+                out.display()
+            );
+        }
+        Self::prepare(out, resume, force, "episodes.jsonl")
+    }
+
     /// The run ended: a `complete` run deletes the folder it replaced; an incomplete
     /// one (stopped early, resumable) keeps it, saying where.
     ///

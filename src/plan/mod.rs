@@ -133,15 +133,8 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         fingerprints.insert("autoencoder".into(), json!(harness::fingerprint::folder(ae)?));
     }
     crate::output::check_apart(&a.out, &apart)?;
+    let out_dir = crate::output::RunDir::prepare_episodes(&a.out, a.resume, a.force)?;
     let jsonl = a.out.join("episodes.jsonl");
-    if a.resume && jsonl.exists() && !a.out.join("config.json").is_file() {
-        bail!(
-            "--resume: {} has episodes but no config.json, so the settings its rows were run with \
-             are unknown; start a new run (--force or another --out)",
-            a.out.display()
-        );
-    }
-    let out_dir = crate::output::RunDir::prepare(&a.out, a.resume, a.force, "episodes.jsonl")?;
     let config = json!({
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "scenario": a.scenario, "policy": a.policy,
