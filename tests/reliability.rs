@@ -128,6 +128,17 @@ fn force_and_merge_never_destroy_inputs_or_a_finished_run() {
     expect_code(&run(&["merge", s(&shards[0]), s(&shards[1]), "--out", s(&merged), "--no-report"]), 0);
     assert_eq!(results(&merged), results(&prev));
 
+    // The folder an interrupted --force run set aside is never overwritten by another.
+    let aside = tmp.path().join("prev.replaced");
+    std::fs::create_dir_all(&aside).unwrap();
+    std::fs::write(aside.join("results.json"), b"{}").unwrap();
+    let mut args = rank_args(&set, &wm, &prev);
+    args.push("--force");
+    let (_, err) = expect_code(&run(&args), 2);
+    assert!(err.contains("prev.replaced") && err.contains("interrupted --force run"), "{err}");
+    assert_eq!(std::fs::read(aside.join("results.json")).unwrap(), b"{}");
+    assert_eq!(tree_bytes(&prev), before);
+    std::fs::remove_dir_all(&aside).unwrap();
     // A --force run that succeeds replaces the old run and leaves nothing aside.
     let mut args = rank_args(&set, &wm, &prev);
     args.extend(["--force", "--seed", "1"]);
