@@ -4,11 +4,10 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
-use crate::commands::RendererKind;
-use crate::commands::wm_eval_windows::Windows;
-
+mod choices;
 mod plan;
 mod train;
+pub use choices::*;
 pub use plan::*;
 pub use train::*;
 

@@ -16,8 +16,9 @@ use serde_json::{Value, json};
 use scenarios::pusht::PushTConfig;
 use scenarios::pusht::rollout::Episode;
 
-use super::episodes::{BehaviourKind, FrameSpec, Perturbation, RendererKind, Runner, behaviour_label};
+use super::episodes::{BehaviourKind, FrameSpec, Perturbation, Runner, behaviour_label};
 use crate::cli::CollectArgs;
+use crate::cli::RendererKind;
 use crate::progress;
 use crate::scenario::load_pusht;
 

@@ -7,6 +7,7 @@
 
 use std::sync::Arc;
 
+use crate::cli::RendererKind;
 use anyhow::{Context, Result, bail};
 use harness::seed::{derive, fnv1a};
 use mujoco_rs::prelude::MjModel;
@@ -94,16 +95,6 @@ fn behaviour(kind: BehaviourKind, env: &PushTEnv, seed: u64, p: Perturbation) ->
             Box::new(Decoy::new(Expert::new(env.model(), env.config()), derive(seed, &[fnv1a("decoy")])))
         }
     }
-}
-
-/// Which renderer draws recorded frames.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum RendererKind {
-    /// The anti-aliased 2-D rasteriser (the observations).
-    Raster,
-    /// MuJoCo's OpenGL renderer beside the rasteriser (frames twice as wide).
-    Mujoco,
 }
 
 /// Frames to record for one episode.

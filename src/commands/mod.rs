@@ -25,8 +25,6 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 
-pub use episodes::RendererKind;
-
 use crate::cli::{Cli, Command, DatasetCommand, TrainCommand, WmCommand};
 
 /// Runs the parsed command; the exit code is 0 unless a gate failed (1).

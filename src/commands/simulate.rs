@@ -10,7 +10,8 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use serde_json::json;
 
-use super::episodes::{BehaviourKind, FrameSpec, Perturbation, RendererKind, Runner};
+use super::episodes::{BehaviourKind, FrameSpec, Perturbation, Runner};
+use crate::cli::RendererKind;
 use crate::cli::SimulateArgs;
 use crate::output::{Staged, write_json};
 use crate::progress;

@@ -15,7 +15,8 @@ use super::goal_free;
 use super::goal_free::DatasetScene;
 use super::wm_eval_motion;
 use super::wm_eval_score::Scoring;
-use super::wm_eval_windows::{self, Windows};
+use super::wm_eval_windows;
+use crate::cli::Windows;
 use crate::cli::WmEvalArgs;
 use crate::output::{Staged, write_json};
 

@@ -9,19 +9,9 @@
 
 use std::ops::Range;
 
+use crate::cli::Windows;
 use harness::rng::Rng;
 use harness::seed::derive;
-
-/// How `wm eval` picks its 64-frame windows.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Windows {
-    /// The first frames of each of the first `--episodes` long-enough episodes.
-    First,
-    /// `--episodes` windows drawn without replacement, uniformly over every start
-    /// position of every long-enough episode, from `--seed` (spec §9's protocol).
-    Random,
-}
 
 /// One chosen window: the episode's index in the dataset and its first frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -1,0 +1,24 @@
+//! The value sets of command-line options (clap value enums) that commands match
+//! on. They live with the CLI so that the commands depend on it, never the other
+//! way round.
+
+/// Which renderer draws recorded frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RendererKind {
+    /// The anti-aliased 2-D rasteriser (the observations).
+    Raster,
+    /// MuJoCo's OpenGL renderer beside the rasteriser (frames twice as wide).
+    Mujoco,
+}
+
+/// How `wm eval` picks its 64-frame windows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Windows {
+    /// The first frames of each of the first `--episodes` long-enough episodes.
+    First,
+    /// `--episodes` windows drawn without replacement, uniformly over every start
+    /// position of every long-enough episode, from `--seed` (spec §9's protocol).
+    Random,
+}
