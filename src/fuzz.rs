@@ -106,7 +106,7 @@ fn zarr_reader_survives_damaged_metadata_and_chunks() {
 
 #[test]
 fn episodes_jsonl_reader_survives_damaged_rows() {
-    use crate::rank::results::{Branch, EpisodeRow, read_rows, resume_rows};
+    use crate::rank::results::{Branch, EpisodeRow, read_rows, resume_rows, whole_batches};
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("episodes.jsonl");
     let rows: Vec<EpisodeRow> = (0..4)
@@ -122,7 +122,9 @@ fn episodes_jsonl_reader_survives_damaged_rows() {
     fuzz("episodes.jsonl", text.as_bytes(), |bytes| {
         std::fs::write(&path, bytes).unwrap();
         let _ = read_rows::<EpisodeRow>(&path);
-        let _ = resume_rows(&path, |r: &[EpisodeRow]| crate::rank::resume::whole_batches(r, &batches));
+        let _ = resume_rows(&path, |r: &[EpisodeRow]| {
+            whole_batches(r, &batches, crate::rank::resume::rank_key, &crate::rank::resume::RANK_KINDS)
+        });
     });
 }
 

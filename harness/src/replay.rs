@@ -202,15 +202,12 @@ pub struct ReplayReader {
     pub attrs: Value,
 }
 
-/// Whether the dataset was written by evalharness, whose writer never omits a chunk
-/// (its older datasets declare fill value 0 all the same).
-fn written_here(attrs: &Value) -> bool {
-    attrs.get("evalharness").is_some()
-}
-
-/// `a`, read with missing chunks as errors when `complete`.
-fn complete_if(a: ArrayReader, complete: bool) -> ArrayReader {
-    if complete { a.all_chunks_written() } else { a }
+/// Opens array `dir` of a dataset whose root attributes are `attrs`. A dataset written
+/// by evalharness (an `evalharness` attribute) never omits a chunk, so a missing one
+/// is an error even where its older files declare fill value 0.
+fn open_array(dir: &Path, attrs: &Value) -> Result<ArrayReader, ZarrError> {
+    let a = ArrayReader::open(dir)?;
+    Ok(if attrs.get("evalharness").is_some() { a.all_chunks_written() } else { a })
 }
 
 impl ReplayReader {
@@ -224,13 +221,12 @@ impl ReplayReader {
             return Err(layout("no .zgroup (not a zarr v2 group)".into()));
         }
         let attrs = read_attrs(path)?;
-        let ours = written_here(&attrs);
         let open = |name: &str| {
             let p = path.join(name);
             if !p.join(".zarray").is_file() {
                 return Err(layout(format!("missing array {name}")));
             }
-            Ok(complete_if(ArrayReader::open(&p)?, ours))
+            Ok(open_array(&p, &attrs)?)
         };
         let img = open("data/img")?;
         let action = open("data/action")?;
@@ -285,7 +281,7 @@ impl ReplayReader {
         if !p.join(".zarray").is_file() {
             return Ok(None);
         }
-        let a = complete_if(ArrayReader::open(&p)?, written_here(&self.attrs));
+        let a = open_array(&p, &self.attrs)?;
         let v = a.read_f64()?;
         if v.len() != self.steps() {
             return Err(ReplayError::Layout {
@@ -350,7 +346,7 @@ impl ReplayReader {
                     reason: format!("missing array data/{name}"),
                 });
             }
-            ep.extras.push(floats(&complete_if(ArrayReader::open(&p)?, written_here(&self.attrs)))?);
+            ep.extras.push(floats(&open_array(&p, &self.attrs)?)?);
         }
         Ok(ep)
     }

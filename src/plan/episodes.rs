@@ -87,23 +87,9 @@ pub struct PlanRow {
     pub regret_random: Option<f64>,
 }
 
-/// Marks the rows of whole batches, for `resume_rows`: a row is kept when its seed's
-/// batch holds, for its planner, exactly one row per seed (rows of a partial or
-/// doubled batch, or of seeds outside the run, are not).
-pub fn whole_batches(rows: &[PlanRow], batches: &[&[u64]]) -> Vec<bool> {
-    let mut count: std::collections::HashMap<(&str, u64), usize> = std::collections::HashMap::new();
-    for r in rows {
-        *count.entry((r.planner.as_str(), r.seed)).or_default() += 1;
-    }
-    let batch_of: std::collections::HashMap<u64, usize> =
-        batches.iter().enumerate().flat_map(|(b, seeds)| seeds.iter().map(move |&s| (s, b))).collect();
-    rows.iter()
-        .map(|r| {
-            batch_of
-                .get(&r.seed)
-                .is_some_and(|&b| batches[b].iter().all(|&s| count.get(&(r.planner.as_str(), s)) == Some(&1)))
-        })
-        .collect()
+/// A `plan` row's (planner, seed, kind) for `whole_batches`: one row per seed.
+pub fn plan_key(r: &PlanRow) -> (&str, u64, ()) {
+    (r.planner.as_str(), r.seed, ())
 }
 
 /// One episode's live state.

@@ -32,7 +32,7 @@ use crate::cli::{PlanArgs, Planner};
 use crate::output::write_json;
 use crate::progress;
 use crate::rank::start::Timing;
-use episodes::{Ctx, PlanRow, run_batch};
+use episodes::{Ctx, PlanRow, plan_key, run_batch};
 
 /// Loads the proposing policy, returning chunks of max(imagine, execute) actions (it
 /// still predicts its whole horizon; only the slice it returns is longer), with the
@@ -120,18 +120,15 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     };
     let (policy, imagine, execute) = load_proposer(a, cfg.render.size as usize, &device)?;
     // Every input is checked; only now is the output folder touched.
-    let mut fingerprints = serde_json::Map::new();
-    fingerprints.insert("policy".into(), json!(harness::fingerprint::folder(&a.policy)?));
+    let inputs = crate::rank::model_inputs(
+        wm.as_ref().map(|w| (a.world_model.as_path(), w)),
+        std::slice::from_ref(&a.policy),
+    )?;
     let mut apart: Vec<(&str, &Path)> = vec![("--policy", &a.policy)];
-    let ae_dir = wm.as_ref().and_then(|w| w.cfg.autoencoder.as_ref()).map(|ae| a.world_model.join(ae));
     if wm.is_some() {
         apart.push(("--world-model", &a.world_model));
-        fingerprints.insert("world_model".into(), json!(harness::fingerprint::folder(&a.world_model)?));
     }
-    if let Some(ae) = &ae_dir {
-        apart.push(("autoencoder folder", ae));
-        fingerprints.insert("autoencoder".into(), json!(harness::fingerprint::folder(ae)?));
-    }
+    apart.extend(inputs.iter().map(|(_, dir, _)| ("model folder", dir.as_path())));
     crate::output::check_apart(&a.out, &apart)?;
     let out_dir = crate::output::RunDir::prepare_episodes(&a.out, a.resume, a.force)?;
     let jsonl = a.out.join("episodes.jsonl");
@@ -145,7 +142,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         "cost": "mean distance (world units) of the last imagined frame's block pixels from the goal T",
         "episodes": a.episodes, "seed_start": a.seed_start, "max_steps": a.max_steps,
         "batch": a.batch, "seed": a.seed, "bootstrap": a.bootstrap, "record": a.record,
-        "fingerprints": fingerprints,
+        "fingerprints": inputs.iter().map(|(k, _, f)| (k.clone(), json!(f))).collect::<serde_json::Map<_, _>>(),
     });
     if a.resume {
         crate::rank::resume::check_config(&a.out.join("config.json"), &config)?;
@@ -177,8 +174,9 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     let pb = progress::bar((planners.len() * a.episodes) as u64, "plan", quiet);
     let started = Instant::now();
     let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
-    let mut rows: Vec<PlanRow> =
-        crate::rank::results::resume_rows(&jsonl, |r| episodes::whole_batches(r, &batches))?;
+    let mut rows: Vec<PlanRow> = crate::rank::results::resume_rows(&jsonl, |r| {
+        crate::rank::results::whole_batches(r, &batches, plan_key, &[()])
+    })?;
     let mut timing = Timing::default();
     for &planner in &planners {
         for &batch in &batches {

@@ -31,11 +31,10 @@ fn run_key(cfg: &Value) -> Value {
 /// # Errors
 /// A folder without a valid `shard` in its config, counts that differ, or an index
 /// missing or repeated, naming the folders.
-fn check_complete_set(shards: &[PathBuf]) -> Result<()> {
+fn check_complete_set(shards: &[PathBuf], configs: &[Value]) -> Result<()> {
     let mut seen: Vec<Option<&PathBuf>> = Vec::new();
     let mut n_first: Option<(u64, &PathBuf)> = None;
-    for s in shards {
-        let cfg = read_json(&s.join("config.json"))?;
+    for (s, cfg) in shards.iter().zip(configs) {
         let (Some(i), Some(n)) = (cfg["shard"][0].as_u64(), cfg["shard"][1].as_u64()) else {
             bail!("{}: config.json has no \"shard\": [i, n] (not a rank output)", s.display());
         };
@@ -80,9 +79,11 @@ pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Resu
     }
     let inputs: Vec<(&str, &Path)> = shards.iter().map(|s| ("shard", s.as_path())).collect();
     crate::output::check_apart(out, &inputs)?;
-    let first = read_json(&shards[0].join("config.json"))?;
-    let key = run_key(&first);
-    check_complete_set(shards)?;
+    let configs: Vec<Value> =
+        shards.iter().map(|s| read_json(&s.join("config.json"))).collect::<Result<_>>()?;
+    let first = &configs[0];
+    let key = run_key(first);
+    check_complete_set(shards, &configs)?;
     let mut rows: Vec<EpisodeRow> = Vec::new();
     let mut failed: Vec<FailedPolicy> = Vec::new();
     let mut timing = RunTiming {
@@ -95,9 +96,8 @@ pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Resu
     };
     let mut frames = 0.0;
     let mut first_res: Option<RankResults> = None;
-    for s in shards {
-        let cfg = read_json(&s.join("config.json"))?;
-        if run_key(&cfg) != key {
+    for (s, cfg) in shards.iter().zip(&configs) {
+        if run_key(cfg) != key {
             bail!("{}: not a shard of the same run as {}", s.display(), shards[0].display());
         }
         for r in read_rows::<EpisodeRow>(&s.join("episodes.jsonl"))? {

@@ -64,7 +64,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     let device = world_model::device::selected()?;
     let wm = load_world_model(&a.world_model, a.alpha, &device)?;
     let dirs = checkpoint_dirs(&a.policies)?;
-    let inputs = model_inputs(&a.world_model, &wm, &dirs)?;
+    let inputs = model_inputs(Some((&a.world_model, &wm)), &dirs)?;
     let mut apart: Vec<(&str, &Path)> = vec![("--policies", &a.policies), ("--world-model", &a.world_model)];
     apart.extend(inputs.iter().map(|(_, dir, _)| ("model folder", dir.as_path())));
     crate::output::check_apart(&a.out, &apart)?;
@@ -84,7 +84,9 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     }
     write_json(&a.out.join("config.json"), &config)?;
     let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
-    let mut rows: Vec<EpisodeRow> = results::resume_rows(&jsonl, |r| resume::whole_batches(r, &batches))?;
+    let mut rows: Vec<EpisodeRow> = results::resume_rows(&jsonl, |r| {
+        results::whole_batches(r, &batches, resume::rank_key, &resume::RANK_KINDS)
+    })?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.jobs.max(1))
         .build()
@@ -134,8 +136,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         let (name, todo) = (&names[loaded[jobs[j].policy].0], &jobs[j].seeds);
         match out {
             Ok(new) => {
-                // Drop half-written pairs of these seeds (from a killed run) before appending.
-                rows.retain(|r| !(&r.policy == name && todo.contains(&r.seed)));
+                // Batches are appended whole, and `resume_rows` dropped any part of one.
                 append_rows(&jsonl, &new)?;
                 rows.extend(new);
                 pb.inc(todo.len() as u64);
@@ -203,19 +204,21 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
 }
 
 /// The model folders a run depends on, each as (name in `config.json`'s
-/// `fingerprints`, folder, content fingerprint): every policy checkpoint, the world
-/// model and its autoencoder.
+/// `fingerprints`, folder, content fingerprint): the world model (when the run uses
+/// one, with its folder) and its autoencoder, and every policy checkpoint.
 ///
 /// # Errors
 /// A folder that cannot be read, naming it.
 pub(crate) fn model_inputs(
-    wm_dir: &Path,
-    wm: &WorldModel,
+    wm: Option<(&Path, &WorldModel)>,
     dirs: &[std::path::PathBuf],
 ) -> Result<Vec<(String, std::path::PathBuf, String)>> {
-    let mut out = vec![("world_model".to_string(), wm_dir.to_path_buf())];
-    if let Some(ae) = &wm.cfg.autoencoder {
-        out.push(("autoencoder".to_string(), wm_dir.join(ae)));
+    let mut out = Vec::new();
+    if let Some((wm_dir, wm)) = wm {
+        out.push(("world_model".to_string(), wm_dir.to_path_buf()));
+        if let Some(ae) = &wm.cfg.autoencoder {
+            out.push(("autoencoder".to_string(), wm_dir.join(ae)));
+        }
     }
     out.extend(dirs.iter().map(|d| (format!("policy {}", checkpoint_name(d)), d.clone())));
     out.into_iter()

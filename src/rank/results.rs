@@ -6,7 +6,7 @@
 //! so a resumed, sharded or multi-threaded run gives the same results as one
 //! uninterrupted run.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::io::Write;
 use std::path::Path;
 
@@ -107,6 +107,34 @@ pub fn resume_rows<T: Serialize + serde::de::DeserializeOwned>(
             .with_context(|| format!("rewriting {}", path.display()))?;
     }
     Ok(rows)
+}
+
+/// Marks the rows of whole batches, for [`resume_rows`]: a row is kept when its seed's
+/// batch (of this run's `batches`) holds, for the row's group (its policy, or its
+/// planner), exactly one row of each of `kinds` per seed (`rank`: a MuJoCo and a
+/// world-model row; `plan`: one row). Rows of partial or doubled batches, and of
+/// seeds outside the run, are not. `key` gives a row's (group, seed, kind).
+pub fn whole_batches<T, K: Copy + Eq + std::hash::Hash>(
+    rows: &[T],
+    batches: &[&[u64]],
+    key: impl for<'a> Fn(&'a T) -> (&'a str, u64, K),
+    kinds: &[K],
+) -> Vec<bool> {
+    let mut count: HashMap<(&str, u64, K), usize> = HashMap::new();
+    for r in rows {
+        *count.entry(key(r)).or_default() += 1;
+    }
+    let batch_of: HashMap<u64, usize> =
+        batches.iter().enumerate().flat_map(|(b, seeds)| seeds.iter().map(move |&s| (s, b))).collect();
+    let whole = |group: &str, b: usize| {
+        batches[b].iter().all(|&s| kinds.iter().all(|&k| count.get(&(group, s, k)) == Some(&1)))
+    };
+    rows.iter()
+        .map(|r| {
+            let (group, seed, _) = key(r);
+            batch_of.get(&seed).is_some_and(|&b| whole(group, b))
+        })
+        .collect()
 }
 
 /// Appends rows (of `rank` or `plan`) to an `episodes.jsonl`, synced, so a killed run keeps its finished batches.

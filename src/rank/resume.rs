@@ -2,7 +2,6 @@
 //! more episodes per policy. Anything else would mix the rows of two experiments in
 //! one `episodes.jsonl`, so it is refused with each differing setting named.
 
-use std::collections::HashMap;
 use std::path::Path;
 
 use anyhow::{Result, bail};
@@ -90,24 +89,13 @@ fn check_fingerprints(path: &Path, saved: &Value, config: &Value) -> Result<()> 
     Ok(())
 }
 
-/// Marks the rows of whole batches, for [`super::results::resume_rows`]: a row is kept
-/// when its seed's batch (of this run's `batches`) holds, for its policy, exactly one
-/// MuJoCo and one world-model row per seed. Rows of partial or doubled batches, and
-/// of seeds outside the run, are not.
-pub(crate) fn whole_batches(rows: &[EpisodeRow], batches: &[&[u64]]) -> Vec<bool> {
-    let mut count: HashMap<(&str, u64, Branch), usize> = HashMap::new();
-    for r in rows {
-        *count.entry((r.policy.as_str(), r.seed, r.branch)).or_default() += 1;
-    }
-    let batch_of: HashMap<u64, usize> =
-        batches.iter().enumerate().flat_map(|(b, seeds)| seeds.iter().map(move |&s| (s, b))).collect();
-    let whole = |policy: &str, b: usize| {
-        batches[b].iter().all(|&s| {
-            [Branch::Sim, Branch::WorldModel].iter().all(|&br| count.get(&(policy, s, br)) == Some(&1))
-        })
-    };
-    rows.iter().map(|r| batch_of.get(&r.seed).is_some_and(|&b| whole(&r.policy, b))).collect()
+/// A `rank` row's (policy, seed, branch), for [`super::results::whole_batches`].
+pub(crate) fn rank_key(r: &EpisodeRow) -> (&str, u64, Branch) {
+    (r.policy.as_str(), r.seed, r.branch)
 }
+
+/// The rows each seed of a whole `rank` batch has: one per branch.
+pub(crate) const RANK_KINDS: [Branch; 2] = [Branch::Sim, Branch::WorldModel];
 
 /// The `--episodes` rule of [`check_config`] (the other settings already agree).
 fn check_growth(path: &Path, saved: &Value, config: &Value) -> Result<()> {
@@ -220,7 +208,7 @@ mod tests {
             row("b", 11, w),
             row("a", 99, s),
         ];
-        let keep = whole_batches(&rows, &batches);
+        let keep = super::super::results::whole_batches(&rows, &batches, rank_key, &RANK_KINDS);
         assert_eq!(
             keep,
             [true, true, true, true, false, false, false, false, false, false, false, false, false]
