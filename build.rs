@@ -15,7 +15,9 @@ fn main() {
     for watched in [".git/HEAD", ".git/refs", ".git/packed-refs", "Cargo.toml", "Cargo.lock", "build.rs"] {
         println!("cargo::rerun-if-changed={watched}");
     }
-    for dir in ["src", "harness", "world_model", "policies", "scenarios", "reports", "benches", "tests"] {
+    for dir in
+        ["src", "harness", "engine", "world_model", "policies", "scenarios", "reports", "benches", "tests"]
+    {
         println!("cargo::rerun-if-changed={dir}");
     }
     println!("cargo::rustc-env=EVALHARNESS_BUILD_COMMIT={}", build_commit());

@@ -87,4 +87,14 @@ pub enum ScenarioError {
         /// The action.
         action: [f64; 2],
     },
+    /// An action with the wrong number of entries for the task.
+    #[error("action of {got} entries at seed {seed}: the task takes {expected}")]
+    BadActionSize {
+        /// Episode seed.
+        seed: u64,
+        /// Entries the task takes.
+        expected: usize,
+        /// Entries given.
+        got: usize,
+    },
 }

@@ -1,30 +1,26 @@
 //! Loading a checkpoint of any policy kind.
 //!
-//! The learned kinds live in `policies` (burn) and the `scripted` kind in
-//! `scenarios` (it plans with MuJoCo); the crates do not know each other, so the
-//! binary, which sees both, dispatches on `policy.json`'s `kind`.
+//! The learned kinds live in `policies` (burn) and the `scripted` kind belongs to
+//! the task (its expert plans with the task's simulator); the crates do not know
+//! each other, so the binary, which sees both, dispatches on `policy.json`'s `kind`.
 
 use std::path::Path;
-use std::sync::Arc;
 
 use burn::tensor::Device;
 use harness::policy::Policy;
-use mujoco_rs::prelude::MjModel;
+use harness::task::Task;
 use policies::dir::{Expectations, PolicyLoadError, load_policy};
-use scenarios::pusht::PushTConfig;
-use scenarios::pusht::scripted::ScriptedPolicy;
 
-/// Loads the checkpoint folder `dir` for the Push-T scene `cfg` (compiled `model`).
+/// Loads the checkpoint folder `dir` for `task`.
 ///
 /// # Errors
 /// [`PolicyLoadError`] naming the folder (see [`load_policy`]; for `scripted`, an
-/// unreadable `policy.json` or a bad config).
+/// unreadable `policy.json`, a bad config, or a task without scripted policies).
 pub fn load_any(
     dir: &Path,
     expect: Expectations,
     device: &Device,
-    cfg: &PushTConfig,
-    model: &Arc<MjModel>,
+    task: &dyn Task,
 ) -> Result<Box<dyn Policy>, PolicyLoadError> {
     let json = dir.join("policy.json");
     let kind = std::fs::read_to_string(&json)
@@ -32,9 +28,12 @@ pub fn load_any(
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
         .and_then(|v| v["kind"].as_str().map(str::to_owned));
     if kind.as_deref() == Some("scripted") {
-        let policy = ScriptedPolicy::load(dir, cfg, model.clone(), expect.image_size)
-            .map_err(|m| PolicyLoadError::new(dir, m))?;
-        return Ok(Box::new(policy));
+        return task.scripted_policy(dir).map_err(|m| PolicyLoadError::new(dir, m));
     }
     load_policy(dir, expect, device)
+}
+
+/// What a learned checkpoint must match to run on `task`: its frame size and action width.
+pub fn expectations(task: &dyn Task) -> Expectations {
+    Expectations { image_size: task.observation_spec().image_size, action_dim: task.action_spec().dim }
 }

@@ -1,5 +1,7 @@
 //! evalharness core: what every other crate shares, with no burn or MuJoCo in sight.
 //!
+//! - [`task`] and [`judge`]: the task interface (seeded episodes, action and observation
+//!   specs, exact scores) and the judge of imagined frames, which the paired engine drives;
 //! - [`policy`] + [`rng`]: the batched policy interface and the caller-owned noise streams;
 //! - [`image`]: PSNR and SSIM as scikit-image computes them on 8-bit frames;
 //! - [`seed`]: deterministic seed derivation (episode RNGs never depend on thread order),
@@ -15,6 +17,7 @@
 pub mod blosc;
 pub mod fingerprint;
 pub mod image;
+pub mod judge;
 pub mod metrics;
 pub mod policy;
 pub mod replay;
@@ -23,4 +26,5 @@ pub mod rng;
 pub mod runfile;
 pub mod seed;
 pub mod stop;
+pub mod task;
 pub mod zarr;

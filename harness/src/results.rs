@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::judge::SceneCheck;
 use crate::metrics::bootstrap::AgreementCi;
 
 /// Which branch an episode ran in.
@@ -129,12 +130,11 @@ impl EpisodeRow {
         self
     }
 
-    /// With the scene checks of the last frame the policy saw (block area, goal kept,
-    /// agent kept), or none.
-    pub fn with_scene_checks(mut self, checks: Option<[f64; 3]>) -> Self {
-        self.block_area = checks.map(|c| c[0]);
-        self.goal_kept = checks.map(|c| c[1]);
-        self.agent_kept = checks.map(|c| c[2]);
+    /// With the scene checks of the last frame the policy saw, or none.
+    pub fn with_scene(mut self, checks: Option<SceneCheck>) -> Self {
+        self.block_area = checks.map(|c| c.block_area);
+        self.goal_kept = checks.map(|c| c.goal_kept);
+        self.agent_kept = checks.map(|c| c.agent_kept);
         self
     }
 }

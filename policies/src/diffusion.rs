@@ -242,24 +242,7 @@ impl DiffusionPolicy {
     }
 }
 
-/// Byte frames (HWC) to a `[n, 3, s, s]` tensor in [-1, 1].
-pub fn frames_to_tensor(frames: &[&[u8]], s: usize, device: &Device) -> Tensor<4> {
-    Tensor::from_data(TensorData::new(frames_to_vec(frames, s), [frames.len(), 3, s, s]), device)
-}
-
-/// Byte frames (HWC) to `[n, 3, s, s]` values in [-1, 1].
-pub fn frames_to_vec(frames: &[&[u8]], s: usize) -> Vec<f32> {
-    let plane = s * s;
-    let mut v = vec![0f32; frames.len() * 3 * plane];
-    for (k, f) in frames.iter().enumerate() {
-        for p in 0..plane {
-            for c in 0..3 {
-                v[(k * 3 + c) * plane + p] = f32::from(f[p * 3 + c]) / 127.5 - 1.0;
-            }
-        }
-    }
-    v
-}
+pub use world_model::data::{frames_to_tensor, frames_to_vec};
 
 impl Policy for DiffusionPolicy {
     fn name(&self) -> &str {

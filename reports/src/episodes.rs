@@ -99,16 +99,17 @@ pub fn read_episodes_parquet(path: &Path) -> Result<DataFrame, TableError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use harness::judge::SceneCheck;
     use harness::results::Branch;
 
     fn rows() -> Vec<EpisodeRow> {
         let r = EpisodeRow::new("epoch-0002", 100_000, Branch::Sim, 0.5, 0.475, 0.4, 0.95, 300)
             .with_poses(Some([250.0, 260.0, 0.5]), [256.0, 256.0, 0.785])
             .with_scorer_error(Some(0.01))
-            .with_scene_checks(Some([0.98, 0.95, 0.99]));
+            .with_scene(Some(SceneCheck { block_area: 0.98, goal_kept: 0.95, agent_kept: 0.99 }));
         let mut w =
             EpisodeRow { branch: Branch::WorldModel, final_block: None, scorer_abs_error: None, ..r.clone() };
-        w = w.with_scene_checks(None);
+        w = w.with_scene(None);
         w.agent_kept = Some(0.02);
         vec![r, w]
     }

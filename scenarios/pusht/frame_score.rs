@@ -30,16 +30,7 @@ pub fn agent_fraction(px: &[u8]) -> f64 {
     ((f64::from(px[2]) - f64::from(px[0])) / 160.0).clamp(0.0, 1.0)
 }
 
-/// Health checks of one frame: is the scene still there? (Not scores.)
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SceneCheck {
-    /// [`FrameScorer::block_area`].
-    pub block_area: f64,
-    /// [`FrameScorer::goal_kept`].
-    pub goal_kept: f64,
-    /// [`FrameScorer::agent_kept`].
-    pub agent_kept: f64,
-}
+pub use harness::judge::SceneCheck;
 
 /// A coverage estimator for one goal pose.
 #[derive(Clone, Debug)]
@@ -184,6 +175,18 @@ impl FrameScorer {
                 }
             }
         }
+    }
+}
+
+/// Push-T's colour-mask judge of imagined frames: coverage read from the block's
+/// red pixels over the goal, and the scene checks.
+impl harness::judge::Judge for FrameScorer {
+    fn score(&self, frame: &[u8]) -> f64 {
+        self.coverage(frame)
+    }
+
+    fn scene(&self, frame: &[u8]) -> Option<SceneCheck> {
+        Some(FrameScorer::scene(self, frame))
     }
 }
 

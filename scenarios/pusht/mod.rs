@@ -21,6 +21,7 @@ pub mod plan_cost;
 pub mod render;
 pub mod rollout;
 pub mod scripted;
+pub mod task;
 
 use std::sync::Arc;
 
@@ -32,6 +33,7 @@ use rand_distr::StandardNormal;
 pub use config::PushTConfig;
 pub use geometry::{Pose2, TShape};
 pub use physics::{PushTPhysics, PushTState};
+pub use task::PushTTask;
 
 use crate::error::ScenarioError;
 use geometry::wrap_angle;

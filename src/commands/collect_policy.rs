@@ -16,15 +16,17 @@ use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
+use engine::{Setup, Start, Timing, Trajectory, sim_branch};
 use harness::replay::ReplayWriter;
-use policies::dir::{Expectations, checkpoint_dirs};
-use scenarios::pusht::PushTPhysics;
+use policies::dir::checkpoint_dirs;
+use scenarios::pusht::rollout::{Episode, StepRow};
+use scenarios::pusht::{Pose2, PushTTask};
 use serde_json::json;
 
 use super::collect::{dataset_attrs, episode_arrays, episode_attr, replay_spec};
 use crate::cli::CollectArgs;
+use crate::policy_kinds::{expectations, load_any};
 use crate::progress;
-use crate::rank::paired::{Setup, Start, Timing, sim_branch};
 use crate::scenario::load_pusht;
 
 /// Episodes advanced together per batched policy call.
@@ -37,16 +39,16 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
         bail!("--noise and --lag perturb the scripted expert; they do not apply to --policy");
     }
     let cfg = load_pusht(&c.scenario)?;
-    let model = PushTPhysics::compile(&cfg)?;
+    let task = PushTTask::new(cfg.clone())?;
     let max_steps = c.max_steps.map_or(cfg.task.max_steps as usize, |m| m as usize);
     if max_steps == 0 || c.episodes == 0 {
         bail!("--episodes and --max-steps must be at least 1");
     }
-    let setup = Setup { cfg: &cfg, model: &model, master_seed: 0, max_steps };
+    let setup = Setup { task: &task, master_seed: 0, max_steps };
     let device = world_model::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
     let size = cfg.render.size as usize;
-    let expect = Expectations { image_size: size, action_dim: 2 };
+    let expect = expectations(&task);
     crate::output::check_apart(&args.out, &[("--policy", dir)])?;
     let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();
     let mut writer = ReplayWriter::create(&args.out, replay_spec(size), c.force)?;
@@ -55,8 +57,8 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
     let pb = progress::bar(dirs.len() as u64 * c.episodes, "collect", quiet);
     let (mut episodes, mut checkpoints) = (Vec::new(), Vec::new());
     for d in &dirs {
-        let policy = crate::policy_kinds::load_any(d, expect, &device, &cfg, &model)
-            .with_context(|| format!("loading policy {}", d.display()))?;
+        let policy =
+            load_any(d, expect, &device, &task).with_context(|| format!("loading policy {}", d.display()))?;
         let name = policy.name().to_string();
         let mut timing = Timing::default();
         let mut score = 0.0;
@@ -66,10 +68,11 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
             let out = pool
                 .install(|| sim_branch(policy.as_ref(), start, &setup, &mut timing))
                 .with_context(|| format!("policy {name}"))?;
-            for ep in &out.episodes {
-                writer.append(&episode_arrays(ep))?;
+            for t in &out.episodes {
+                let ep = episode(t).with_context(|| format!("policy {name}, seed {}", t.seed))?;
+                writer.append(&episode_arrays(&ep))?;
                 score += ep.score;
-                episodes.push(episode_attr(ep, &name));
+                episodes.push(episode_attr(&ep, &name));
             }
             pb.inc(batch.len() as u64);
         }
@@ -89,4 +92,29 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
         path.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// A recorded Push-T episode in the dataset layout of `collect`: each step's state
+/// (agent x, y, block x, y, θ) before the action, the action and the coverage after it.
+fn episode(t: &Trajectory) -> Result<Episode> {
+    let g = t.goal.context("the episode has no goal pose")?;
+    let rows = t
+        .states
+        .iter()
+        .zip(&t.actions)
+        .zip(&t.raw)
+        .enumerate()
+        .map(|(j, ((s, a), &coverage))| match (&s[..], &a[..]) {
+            (&[ax, ay, bx, by, bth], &[x, y]) => Ok(StepRow {
+                step: j as u32,
+                agent: [ax, ay],
+                block: Pose2::new(bx, by, bth),
+                action: [f64::from(x), f64::from(y)],
+                coverage,
+            }),
+            _ => bail!("step {j}: state of {} entries or action of {}, expected 5 and 2", s.len(), a.len()),
+        })
+        .collect::<Result<_>>()?;
+    let (seed, score, success) = (t.seed, t.score, t.success);
+    Ok(Episode { seed, goal: Pose2::new(g[0], g[1], g[2]), rows, frames: t.frames.clone(), score, success })
 }

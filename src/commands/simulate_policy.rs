@@ -6,30 +6,29 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use policies::dir::{Expectations, checkpoint_dirs};
-use scenarios::pusht::PushTPhysics;
+use engine::{Setup, Start, Timing, sim_branch};
+use policies::dir::checkpoint_dirs;
 use serde_json::{Value, json};
 
 use super::train::git_commit;
 use crate::cli::SimulateArgs;
 use crate::output::{Staged, read_json, write_json};
+use crate::policy_kinds::{expectations, load_any};
 use crate::progress;
-use crate::rank::paired::{Setup, Start, Timing, sim_branch};
 use crate::rank::results::{EpisodeRow, append_rows, branch_stats};
-use crate::scenario::load_pusht;
+use crate::scenario::load_task;
 
 /// Runs every checkpoint under `--policy` in MuJoCo.
 pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
     let dir = std::path::Path::new(&args.policy);
-    let cfg = load_pusht(&c.scenario)?;
-    let model = PushTPhysics::compile(&cfg)?;
-    let max_steps = c.max_steps.map_or(cfg.task.max_steps as usize, |m| m as usize);
-    let setup = Setup { cfg: &cfg, model: &model, master_seed: 0, max_steps };
+    let task = load_task(&c.scenario)?;
+    let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
+    let setup = Setup { task: task.as_ref(), master_seed: 0, max_steps };
     let device = world_model::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
     let out = Staged::new(&args.out, c.force)?;
-    let expect = Expectations { image_size: cfg.render.size as usize, action_dim: 2 };
+    let expect = expectations(task.as_ref());
     let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();
     let pool =
         rayon::ThreadPoolBuilder::new().num_threads(c.jobs.max(1)).build().context("starting threads")?;
@@ -41,7 +40,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
         let name = policies::dir::checkpoint_name(d);
         let started = Instant::now();
         let rows: Result<Vec<EpisodeRow>> = (|| {
-            let policy = crate::policy_kinds::load_any(d, expect, &device, &cfg, &model)?;
+            let policy = load_any(d, expect, &device, task.as_ref())?;
             let mut timing = Timing::default();
             let mut rows = Vec::new();
             for batch in seeds.chunks(100) {
@@ -78,7 +77,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     write_json(
         &out.file("summary.json"),
         &json!({"scenario": c.scenario, "policies_dir": dir, "seed_start": c.seed_start, "episodes": c.episodes,
-                "max_steps": max_steps, "score": "max over the episode of clip(coverage / 0.95, 0, 1)",
+                "max_steps": max_steps, "score": task.score_kind().describe(),
                 "policies": summary}),
     )?;
     let o = out.commit()?;

@@ -31,8 +31,8 @@ use world_model::model::WorldModel;
 
 use super::imagine::{self, Decision, Imagined};
 use crate::cli::Planner;
-use crate::rank::paired::{obs_of, push};
-use crate::rank::start::{Seen, Timing};
+use engine::{Timing, obs_of, push};
+use harness::task::Seen;
 
 /// What the planners share.
 pub struct Ctx<'a> {
@@ -173,7 +173,7 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
         let pos = st.agent.map(|v| v as f32);
         let cov = env.score().coverage;
         live.push(Live {
-            seen: (0..o).map(|_| (first.clone(), pos)).collect(),
+            seen: (0..o).map(|_| Seen { frame: first.clone(), proprio: pos.to_vec() }).collect(),
             wm_hist: (0..wm_k).map(|_| wm_first.clone()).collect(),
             wm_first,
             scorer: FrameScorer::new(ctx.cfg, &goal, size),
@@ -204,8 +204,13 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
     while steps < ctx.max_steps && !active.is_empty() {
         // Proposals, k per active episode, episode-major.
         let tp = Instant::now();
-        let obs: Vec<Observation> =
-            active.iter().flat_map(|&i| std::iter::repeat_n(obs_of(&live[i].seen, size), k)).collect();
+        let obs: Vec<Observation> = active
+            .iter()
+            .map(|&i| Ok(std::iter::repeat_n(obs_of(&live[i].seen, size)?, k)))
+            .collect::<Result<Vec<_>>>()?
+            .into_iter()
+            .flatten()
+            .collect();
         let mut rngs: Vec<Rng> = active
             .iter()
             .flat_map(|&i| {
@@ -268,7 +273,7 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
         // showed of the picked proposal's outcome.
         for (p, &i) in active.iter().enumerate() {
             let q = p * k + picks[p];
-            let (real, l) = (live[i].seen.back().map(|f| f.0.clone()), &mut live[i]);
+            let (real, l) = (live[i].seen.back().map(|f| f.frame.clone()), &mut live[i]);
             if let (Some(rec), Some(real)) = (l.record.as_mut(), real) {
                 let get = |o: Option<&Imagined>| o.and_then(|o| o.frames.get(q)).cloned().unwrap_or_default();
                 rec.push([real, get(wm_out.as_ref()), get(sim_costs.as_ref())]);
@@ -333,7 +338,7 @@ fn execute(
                 let wm_frame = if goal_free { raster.render_without_goal(&st) } else { frame.clone() };
                 push(&mut l.wm_hist, wm_frame, keep_wm);
             }
-            push(&mut l.seen, (frame, st.agent.map(|v| v as f32)), o);
+            push(&mut l.seen, Seen { frame, proprio: st.agent.map(|v| v as f32).to_vec() }, o);
         }
     }
     Ok(())

@@ -31,7 +31,7 @@ use serde_json::json;
 use crate::cli::{PlanArgs, Planner};
 use crate::output::write_json;
 use crate::progress;
-use crate::rank::start::Timing;
+use engine::Timing;
 use episodes::{Ctx, PlanRow, plan_key, run_batch};
 
 /// Loads the proposing policy, returning chunks of max(imagine, execute) actions (it

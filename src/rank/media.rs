@@ -11,8 +11,8 @@ use anyhow::Result;
 use harness::policy::Policy;
 use world_model::model::WorldModel;
 
-use super::paired::{Setup, Start, Timing, sim_branch, wm_branch};
 use super::results::{Branch, EpisodeRow};
+use engine::{Setup, Start, Timing, sim_branch, wm_branch};
 
 /// The best- and worst-agreeing seeds of a policy (at most 2, distinct).
 pub fn pick_seeds(rows: &[EpisodeRow], policy: &str) -> Vec<(u64, &'static str)> {
@@ -58,7 +58,7 @@ pub fn write_rollouts(
     start.record = true;
     let imagined = wm_branch(policy, &start, setup, wm, &mut timing)?;
     let real = sim_branch(policy, start, setup, &mut timing)?;
-    let size = setup.cfg.render.size as usize;
+    let size = setup.task.observation_spec().image_size;
     let mut out = Vec::new();
     for (i, &(seed, tag)) in picks.iter().enumerate() {
         let (r, w) = (&real.frames[i], &imagined.frames[i]);

@@ -9,13 +9,10 @@
 
 mod media;
 pub mod merge;
-pub mod paired;
 pub mod report;
 pub mod results;
 pub(crate) mod resume;
 pub mod scene;
-mod schedule;
-pub mod start;
 mod summary;
 
 use std::path::Path;
@@ -23,11 +20,12 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use policies::dir::{Expectations, checkpoint_dirs, checkpoint_name};
+use engine::Setup;
+use engine::schedule::{self, Batch};
+use policies::dir::{checkpoint_dirs, checkpoint_name};
 
-use crate::policy_kinds::load_any;
+use crate::policy_kinds::{expectations, load_any};
 use harness::results::{FailedPolicy, RankResults, RunTiming};
-use scenarios::pusht::PushTPhysics;
 use serde_json::{Value, json};
 use world_model::model::WorldModel;
 use world_model::rollout::NonFiniteLatents;
@@ -35,9 +33,7 @@ use world_model::rollout::NonFiniteLatents;
 use crate::cli::RankArgs;
 use crate::output::write_json;
 use crate::progress;
-use paired::Setup;
 use results::{EpisodeRow, append_rows, summarise};
-use schedule::Batch;
 pub(crate) use summary::write_tables;
 
 /// Parses `--shard i/n`.
@@ -59,8 +55,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     }
     let seeds: Vec<u64> = harness::seed::range(a.seed_start, a.episodes as u64)?.collect();
     // Every input is checked before the output folder is touched.
-    let cfg = crate::scenario::load_pusht(&a.scenario)?;
-    let model = PushTPhysics::compile(&cfg)?;
+    let task = crate::scenario::load_task(&a.scenario)?;
     let device = world_model::device::selected()?;
     let wm = load_world_model(&a.world_model, a.alpha, &device)?;
     let dirs = checkpoint_dirs(&a.policies)?;
@@ -91,8 +86,8 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         .num_threads(a.jobs.max(1))
         .build()
         .context("starting worker threads")?;
-    let setup = Setup { cfg: &cfg, model: &model, master_seed: a.seed, max_steps: a.max_steps };
-    let expect = Expectations { image_size: cfg.render.size as usize, action_dim: 2 };
+    let setup = Setup { task: task.as_ref(), master_seed: a.seed, max_steps: a.max_steps };
+    let expect = expectations(task.as_ref());
     let pb = progress::bar((dirs.len() * a.episodes) as u64, "rank", quiet);
     let mut failed: Vec<FailedPolicy> = Vec::new();
     let mut names = Vec::new();
@@ -103,7 +98,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     for (pi, dir) in dirs.iter().enumerate() {
         let name = checkpoint_name(dir);
         names.push(name.clone());
-        match load_any(dir, expect, &device, &cfg, &model) {
+        match load_any(dir, expect, &device, task.as_ref()) {
             Ok(p) => loaded.push((pi, p)),
             Err(e) => {
                 tracing::error!("{e}; continuing with the other policies");
@@ -133,6 +128,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     }
     let policies: Vec<&dyn harness::policy::Policy> = loaded.iter().map(|(_, p)| p.as_ref()).collect();
     let mut done = |j: usize, out: schedule::BatchResult| -> Result<()> {
+        let out = out.map_err(anyhow::Error::new);
         let (name, todo) = (&names[loaded[jobs[j].policy].0], &jobs[j].seeds);
         match out {
             Ok(new) => {
@@ -160,7 +156,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         }
         Ok(())
     };
-    let timing = schedule::run_batches(&policies, &jobs, &setup, &wm, a.jobs, &mut done)?;
+    let timing = schedule::run_batches::<anyhow::Error>(&policies, &jobs, &setup, &wm, a.jobs, &mut done)?;
     pb.finish_and_clear();
     let failed_names: Vec<&str> = failed.iter().map(|f| f.policy.as_str()).collect();
     let ok_names: Vec<String> =
@@ -258,14 +254,14 @@ fn rollouts(
 ) -> Result<()> {
     let dir = a.out.join("filmstrips");
     let device = wm.device().clone();
-    let expect = Expectations { image_size: setup.cfg.render.size as usize, action_dim: 2 };
+    let expect = expectations(setup.task);
     let mut index = Vec::new();
     for d in dirs {
         let name = checkpoint_name(d);
         if failed.contains(&name.as_str()) {
             continue;
         }
-        let Ok(policy) = load_any(d, expect, &device, setup.cfg, setup.model) else { continue };
+        let Ok(policy) = load_any(d, expect, &device, setup.task) else { continue };
         let picks = media::pick_seeds(rows, &name);
         let strips = pool.install(|| media::write_rollouts(&dir, policy.as_ref(), &picks, setup, wm, 4))?;
         for (png, caption) in strips {

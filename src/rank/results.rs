@@ -14,23 +14,9 @@ use anyhow::{Context, Result};
 use harness::metrics::agreement;
 use harness::metrics::bootstrap::{agreement_ci, mean_ci, wilson};
 use harness::results::{AgreementSummary, BranchStats, PolicyResult};
-use scenarios::pusht::frame_score::SceneCheck;
 use serde::Serialize;
 
 pub use harness::results::{Branch, EpisodeRow};
-
-/// Push-T's scene checks on a row.
-pub trait WithScene {
-    /// With the scene checks of the last frame the policy saw
-    /// ([`SceneCheck`]: block area, goal kept, agent kept).
-    fn with_scene(self, scene: Option<SceneCheck>) -> Self;
-}
-
-impl WithScene for EpisodeRow {
-    fn with_scene(self, scene: Option<SceneCheck>) -> Self {
-        self.with_scene_checks(scene.map(|s| [s.block_area, s.goal_kept, s.agent_kept]))
-    }
-}
 
 /// Reads `episodes.jsonl` (missing file: no rows).
 ///

@@ -78,8 +78,8 @@ pub fn scene_note(pol: &[PolicyResult]) -> Option<(String, bool)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rank::results::{Branch, EpisodeRow, WithScene, summarise};
-    use scenarios::pusht::frame_score::SceneCheck;
+    use crate::rank::results::{Branch, EpisodeRow, summarise};
+    use harness::judge::SceneCheck;
 
     #[test]
     fn names_policies_whose_imagined_scene_degraded() {

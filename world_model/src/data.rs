@@ -108,6 +108,25 @@ impl EpisodeData {
     }
 }
 
+/// Byte frames (HWC) to a `[n, 3, s, s]` tensor in [-1, 1].
+pub fn frames_to_tensor(frames: &[&[u8]], s: usize, device: &Device) -> Tensor<4> {
+    Tensor::from_data(TensorData::new(frames_to_vec(frames, s), [frames.len(), 3, s, s]), device)
+}
+
+/// Byte frames (HWC) to `[n, 3, s, s]` values in [-1, 1].
+pub fn frames_to_vec(frames: &[&[u8]], s: usize) -> Vec<f32> {
+    let plane = s * s;
+    let mut v = vec![0f32; frames.len() * 3 * plane];
+    for (k, f) in frames.iter().enumerate() {
+        for p in 0..plane {
+            for c in 0..3 {
+                v[(k * 3 + c) * plane + p] = f32::from(f[p * 3 + c]) / 127.5 - 1.0;
+            }
+        }
+    }
+    v
+}
+
 /// `[b, 3, h, w]` tensor in [-1, 1] to `b` HWC byte images (clamped, rounded).
 pub fn tensor_to_frames(t: Tensor<4>) -> Vec<Vec<u8>> {
     let [b, c, h, w] = t.dims();

@@ -20,12 +20,14 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 
-use anyhow::{Result, anyhow};
 use harness::policy::Policy;
+use harness::results::EpisodeRow;
 use world_model::model::WorldModel;
 
-use super::paired::{BranchOut, Setup, Start, Timing, sim_branch, wm_branch};
-use super::results::EpisodeRow;
+use crate::EngineError;
+use crate::imagined::wm_branch;
+use crate::sim::sim_branch;
+use crate::start::{BranchOut, Setup, Start, Timing};
 
 /// One batch: a policy (index into the loaded policies) and the seeds to run.
 pub struct Batch {
@@ -37,9 +39,9 @@ pub struct Batch {
 
 /// What a finished batch hands on: its rows (MuJoCo and world model alternating, by
 /// seed) or the policy's error.
-pub type BatchResult = Result<Vec<EpisodeRow>>;
+pub type BatchResult = Result<Vec<EpisodeRow>, EngineError>;
 
-type TaskOut = Option<Result<BranchOut>>;
+type TaskOut = Option<Result<BranchOut, EngineError>>;
 
 fn run_task(
     policy: &dyn Policy,
@@ -48,7 +50,7 @@ fn run_task(
     s: &Setup,
     wm: &WorldModel,
     t: &mut Timing,
-) -> Result<BranchOut> {
+) -> Result<BranchOut, EngineError> {
     let start = Start::new(policy.name(), &batch.seeds, s)?;
     if world { wm_branch(policy, &start, s, wm, t) } else { sim_branch(policy, start, s, t) }
 }
@@ -59,24 +61,27 @@ fn run_task(
 /// # Errors
 /// What `done` returns (e.g. an I/O error writing the rows), or a worker that
 /// could not start; a policy's own failure goes to `done`, not here.
-pub fn run_batches(
+pub fn run_batches<E: From<EngineError>>(
     policies: &[&dyn Policy],
     batches: &[Batch],
     s: &Setup,
     wm: &WorldModel,
     jobs: usize,
-    done: &mut dyn FnMut(usize, BatchResult) -> Result<()>,
-) -> Result<Timing> {
+    done: &mut dyn FnMut(usize, BatchResult) -> Result<(), E>,
+) -> Result<Timing, E> {
     let next = AtomicUsize::new(0);
     // Per policy, the first batch that failed: later batches are skipped (never earlier
     // ones, whatever order the workers finish in).
     let failed_at: Vec<AtomicUsize> = policies.iter().map(|_| AtomicUsize::new(usize::MAX)).collect();
     let timing = Mutex::new(Timing::default());
     let (tx, rx) = mpsc::channel::<(usize, TaskOut)>();
-    std::thread::scope(|sc| -> Result<()> {
+    std::thread::scope(|sc| -> Result<(), E> {
         for _ in 0..jobs.max(1).min(2 * batches.len().max(1)) {
             let tx = tx.clone();
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build()
+                .map_err(|e| EngineError::Threads(e.to_string()))?;
             let (next, failed_at, timing) = (&next, &failed_at, &timing);
             sc.spawn(move || {
                 loop {
@@ -127,7 +132,7 @@ pub fn run_batches(
         }
         Ok(())
     })?;
-    timing.into_inner().map_err(|_| anyhow!("a rank worker panicked"))
+    timing.into_inner().map_err(|_| EngineError::WorkerPanicked.into())
 }
 
 /// The batch's rows from its two halves, or its error (the world model's first). A
@@ -137,7 +142,7 @@ fn pair(world: TaskOut, sim: TaskOut, name: &str) -> BatchResult {
     match (world, sim) {
         (Some(Ok(w)), Some(Ok(m))) => Ok(m.rows.into_iter().zip(w.rows).flat_map(|(a, b)| [a, b]).collect()),
         (Some(Err(e)), _) | (_, Some(Err(e))) => Err(e),
-        _ => Err(anyhow!("policy {name}: skipped after an earlier failure")),
+        _ => Err(EngineError::Skipped { policy: name.to_string() }),
     }
 }
 
@@ -145,8 +150,8 @@ fn pair(world: TaskOut, sim: TaskOut, name: &str) -> BatchResult {
 mod tests {
     use burn::tensor::Device;
     use harness::policy::{ActionChunk, Observation, PolicyError};
+    use harness::results::Branch;
     use harness::rng::Rng;
-    use scenarios::pusht::PushTPhysics;
     use world_model::codec::FrameCodec;
     use world_model::model::WorldModelConfig;
     use world_model::unet::UNetConfig;
@@ -179,13 +184,12 @@ mod tests {
 
     #[test]
     fn any_worker_count_hands_on_the_same_batches_and_stops_a_failing_policy() {
-        let cfg = crate::scenario::load_pusht("pusht").unwrap();
-        let model = PushTPhysics::compile(&cfg).unwrap();
-        let setup = Setup { cfg: &cfg, model: &model, master_seed: 3, max_steps: 4 };
+        let task = scenarios::load_task("pusht").unwrap();
+        let setup = Setup { task: task.as_ref(), master_seed: 3, max_steps: 4 };
         // A tiny pixel-space world model with random weights: the rows only need to be
         // a deterministic function of the batch.
         let device = Device::flex();
-        let size = cfg.render.size as usize;
+        let size = task.observation_spec().image_size;
         let wm_cfg = WorldModelConfig::pixels(UNetConfig::new(3, 8, vec![1], vec![]).with_groups(4), size);
         let unet = wm_cfg.unet.init(&device);
         let wm = WorldModel::from_parts(wm_cfg, FrameCodec::pixels(size), unet, &device);
@@ -196,7 +200,7 @@ mod tests {
             (0..6).map(|i| Batch { policy: i % 2, seeds: vec![100 + i as u64 / 2] }).collect();
         let run = |jobs: usize| {
             let mut handed = Vec::new();
-            run_batches(&policies, &batches, &setup, &wm, jobs, &mut |j, r| {
+            run_batches::<EngineError>(&policies, &batches, &setup, &wm, jobs, &mut |j, r| {
                 handed.push((
                     j,
                     r.map(|rows| serde_json::to_string(&rows).unwrap()).map_err(|e| e.to_string()),
@@ -215,10 +219,7 @@ mod tests {
         for (_, r) in [&one[0], &one[2], &one[3]] {
             let rows: Vec<EpisodeRow> = serde_json::from_str(r.as_ref().unwrap()).unwrap();
             assert_eq!(rows.len(), 2);
-            assert_eq!(
-                (rows[0].branch, rows[1].branch),
-                (super::super::results::Branch::Sim, super::super::results::Branch::WorldModel)
-            );
+            assert_eq!((rows[0].branch, rows[1].branch), (Branch::Sim, Branch::WorldModel));
         }
         assert_eq!(run(3), one, "three workers hand on exactly what one does");
     }

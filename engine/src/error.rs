@@ -1,0 +1,49 @@
+//! Why a batch of paired episodes stopped, naming the policy, seed or steps at fault.
+
+use harness::policy::PolicyError;
+use harness::task::TaskError;
+use world_model::rollout::NonFiniteLatents;
+
+/// What can stop a branch or a run of batches.
+#[derive(Debug, thiserror::Error)]
+pub enum EngineError {
+    /// The policy could not act (non-finite output, unusable observations).
+    #[error(transparent)]
+    Policy(#[from] PolicyError),
+    /// The task's simulator failed (a diverging step, an impossible reset).
+    #[error(transparent)]
+    Task(#[from] TaskError),
+    /// A policy returned no actions for some episode.
+    #[error("policy {policy} returned an empty action chunk or too few chunks")]
+    EmptyChunk {
+        /// The policy.
+        policy: String,
+    },
+    /// The world model generated NaN or infinite latents.
+    #[error("policy {policy}, episode steps {first}..{end}")]
+    WorldModel {
+        /// The policy whose episodes were being imagined.
+        policy: String,
+        /// First control step of the chunk.
+        first: usize,
+        /// One past its last step.
+        end: usize,
+        /// Which generated frames.
+        source: NonFiniteLatents,
+    },
+    /// A task the engine cannot drive yet (what is missing).
+    #[error("{0}")]
+    Unsupported(String),
+    /// A batch of a policy that had already failed.
+    #[error("policy {policy}: skipped after an earlier failure")]
+    Skipped {
+        /// The policy.
+        policy: String,
+    },
+    /// Worker threads could not start.
+    #[error("starting worker threads: {0}")]
+    Threads(String),
+    /// A worker thread panicked.
+    #[error("a rank worker panicked")]
+    WorkerPanicked,
+}

@@ -1,0 +1,146 @@
+//! The world-model branch: imagined frames only, scored by the task's judge.
+//!
+//! The history starts as the first observation repeated; each action chunk is
+//! imagined in one-pass chunks of F frames; the policy sees only decoded imagined
+//! frames, with the proprioception the task's [`Imagination`] integrates from the
+//! commanded actions (Push-T: the last commanded target standing in for the agent
+//! position, as in DriftWorld's evaluation). Only the frames the policy sees (the
+//! last `obs_horizon` of each chunk) are decoded to pixels, and those are scored by
+//! the episode's [`Judge`](harness::judge::Judge). A goal-free world model
+//! (`train world-model --goal-free`) starts from the first frame in its view and
+//! each decoded frame gets the goal drawn back before the policy, the judge or a
+//! recording sees it. Nothing here reads the simulator after the reset.
+//!
+//! [`Imagination`]: harness::task::Imagination
+
+use std::time::Instant;
+
+use harness::results::Branch;
+use harness::rng::Rng;
+use harness::seed::{derive, fnv1a};
+use harness::task::{Imagination, ModelView, Seen};
+use world_model::data::{frames_to_tensor, tensor_to_frames};
+use world_model::model::WorldModel;
+use world_model::rollout::Rollout;
+
+use crate::EngineError;
+use crate::decide::{decide, record_chunk};
+use crate::start::{BranchOut, Setup, Start, Timing, Track, push, still_active};
+use harness::policy::Policy;
+
+/// The world-model branch of one batch. `start` is borrowed: its episodes are
+/// still at their reset states (only the simulator branch, which takes it by
+/// value, steps them).
+///
+/// # Errors
+/// A policy error or non-finite generated latents, naming the policy and steps.
+pub fn wm_branch(
+    policy: &dyn Policy,
+    start: &Start,
+    s: &Setup,
+    wm: &WorldModel,
+    timing: &mut Timing,
+) -> Result<BranchOut, EngineError> {
+    let name = policy.name().to_string();
+    let n = start.envs.len();
+    let size = s.task.observation_spec().image_size;
+    let kind = s.task.score_kind();
+    let o = policy.obs_horizon().max(1);
+    let mut hist = start.histories(o);
+    let mut rngs = start.policy_rngs.clone();
+    let mut gen_rngs: Vec<Rng> = start
+        .seeds
+        .iter()
+        .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(&name), sd, fnv1a("world_model")])))
+        .collect();
+    let mut track = vec![Track::default(); n];
+    let mut rec = start.recording();
+    for ((t, judge), f) in track.iter_mut().zip(&start.judges).zip(&start.first) {
+        t.add(judge.score(&f.frame), &kind);
+        t.scene = judge.scene(&f.frame);
+    }
+    let tw = Instant::now();
+    let device = wm.device().clone();
+    let (k, f_max) = (wm.cfg.unet.history, wm.cfg.future);
+    let view = if wm.cfg.is_goal_free() { ModelView::GoalFree } else { ModelView::Observation };
+    let mut imagine: Vec<Box<dyn Imagination>> = start.envs.iter().map(|e| e.imagination(view)).collect();
+    let refs: Vec<&[u8]> = imagine.iter().map(|m| m.first_frame()).collect();
+    let z0 = wm.encode(frames_to_tensor(&refs, size, &device)); // [n, C, s, s]
+    let [_, c, ls, _] = z0.dims();
+    // Latent histories and anchors (the first frame) of the active episodes, in `active`'s order.
+    let anchor = z0.clone(); // [a, C, s, s]
+    let mut roll = Rollout::new(z0.unsqueeze_dim::<5>(1).expand([n, k, c, ls, ls]), anchor); // [a, K, C, s, s]
+    timing.world_model_s += tw.elapsed().as_secs_f64();
+    let mut steps = 0;
+    let mut active: Vec<usize> = (0..n).collect();
+    while steps < s.max_steps && !active.is_empty() {
+        let (chunks, len) = decide(policy, &hist, &active, size, &mut rngs, s.max_steps - steps, timing)?;
+        let tw = Instant::now();
+        let a = active.len();
+        let mut sub: Vec<Rng> = active.iter().map(|&i| gen_rngs[i].clone()).collect();
+        let mut done = 0;
+        while done < len {
+            let f = f_max.min(len - done);
+            let pred = roll.step(wm, f, |p, j| chunks[p][done + j], &mut sub).map_err(|source| {
+                EngineError::WorldModel {
+                    policy: name.clone(),
+                    first: steps + done,
+                    end: steps + done + f,
+                    source,
+                }
+            })?; // [a, f, C, s, s]
+            // Decode only the frames the policy will see (the chunk's last `o`): decoding
+            // is the most expensive part of the branch. They are also the frames judged.
+            let first_seen = len.saturating_sub(o).max(done).min(done + f) - done;
+            let mut frames = if first_seen < f {
+                let m = f - first_seen;
+                let seen = pred.narrow(1, first_seen, m).reshape([a * m, c, ls, ls]);
+                tensor_to_frames(wm.decode(seen))
+            } else {
+                Vec::new()
+            };
+            let m = f - first_seen.min(f);
+            for (p, &i) in active.iter().enumerate() {
+                for j in 0..f {
+                    imagine[i].advance(&chunks[p][done + j]);
+                    if j >= first_seen {
+                        let fr = &mut frames[p * m + j - first_seen];
+                        imagine[i].to_observation(fr);
+                        track[i].add(start.judges[i].score(fr), &kind);
+                        let seen = Seen { frame: std::mem::take(fr), proprio: imagine[i].proprio() };
+                        push(&mut hist[i], seen, o);
+                    }
+                }
+            }
+            timing.frames += (a * f) as u64;
+            done += f;
+        }
+        for (&i, r) in active.iter().zip(sub) {
+            gen_rngs[i] = r;
+            track[i].steps += len;
+            // Scene checks of the chunk's last seen frame only (the row keeps the last).
+            if let Some(f) = hist[i].back() {
+                track[i].scene = start.judges[i].scene(&f.frame);
+            }
+        }
+        record_chunk(&mut rec, &hist);
+        track.iter_mut().for_each(Track::end_chunk);
+        steps += len;
+        let next = still_active(&active, &track);
+        if next.len() < active.len() && !next.is_empty() {
+            let kept: Vec<usize> =
+                active.iter().enumerate().filter(|(_, i)| next.contains(i)).map(|(p, _)| p).collect();
+            roll.keep(&kept);
+        }
+        active = next;
+        timing.world_model_s += tw.elapsed().as_secs_f64();
+    }
+    let rows = (0..n)
+        .map(|i| {
+            track[i]
+                .row(&name, start.seeds[i], Branch::WorldModel, &kind)
+                .with_poses(None, start.goals[i].unwrap_or_default())
+        })
+        .collect();
+    Ok(BranchOut { rows, frames: rec, episodes: Vec::new() })
+}

@@ -1,0 +1,146 @@
+//! The simulator branch: real frames, the real proprioception, exact scores.
+//!
+//! The policy sees the task's rendered observations; every executed action is
+//! scored exactly from the simulator's state. The judge of imagined frames also
+//! reads the frames the policy sees here, and its mean absolute error against
+//! the exact score goes into the row (`scorer_abs_error`): how far to trust the
+//! imagined branch's scores. Episodes step on rayon.
+
+use std::time::Instant;
+
+use harness::policy::{ActionChunk, Policy};
+use harness::results::Branch;
+use harness::task::{Env, Seen};
+use rayon::prelude::*;
+
+use crate::EngineError;
+use crate::decide::{decide, record_chunk};
+use crate::start::{BranchOut, Setup, Start, Timing, Track, Trajectory, push, still_active};
+
+/// What one simulator episode returns per chunk.
+#[derive(Default)]
+struct ChunkOut {
+    /// Exact raw score after each executed action.
+    raw: Vec<f64>,
+    /// The observations the policy will see (the chunk's last `obs_horizon`).
+    seen: Vec<Seen>,
+    /// Sum of the judge's absolute errors on `seen`.
+    err: f64,
+    /// With [`Start::trajectories`]: each step's observation frame and state before
+    /// the action, and the action.
+    steps: Vec<(Vec<u8>, Vec<f64>, Vec<f32>)>,
+}
+
+/// The simulator branch of one batch.
+///
+/// # Errors
+/// A policy error or a diverging simulation.
+pub fn sim_branch(
+    policy: &dyn Policy,
+    mut start: Start,
+    s: &Setup,
+    timing: &mut Timing,
+) -> Result<BranchOut, EngineError> {
+    let name = policy.name().to_string();
+    let n = start.envs.len();
+    let size = s.task.observation_spec().image_size;
+    let kind = s.task.score_kind();
+    let o = policy.obs_horizon().max(1);
+    let mut hist = start.histories(o);
+    let mut rngs = start.policy_rngs.clone();
+    let mut track = vec![Track::default(); n];
+    let mut judge_err = vec![(0.0f64, 0usize); n];
+    let mut rec = start.recording();
+    let trajectories = start.trajectories;
+    let mut traj: Vec<Trajectory> = vec![Trajectory::default(); n];
+    for (((t, env), judge), f) in track.iter_mut().zip(&start.envs).zip(&start.judges).zip(&start.first) {
+        t.add(env.score(), &kind);
+        t.scene = judge.scene(&f.frame);
+    }
+    let mut steps = 0;
+    let mut active: Vec<usize> = (0..n).collect();
+    while steps < s.max_steps && !active.is_empty() {
+        let (chunks, len) = decide(policy, &hist, &active, size, &mut rngs, s.max_steps - steps, timing)?;
+        let ts = Instant::now();
+        let mut chunk_of: Vec<Option<&ActionChunk>> = vec![None; n];
+        for (&i, ch) in active.iter().zip(&chunks) {
+            chunk_of[i] = Some(ch);
+        }
+        let results: Vec<Option<Result<ChunkOut, EngineError>>> = start
+            .envs
+            .par_iter_mut()
+            .zip(chunk_of.par_iter())
+            .zip(start.judges.par_iter())
+            .map(|((env, chunk), judge)| {
+                let chunk = (*chunk)?;
+                let mut run = || -> Result<ChunkOut, EngineError> {
+                    let mut out = ChunkOut { raw: Vec::with_capacity(len), ..ChunkOut::default() };
+                    for (j, a) in chunk[..len].iter().enumerate() {
+                        let before = trajectories.then(|| (env.observe().frame, env.state()));
+                        let raw = env.step(a)?;
+                        out.raw.push(raw);
+                        if let Some((frame, state)) = before {
+                            out.steps.push((frame, state, a.to_vec()));
+                        }
+                        if j + o >= len {
+                            let seen = env.observe();
+                            out.err += (judge.score(&seen.frame) - raw).abs();
+                            out.seen.push(seen);
+                        }
+                    }
+                    Ok(out)
+                };
+                Some(run())
+            })
+            .collect();
+        for (i, r) in results.into_iter().enumerate() {
+            let Some(r) = r else { continue };
+            let out = r?;
+            out.raw.iter().for_each(|&v| track[i].add(v, &kind));
+            track[i].steps += len;
+            judge_err[i].0 += out.err;
+            judge_err[i].1 += out.seen.len();
+            if let Some(f) = out.seen.last() {
+                track[i].scene = start.judges[i].scene(&f.frame);
+            }
+            out.seen.into_iter().for_each(|f| push(&mut hist[i], f, o));
+            let t = &mut traj[i];
+            for ((frame, state, action), raw) in out.steps.into_iter().zip(out.raw) {
+                t.frames.push(frame);
+                t.states.push(state);
+                t.actions.push(action);
+                t.raw.push(raw);
+            }
+        }
+        record_chunk(&mut rec, &hist);
+        track.iter_mut().for_each(Track::end_chunk);
+        timing.sim_s += ts.elapsed().as_secs_f64();
+        steps += len;
+        active = still_active(&active, &track);
+    }
+    let rows = (0..n)
+        .map(|i| {
+            let env = &start.envs[i];
+            let err = judge_err[i].0 / judge_err[i].1.max(1) as f64;
+            track[i]
+                .row(&name, start.seeds[i], Branch::Sim, &kind)
+                .with_poses(env.object_pose(), start.goals[i].unwrap_or_default())
+                .with_scorer_error(Some(err))
+        })
+        .collect();
+    let episodes = if trajectories {
+        traj.into_iter()
+            .enumerate()
+            .map(|(i, mut t)| {
+                let env: &dyn Env = start.envs[i].as_ref();
+                t.frames.push(env.observe().frame);
+                t.success = t.raw.iter().any(|&r| r > kind.threshold());
+                (t.seed, t.goal, t.score) = (start.seeds[i], start.goals[i], track[i].best_reward);
+                t
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    Ok(BranchOut { rows, frames: rec, episodes })
+}

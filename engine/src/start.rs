@@ -1,0 +1,248 @@
+//! What a batch of paired episodes starts from and what a branch returns: the
+//! task's episodes reset to the seeds, their judges and first observations, the
+//! per-episode policy noise streams; the timing split; a branch's rows, filmstrip
+//! frames and (for `collect --policy`) whole trajectories; and each episode's
+//! running score and when it ends. The branches are in [`crate::sim`] and
+//! [`crate::imagined`].
+
+use std::collections::VecDeque;
+
+use harness::judge::{Judge, SceneCheck};
+use harness::policy::Observation;
+use harness::rng::Rng;
+use harness::seed::{derive, fnv1a};
+use harness::task::{Env, ScoreKind, Seen, Task};
+
+use crate::EngineError;
+use harness::results::EpisodeRow;
+
+/// Wall-clock split of a batch.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Timing {
+    /// Simulator stepping and rendering.
+    pub sim_s: f64,
+    /// World-model prediction and decoding.
+    pub world_model_s: f64,
+    /// Policy inference (both branches).
+    pub policy_s: f64,
+    /// Frames the world model generated.
+    pub frames: u64,
+}
+
+impl Timing {
+    /// Adds another split.
+    pub fn add(&mut self, o: &Timing) {
+        self.sim_s += o.sim_s;
+        self.world_model_s += o.world_model_s;
+        self.policy_s += o.policy_s;
+        self.frames += o.frames;
+    }
+}
+
+/// What a rollout needs besides the policy.
+#[derive(Clone, Copy)]
+pub struct Setup<'a> {
+    /// The task.
+    pub task: &'a dyn Task,
+    /// Master seed of the policy noise.
+    pub master_seed: u64,
+    /// Control steps per episode.
+    pub max_steps: usize,
+}
+
+/// What both branches start from: episodes reset to the seeds, their judges, the
+/// first observations and the policy noise streams.
+pub struct Start {
+    pub(crate) envs: Vec<Box<dyn Env>>,
+    pub(crate) judges: Vec<Box<dyn Judge>>,
+    pub(crate) first: Vec<Seen>,
+    /// Each episode's goal pose at reset (for the rows of both branches).
+    pub(crate) goals: Vec<Option<[f64; 3]>>,
+    pub(crate) policy_rngs: Vec<Rng>,
+    pub(crate) seeds: Vec<u64>,
+    /// Keep the last frame of every action chunk (for filmstrips and GIFs).
+    pub record: bool,
+    /// Simulator branch only: keep every step's observation, state, action and raw
+    /// score (`collect --policy`).
+    pub trajectories: bool,
+}
+
+/// One recorded simulator episode, step by step.
+#[derive(Clone, Debug, Default)]
+pub struct Trajectory {
+    /// Episode seed.
+    pub seed: u64,
+    /// The observation frame before each action, then the final one.
+    pub frames: Vec<Vec<u8>>,
+    /// The privileged state before each action ([`Env::state`]).
+    pub states: Vec<Vec<f64>>,
+    /// The executed actions.
+    pub actions: Vec<Vec<f32>>,
+    /// The exact raw score after each action.
+    pub raw: Vec<f64>,
+    /// The goal pose, where the task has one.
+    pub goal: Option<[f64; 3]>,
+    /// The episode's score (best reward).
+    pub score: f64,
+    /// Whether the raw score passed the success threshold.
+    pub success: bool,
+}
+
+/// A branch's rows and, when recording, each episode's frames at the end of every
+/// action chunk (the first frame first).
+pub struct BranchOut {
+    /// One row per episode.
+    pub rows: Vec<EpisodeRow>,
+    /// Recorded frames per episode (empty unless recording).
+    pub frames: Vec<Vec<Vec<u8>>>,
+    /// Whole episodes (empty unless [`Start::trajectories`]; the simulator branch only).
+    pub episodes: Vec<Trajectory>,
+}
+
+impl Start {
+    /// Resets one episode per seed.
+    ///
+    /// # Errors
+    /// A seed whose reset fails, naming it.
+    pub fn new(policy: &str, seeds: &[u64], s: &Setup) -> Result<Self, EngineError> {
+        let mut envs = Vec::with_capacity(seeds.len());
+        for &seed in seeds {
+            envs.push(s.task.reset(seed)?);
+        }
+        Ok(Self {
+            judges: envs.iter().map(|e| e.judge()).collect(),
+            first: envs.iter().map(|e| e.observe()).collect(),
+            goals: envs.iter().map(|e| e.goal_pose()).collect(),
+            policy_rngs: seeds
+                .iter()
+                .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(policy), sd])))
+                .collect(),
+            seeds: seeds.to_vec(),
+            record: false,
+            trajectories: false,
+            envs,
+        })
+    }
+
+    pub(crate) fn recording(&self) -> Vec<Vec<Vec<u8>>> {
+        if self.record { self.first.iter().map(|f| vec![f.frame.clone()]).collect() } else { Vec::new() }
+    }
+
+    pub(crate) fn histories(&self, o: usize) -> Vec<VecDeque<Seen>> {
+        self.first.iter().map(|f| (0..o).map(|_| f.clone()).collect()).collect()
+    }
+}
+
+/// The observation of an episode's last frames (oldest first) and agent positions.
+///
+/// # Errors
+/// A proprioceptive vector that is not the 2-D position the policy interface takes.
+pub fn obs_of(hist: &VecDeque<Seen>, size: usize) -> Result<Observation, EngineError> {
+    let agent_pos = hist
+        .iter()
+        .map(|s| match s.proprio[..] {
+            [x, y] => Ok([x, y]),
+            _ => Err(EngineError::Unsupported(format!(
+                "the policy interface reads a 2-D agent position; the task's proprioception has {} entries",
+                s.proprio.len()
+            ))),
+        })
+        .collect::<Result<_, _>>()?;
+    Ok(Observation { frames: hist.iter().map(|s| s.frame.clone()).collect(), agent_pos, size })
+}
+
+/// Appends `item` and keeps the newest `keep` items.
+pub fn push<T>(hist: &mut VecDeque<T>, item: T, keep: usize) {
+    hist.push_back(item);
+    while hist.len() > keep {
+        hist.pop_front();
+    }
+}
+
+/// Per-episode running score.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Track {
+    pub(crate) best_reward: f64,
+    pub(crate) max_raw: f64,
+    pub(crate) last_raw: f64,
+    /// Control steps executed (until success or the step limit).
+    pub(crate) steps: usize,
+    /// Score so far at the end of each action chunk (repeated after the episode ended,
+    /// so every trace of a batch has the same length).
+    pub(crate) trace: Vec<f64>,
+    /// Scene checks of the last frame the policy saw.
+    pub(crate) scene: Option<SceneCheck>,
+}
+
+impl Track {
+    pub(crate) fn add(&mut self, raw: f64, kind: &ScoreKind) {
+        self.best_reward = self.best_reward.max(kind.reward(raw));
+        self.max_raw = self.max_raw.max(raw);
+        self.last_raw = raw;
+    }
+
+    pub(crate) fn end_chunk(&mut self) {
+        self.trace.push((self.best_reward * 1e6).round() / 1e6);
+    }
+
+    /// The episode's row (scores, steps and trace; the branch adds poses and checks).
+    pub(crate) fn row(
+        &self,
+        policy: &str,
+        seed: u64,
+        branch: harness::results::Branch,
+        kind: &ScoreKind,
+    ) -> EpisodeRow {
+        EpisodeRow::new(
+            policy,
+            seed,
+            branch,
+            self.best_reward,
+            self.max_raw,
+            self.last_raw,
+            kind.threshold(),
+            self.steps,
+        )
+        .with_trace(self.trace.clone())
+        .with_scene(self.scene)
+    }
+}
+
+/// Episodes still running: gym-pusht ends an episode at success, and so does each
+/// branch here, at the end of the action chunk that reached it (its score, the best
+/// reward so far, cannot change after that).
+pub(crate) fn still_active(active: &[usize], track: &[Track]) -> Vec<usize> {
+    active.iter().copied().filter(|&i| track[i].best_reward < 1.0).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn succeeded_episodes_leave_the_batch_and_keep_their_trace() {
+        let mut track = vec![Track::default(); 3];
+        let kind = ScoreKind::Coverage { success_at: 0.95 };
+        // Success coverage 0.95: coverage 0.95 gives reward 1 (ends), 0.5 gives 0.526.
+        track[0].add(0.5, &kind);
+        track[1].add(0.95, &kind);
+        track[2].add(0.2, &kind);
+        assert_eq!(still_active(&[0, 1, 2], &track), vec![0, 2]);
+        // A finished episode is not revived, and its trace keeps the batch's length.
+        assert_eq!(still_active(&[0, 2], &track), vec![0, 2]);
+        track.iter_mut().for_each(Track::end_chunk);
+        track.iter_mut().for_each(Track::end_chunk);
+        assert_eq!(track[1].trace, vec![1.0, 1.0]);
+        assert_eq!(track[0].trace, vec![0.526316, 0.526316]);
+    }
+
+    #[test]
+    fn observations_need_the_two_dimensional_agent_position() {
+        let seen = |p: Vec<f32>| Seen { frame: vec![0; 3], proprio: p };
+        let hist: VecDeque<Seen> = [seen(vec![1.0, 2.0]), seen(vec![3.0, 4.0])].into();
+        let obs = obs_of(&hist, 1).unwrap();
+        assert_eq!(obs.agent_pos, vec![[1.0, 2.0], [3.0, 4.0]]);
+        let lift: VecDeque<Seen> = [seen(vec![0.0; 9])].into();
+        assert!(obs_of(&lift, 1).unwrap_err().to_string().contains("9 entries"));
+    }
+}

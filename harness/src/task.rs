@@ -1,0 +1,241 @@
+//! The task interface: what a reference simulator gives the paired engine.
+//!
+//! A [`Task`] (Push-T, robomimic Lift, Can, ...) declares its action space, its
+//! observation and how it is scored, and per episode seed makes an [`Env`]: a
+//! simulator reset to that seed's initial state (a pure function of the seed)
+//! that steps one action at a time, renders what the policy sees and scores itself
+//! exactly from privileged state.
+//!
+//! The imagined branch of an episode happens only in the world model. All it may
+//! know of the episode is taken once, at reset, from the [`Env`]: the first
+//! observation, an [`Imagination`] (what the world model is fed and what is drawn
+//! back onto its frames, and the proprioception the policy reads, integrated from
+//! its own commands) and a [`Judge`](crate::judge::Judge) of imagined frames. It
+//! never reads the simulator's state after that.
+//!
+//! Everything here is plain data (u8 frames, f32/f64 vectors): no MuJoCo, no burn.
+
+use std::path::Path;
+
+use crate::judge::Judge;
+use crate::policy::Policy;
+
+/// How a task reads an action vector.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionKind {
+    /// Absolute targets (Push-T: the agent's target position in world units).
+    Absolute,
+    /// Changes relative to the current state (robomimic: end-effector deltas in
+    /// [-1, 1], scaled by the controller, plus a gripper command).
+    Delta,
+}
+
+/// A task's action space.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ActionSpec {
+    /// Entries per action.
+    pub dim: usize,
+    /// Lower bound of each entry.
+    pub low: Vec<f32>,
+    /// Upper bound of each entry.
+    pub high: Vec<f32>,
+    /// Absolute or delta.
+    pub kind: ActionKind,
+}
+
+/// What a policy observes in a task.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ObservationSpec {
+    /// Side of the square RGB frames, in pixels.
+    pub image_size: usize,
+    /// The camera views, in the order their frames are given (one today).
+    pub cameras: Vec<String>,
+    /// Names of the proprioceptive vector's entries, in order.
+    pub proprio: Vec<String>,
+}
+
+/// How an episode is scored. Every step yields a raw value (the exact one from
+/// the simulator's state, or a judge's estimate from a frame); the episode's score
+/// is the best per-step reward, and it succeeds when the raw value passes the
+/// threshold.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum ScoreKind {
+    /// Push-T: the raw value is the goal coverage c; the reward is
+    /// clip(c / `success_at`, 0, 1) and success is c > `success_at`.
+    Coverage {
+        /// Coverage above which the episode succeeds (0.95).
+        success_at: f64,
+    },
+    /// robomimic: the raw value is 1 on success and 0 otherwise (a learned judge may
+    /// give a probability); reward and success are raw > 0.5.
+    Success,
+}
+
+impl ScoreKind {
+    /// The reward of one step's raw value, in [0, 1].
+    pub fn reward(&self, raw: f64) -> f64 {
+        match *self {
+            Self::Coverage { success_at } => (raw / success_at).clamp(0.0, 1.0),
+            Self::Success => {
+                if raw > 0.5 {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// The episode score in words, as summaries state it.
+    pub fn describe(&self) -> String {
+        match *self {
+            Self::Coverage { success_at } => {
+                format!("max over the episode of clip(coverage / {success_at}, 0, 1)")
+            }
+            Self::Success => "1 if the task succeeded at some step, else 0".to_string(),
+        }
+    }
+
+    /// The raw value an episode must exceed to succeed.
+    pub fn threshold(&self) -> f64 {
+        match *self {
+            Self::Coverage { success_at } => success_at,
+            Self::Success => 0.5,
+        }
+    }
+}
+
+/// One observation: a frame and the proprioceptive vector seen with it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Seen {
+    /// `size x size x 3` bytes, HWC RGB.
+    pub frame: Vec<u8>,
+    /// The entries [`ObservationSpec::proprio`] names (Push-T: the agent's position).
+    pub proprio: Vec<f32>,
+}
+
+/// An error of a task's simulator (a diverging step, a bad action, an impossible
+/// reset), naming the task, seed and step where the task knows them.
+#[derive(Debug, thiserror::Error)]
+#[error(transparent)]
+pub struct TaskError(pub Box<dyn std::error::Error + Send + Sync>);
+
+impl TaskError {
+    /// Wraps a task's own error type.
+    pub fn new(e: impl std::error::Error + Send + Sync + 'static) -> Self {
+        Self(Box::new(e))
+    }
+}
+
+/// What the world model is fed of an episode's frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModelView {
+    /// The policy's observation itself.
+    Observation,
+    /// A view without the episode's goal (Push-T's goal-free world models): the
+    /// goal is drawn back onto every decoded frame before anyone sees it.
+    GoalFree,
+}
+
+/// The world-model adaptor of one episode, made at reset from what the episode
+/// shows publicly (Push-T: its first frame and its goal). The imagined branch
+/// knows nothing else of the episode.
+pub trait Imagination: Send + Sync {
+    /// The frame the world model starts from, in its view.
+    fn first_frame(&self) -> &[u8];
+    /// Turns a decoded frame of the model's view into the policy's observation
+    /// (draws back the goal for [`ModelView::GoalFree`]; a no-op otherwise).
+    fn to_observation(&self, frame: &mut [u8]);
+    /// Takes one commanded action (every executed one, in order).
+    fn advance(&mut self, action: &[f32]);
+    /// The proprioception the policy reads with the newest imagined frame, from the
+    /// commands alone (Push-T: the last commanded target standing in for the agent's
+    /// position, as DriftWorld evaluates).
+    fn proprio(&self) -> Vec<f32>;
+}
+
+/// One episode of a task's reference simulator.
+pub trait Env: Send {
+    /// The episode seed it was reset to.
+    fn seed(&self) -> u64;
+    /// What the policy sees now.
+    fn observe(&self) -> Seen;
+    /// Executes one action for one control step and returns the exact raw score
+    /// after it ([`ScoreKind`]).
+    ///
+    /// # Errors
+    /// A non-finite action or a diverging simulation, naming seed and step.
+    fn step(&mut self, action: &[f32]) -> Result<f64, TaskError>;
+    /// The exact raw score of the current state.
+    fn score(&self) -> f64;
+    /// The privileged state as datasets store it (Push-T: agent x, y, block x, y, θ).
+    fn state(&self) -> Vec<f64>;
+    /// The manipulated object's planar pose (x, y, θ), where the task has one.
+    fn object_pose(&self) -> Option<[f64; 3]>;
+    /// The goal pose (x, y, θ), where the task has one.
+    fn goal_pose(&self) -> Option<[f64; 3]>;
+    /// The judge of this episode's imagined frames, from its public conditions only
+    /// (Push-T: the goal pose).
+    fn judge(&self) -> Box<dyn Judge>;
+    /// The world-model adaptor of this episode; call right after reset.
+    fn imagination(&self, view: ModelView) -> Box<dyn Imagination>;
+}
+
+/// A task: the scenario, its declarations and its seeded episodes.
+pub trait Task: Send + Sync {
+    /// The scenario name (`pusht`, `lift`, ...).
+    fn name(&self) -> &str;
+    /// Its action space.
+    fn action_spec(&self) -> ActionSpec;
+    /// What its policies observe.
+    fn observation_spec(&self) -> ObservationSpec;
+    /// How its episodes are scored.
+    fn score_kind(&self) -> ScoreKind;
+    /// Control steps per episode unless asked otherwise.
+    fn max_steps(&self) -> usize;
+    /// Control steps per second.
+    fn control_hz(&self) -> f64;
+    /// The episode of `seed`, reset (a pure function of the seed).
+    ///
+    /// # Errors
+    /// A seed whose reset fails (an impossible reset, a diverging first step).
+    fn reset(&self, seed: u64) -> Result<Box<dyn Env>, TaskError>;
+    /// A `scripted` policy checkpoint of this task (its expert acting from frames);
+    /// tasks without scripted policies refuse.
+    ///
+    /// # Errors
+    /// An unreadable or invalid `policy.json`, naming it.
+    fn scripted_policy(&self, dir: &Path) -> Result<Box<dyn Policy>, String> {
+        Err(format!("{}: task {} has no scripted policies", dir.display(), self.name()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rewards_and_thresholds_by_score_kind() {
+        let cov = ScoreKind::Coverage { success_at: 0.95 };
+        // 0.475 / 0.95 = 0.5; 0.99 / 0.95 > 1 clips to 1; negative clips to 0.
+        assert_eq!(cov.reward(0.475), 0.5);
+        assert_eq!(cov.reward(0.99), 1.0);
+        assert_eq!(cov.reward(-0.1), 0.0);
+        assert_eq!(cov.threshold(), 0.95);
+        assert_eq!(cov.describe(), "max over the episode of clip(coverage / 0.95, 0, 1)");
+        // Success: a probability of 0.7 is a success, 0.5 is not.
+        assert_eq!(ScoreKind::Success.reward(0.7), 1.0);
+        assert_eq!(ScoreKind::Success.reward(0.5), 0.0);
+        assert_eq!(ScoreKind::Success.threshold(), 0.5);
+    }
+
+    #[test]
+    fn task_errors_keep_the_message_and_the_source() {
+        let io = std::io::Error::other("step 3 diverged");
+        let e = TaskError::new(io);
+        assert_eq!(e.to_string(), "step 3 diverged");
+        assert!(e.0.downcast_ref::<std::io::Error>().is_some());
+    }
+}
