@@ -106,7 +106,8 @@ fn zarr_reader_survives_damaged_metadata_and_chunks() {
 
 #[test]
 fn episodes_jsonl_reader_survives_damaged_rows() {
-    use crate::rank::results::{Branch, EpisodeRow, read_rows, resume_rows, whole_batches};
+    use harness::results::{Branch, EpisodeRow};
+    use harness::rows::{read_rows, resume_rows, whole_batches};
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("episodes.jsonl");
     let rows: Vec<EpisodeRow> = (0..4)

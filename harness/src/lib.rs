@@ -10,6 +10,8 @@
 //! - [`metrics`]: agreement metrics between predicted and true policy scores, with CIs;
 //! - [`results`]: the typed rows and `results.json` of a ranking run, shared by the
 //!   commands that write them and the reports that read them;
+//! - [`rows`]: `episodes.jsonl` (append, read, resume at whole batches), and
+//!   [`summarise`]: per-policy statistics and agreement from the rows;
 //! - [`runfile`]: a training run's config, written at the start and read back on resume;
 //! - [`stop`]: Ctrl-C / SIGTERM as a cooperative stop that trainers poll between steps;
 //! - [`zarr`] and [`replay`]: the diffusion_policy / GPC replay-buffer dataset layout.
@@ -23,8 +25,10 @@ pub mod policy;
 pub mod replay;
 pub mod results;
 pub mod rng;
+pub mod rows;
 pub mod runfile;
 pub mod seed;
 pub mod stop;
+pub mod summarise;
 pub mod task;
 pub mod zarr;

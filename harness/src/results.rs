@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::judge::SceneCheck;
+use crate::metrics::Agreement;
 use crate::metrics::bootstrap::AgreementCi;
 
 /// Which branch an episode ran in.
@@ -295,6 +296,39 @@ impl RankResults {
     /// Never for these types (serde_json's error is passed on all the same).
     pub fn to_json(&self) -> Result<serde_json::Value, serde_json::Error> {
         serde_json::to_value(self)
+    }
+}
+
+/// The typed form of the agreement metrics (here, so that `metrics` never needs
+/// `results`).
+impl Agreement {
+    /// The `agreement` of `agreement` and `rank` outputs: every metric, tied pairs by
+    /// name (`names[i]` is policy i) and the 95% intervals. A ranking of fewer than
+    /// two policies has no pairs: its inversion count, MMRV and regret are undefined,
+    /// not perfect (null, like the correlations).
+    pub fn summary(&self, names: &[&str], ci: Option<&AgreementCi>) -> AgreementSummary {
+        let ranked = names.len() >= 2;
+        AgreementSummary {
+            pearson: self.pearson,
+            spearman: self.spearman,
+            kendall_tau_b: self.kendall_tau_b,
+            rank_inversions: ranked.then_some(self.rank_inversions.count),
+            rank_inversion_fraction: ranked.then_some(self.rank_inversions.fraction),
+            ties: self
+                .rank_inversions
+                .ties
+                .iter()
+                .map(|&(i, j)| [names[i].to_string(), names[j].to_string()])
+                .collect(),
+            mmrv: ranked.then_some(self.mmrv),
+            regret_at_1: ranked.then_some(self.regret_at_1),
+            ci95: ci.cloned(),
+        }
+    }
+
+    /// [`Agreement::summary`] as JSON.
+    pub fn to_json(&self, names: &[&str], ci: Option<&AgreementCi>) -> serde_json::Value {
+        serde_json::to_value(self.summary(names, ci)).unwrap_or_default()
     }
 }
 

@@ -11,9 +11,11 @@
 
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::Conv2d;
-use world_model::cpu_decoder::{UnsupportedLayer, conv3x3_of, norm_of};
+use world_model::cpu_decoder::{conv3x3_of, norm_of};
 use world_model::cpu_kernels::{Conv2dShape, matmul};
-use world_model::direct_conv::{Conv3x3, Norm, Padded};
+use world_model::direct_conv::{Conv3x3, Norm};
+use world_model::error::UnsupportedLayer;
+use world_model::padded::Padded;
 
 use crate::net::{ObsEncoder, Res2d};
 

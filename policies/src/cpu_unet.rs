@@ -26,10 +26,10 @@ use crate::net::{CondRes1d, CondUnet1d, Conv1dBlock, Level1d};
 /// Why a U-Net cannot be run by these kernels (a layer they do not support).
 #[derive(Debug, thiserror::Error)]
 #[error("policy U-Net {0}")]
-pub struct UnsupportedLayer(#[from] world_model::cpu_decoder::UnsupportedLayer);
+pub struct UnsupportedLayer(#[from] world_model::error::UnsupportedLayer);
 
 fn unsupported(layer: &str, message: impl Into<String>) -> UnsupportedLayer {
-    UnsupportedLayer(world_model::cpu_decoder::UnsupportedLayer::new(layer, message))
+    UnsupportedLayer(world_model::error::UnsupportedLayer::new(layer, message))
 }
 
 /// A dense layer, its errors named for this network.

@@ -6,6 +6,7 @@
 //! The geometry, physics constants and reset distribution follow the GPC /
 //! DriftWorld variant (randomised goal); `reset.fixed_goal` gives the standard one.
 
+pub mod colors;
 pub mod config;
 pub mod decoy;
 pub mod expert;

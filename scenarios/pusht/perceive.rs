@@ -3,7 +3,7 @@
 //! A scripted policy that must act from what a learned policy sees (frames and
 //! the agent position, no simulator state) needs the block and goal poses. Both
 //! are T shapes of known geometry in distinctive colours (see
-//! [`super::render::colors`]), so each pose is found in two steps:
+//! [`super::colors`]), so each pose is found in two steps:
 //!
 //! 1. **Moments.** The T's body origin is its centre of mass, so the weighted
 //!    centroid of its pixels is the position. Its larger principal axis is the
@@ -26,10 +26,10 @@
 //! entirely hidden under the block stays there.
 
 use super::PushTConfig;
+use super::colors::{BACKGROUND, GOAL};
 use super::frame_score::block_fraction;
 use super::geometry::{Pose2, TShape, wrap_angle};
 use super::render::block_colour;
-use super::render::colors::{BACKGROUND, GOAL};
 
 /// What the perceiver read from a frame.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -14,9 +14,9 @@ use std::sync::Arc;
 
 use mujoco_rs::prelude::*;
 
+use super::colors;
 use super::config::PushTConfig;
 use super::geometry::{Pose2, Rect, wrap_angle};
-use super::render::colors;
 use crate::error::ScenarioError;
 
 /// Indices into qpos / qvel: agent x, y then block x, y, theta (the MJCF's body order).

@@ -15,27 +15,7 @@ use super::physics::PushTState;
 
 type Rgb = [u8; 3];
 
-/// The scene's colours, shared with the MuJoCo scene description.
-pub mod colors {
-    /// Floor.
-    pub const BACKGROUND: [u8; 3] = [255, 255, 255];
-    /// Goal T.
-    pub const GOAL: [u8; 3] = [0, 0, 0];
-    /// Block fill: 1.2 x (198, 33, 57).
-    pub const BLOCK: [u8; 3] = [237, 39, 68];
-    /// Block outline.
-    pub const BLOCK_EDGE: [u8; 3] = [165, 28, 48];
-    /// Agent disk (RoyalBlue).
-    pub const AGENT: [u8; 3] = [65, 105, 225];
-    /// Agent inner disk.
-    pub const AGENT_INNER: [u8; 3] = [78, 126, 255];
-    /// Walls.
-    pub const WALL: [u8; 3] = [211, 211, 211];
-    /// Radius of the agent's inner disk, world units.
-    pub const AGENT_INNER_RADIUS: f64 = 11.0;
-}
-
-use colors::{AGENT, AGENT_INNER, AGENT_INNER_RADIUS, BACKGROUND, BLOCK, BLOCK_EDGE, GOAL, WALL};
+use super::colors::{AGENT, AGENT_INNER, AGENT_INNER_RADIUS, BACKGROUND, BLOCK, BLOCK_EDGE, GOAL, WALL};
 
 /// Half width of the block's outline, world units (a 4-unit line centred on the edge).
 const EDGE_HALF: f64 = 2.0;

@@ -118,11 +118,8 @@ pub(super) fn dataset_attrs(
     json!({ "evalharness": e })
 }
 
-/// Runs the command.
+/// Runs the command for the scripted behaviours (`--policy` runs [`super::collect_policy`]).
 pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
-    if let Some(dir) = &args.policy {
-        return super::collect_policy::run(args, dir, quiet);
-    }
     let c = &args.common;
     let mix = parse_mix(&args.mix)?;
     let cfg = load_pusht(&c.scenario)?;

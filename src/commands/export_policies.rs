@@ -19,7 +19,7 @@ use policies::diffusion::DiffusionConfig;
 use policies::dir::{PolicyFile, checkpoint_dirs};
 use serde_json::{Map, Value, json};
 
-use super::train::git_commit;
+use super::git_commit;
 use crate::cli::ExportPoliciesArgs;
 use crate::output::{Staged, read_json, write_json};
 

@@ -27,11 +27,21 @@ use anyhow::Result;
 
 use crate::cli::{Cli, Command, DatasetCommand, TrainCommand, WmCommand};
 
+/// The commit this binary was built from (`+dirty` if tracked files differed from it;
+/// "unknown" when built outside a git checkout), recorded by `build.rs`: the
+/// provenance every command that writes a model or a score records.
+pub(crate) fn git_commit() -> String {
+    env!("EVALHARNESS_BUILD_COMMIT").to_string()
+}
+
 /// Runs the parsed command; the exit code is 0 unless a gate failed (1).
 pub fn run(cli: &Cli) -> Result<ExitCode> {
     match &cli.command {
         Command::Simulate(a) => simulate::run(a, cli.quiet),
-        Command::Collect(a) => collect::run(a, cli.quiet),
+        Command::Collect(a) => match &a.policy {
+            Some(dir) => collect_policy::run(a, dir, cli.quiet),
+            None => collect::run(a, cli.quiet),
+        },
         Command::Dataset(DatasetCommand::Info { path, json }) => dataset::info(path, *json),
         Command::Dataset(DatasetCommand::Merge { inputs, out, force }) => {
             dataset_merge::run(inputs, out, *force, cli.quiet)

@@ -8,7 +8,7 @@ use anyhow::{Context, Result, bail};
 use scenarios::pusht::scripted::{ScriptedConfig, ScriptedFile};
 use serde_json::json;
 
-use super::train::git_commit;
+use super::git_commit;
 use crate::cli::ScriptedArgs;
 use crate::output::{Staged, write_json};
 

@@ -15,7 +15,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use serde_json::json;
 
-use super::train::git_commit;
+use super::git_commit;
 use crate::output::{read_json, write_json};
 
 /// Where the session in progress is described until it ends.

@@ -10,13 +10,15 @@ use engine::{Setup, Start, Timing, sim_branch};
 use policies::dir::checkpoint_dirs;
 use serde_json::{Value, json};
 
-use super::train::git_commit;
+use super::git_commit;
 use crate::cli::SimulateArgs;
 use crate::output::{Staged, read_json, write_json};
 use crate::policy_kinds::{expectations, load_any};
 use crate::progress;
-use crate::rank::results::{EpisodeRow, append_rows, branch_stats};
 use crate::scenario::load_task;
+use harness::results::EpisodeRow;
+use harness::rows::append_rows;
+use harness::summarise::branch_stats;
 
 /// Runs every checkpoint under `--policy` in MuJoCo.
 pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {

@@ -17,12 +17,6 @@ use crate::cli::TrainAutoencoderArgs;
 use crate::output::write_json;
 use crate::progress;
 
-/// The commit this binary was built from (`+dirty` if tracked files differed from it;
-/// "unknown" when built outside a git checkout), recorded by `build.rs`.
-pub(super) fn git_commit() -> String {
-    env!("EVALHARNESS_BUILD_COMMIT").to_string()
-}
-
 /// How an evalharness dataset was collected (from its attributes), to regenerate it:
 /// `collect` is deterministic, so the same arguments give the same bytes. A merged
 /// dataset lists the origin of each of its inputs, in order.
@@ -246,7 +240,7 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
             "command": args.join(" "),
             "sessions": sessions,
             "seed": a.seed,
-            "commit": git_commit(),
+            "commit": super::git_commit(),
             "data": data_provenance(&a.data, data.episodes.len(), data.len()),
             "steps": outcome.step,
             "finished": outcome.finished,

@@ -11,7 +11,8 @@ use policies::net::NetConfig;
 use policies::train::{Phase, PolicyRun, PolicyTrainConfig, RunConfigs, train_policy};
 use serde_json::json;
 
-use super::train::{dataset_origin, fixed_fields, git_commit, prepare_out, refuse_contradicting_flags};
+use super::git_commit;
+use super::train::{dataset_origin, fixed_fields, prepare_out, refuse_contradicting_flags};
 use crate::cli::TrainPolicyArgs;
 use crate::progress;
 

@@ -19,8 +19,9 @@ use world_model::train_ae::RunOptions;
 use world_model::train_wm::{TrainingFrames, WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
+use super::git_commit;
 use super::sessions::{open_session, read_step, record_session};
-use super::train::{data_provenance, fixed_fields, git_commit, prepare_out, refuse_contradicting_flags};
+use super::train::{data_provenance, fixed_fields, prepare_out, refuse_contradicting_flags};
 use crate::cli::{FieldArg, ObjectiveArg, PredictionArg, TrainWorldModelArgs, WmConfigArg};
 use crate::output::{read_json, write_json};
 use crate::progress;

@@ -22,8 +22,8 @@ use world_model::model::WorldModel;
 use world_model::train_ae::load_autoencoder;
 
 use super::export_policies::append;
+use super::git_commit;
 use super::sessions::stale_provenance;
-use super::train::git_commit;
 use super::train_wm::relative_to;
 use crate::cli::WmExportArgs;
 use crate::output::{Staged, read_json, write_json};

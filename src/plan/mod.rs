@@ -174,9 +174,8 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     let pb = progress::bar((planners.len() * a.episodes) as u64, "plan", quiet);
     let started = Instant::now();
     let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
-    let mut rows: Vec<PlanRow> = crate::rank::results::resume_rows(&jsonl, |r| {
-        crate::rank::results::whole_batches(r, &batches, plan_key, &[()])
-    })?;
+    let mut rows: Vec<PlanRow> =
+        harness::rows::resume_rows(&jsonl, |r| harness::rows::whole_batches(r, &batches, plan_key, &[()]))?;
     let mut timing = Timing::default();
     for &planner in &planners {
         for &batch in &batches {
@@ -188,7 +187,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
             // Batches are appended whole, and `resume_rows` dropped any part of one.
             let out = run_batch(&ctx, planner, batch)
                 .with_context(|| format!("planner {} on seeds {:?}", planner.name(), batch))?;
-            crate::rank::results::append_rows(&jsonl, &out.rows)?;
+            harness::rows::append_rows(&jsonl, &out.rows)?;
             timing.add(&out.timing);
             for (seed, rec) in &out.records {
                 let png = filmstrips.join(format!("{}_seed{seed}.png", planner.name()));

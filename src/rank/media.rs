@@ -11,8 +11,8 @@ use anyhow::Result;
 use harness::policy::Policy;
 use world_model::model::WorldModel;
 
-use super::results::{Branch, EpisodeRow};
 use engine::{Setup, Start, Timing, sim_branch, wm_branch};
+use harness::results::{Branch, EpisodeRow};
 
 /// The best- and worst-agreeing seeds of a policy (at most 2, distinct).
 pub fn pick_seeds(rows: &[EpisodeRow], policy: &str) -> Vec<(u64, &'static str)> {

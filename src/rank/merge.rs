@@ -10,8 +10,10 @@ use serde_json::{Value, json};
 
 use harness::results::{FailedPolicy, RankResults, RunTiming};
 
-use super::results::{EpisodeRow, append_rows, read_rows, summarise};
 use crate::output::{Staged, read_json, write_json};
+use harness::results::EpisodeRow;
+use harness::rows::{append_rows, read_rows};
+use harness::summarise::summarise;
 
 /// The run-defining part of a config (everything but the shard and the command).
 fn run_key(cfg: &Value) -> Value {

@@ -10,7 +10,6 @@
 mod media;
 pub mod merge;
 pub mod report;
-pub mod results;
 pub(crate) mod resume;
 pub mod scene;
 mod summary;
@@ -33,7 +32,9 @@ use world_model::rollout::NonFiniteLatents;
 use crate::cli::RankArgs;
 use crate::output::write_json;
 use crate::progress;
-use results::{EpisodeRow, append_rows, summarise};
+use harness::results::EpisodeRow;
+use harness::rows::append_rows;
+use harness::summarise::summarise;
 pub(crate) use summary::write_tables;
 
 /// Parses `--shard i/n`.
@@ -79,8 +80,8 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     }
     write_json(&a.out.join("config.json"), &config)?;
     let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
-    let mut rows: Vec<EpisodeRow> = results::resume_rows(&jsonl, |r| {
-        results::whole_batches(r, &batches, resume::rank_key, &resume::RANK_KINDS)
+    let mut rows: Vec<EpisodeRow> = harness::rows::resume_rows(&jsonl, |r| {
+        harness::rows::whole_batches(r, &batches, resume::rank_key, &resume::RANK_KINDS)
     })?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.jobs.max(1))

@@ -13,8 +13,8 @@ use reports::tables::{latex_table, summary_csv};
 use reports::timeplot::{TimeSeries, band, write_time_plot};
 use serde_json::Value;
 
-use super::results::Branch;
 use crate::output::read_json;
+use harness::results::Branch;
 
 /// A checkpoint's provenance: `provenance.json` if present, else `policy.json`'s entry.
 fn provenance(dir: &Path) -> String {
@@ -39,7 +39,7 @@ pub fn write_report(out: &Path) -> Result<PathBuf> {
     let summary = Summary::from_results(&results);
     let config = read_json(&out.join("config.json"))?;
     let mut plots = write_plots(&out.join("plots"), &summary)?;
-    let rows = super::results::read_rows::<super::results::EpisodeRow>(&out.join("episodes.jsonl"))?;
+    let rows = harness::rows::read_rows::<harness::results::EpisodeRow>(&out.join("episodes.jsonl"))?;
     let max_steps = results.max_steps as f64;
     let series: Vec<TimeSeries> = summary
         .policies

@@ -7,8 +7,8 @@ use std::path::Path;
 use anyhow::{Result, bail};
 use serde_json::Value;
 
-use super::results::{Branch, EpisodeRow};
 use crate::output::read_json;
+use harness::results::{Branch, EpisodeRow};
 
 /// Settings a resumed run may change: the command line itself, and the bootstrap
 /// count (the statistics are recomputed from all rows).
@@ -89,7 +89,7 @@ fn check_fingerprints(path: &Path, saved: &Value, config: &Value) -> Result<()> 
     Ok(())
 }
 
-/// A `rank` row's (policy, seed, branch), for [`super::results::whole_batches`].
+/// A `rank` row's (policy, seed, branch), for [`harness::rows::whole_batches`].
 pub(crate) fn rank_key(r: &EpisodeRow) -> (&str, u64, Branch) {
     (r.policy.as_str(), r.seed, r.branch)
 }
@@ -208,7 +208,7 @@ mod tests {
             row("b", 11, w),
             row("a", 99, s),
         ];
-        let keep = super::super::results::whole_batches(&rows, &batches, rank_key, &RANK_KINDS);
+        let keep = harness::rows::whole_batches(&rows, &batches, rank_key, &RANK_KINDS);
         assert_eq!(
             keep,
             [true, true, true, true, false, false, false, false, false, false, false, false, false]

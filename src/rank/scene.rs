@@ -10,9 +10,9 @@
 //! warning naming the policies whose imagined episodes end with less than half of
 //! the goal, of the block or of the agent.
 //!
-//! [`EpisodeRow::block_area`]: super::results::EpisodeRow::block_area
-//! [`EpisodeRow::goal_kept`]: super::results::EpisodeRow::goal_kept
-//! [`EpisodeRow::agent_kept`]: super::results::EpisodeRow::agent_kept
+//! [`EpisodeRow::block_area`]: harness::results::EpisodeRow::block_area
+//! [`EpisodeRow::goal_kept`]: harness::results::EpisodeRow::goal_kept
+//! [`EpisodeRow::agent_kept`]: harness::results::EpisodeRow::agent_kept
 
 use harness::results::PolicyResult;
 
@@ -78,8 +78,9 @@ pub fn scene_note(pol: &[PolicyResult]) -> Option<(String, bool)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rank::results::{Branch, EpisodeRow, summarise};
     use harness::judge::SceneCheck;
+    use harness::results::{Branch, EpisodeRow};
+    use harness::summarise::summarise;
 
     #[test]
     fn names_policies_whose_imagined_scene_degraded() {

@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use harness::results::RankResults;
 use reports::episodes::write_episodes_parquet;
 
-use super::results::EpisodeRow;
+use harness::results::EpisodeRow;
 
 /// Exit 1 when a gate fails (or a policy failed, or fewer than two policies were
 /// ranked, so no agreement could be measured), 0 otherwise. Undefined metrics fail

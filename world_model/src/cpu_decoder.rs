@@ -15,23 +15,10 @@ use burn::tensor::Tensor;
 
 use crate::autoencoder::{Autoencoder, ResBlock};
 use crate::cpu_kernels::values;
-use crate::direct_conv::{Conv3x3, Norm, Padded, winograd_enabled};
+use crate::direct_conv::{Conv3x3, Norm, winograd_enabled};
+use crate::error::UnsupportedLayer;
+use crate::padded::Padded;
 use crate::winograd::upsample::Upsample3x3;
-
-/// Why a network cannot be run by the direct kernels (a layer they do not support).
-#[derive(Debug, thiserror::Error)]
-#[error("layer {layer}: {message}")]
-pub struct UnsupportedLayer {
-    layer: String,
-    message: String,
-}
-
-impl UnsupportedLayer {
-    /// `layer` cannot run on these kernels, because of `message`.
-    pub fn new(layer: &str, message: impl Into<String>) -> Self {
-        Self { layer: layer.into(), message: message.into() }
-    }
-}
 
 /// GroupNorm -> SiLU -> conv, twice, plus the input (as [`ResBlock`]).
 #[derive(Clone, Debug)]

@@ -14,9 +14,9 @@ use burn::module::{ModuleMapper, Param};
 use burn::nn::Linear;
 use burn::tensor::{Distribution, Tensor};
 
-use crate::cpu_decoder::UnsupportedLayer;
 use crate::direct_conv::{Norm, exp};
 use crate::elementwise::mean_var;
+use crate::error::UnsupportedLayer;
 
 /// A burn tensor's values as f32, or why not.
 pub fn values<const D: usize>(t: Tensor<D>, layer: &str) -> Result<Vec<f32>, UnsupportedLayer> {

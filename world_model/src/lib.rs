@@ -33,6 +33,7 @@ pub mod latents;
 pub mod model;
 pub mod motion;
 pub mod optim;
+pub mod padded;
 pub mod rollout;
 pub mod train_ae;
 pub mod train_wm;

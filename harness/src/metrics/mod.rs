@@ -175,40 +175,5 @@ pub fn agreement(pred: &[f64], actual: &[f64]) -> Agreement {
     }
 }
 
-impl Agreement {
-    /// The `agreement` of `agreement` and `rank` outputs: every metric, tied pairs by
-    /// name (`names[i]` is policy i) and the 95% intervals. A ranking of fewer than
-    /// two policies has no pairs: its inversion count, MMRV and regret are undefined,
-    /// not perfect (null, like the correlations).
-    pub fn summary(
-        &self,
-        names: &[&str],
-        ci: Option<&bootstrap::AgreementCi>,
-    ) -> crate::results::AgreementSummary {
-        let ranked = names.len() >= 2;
-        crate::results::AgreementSummary {
-            pearson: self.pearson,
-            spearman: self.spearman,
-            kendall_tau_b: self.kendall_tau_b,
-            rank_inversions: ranked.then_some(self.rank_inversions.count),
-            rank_inversion_fraction: ranked.then_some(self.rank_inversions.fraction),
-            ties: self
-                .rank_inversions
-                .ties
-                .iter()
-                .map(|&(i, j)| [names[i].to_string(), names[j].to_string()])
-                .collect(),
-            mmrv: ranked.then_some(self.mmrv),
-            regret_at_1: ranked.then_some(self.regret_at_1),
-            ci95: ci.cloned(),
-        }
-    }
-
-    /// [`Agreement::summary`] as JSON.
-    pub fn to_json(&self, names: &[&str], ci: Option<&bootstrap::AgreementCi>) -> serde_json::Value {
-        serde_json::to_value(self.summary(names, ci)).unwrap_or_default()
-    }
-}
-
 #[cfg(test)]
 mod tests;

@@ -22,12 +22,13 @@ use burn::nn::PaddingConfig2d;
 
 use super::blocks::{Attention, Conv3dF, ResBlock};
 use super::{Level, UNet};
-use crate::cpu_decoder::{UnsupportedLayer, norm_of};
+use crate::cpu_decoder::norm_of;
 use crate::cpu_kernels::{
     Conv2dShape, Dense, Film, View, ViewMut, bias_values, group_norm_cols, matmul, matmul_strided, silu,
     values,
 };
 use crate::direct_conv::{Norm, exp, winograd_enabled};
+use crate::error::UnsupportedLayer;
 use crate::winograd_batch::BatchWinograd;
 
 /// Elements of one im2col chunk (16 MB of f32).

@@ -10,7 +10,7 @@ use std::arch::x86_64::{
 };
 
 use super::{LANES, OUT, Pass, Scratch, VECS, Winograd3x3};
-use crate::direct_conv::Padded;
+use crate::padded::Padded;
 
 /// `[a0 a2 a4 a6 b0 b2 b4 b6]` and `[a1 a3 a5 a7 b1 b3 b5 b7]`.
 #[inline]

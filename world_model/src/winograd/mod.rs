@@ -25,7 +25,7 @@ pub mod upsample;
 
 pub(crate) use algebra::{input_2d, output_2d, transform_filter};
 
-use crate::direct_conv::Padded;
+use crate::padded::Padded;
 
 /// Output channels per register tile.
 const OUT: usize = 4;

@@ -12,7 +12,7 @@ use std::arch::x86_64::{
 
 use super::super::avx2::{store_run, tile_columns};
 use super::{LANES, Pass, Tiles, Upsample3x3};
-use crate::direct_conv::Padded;
+use crate::padded::Padded;
 
 /// [`super::transform_input`] for 8 tiles at a time: each of the 3 rows' 17 columns
 /// split into the tiles' columns `d0, d1, d2` ([`tile_columns`]), `[d0 − d1, d1, d2 − d1]`

@@ -18,7 +18,7 @@
 mod avx2;
 
 use super::{LANES, OUT, TILES_PER_PASS, Winograd3x3, bias_or_zeros, pack_filters, products};
-use crate::direct_conv::Padded;
+use crate::padded::Padded;
 
 /// Tap rows (or columns) of the 3x3 filter that reach the phase's input row `r` (0:
 /// the upper of its two rows, 1: the lower), for output rows of parity `a`:

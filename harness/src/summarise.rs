@@ -1,0 +1,114 @@
+//! The statistics of a ranking run, from its rows: per policy and branch the mean
+//! score with a bootstrap CI, the success rate with a Wilson CI and the scene
+//! checks; across policies, how well the world model's ranking agrees with the
+//! simulator's (with bootstrap CIs). Rows may come in any order (a resumed,
+//! sharded or multi-threaded run gives the same results as one uninterrupted run).
+
+use std::collections::BTreeMap;
+
+use crate::metrics::agreement;
+use crate::metrics::bootstrap::{agreement_ci, mean_ci, wilson};
+use crate::results::{AgreementSummary, Branch, BranchStats, EpisodeRow, PolicyResult};
+
+/// Mean, bootstrap CI, success rate and Wilson CI of one branch of one policy.
+pub fn branch_stats(rows: &[&EpisodeRow], bootstrap: usize, seed: u64) -> BranchStats {
+    let scores: Vec<f64> = rows.iter().map(|r| r.score).collect();
+    let n = scores.len();
+    let k = rows.iter().filter(|r| r.success).count();
+    let mean_of = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+    let (lo, hi) = wilson(k, n, 1.959_963_984_540_054);
+    BranchStats {
+        mean: scores.iter().sum::<f64>() / n.max(1) as f64,
+        ci95: mean_ci(&scores, bootstrap, seed),
+        success_rate: k as f64 / n.max(1) as f64,
+        success_ci95: [lo, hi],
+        episodes: n,
+        block_area: mean_of(rows.iter().filter_map(|r| r.block_area).collect()),
+        goal_kept: mean_of(rows.iter().filter_map(|r| r.goal_kept).collect()),
+        agent_kept: mean_of(rows.iter().filter_map(|r| r.agent_kept).collect()),
+    }
+}
+
+/// Per-policy statistics and agreement, from rows (any order; sorted here).
+/// `policies` fixes the output order; policies without complete pairs are skipped.
+pub fn summarise(
+    rows: &[EpisodeRow],
+    policies: &[String],
+    bootstrap: usize,
+    seed: u64,
+) -> (Vec<PolicyResult>, AgreementSummary) {
+    let mut by: BTreeMap<(&str, u64), [Option<&EpisodeRow>; 2]> = BTreeMap::new();
+    for r in rows {
+        let e = by.entry((r.policy.as_str(), r.seed)).or_default();
+        e[usize::from(r.branch == Branch::WorldModel)] = Some(r);
+    }
+    let mut out = Vec::new();
+    let mut pairs: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
+    let mut names = Vec::new();
+    for p in policies {
+        let eps: Vec<[&EpisodeRow; 2]> = by
+            .range((p.as_str(), 0)..=(p.as_str(), u64::MAX))
+            .filter_map(|(_, v)| Some([v[0]?, v[1]?]))
+            .collect();
+        if eps.is_empty() {
+            continue;
+        }
+        let sim: Vec<&EpisodeRow> = eps.iter().map(|e| e[0]).collect();
+        let wm: Vec<&EpisodeRow> = eps.iter().map(|e| e[1]).collect();
+        let errs: Vec<f64> = sim.iter().filter_map(|r| r.scorer_abs_error).collect();
+        out.push(PolicyResult {
+            name: p.clone(),
+            sim: branch_stats(&sim, bootstrap, seed),
+            world_model: branch_stats(&wm, bootstrap, seed),
+            frame_scorer_mean_abs_error: errs.iter().sum::<f64>() / errs.len().max(1) as f64,
+        });
+        pairs.push((wm.iter().map(|r| r.score).collect(), sim.iter().map(|r| r.score).collect()));
+        names.push(p.as_str());
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let pred: Vec<f64> = pairs.iter().map(|(w, _)| mean(w)).collect();
+    let act: Vec<f64> = pairs.iter().map(|(_, s)| mean(s)).collect();
+    let m = agreement(&pred, &act);
+    let ci = (pairs.len() >= 2 && pairs.iter().all(|(w, _)| w.len() >= 2))
+        .then(|| agreement_ci(&pairs, bootstrap, seed));
+    (out, m.summary(&names, ci.as_ref()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(p: &str, seed: u64, b: Branch, score: f64) -> EpisodeRow {
+        EpisodeRow::new(p, seed, b, score, score * 0.95, 0.0, 0.95, 10)
+    }
+
+    #[test]
+    fn summary_pairs_branches_and_computes_agreement() {
+        // Policy a: sim (0.2, 0.4) mean 0.3, wm (0.1, 0.3) mean 0.2;
+        // policy b: sim (0.8, 1.0) mean 0.9, wm (0.7, 0.9) mean 0.8. Same order: r = 1, no inversion.
+        let rows = vec![
+            row("b", 2, Branch::WorldModel, 0.9),
+            row("a", 1, Branch::Sim, 0.2),
+            row("a", 1, Branch::WorldModel, 0.1),
+            row("a", 2, Branch::Sim, 0.4),
+            row("a", 2, Branch::WorldModel, 0.3),
+            row("b", 1, Branch::Sim, 0.8),
+            row("b", 1, Branch::WorldModel, 0.7),
+            row("b", 2, Branch::Sim, 1.0),
+            row("a", 3, Branch::Sim, 0.9), // unpaired: ignored
+        ];
+        let s = summarise(&rows, &["a".into(), "b".into()], 200, 0);
+        assert!((s.0[0].sim.mean - 0.3).abs() < 1e-12);
+        assert!((s.0[1].world_model.mean - 0.8).abs() < 1e-12);
+        // Success: max coverage = 0.95 score > 0.95 only for score 1.0 (0.95 > 0.95 is false): none.
+        assert_eq!(s.0[1].sim.success_rate, 0.0);
+        assert!((s.1.pearson.unwrap() - 1.0).abs() < 1e-12);
+        assert_eq!(s.1.rank_inversions, Some(0));
+        // No scene checks recorded (as in runs made before they existed): null.
+        assert_eq!(s.0[0].sim.block_area, None);
+        // Same input in another order gives the same summary.
+        let mut rev = rows.clone();
+        rev.reverse();
+        assert_eq!(summarise(&rev, &["a".into(), "b".into()], 200, 0), s);
+    }
+}
