@@ -8,4 +8,5 @@ mod reliability;
 mod shipped;
 mod simulate;
 mod train;
+mod train_wm;
 mod util;

@@ -25,7 +25,7 @@ use world_model::rollout::Rollout;
 
 use crate::EngineError;
 use crate::decide::{decide, record_chunk};
-use crate::start::{BranchOut, Setup, Start, Timing, Track, push, still_active};
+use crate::start::{Begin, BranchOut, Setup, Start, Timing, Track, push, still_active};
 use harness::policy::Policy;
 
 /// The world-model branch of one batch. `start` is borrowed: its episodes are
@@ -41,20 +41,12 @@ pub fn wm_branch(
     wm: &WorldModel,
     timing: &mut Timing,
 ) -> Result<BranchOut, EngineError> {
-    let name = policy.name().to_string();
-    let n = start.envs.len();
-    let size = s.task.observation_spec().image_size;
-    let kind = s.task.score_kind();
-    let o = policy.obs_horizon().max(1);
-    let mut hist = start.histories(o);
-    let mut rngs = start.policy_rngs.clone();
+    let Begin { name, n, size, kind, o, mut hist, mut rngs, mut track, mut rec } = start.begin(policy, s);
     let mut gen_rngs: Vec<Rng> = start
         .seeds
         .iter()
         .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(&name), sd, fnv1a("world_model")])))
         .collect();
-    let mut track = vec![Track::default(); n];
-    let mut rec = start.recording();
     for ((t, judge), f) in track.iter_mut().zip(&start.judges).zip(&start.first) {
         t.add(judge.score(&f.frame), &kind);
         t.scene = judge.scene(&f.frame);

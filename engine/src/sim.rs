@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use crate::EngineError;
 use crate::decide::{decide, record_chunk};
-use crate::start::{BranchOut, Setup, Start, Timing, Track, Trajectory, push, still_active};
+use crate::start::{Begin, BranchOut, Setup, Start, Timing, Track, Trajectory, push, still_active};
 
 /// What one simulator episode returns per chunk.
 #[derive(Default)]
@@ -41,16 +41,8 @@ pub fn sim_branch(
     s: &Setup,
     timing: &mut Timing,
 ) -> Result<BranchOut, EngineError> {
-    let name = policy.name().to_string();
-    let n = start.envs.len();
-    let size = s.task.observation_spec().image_size;
-    let kind = s.task.score_kind();
-    let o = policy.obs_horizon().max(1);
-    let mut hist = start.histories(o);
-    let mut rngs = start.policy_rngs.clone();
-    let mut track = vec![Track::default(); n];
+    let Begin { name, n, size, kind, o, mut hist, mut rngs, mut track, mut rec } = start.begin(policy, s);
     let mut judge_err = vec![(0.0f64, 0usize); n];
-    let mut rec = start.recording();
     let trajectories = start.trajectories;
     let mut traj: Vec<Trajectory> = vec![Trajectory::default(); n];
     for (((t, env), judge), f) in track.iter_mut().zip(&start.envs).zip(&start.judges).zip(&start.first) {

@@ -8,7 +8,7 @@
 use std::collections::VecDeque;
 
 use harness::judge::{Judge, SceneCheck};
-use harness::policy::Observation;
+use harness::policy::{Observation, Policy};
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
 use harness::task::{Env, ScoreKind, Seen, Task};
@@ -124,13 +124,51 @@ impl Start {
         })
     }
 
-    pub(crate) fn recording(&self) -> Vec<Vec<Vec<u8>>> {
+    /// What both branches set up alike for `policy`.
+    pub(crate) fn begin(&self, policy: &dyn Policy, s: &Setup) -> Begin {
+        let o = policy.obs_horizon().max(1);
+        Begin {
+            name: policy.name().to_string(),
+            n: self.envs.len(),
+            size: s.task.observation_spec().image_size,
+            kind: s.task.score_kind(),
+            o,
+            hist: self.histories(o),
+            rngs: self.policy_rngs.clone(),
+            track: vec![Track::default(); self.envs.len()],
+            rec: self.recording(),
+        }
+    }
+
+    fn recording(&self) -> Vec<Vec<Vec<u8>>> {
         if self.record { self.first.iter().map(|f| vec![f.frame.clone()]).collect() } else { Vec::new() }
     }
 
-    pub(crate) fn histories(&self, o: usize) -> Vec<VecDeque<Seen>> {
+    fn histories(&self, o: usize) -> Vec<VecDeque<Seen>> {
         self.first.iter().map(|f| (0..o).map(|_| f.clone()).collect()).collect()
     }
+}
+
+/// A branch's starting state ([`Start::begin`]).
+pub(crate) struct Begin {
+    /// The policy's name.
+    pub(crate) name: String,
+    /// Episodes in the batch.
+    pub(crate) n: usize,
+    /// Frame side in pixels.
+    pub(crate) size: usize,
+    /// How the task scores.
+    pub(crate) kind: ScoreKind,
+    /// Observations the policy reads per decision.
+    pub(crate) o: usize,
+    /// Each episode's last `o` observations (the first one repeated at the start).
+    pub(crate) hist: Vec<VecDeque<Seen>>,
+    /// Each episode's policy noise stream.
+    pub(crate) rngs: Vec<Rng>,
+    /// Each episode's running score.
+    pub(crate) track: Vec<Track>,
+    /// Recorded frames (empty unless recording).
+    pub(crate) rec: Vec<Vec<Vec<u8>>>,
 }
 
 /// The observation of an episode's last frames (oldest first) and agent positions.

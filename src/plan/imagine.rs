@@ -18,7 +18,7 @@ use world_model::data::tensor_to_frames;
 use world_model::model::WorldModel;
 use world_model::rollout::Rollout;
 
-use super::episodes::{Ctx, Live};
+use super::state::{Ctx, Live};
 
 /// Each proposal's cost and last imagined frame (with the goal), in proposal order.
 pub struct Imagined {

@@ -16,6 +16,7 @@
 mod episodes;
 mod imagine;
 mod results;
+mod state;
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -32,7 +33,8 @@ use crate::cli::{PlanArgs, Planner};
 use crate::output::write_json;
 use crate::progress;
 use engine::Timing;
-use episodes::{Ctx, PlanRow, plan_key, run_batch};
+use episodes::run_batch;
+use state::{Ctx, PlanRow, plan_key};
 
 /// Loads the proposing policy, returning chunks of max(imagine, execute) actions (it
 /// still predicts its whole horizon; only the slice it returns is longer), with the
@@ -128,10 +130,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     if wm.is_some() {
         apart.push(("--world-model", &a.world_model));
     }
-    apart.extend(inputs.iter().map(|(_, dir, _)| ("model folder", dir.as_path())));
-    crate::output::check_apart(&a.out, &apart)?;
-    let out_dir = crate::output::RunDir::prepare_episodes(&a.out, a.resume, a.force)?;
-    let jsonl = a.out.join("episodes.jsonl");
+    let (out_dir, jsonl) = crate::rank::prepare_run(&a.out, apart, &inputs, a.resume, a.force)?;
     let config = json!({
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "scenario": a.scenario, "policy": a.policy,

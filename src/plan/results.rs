@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use harness::metrics::bootstrap::{mean_ci, wilson};
 use serde_json::{Value, json};
 
-use super::episodes::PlanRow;
+use super::state::PlanRow;
 use crate::cli::Planner;
 
 fn sorted(rows: &[PlanRow], planner: Planner) -> Vec<&PlanRow> {

@@ -61,11 +61,8 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     let wm = load_world_model(&a.world_model, a.alpha, &device)?;
     let dirs = checkpoint_dirs(&a.policies)?;
     let inputs = model_inputs(Some((&a.world_model, &wm)), &dirs)?;
-    let mut apart: Vec<(&str, &Path)> = vec![("--policies", &a.policies), ("--world-model", &a.world_model)];
-    apart.extend(inputs.iter().map(|(_, dir, _)| ("model folder", dir.as_path())));
-    crate::output::check_apart(&a.out, &apart)?;
-    let out_dir = crate::output::RunDir::prepare_episodes(&a.out, a.resume, a.force)?;
-    let jsonl = a.out.join("episodes.jsonl");
+    let flags: Vec<(&str, &Path)> = vec![("--policies", &a.policies), ("--world-model", &a.world_model)];
+    let (out_dir, jsonl) = prepare_run(&a.out, flags, &inputs, a.resume, a.force)?;
     let config = json!({
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "scenario": a.scenario, "policies": a.policies, "world_model": a.world_model,
@@ -224,6 +221,25 @@ pub(crate) fn model_inputs(
             Ok((k, d, f))
         })
         .collect()
+}
+
+/// Checks that `out` stays apart from every input (the `flags`' paths and the model
+/// folders of [`model_inputs`]), then prepares it for a run that appends rows (see
+/// [`crate::output::RunDir::prepare_episodes`]); returns it and its `episodes.jsonl`.
+///
+/// # Errors
+/// An `out` that overlaps an input, or one `--resume` / `--force` cannot take.
+pub(crate) fn prepare_run<'a>(
+    out: &Path,
+    mut apart: Vec<(&'a str, &'a Path)>,
+    inputs: &'a [(String, std::path::PathBuf, String)],
+    resume: bool,
+    force: bool,
+) -> Result<(crate::output::RunDir, std::path::PathBuf)> {
+    apart.extend(inputs.iter().map(|(_, dir, _)| ("model folder", dir.as_path())));
+    crate::output::check_apart(out, &apart)?;
+    let dir = crate::output::RunDir::prepare_episodes(out, resume, force)?;
+    Ok((dir, out.join("episodes.jsonl")))
 }
 
 /// Loads the world model in `dir`, with `--alpha` applied when given.

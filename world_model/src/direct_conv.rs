@@ -76,7 +76,7 @@ impl Conv3x3 {
     /// # Shapes
     /// `x`: `[cin, h, w]` (bordered) -> `out`: `[cout, h, w]`
     pub fn forward(&self, x: &Padded, residual: Option<&[f32]>, out: &mut [f32]) {
-        if Winograd3x3::supports(x.h, x.w) && winograd_enabled() {
+        if Winograd3x3::supports(x.height(), x.width()) && winograd_enabled() {
             self.winograd.forward(x, residual, out);
         } else {
             self.forward_direct(x, residual, out);
@@ -88,8 +88,8 @@ impl Conv3x3 {
     /// # Shapes
     /// `x`: `[cin, h, w]` (bordered) -> `out`: `[cout, h, w]`
     pub fn forward_direct(&self, x: &Padded, residual: Option<&[f32]>, out: &mut [f32]) {
-        debug_assert_eq!(x.c, self.cin);
-        debug_assert_eq!(out.len(), self.cout * x.h * x.w);
+        debug_assert_eq!(x.channels(), self.cin);
+        debug_assert_eq!(out.len(), self.cout * x.height() * x.width());
         #[cfg(target_arch = "x86_64")]
         if crate::elementwise::has_avx2_fma() {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
@@ -116,7 +116,7 @@ fn each_tile(
     out: &mut [f32],
     mut tile: impl FnMut(&[f32], usize, &mut [[f32; LANES]; OUT]),
 ) {
-    let (h, w) = (x.h, x.w);
+    let (h, w, stride) = (x.height(), x.width(), x.stride());
     for y in 0..h {
         for block in 0..k.cout.div_ceil(OUT) {
             let wb = &k.weights[block * k.cin * 9 * OUT..][..k.cin * 9 * OUT];
@@ -126,7 +126,7 @@ fn each_tile(
                 for (a, &b) in acc.iter_mut().zip(bias) {
                     *a = [b; LANES];
                 }
-                tile(wb, y * x.stride + x0, &mut acc);
+                tile(wb, y * stride + x0, &mut acc);
                 let n = LANES.min(w - x0);
                 for (j, a) in acc.iter().enumerate() {
                     let co = block * OUT + j;
@@ -151,12 +151,13 @@ fn each_tile(
 
 /// The portable kernel: the reduction in plain Rust.
 fn conv(k: &Conv3x3, x: &Padded, residual: Option<&[f32]>, out: &mut [f32]) {
-    let plane = (x.h + 2) * x.stride;
+    let (data, stride) = (x.data(), x.stride());
+    let plane = (x.height() + 2) * stride;
     each_tile(k, x, residual, out, |wb, base, acc| {
         for ci in 0..k.cin {
             let wc = &wb[ci * 9 * OUT..][..9 * OUT];
             for ky in 0..3 {
-                let row = &x.data[ci * plane + ky * x.stride + base..][..LANES + 2];
+                let row = &data[ci * plane + ky * stride + base..][..LANES + 2];
                 for kx in 0..3 {
                     let wt = &wc[(ky * 3 + kx) * OUT..][..OUT];
                     for (a, &wj) in acc.iter_mut().zip(wt) {
@@ -178,7 +179,8 @@ fn conv(k: &Conv3x3, x: &Padded, residual: Option<&[f32]>, out: &mut [f32]) {
 #[allow(unsafe_code)]
 fn conv_avx2_fma(k: &Conv3x3, x: &Padded, residual: Option<&[f32]>, out: &mut [f32]) {
     use std::arch::x86_64::{__m256, _mm256_fmadd_ps, _mm256_loadu_ps, _mm256_set1_ps, _mm256_storeu_ps};
-    let plane = (x.h + 2) * x.stride;
+    let (data, stride) = (x.data(), x.stride());
+    let plane = (x.height() + 2) * stride;
     each_tile(k, x, residual, out, |wb, base, acc| {
         let mut r = [[_mm256_set1_ps(0.0); 2]; OUT];
         for (rj, aj) in r.iter_mut().zip(acc.iter()) {
@@ -188,7 +190,7 @@ fn conv_avx2_fma(k: &Conv3x3, x: &Padded, residual: Option<&[f32]>, out: &mut [f
         for ci in 0..k.cin {
             let wc = &wb[ci * 9 * OUT..][..9 * OUT];
             for ky in 0..3 {
-                let row = &x.data[ci * plane + ky * x.stride + base..][..LANES + 2];
+                let row = &data[ci * plane + ky * stride + base..][..LANES + 2];
                 for kx in 0..3 {
                     // SAFETY: `row` holds LANES + 2 floats (checked by the slice above), so
                     // kx + 16 <= LANES + 2 floats are in bounds for kx <= 2.

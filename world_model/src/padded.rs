@@ -12,32 +12,48 @@ pub(crate) const LANES: usize = 16;
 /// to whole tiles, so a 3x3 tap never needs a bounds branch.
 #[derive(Clone, Debug)]
 pub struct Padded {
-    pub(crate) c: usize,
-    pub(crate) h: usize,
-    pub(crate) w: usize,
+    c: usize,
+    h: usize,
+    w: usize,
     /// Floats per stored row (`w` rounded up to a whole tile, plus the border).
-    pub(crate) stride: usize,
-    pub(crate) data: Vec<f32>,
+    stride: usize,
+    data: Vec<f32>,
 }
 
 impl Padded {
     /// A zero map of `c` channels, `h` x `w` pixels.
+    #[inline]
     pub fn zeros(c: usize, h: usize, w: usize) -> Self {
         let stride = w.div_ceil(LANES) * LANES + 2;
         Self { c, h, w, stride, data: vec![0.0; c * (h + 2) * stride] }
     }
 
+    /// Floats per stored row (the interior rounded up to whole tiles, plus the border).
+    #[inline(always)]
+    pub(crate) fn stride(&self) -> usize {
+        self.stride
+    }
+
+    /// The stored values: per channel `h + 2` rows of [`Padded::stride`] floats.
+    #[inline(always)]
+    pub(crate) fn data(&self) -> &[f32] {
+        &self.data
+    }
+
     /// Channels.
+    #[inline]
     pub fn channels(&self) -> usize {
         self.c
     }
 
     /// Interior height.
+    #[inline]
     pub fn height(&self) -> usize {
         self.h
     }
 
     /// Interior width.
+    #[inline]
     pub fn width(&self) -> usize {
         self.w
     }
@@ -45,11 +61,13 @@ impl Padded {
     /// Bordered row `by` (0 is the zero row above the interior) of channel `ch`: the
     /// left border, the `w` interior values, then zeros to the stored row's end
     /// (at least `w + 2` values).
+    #[inline]
     pub fn bordered_row(&self, ch: usize, by: usize) -> &[f32] {
         &self.data[(ch * (self.h + 2) + by) * self.stride..][..self.stride]
     }
 
     /// The interior row `y` of channel `ch` (`w` values).
+    #[inline]
     fn row_mut(&mut self, ch: usize, y: usize) -> &mut [f32] {
         let start = (ch * (self.h + 2) + y + 1) * self.stride + 1;
         &mut self.data[start..start + self.w]
