@@ -13,7 +13,7 @@
 //! `BENCH_OBJECTIVE_BATCHES=1,100`. The device is `EVALHARNESS_DEVICE` (see
 //! `world_model::device`). `decoder` times the frame decoder alone, burn's
 //! convolutions against the CPU kernels (`world_model::cpu_decoder`; Winograd's
-//! algorithm since session 21, the direct 3x3 kernel under `EVALHARNESS_CONV=direct`), at
+//! algorithm since 2026-11-24, the direct 3x3 kernel under `EVALHARNESS_CONV=direct`), at
 //! batch 1 and 50 on the shipped autoencoder (`BENCH_AUTOENCODER=DIR`);
 //! `BENCH_DECODER_CHANNELS=8,16,32,32` adds a decoder of those widths (random
 //! weights) on the direct kernels, to price a narrower decoder before training one.

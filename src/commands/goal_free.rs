@@ -6,7 +6,7 @@
 //! back onto what it generates (`FrameScorer::draw_goal`) before a policy or a
 //! scorer sees them. The point: a model that sees the goal learns the expert data's
 //! "blocks go to the goal" prior and, over a long rollout, drifts any block there
-//! (measured in BENCHMARKS.md, session 19); one that never sees it cannot.
+//! (measured in BENCHMARKS.md, 2026-11-24); one that never sees it cannot.
 //!
 //! Re-rendering needs what evalharness records with every dataset: the scenario's
 //! configuration and the state rows (agent, block, goal).

@@ -14,7 +14,7 @@
 //! internet access to GitHub (its `cubecl-llvm` build script downloads LLVM), so a
 //! GPU binary made on such a machine is a wgpu one; Vulkan drivers come with
 //! NVIDIA's, and Mesa's lavapipe runs the same binary on a CPU for a check (its
-//! `wm eval` equals Flex's, BENCHMARKS.md session 26). burn's
+//! `wm eval` equals Flex's: BENCHMARKS.md, "a wgpu GPU build", 2026-11-25). burn's
 //! `vulkan` feature (SPIR-V shaders instead of WGSL) was tried first and crashed
 //! inside lavapipe (Mesa 22.3 and 25.0) while autotuning its matmul kernels.
 
