@@ -24,6 +24,8 @@ pub mod imagined;
 pub mod schedule;
 pub mod sim;
 pub mod start;
+#[cfg(test)]
+mod tests;
 
 pub use error::EngineError;
 pub use imagined::wm_branch;

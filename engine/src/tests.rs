@@ -1,0 +1,152 @@
+//! The engine on a task that is not Push-T: a toy "reach" task scored by success
+//! alone (as robomimic's Lift and Can are), to show that nothing in the simulator
+//! branch assumes Push-T's coverage.
+
+use harness::judge::Judge;
+use harness::policy::{ActionChunk, Observation, Policy, PolicyError};
+use harness::results::Branch;
+use harness::rng::Rng;
+use harness::task::{
+    ActionKind, ActionSpec, Env, Imagination, ModelView, ObservationSpec, ScoreKind, Seen, Task, TaskError,
+};
+
+use crate::{Setup, Start, Timing, sim_branch};
+
+/// An agent on a line moves halfway to its commanded target each step; it succeeds
+/// within 0.5 of the goal at 7. The frame's first byte shows the position × 25.
+struct Reach;
+
+struct ReachEnv {
+    seed: u64,
+    x: f64,
+}
+
+const GOAL: f64 = 7.0;
+
+fn near(x: f64) -> f64 {
+    if (x - GOAL).abs() < 0.5 { 1.0 } else { 0.0 }
+}
+
+impl Task for Reach {
+    fn name(&self) -> &str {
+        "reach"
+    }
+    fn action_spec(&self) -> ActionSpec {
+        ActionSpec { dim: 2, low: vec![0.0; 2], high: vec![10.0; 2], kind: ActionKind::Absolute }
+    }
+    fn observation_spec(&self) -> ObservationSpec {
+        ObservationSpec {
+            image_size: 1,
+            cameras: vec!["line".into()],
+            proprio: vec!["x".into(), "zero".into()],
+        }
+    }
+    fn score_kind(&self) -> ScoreKind {
+        ScoreKind::Success
+    }
+    fn max_steps(&self) -> usize {
+        10
+    }
+    fn control_hz(&self) -> f64 {
+        1.0
+    }
+    fn reset(&self, seed: u64) -> Result<Box<dyn Env>, TaskError> {
+        Ok(Box::new(ReachEnv { seed, x: 3.0 * seed as f64 }))
+    }
+}
+
+/// Reads the position back from the frame.
+struct ReachJudge;
+
+impl Judge for ReachJudge {
+    fn score(&self, frame: &[u8]) -> f64 {
+        near(f64::from(frame[0]) / 25.0)
+    }
+}
+
+impl Env for ReachEnv {
+    fn seed(&self) -> u64 {
+        self.seed
+    }
+    fn observe(&self) -> Seen {
+        Seen { frame: vec![(self.x * 25.0) as u8, 0, 0], proprio: vec![self.x as f32, 0.0] }
+    }
+    fn step(&mut self, action: &[f32]) -> Result<f64, TaskError> {
+        self.x += (f64::from(action[0]) - self.x) / 2.0;
+        Ok(self.score())
+    }
+    fn score(&self) -> f64 {
+        near(self.x)
+    }
+    fn state(&self) -> Vec<f64> {
+        vec![self.x]
+    }
+    fn object_pose(&self) -> Option<[f64; 3]> {
+        None
+    }
+    fn goal_pose(&self) -> Option<[f64; 3]> {
+        None
+    }
+    fn judge(&self) -> Box<dyn Judge> {
+        Box::new(ReachJudge)
+    }
+    fn imagination(&self, _: ModelView) -> Box<dyn Imagination> {
+        unreachable!("the simulator branch never imagines")
+    }
+}
+
+/// Commands the goal, two actions a decision.
+struct ToGoal;
+
+impl Policy for ToGoal {
+    fn name(&self) -> &str {
+        "to-goal"
+    }
+    fn obs_horizon(&self) -> usize {
+        1
+    }
+    fn action_horizon(&self) -> usize {
+        2
+    }
+    fn act(&self, obs: &[Observation], _: &mut [Rng]) -> Result<Vec<ActionChunk>, PolicyError> {
+        Ok(obs.iter().map(|_| vec![[GOAL as f32, 0.0]; 2]).collect())
+    }
+}
+
+#[test]
+fn a_success_scored_task_runs_through_the_simulator_branch() {
+    let setup = Setup { task: &Reach, master_seed: 0, max_steps: 10 };
+    let mut start = Start::new("to-goal", &[0, 2, 4], &setup).unwrap();
+    start.trajectories = true;
+    let out = sim_branch(&ToGoal, start, &setup, &mut Timing::default()).unwrap();
+    // Seed 0 starts at 0: 3.5, 5.25, 6.125, 6.5625 — within 0.5 of 7 at step 4, the end of
+    // the second chunk. Seed 2 starts at 6: 6.5 (not < 0.5 away), 6.75 — success at step 2.
+    // Seed 4 starts at 12: 9.5, 8.25, 7.625, 7.3125 — step 4 as well.
+    let r = &out.rows;
+    assert_eq!((r[0].steps, r[1].steps, r[2].steps), (4, 2, 4));
+    assert!(r.iter().all(|r| r.success && r.score == 1.0 && r.branch == Branch::Sim));
+    // The trace holds the score at each chunk's end, repeated after success.
+    assert_eq!(r[0].score_trace, vec![0.0, 1.0]);
+    assert_eq!(r[1].score_trace, vec![1.0, 1.0]);
+    // The judge reads the frame exactly here (x × 25 truncated keeps x within 0.04):
+    // no error on the frames the policy saw.
+    assert_eq!(r[0].scorer_abs_error, Some(0.0));
+    // No poses: the task has none; no scene checks: its judge makes none.
+    assert_eq!((r[0].final_block, r[0].goal, r[0].block_area), (None, [0.0; 3], None));
+    // Whole trajectories: the state before each action, the actions, the raw scores.
+    let t = &out.episodes[0];
+    assert_eq!(t.states, vec![vec![0.0], vec![3.5], vec![5.25], vec![6.125]]);
+    assert_eq!(t.raw, vec![0.0, 0.0, 0.0, 1.0]);
+    assert_eq!((t.frames.len(), t.actions.len(), t.success), (5, 4, true));
+}
+
+#[test]
+fn episodes_that_never_succeed_run_to_the_step_limit() {
+    // Seed 1 starts at 3 and is commanded to the goal; with max_steps 2 it reaches 5 then 6:
+    // never within 0.5, so the row is a failure after exactly 2 steps.
+    let setup = Setup { task: &Reach, master_seed: 0, max_steps: 2 };
+    let start = Start::new("to-goal", &[1], &setup).unwrap();
+    let out = sim_branch(&ToGoal, start, &setup, &mut Timing::default()).unwrap();
+    let r = &out.rows[0];
+    assert_eq!((r.steps, r.success, r.score, r.max_coverage), (2, false, 0.0, 0.0));
+}
