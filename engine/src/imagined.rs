@@ -83,15 +83,14 @@ pub fn wm_branch(
             })?; // [a, f, C, s, s]
             // Decode only the frames the policy will see (the chunk's last `o`): decoding
             // is the most expensive part of the branch. They are also the frames judged.
-            let first_seen = len.saturating_sub(o).max(done).min(done + f) - done;
-            let mut frames = if first_seen < f {
-                let m = f - first_seen;
+            let first_seen = len.saturating_sub(o).max(done).min(done + f) - done; // <= f
+            let m = f - first_seen;
+            let mut frames = if m > 0 {
                 let seen = pred.narrow(1, first_seen, m).reshape([a * m, c, ls, ls]);
                 tensor_to_frames(wm.decode(seen))
             } else {
                 Vec::new()
             };
-            let m = f - first_seen.min(f);
             for (p, &i) in active.iter().enumerate() {
                 for j in 0..f {
                     imagine[i].advance(&chunks[p][done + j]);

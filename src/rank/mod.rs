@@ -19,15 +19,14 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use engine::Setup;
 use engine::schedule::{self, Batch};
+use engine::{EngineError, Setup};
 use policies::dir::{checkpoint_dirs, checkpoint_name};
 
 use crate::policy_kinds::{expectations, load_any};
 use harness::results::{FailedPolicy, RankResults, RunTiming};
 use serde_json::{Value, json};
 use world_model::model::WorldModel;
-use world_model::rollout::NonFiniteLatents;
 
 use crate::cli::RankArgs;
 use crate::output::write_json;
@@ -126,7 +125,6 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     }
     let policies: Vec<&dyn harness::policy::Policy> = loaded.iter().map(|(_, p)| p.as_ref()).collect();
     let mut done = |j: usize, out: schedule::BatchResult| -> Result<()> {
-        let out = out.map_err(anyhow::Error::new);
         let (name, todo) = (&names[loaded[jobs[j].policy].0], &jobs[j].seeds);
         match out {
             Ok(new) => {
@@ -137,17 +135,15 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
             }
             // The world model failing is not the policy's fault and would fail every
             // policy alike: stop the run once, naming the model.
-            Err(e) if e.chain().any(|c| c.downcast_ref::<NonFiniteLatents>().is_some()) => {
+            Err(EngineError::WorldModel { source, .. }) => {
                 bail!(
-                    "world model {}: {} (while imagining policy {name}'s seeds {todo:?}); \
+                    "world model {}: {source} (while imagining policy {name}'s seeds {todo:?}); \
                      the rows of the batches before this one are kept",
                     a.world_model.display(),
-                    e.chain()
-                        .find_map(|c| c.downcast_ref::<NonFiniteLatents>())
-                        .map_or_else(String::new, |n| n.to_string())
                 );
             }
             Err(e) => {
+                let e = anyhow::Error::new(e);
                 tracing::error!("policy {name}: {e:#}; continuing with the other policies");
                 failed.push(FailedPolicy { policy: name.clone(), error: format!("{e:#}") });
             }
