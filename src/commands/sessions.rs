@@ -139,19 +139,19 @@ mod tests {
     fn a_killed_session_is_recorded_up_to_its_checkpoint_by_the_next() {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("run");
-        // Session 1 ends normally at step 100.
+        // The first training process ends normally at step 100.
         open_session(&out, "train --steps 300", 0).unwrap();
         std::fs::write(out.join("state.json"), r#"{"step":100,"elapsed_s":50.0}"#).unwrap();
         let all = record_session(&out, "train --steps 300", 0, 100, 50.0).unwrap();
         assert_eq!(all.len(), 1);
         assert!(!out.join(OPEN_SESSION).exists());
-        // Session 2 starts at 100, checkpoints at 150 and is killed (no record_session).
+        // The second starts at 100, checkpoints at 150 and is killed (no record_session).
         open_session(&out, "train --resume", 100).unwrap();
         std::fs::write(out.join("state.json"), r#"{"step":150,"elapsed_s":80.5}"#).unwrap();
         let prov = json!({"steps": 100});
         let stale = stale_provenance(&out, &prov).expect("provenance is behind the checkpoint");
         assert!(stale.contains("records 100 steps") && stale.contains("at step 150"), "{stale}");
-        // Session 3 finds session 2's open file and records it from 100 to 150.
+        // The third finds the second's open file and records it from 100 to 150.
         open_session(&out, "train --resume --max-minutes 0", 150).unwrap();
         let got = lines(&out);
         assert_eq!(got.len(), 2);
