@@ -1,5 +1,6 @@
 //! Checks that MuJoCo 3.17.0 was unpacked by `scripts/setup.sh` and bakes its
-//! folder into the rpath of this crate's test binaries.
+//! folder into the rpath of this crate's test binaries; bakes in where
+//! `scripts/setup.sh` unpacks robosuite's scene assets.
 
 fn main() {
     println!("cargo::rerun-if-env-changed=MUJOCO_DYNAMIC_LINK_DIR");
@@ -20,4 +21,8 @@ fn main() {
         );
     }
     println!("cargo::rustc-link-arg=-Wl,-rpath,{dir}");
+    // robosuite's scene assets, unpacked by scripts/setup.sh beside .mujoco.
+    let manifest = std::env::var("CARGO_MANIFEST_DIR").unwrap_or_default();
+    let assets = std::path::Path::new(&manifest).join("..").join(".robosuite").join("assets");
+    println!("cargo::rustc-env=EVALHARNESS_ROBOSUITE_DEFAULT={}", assets.display());
 }

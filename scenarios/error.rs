@@ -97,4 +97,34 @@ pub enum ScenarioError {
         /// Entries given.
         got: usize,
     },
+    /// robosuite's scene assets are not where the build or
+    /// `EVALHARNESS_ROBOSUITE_ASSETS` says.
+    #[error(
+        "robosuite assets missing: {dir} has no {missing}; run scripts/setup.sh (it unpacks the \
+         pinned robosuite wheel's assets into .robosuite/assets) or set EVALHARNESS_ROBOSUITE_ASSETS"
+    )]
+    MissingAssets {
+        /// The folder looked in.
+        dir: PathBuf,
+        /// The first file not found, relative to it.
+        missing: String,
+    },
+    /// An element the scene composer expects in a robosuite asset file is absent.
+    #[error("robosuite asset {file}: no {kind} named '{name}'")]
+    MissingElement {
+        /// The asset file.
+        file: PathBuf,
+        /// Body, geom, joint, site, ...
+        kind: &'static str,
+        /// The element's name.
+        name: String,
+    },
+    /// A scenario that exists but cannot yet do what was asked.
+    #[error("scenario '{scenario}' does not support {what} yet")]
+    Unsupported {
+        /// The scenario.
+        scenario: String,
+        /// What it cannot do.
+        what: String,
+    },
 }

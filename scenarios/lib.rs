@@ -4,10 +4,13 @@
 //! seed), its renderer, its exact scoring and its scripted behaviours (expert and
 //! exploration) used to collect datasets, and implements the task interface
 //! ([`harness::task::Task`]) the paired engine drives; [`load_task`] resolves
-//! `--scenario`. Only Push-T exists so far.
+//! `--scenario`. Push-T implements the task interface; robomimic Lift so far has
+//! its reference simulator, scripted behaviours and data commands.
 
 pub mod error;
+pub mod lift;
 pub mod pusht;
+pub mod robosuite;
 
 pub use error::ScenarioError;
 
@@ -20,7 +23,15 @@ use harness::task::Task;
 /// # Errors
 /// An unknown name, an unreadable or invalid file, or a scene MuJoCo refuses.
 pub fn load_task(spec: &str) -> Result<Box<dyn Task>, ScenarioError> {
-    Ok(Box::new(pusht::PushTTask::new(pusht_config(spec)?)?))
+    match scenario(spec)? {
+        Scenario::PushT(cfg) => Ok(Box::new(pusht::PushTTask::new(*cfg)?)),
+        Scenario::Lift(_) => Err(ScenarioError::Unsupported {
+            scenario: "lift".into(),
+            what: "policies and world models (it runs with `simulate` and `collect` and its scripted \
+                   behaviours)"
+                .into(),
+        }),
+    }
 }
 
 /// The Push-T config `--scenario` names: `pusht` gives the shipped parameters, a
@@ -33,14 +44,58 @@ pub fn pusht_config(spec: &str) -> Result<pusht::PushTConfig, ScenarioError> {
         return Ok(pusht::PushTConfig::default());
     }
     let path = std::path::Path::new(spec);
-    if spec.ends_with(".toml") || path.exists() {
+    let file = spec.ends_with(".toml") || path.exists();
+    if spec == "lift" || (file && file_names(path)?.as_deref() == Some("lift")) {
+        return Err(ScenarioError::Unsupported {
+            scenario: "lift".into(),
+            what: "this command (Lift runs with `simulate` and `collect` and its scripted behaviours)".into(),
+        });
+    }
+    if file {
         return pusht::PushTConfig::from_file(path);
     }
     Err(ScenarioError::UnknownScenario { name: spec.into(), available: SCENARIOS.join(", ") })
 }
 
 /// Names of the scenarios this build can simulate.
-pub const SCENARIOS: &[&str] = &["pusht"];
+pub const SCENARIOS: &[&str] = &["pusht", "lift"];
+
+/// A resolved `--scenario`: which simulator, with its parameters.
+#[derive(Clone, Debug)]
+pub enum Scenario {
+    /// Push-T.
+    PushT(Box<pusht::PushTConfig>),
+    /// robomimic Lift.
+    Lift(lift::LiftConfig),
+}
+
+/// Resolves `--scenario`: a name (`pusht`, `lift`: the shipped parameters) or a
+/// scenario .toml file, whose `name` key says which simulator it describes.
+///
+/// # Errors
+/// An unknown name, or an unreadable or invalid file.
+pub fn scenario(spec: &str) -> Result<Scenario, ScenarioError> {
+    if spec == "lift" {
+        return Ok(Scenario::Lift(lift::LiftConfig::default()));
+    }
+    let path = std::path::Path::new(spec);
+    if spec != "pusht"
+        && (spec.ends_with(".toml") || path.exists())
+        && file_names(path)?.as_deref() == Some("lift")
+    {
+        return Ok(Scenario::Lift(lift::LiftConfig::from_file(path)?));
+    }
+    Ok(Scenario::PushT(Box::new(pusht_config(spec)?)))
+}
+
+/// The `name` a scenario file gives itself, if it parses and has one.
+fn file_names(path: &std::path::Path) -> Result<Option<String>, ScenarioError> {
+    let text =
+        std::fs::read_to_string(path).map_err(|source| ScenarioError::Io { path: path.into(), source })?;
+    Ok(toml::from_str::<toml::Table>(&text)
+        .ok()
+        .and_then(|t| t.get("name").and_then(|n| n.as_str().map(str::to_string))))
+}
 
 /// Routes MuJoCo's warnings and messages to the `log` crate (and so to the
 /// program's `tracing` subscriber) instead of MuJoCo's default: printing to the

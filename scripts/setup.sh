@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Set up evalharness on a fresh Debian machine. Idempotent: safe to re-run.
 #
-#   scripts/setup.sh            Debian packages + MuJoCo 3.17.0 + release build
+#   scripts/setup.sh            Debian packages + MuJoCo 3.17.0 + robosuite assets + release build
 #   scripts/setup.sh --no-build the same without `cargo build --release`
 #   scripts/setup.sh --tests    also Chromium, which the report test screenshots the HTML with
 #
@@ -77,7 +77,44 @@ else
   say "MuJoCo ${MUJOCO_VERSION} unpacked into .mujoco/lib"
 fi
 
-# 4. The release binary.
+# 4. robosuite 1.5.2's scene assets (MIT-licensed) for the Lift and Can scenes:
+#    the pinned wheel is checked against its sha256 and only the files the two
+#    scenes read are unpacked into .robosuite/assets (git-ignored). No Python
+#    package is installed.
+RS_VERSION=1.5.2
+RS_WHEEL="robosuite-${RS_VERSION}-py3-none-any.whl"
+RS_SHA256=b9e02df55de8949739de6ba1d196d2ba59cf33c51a76efcfbe5c2f73cdcf99ce
+RS_DIR="$root/.robosuite"
+RS_STAMP="$RS_DIR/assets/.robosuite-${RS_VERSION}"
+if [ -f "$RS_STAMP" ]; then
+  say "robosuite ${RS_VERSION} assets already in .robosuite/assets"
+else
+  mkdir -p "$RS_DIR/wheel"
+  if [ ! -f "$RS_DIR/wheel/$RS_WHEEL" ]; then
+    say "downloading robosuite==${RS_VERSION} wheel from PyPI"
+    python3 -m pip download --quiet --no-deps --only-binary=:all: \
+      -d "$RS_DIR/wheel" "robosuite==${RS_VERSION}"
+  fi
+  echo "${RS_SHA256}  $RS_DIR/wheel/$RS_WHEEL" | sha256sum --check --quiet - \
+    || { echo "setup.sh: sha256 mismatch for $RS_WHEEL; delete .robosuite/ and re-run" >&2; exit 2; }
+  rm -rf "$RS_DIR/unpack" "$RS_DIR/assets"
+  a=robosuite/models/assets
+  unzip -q "$RS_DIR/wheel/$RS_WHEEL" -d "$RS_DIR/unpack" \
+    "$a/base.xml" "$a/robots/panda/*" "$a/grippers/panda_gripper.xml" \
+    "$a/grippers/meshes/panda_gripper/*" "$a/bases/rethink_mount.xml" \
+    "$a/bases/meshes/rethink_mount/*" "$a/arenas/table_arena.xml" "$a/arenas/bins_arena.xml" \
+    "$a/objects/can.xml" "$a/objects/meshes/can.*" \
+    "$a/textures/light-gray-floor-tile.png" "$a/textures/ceramic.png" \
+    "$a/textures/steel-brushed.png" "$a/textures/light-gray-plaster.png" \
+    "$a/textures/red-wood.png" "$a/textures/dark-wood.png" "$a/textures/light-wood.png" \
+    "$a/textures/soda.png"
+  mv "$RS_DIR/unpack/$a" "$RS_DIR/assets"
+  rm -rf "$RS_DIR/unpack"
+  touch "$RS_STAMP"
+  say "robosuite ${RS_VERSION} assets unpacked into .robosuite/assets"
+fi
+
+# 5. The release binary.
 if [ "$build" -eq 1 ]; then
   say "building target/release/evalharness"
   cargo build --release --locked

@@ -327,7 +327,7 @@ pub struct ReportArgs {
 /// Options shared by commands that run a scenario.
 #[derive(Debug, Args)]
 pub struct ScenarioArgs {
-    /// Scenario name (pusht) or path to a scenario .toml file.
+    /// Scenario name (pusht, lift) or path to a scenario .toml file.
     #[arg(long, default_value = "pusht")]
     pub scenario: String,
     /// Number of episodes.
@@ -407,6 +407,10 @@ pub struct SimulateArgs {
     /// writes render_crosscheck.json).
     #[arg(long, value_enum, default_value_t = RendererKind::Raster)]
     pub renderer: RendererKind,
+    /// Lift: keep stepping after the cube is lifted, up to the step limit (by
+    /// default an episode ends at its first success, as robomimic's rollouts do).
+    #[arg(long)]
+    pub no_early_stop: bool,
 }
 
 /// `evalharness collect`.
@@ -415,10 +419,12 @@ pub struct CollectArgs {
     /// Scenario, episodes, seeds, jobs.
     #[command(flatten)]
     pub common: ScenarioArgs,
-    /// Behaviour mix, as name=weight pairs (expert, explore, decoy); each episode draws
-    /// one from its seed.
-    #[arg(long, default_value = "expert=0.8,explore=0.2")]
-    pub mix: String,
+    /// Behaviour mix, as name=weight pairs; each episode draws one from its seed.
+    /// Push-T: expert, explore, decoy (default expert=0.8,explore=0.2). Lift:
+    /// expert, miss, drop, push, hesitate, random (default
+    /// expert=0.5,miss=0.1,drop=0.1,push=0.1,hesitate=0.1,random=0.1).
+    #[arg(long)]
+    pub mix: Option<String>,
     /// Instead of `--mix`: record the closed-loop MuJoCo rollouts of a policy
     /// checkpoint, or of every checkpoint in a folder (`--episodes` each, the seeds
     /// and noise of `rank`'s MuJoCo branch). Use checkpoints outside the set you

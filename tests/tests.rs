@@ -2,6 +2,7 @@
 
 mod agreement;
 mod dataset;
+mod lift;
 mod pipeline;
 mod plan;
 mod reliability;

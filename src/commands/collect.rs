@@ -8,7 +8,7 @@
 
 use std::process::ExitCode;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use harness::replay::{EpisodeArrays, ReplaySpec, ReplayWriter};
 use harness::seed::{derive, fnv1a};
 use serde_json::{Value, json};
@@ -20,20 +20,27 @@ use super::episodes::{BehaviourKind, FrameSpec, Perturbation, Runner, behaviour_
 use crate::cli::CollectArgs;
 use crate::cli::RendererKind;
 use crate::progress;
-use crate::scenario::load_pusht;
 
 /// Names of the state columns, stored in the dataset's attributes.
 pub const STATE_COLUMNS: [&str; 8] =
     ["agent_x", "agent_y", "block_x", "block_y", "block_theta", "goal_x", "goal_y", "goal_theta"];
 
+/// Push-T's default `--mix`.
+pub const PUSHT_MIX: &str = "expert=0.8,explore=0.2";
+
 /// Parses `expert=0.8,explore=0.2` into normalised weights.
 fn parse_mix(text: &str) -> Result<Vec<(BehaviourKind, f64)>> {
+    parse_mix_with(text, BehaviourKind::parse)
+}
+
+/// Parses `name=weight` pairs, naming behaviours with `parse`, into normalised weights.
+pub(super) fn parse_mix_with<K>(text: &str, parse: impl Fn(&str) -> Result<K>) -> Result<Vec<(K, f64)>> {
     let mut mix = Vec::new();
     for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
         let Some((name, w)) = part.split_once('=') else {
             bail!("--mix: '{part}' is not name=weight");
         };
-        let kind = BehaviourKind::parse(name.trim()).map_err(|e| anyhow::anyhow!("--mix: {e}"))?;
+        let kind = parse(name.trim()).map_err(|e| anyhow::anyhow!("--mix: {e}"))?;
         let w: f64 =
             w.trim().parse().map_err(|_| anyhow::anyhow!("--mix: weight '{w}' of {name} is not a number"))?;
         if !(w.is_finite() && w >= 0.0) {
@@ -49,7 +56,7 @@ fn parse_mix(text: &str) -> Result<Vec<(BehaviourKind, f64)>> {
 }
 
 /// The behaviour of episode `seed`: a pure function of the seed and the mix.
-fn draw(mix: &[(BehaviourKind, f64)], seed: u64) -> BehaviourKind {
+pub(super) fn draw<K: Copy>(mix: &[(K, f64)], seed: u64) -> K {
     let u = (derive(seed, &[fnv1a("collect/mix")]) >> 11) as f64 / (1u64 << 53) as f64;
     let mut acc = 0.0;
     for &(k, w) in mix {
@@ -58,7 +65,7 @@ fn draw(mix: &[(BehaviourKind, f64)], seed: u64) -> BehaviourKind {
             return k;
         }
     }
-    mix.last().map_or(BehaviourKind::Expert, |m| m.0)
+    mix.last().map(|m| m.0).expect("a parsed mix has an entry")
 }
 
 /// The dataset layout: `size`² RGB images, 2-D actions, 8 state columns, coverage.
@@ -121,8 +128,13 @@ pub(super) fn dataset_attrs(
 /// Runs the command for the scripted behaviours (`--policy` runs [`super::collect_policy`]).
 pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
-    let mix = parse_mix(&args.mix)?;
-    let cfg = load_pusht(&c.scenario)?;
+    let cfg =
+        match scenarios::scenario(&c.scenario).with_context(|| format!("loading scenario {}", c.scenario))? {
+            scenarios::Scenario::Lift(cfg) => return super::collect_lift::run(args, cfg, quiet),
+            scenarios::Scenario::PushT(cfg) => *cfg,
+        };
+    let mix_text = args.mix.as_deref().unwrap_or(PUSHT_MIX);
+    let mix = parse_mix(mix_text)?;
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };
     let runner = Runner::new(cfg, c.jobs, c.max_steps, perturbation)?;
     let size = runner.cfg.render.size as usize;
@@ -144,7 +156,7 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     pb.finish_and_clear();
     let n = episodes.len();
     let steps: u64 = episodes.iter().filter_map(|e| e["steps"].as_u64()).sum();
-    let source = json!({"mix": args.mix, "noise": c.noise, "lag": c.lag});
+    let source = json!({"mix": mix_text, "noise": c.noise, "lag": c.lag});
     let attrs = dataset_attrs(&runner.cfg, c.seed_start, source, runner.max_steps, episodes);
     let path = writer.finish(&attrs)?;
     println!("pusht dataset: {n} episodes, {steps} steps -> {}", path.display());

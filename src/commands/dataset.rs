@@ -1,7 +1,8 @@
 //! `evalharness dataset info`: what a replay-buffer dataset holds.
 //!
-//! Episode scores come from `data/coverage` when the dataset has it (ours do);
-//! otherwise from `data/state` when its columns include the goal pose (Push-T
+//! Episode scores come from `data/success` when the dataset has it (Lift: an
+//! episode scores 1 if the cube was lifted at any step); from `data/coverage`
+//! when it has that (Push-T, ours do); otherwise from `data/state` when its columns include the goal pose (Push-T
 //! GPC layout: agent xy, block xyθ, goal xyθ), as the coverage before each
 //! action; otherwise they are reported as unavailable rather than guessed.
 
@@ -41,7 +42,10 @@ pub fn info(path: &Path, as_json: bool) -> Result<ExitCode> {
         .as_f64()
         .unwrap_or(cfg.task.success_coverage);
     let state_dim = r.state.row_len();
-    let (source, coverage) = if let Some(c) = r.extra("coverage")? {
+    let success = r.extra("success")?;
+    let (source, coverage) = if success.is_some() {
+        ("data/success", None)
+    } else if let Some(c) = r.extra("coverage")? {
         ("data/coverage", Some(c))
     } else if state_dim >= 8 {
         let s = r.state.read_f64()?;
@@ -69,8 +73,14 @@ pub fn info(path: &Path, as_json: bool) -> Result<ExitCode> {
         "state_dim": state_dim,
         "score_source": source,
     });
-    if let Some(c) = coverage {
-        let scores = episode_scores(&r, &c, threshold);
+    let scores = match (&success, coverage) {
+        (Some(s), _) => Some(
+            episode_scores(&r, s, 0.5).into_iter().map(|(_, hit)| (f64::from(u8::from(hit)), hit)).collect(),
+        ),
+        (None, Some(c)) => Some(episode_scores(&r, &c, threshold)),
+        (None, None) => None,
+    };
+    if let Some(scores) = scores {
         let values: Vec<f64> = scores.iter().map(|s| s.0).collect();
         let mut score = stats(&values);
         score["success_rate"] =

@@ -2,6 +2,7 @@
 
 pub(crate) mod agreement;
 mod collect;
+mod collect_lift;
 mod collect_policy;
 mod dataset;
 mod dataset_merge;
@@ -11,6 +12,7 @@ mod goal_free;
 mod scripted;
 mod sessions;
 mod simulate;
+mod simulate_lift;
 mod simulate_policy;
 mod train;
 mod train_policy;

@@ -15,7 +15,6 @@ use crate::cli::RendererKind;
 use crate::cli::SimulateArgs;
 use crate::output::{Staged, write_json};
 use crate::progress;
-use crate::scenario::load_pusht;
 
 /// Mean absolute difference between the left (MuJoCo) and right (raster) halves.
 fn side_by_side_difference(frames: &[Vec<u8>], size: usize) -> f64 {
@@ -38,8 +37,15 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
         return super::simulate_policy::run(args, quiet);
     }
     let c = &args.common;
+    let cfg =
+        match scenarios::scenario(&c.scenario).with_context(|| format!("loading scenario {}", c.scenario))? {
+            scenarios::Scenario::Lift(cfg) => return super::simulate_lift::run(args, cfg, quiet),
+            scenarios::Scenario::PushT(cfg) => *cfg,
+        };
+    if args.no_early_stop {
+        anyhow::bail!("--no-early-stop applies to Lift; Push-T episodes run to their step limit or success");
+    }
     let kind = BehaviourKind::parse(&args.policy)?;
-    let cfg = load_pusht(&c.scenario)?;
     if !(16..=1024).contains(&args.gif_size) {
         anyhow::bail!("--gif-size must be in 16..=1024, got {}", args.gif_size);
     }

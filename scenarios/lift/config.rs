@@ -1,0 +1,148 @@
+//! Lift's parameters: robosuite 1.5.2's `Lift` defaults, typed and checked.
+//!
+//! A scenario TOML (`name = "lift"`) may override any of them; an unknown key is refused with its
+//! name (`deny_unknown_fields`).
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::ScenarioError;
+
+/// Everything that defines a Lift episode except the seed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LiftConfig {
+    /// Table size (x, y, thickness), m.
+    pub table_full_size: [f64; 3],
+    /// Table friction: sliding, torsional, rolling.
+    pub table_friction: [f64; 3],
+    /// Table-top centre, m.
+    pub table_offset: [f64; 3],
+    /// Smallest cube half-size per axis, m (drawn uniformly per episode).
+    pub cube_half_min: [f64; 3],
+    /// Largest cube half-size per axis, m.
+    pub cube_half_max: [f64; 3],
+    /// Cube centre x range about the table centre, m.
+    pub cube_x_range: [f64; 2],
+    /// Cube centre y range about the table centre, m.
+    pub cube_y_range: [f64; 2],
+    /// Height of the cube's bottom above the table top at reset, m.
+    pub cube_z_offset: f64,
+    /// Standard deviation of the Gaussian noise on the arm's initial joints, rad.
+    pub init_noise: f64,
+    /// Height above the table top the cube's centre must exceed, m.
+    pub success_height: f64,
+    /// Control steps per episode (robomimic's rollout horizon).
+    pub max_steps: usize,
+}
+
+impl Default for LiftConfig {
+    fn default() -> Self {
+        Self {
+            table_full_size: [0.8, 0.8, 0.05],
+            table_friction: [1.0, 5e-3, 1e-4],
+            table_offset: [0.0, 0.0, 0.8],
+            cube_half_min: [0.020; 3],
+            cube_half_max: [0.022; 3],
+            cube_x_range: [-0.03, 0.03],
+            cube_y_range: [-0.03, 0.03],
+            cube_z_offset: 0.01,
+            init_noise: 0.02,
+            success_height: 0.04,
+            max_steps: 400,
+        }
+    }
+}
+
+impl LiftConfig {
+    /// Reads a scenario TOML: `name = "lift"` plus any of the fields to override.
+    ///
+    /// # Errors
+    /// The file is unreadable, malformed, names another scenario, has an unknown
+    /// key, or a value is out of range.
+    pub fn from_file(path: &Path) -> Result<Self, ScenarioError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ScenarioError::Io { path: path.into(), source })?;
+        let parse = |e: toml::de::Error| ScenarioError::Parse { path: path.into(), message: e.to_string() };
+        let mut table: toml::Table = toml::from_str(&text).map_err(parse)?;
+        match table.remove("name") {
+            Some(toml::Value::String(n)) if n == "lift" => {}
+            other => {
+                return Err(ScenarioError::InvalidField {
+                    path: path.into(),
+                    field: "name".into(),
+                    reason: format!("a Lift scenario file says name = \"lift\", not {other:?}"),
+                });
+            }
+        }
+        let cfg: LiftConfig = table.try_into().map_err(parse)?;
+        cfg.validate(path)?;
+        Ok(cfg)
+    }
+
+    /// Checks ranges.
+    ///
+    /// # Errors
+    /// [`ScenarioError::InvalidField`] naming the field.
+    pub fn validate(&self, path: &Path) -> Result<(), ScenarioError> {
+        let bad = |field: &str, reason: &str| ScenarioError::InvalidField {
+            path: path.into(),
+            field: field.to_string(),
+            reason: reason.into(),
+        };
+        if self.table_full_size.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(bad("table_full_size", "every entry must be > 0"));
+        }
+        for i in 0..3 {
+            let (lo, hi) = (self.cube_half_min[i], self.cube_half_max[i]);
+            if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
+                return Err(bad("cube_half_min", "needs 0 < cube_half_min <= cube_half_max per axis"));
+            }
+        }
+        for (field, r) in [("cube_x_range", self.cube_x_range), ("cube_y_range", self.cube_y_range)] {
+            if !(r[0].is_finite() && r[1].is_finite() && r[0] <= r[1]) {
+                return Err(bad(field, "needs low <= high"));
+            }
+        }
+        if !(self.init_noise.is_finite() && self.init_noise >= 0.0) {
+            return Err(bad("init_noise", "must be >= 0"));
+        }
+        if self.max_steps == 0 {
+            return Err(bad("max_steps", "must be >= 1"));
+        }
+        Ok(())
+    }
+
+    /// The robot base for this table: robosuite's Panda `base_xpos_offset["table"]`
+    /// (x = −0.16 − table length / 2) raised by the Rethink mount (0.912 m).
+    pub fn robot_base(&self) -> [f64; 3] {
+        [-0.16 - self.table_full_size[0] / 2.0, 0.0, 0.912]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_unknown_key_is_refused_by_name() {
+        let dir = std::env::temp_dir().join("evalharness-lift-config");
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("bad.toml");
+        std::fs::write(&p, "name = \"lift\"\ncube_sise = 0.02\n").unwrap();
+        let e = LiftConfig::from_file(&p).unwrap_err().to_string();
+        assert!(e.contains("cube_sise"), "{e}");
+        std::fs::write(&p, "name = \"lift\"\nmax_steps = 50\n").unwrap();
+        assert_eq!(LiftConfig::from_file(&p).unwrap().max_steps, 50);
+        std::fs::write(&p, "name = \"lift\"\nmax_steps = 0\n").unwrap();
+        let e = LiftConfig::from_file(&p).unwrap_err().to_string();
+        assert!(e.contains("max_steps"), "{e}");
+    }
+
+    #[test]
+    fn the_robot_stands_where_robosuite_puts_it() {
+        // −0.16 − 0.8 / 2 = −0.56, as robosuite's model has robot0_base at (−0.56, 0, 0.912).
+        assert_eq!(LiftConfig::default().robot_base(), [-0.56, 0.0, 0.912]);
+    }
+}

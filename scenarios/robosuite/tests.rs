@@ -1,0 +1,87 @@
+//! Tests of the composed robosuite scenes against numbers read off robosuite's
+//! own model (`robosuite.make("Lift", robots="Panda", seed=0)`, 1.5.2 on
+//! MuJoCo 3.17.0, printed by `scripts/crosscheck_robosuite.py --dump`).
+
+use std::sync::Arc;
+
+use mujoco_rs::prelude::*;
+
+use super::assets::assets_dir;
+use super::scene::{SceneBuilder, Table};
+use crate::lift::LiftConfig;
+use crate::lift::sim::{LiftInit, LiftSim, lift_model};
+
+fn lift_scene() -> MjModel {
+    let dir = assets_dir().expect("robosuite assets (scripts/setup.sh)");
+    let mut b = SceneBuilder::table_arena(&dir, &Table::LIFT).unwrap();
+    // Lift: base at (-0.16 - 0.8 / 2, 0, 0) raised by the mount's 0.912 m.
+    b.panda([-0.56, 0.0, 0.912]).unwrap();
+    b.compile("lift").unwrap()
+}
+
+#[test]
+fn the_lift_scene_has_robosuites_bodies_masses_and_joint_settings() {
+    let m = lift_scene();
+    assert_eq!((m.ffi().nq, m.ffi().nu), (9, 9), "7 arm joints + 2 fingers, 9 actuators");
+    let body = |name: &str| m.body(name).unwrap_or_else(|| panic!("no body {name}")).id;
+    // Positions relative to the parent, as robosuite's compiled model has them.
+    assert_eq!(m.body_pos()[body("table")], [0.0, 0.0, 0.775], "0.8 top − 0.025 half thickness");
+    assert_eq!(m.body_pos()[body("robot0_base")], [-0.56, 0.0, 0.912]);
+    assert_eq!(m.body_pos()[body("fixed_mount0_base")], [0.0, 0.0, 0.01]);
+    assert_eq!(m.body_pos()[body("gripper0_right_eef")], [0.0, 0.0, 0.097]);
+    // The table's mass comes from its collision box only (inertiagrouprange 0 0):
+    // 1000 kg/m³ × 0.8 × 0.8 × 0.05 m³ = 32 kg.
+    assert!((m.body_mass()[body("table")] - 32.0).abs() < 1e-9);
+    let links: Vec<f64> = (0..8).map(|i| m.body_mass()[body(&format!("robot0_link{i}"))]).collect();
+    assert_eq!(links, [4.0, 3.0, 3.0, 2.0, 2.0, 2.0, 1.5, 0.5]);
+    assert_eq!(m.body_mass()[body("fixed_mount0_pedestal_feet")], 167.09);
+    // robosuite's joint defaults: armature 5 / (i + 1), damping 0.1 ×5 and 0.01 ×2,
+    // frictionloss 0.1; the fingers keep the gripper file's 1, 100 and 1.
+    let arm: Vec<f64> = m.dof_armature()[..7].to_vec();
+    for (i, a) in arm.iter().enumerate() {
+        assert!((a - 5.0 / (i as f64 + 1.0)).abs() < 1e-12, "{arm:?}");
+    }
+    assert_eq!(m.dof_damping()[..9], [0.1, 0.1, 0.1, 0.1, 0.1, 0.01, 0.01, 100.0, 100.0]);
+    assert_eq!(m.dof_frictionloss()[..9], [0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 1.0, 1.0]);
+    assert_eq!(m.opt().timestep, 0.002);
+}
+
+#[test]
+fn the_grip_site_is_where_robosuite_puts_it_for_the_same_joints() {
+    let m = Arc::new(lift_scene());
+    let mut d = MjData::new(m.clone());
+    // robosuite's seed-0 reset: the noisy initial joints and the fingers.
+    let q = [
+        -0.010885179657146199,
+        0.19002353772197897,
+        0.008232610727482657,
+        -2.5971436106026404,
+        -0.0025706932588806853,
+        2.968921923000787,
+        0.772094269927716,
+        0.020833,
+        -0.020833,
+    ];
+    d.qpos_mut()[..9].copy_from_slice(&q);
+    d.forward();
+    let site = m.site("gripper0_right_grip_site").unwrap().id;
+    let want = [-0.0853232205760393, -0.0008528129235318627, 1.0239900041318835];
+    for (a, b) in d.site_xpos()[site].iter().zip(want) {
+        assert!((a - b).abs() < 1e-12, "{:?} vs {want:?}", d.site_xpos()[site]);
+    }
+}
+
+#[test]
+fn the_cube_weighs_what_robosuites_does_for_the_same_size() {
+    let dir = assets_dir().unwrap();
+    // robosuite's seed-0 cube: half-sizes below, mass 0.07011070102818318 kg
+    // (= 1000 × 8 × 0.020067 × 0.021459 × 0.020351).
+    let half = [0.02006717115061093, 0.02145931089285989, 0.02035131124120512];
+    let m = lift_model(&LiftConfig::default(), &dir, half).unwrap();
+    let cube = m.body("cube_main").unwrap().id;
+    assert!((m.body_mass()[cube] - 0.07011070102818318).abs() < 1e-15);
+    let sim = LiftSim::new(LiftConfig::default()).unwrap();
+    let init = LiftInit::draw(sim.config(), 0);
+    let ep = sim.reset_to(0, init).unwrap();
+    assert_eq!(ep.arm_q(), init.arm_q);
+}

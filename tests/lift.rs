@@ -1,0 +1,139 @@
+//! `simulate` and `collect` on robomimic Lift: the expert lifts, outputs are
+//! byte-identical for any `--jobs`, and bad input is refused by name.
+
+use crate::util::{evalharness, expect_code, read_json, run, tree_bytes};
+
+fn simulate(out: &std::path::Path, policy: &str, jobs: &str) -> std::process::Output {
+    run(&[
+        "simulate",
+        "--scenario",
+        "lift",
+        "--policy",
+        policy,
+        "--episodes",
+        "3",
+        "--seed-start",
+        "40",
+        "--max-steps",
+        "70",
+        "--gif-size",
+        "32",
+        "--jobs",
+        jobs,
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
+#[test]
+fn the_expert_lifts_and_any_jobs_gives_the_same_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (one, two) = (dir.path().join("one"), dir.path().join("two"));
+    let (stdout, _) = expect_code(&simulate(&one, "expert", "1"), 0);
+    assert!(stdout.contains("lift expert: 3 episodes, success rate 100.0%"), "{stdout}");
+    expect_code(&simulate(&two, "expert", "2"), 0);
+    assert_eq!(tree_bytes(&one), tree_bytes(&two), "--jobs 1 and --jobs 2 differ");
+    let s = read_json(&one.join("summary.json"));
+    let per = s["per_episode"].as_array().unwrap();
+    assert_eq!(per.iter().map(|e| e["seed"].as_u64().unwrap()).collect::<Vec<_>>(), [40, 41, 42]);
+    // Episodes end at the first success: the last line of each is the lifting step.
+    let lines = std::fs::read_to_string(one.join("episodes.jsonl")).unwrap();
+    let rows: Vec<serde_json::Value> = lines.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let steps: u64 = per.iter().map(|e| e["steps"].as_u64().unwrap()).sum();
+    assert_eq!(rows.len() as u64, steps);
+    let first = &rows[0];
+    assert_eq!(first["state"].as_array().unwrap().len(), 23);
+    assert_eq!(first["action"].as_array().unwrap().len(), 7);
+    let ends: Vec<&serde_json::Value> =
+        rows.windows(2).filter(|w| w[0]["seed"] != w[1]["seed"]).map(|w| &w[0]).collect();
+    for end in ends.into_iter().chain([&rows[rows.len() - 1]]) {
+        assert_eq!(end["success"], true, "{end}");
+    }
+    // The cube's centre starts 0.01 m above the 0.8 m table plus its half height
+    // (0.020 to 0.022 m): between 0.830 and 0.832.
+    let z = first["state"][2].as_f64().unwrap();
+    assert!((0.830..=0.832).contains(&z), "{z}");
+    assert!(one.join("episode_40.gif").is_file());
+    assert_eq!(std::fs::read_to_string(one.join("initial_states.jsonl")).unwrap().lines().count(), 3);
+}
+
+#[test]
+fn a_missed_grasp_never_lifts() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("miss");
+    let (stdout, _) = expect_code(&simulate(&out, "miss", "2"), 0);
+    assert!(stdout.contains("success rate 0.0%"), "{stdout}");
+}
+
+#[test]
+fn collect_writes_a_lift_dataset_identical_for_any_jobs() {
+    let dir = tempfile::tempdir().unwrap();
+    let make = |name: &str, jobs: &str| {
+        let out = dir.path().join(name);
+        let args = [
+            "collect",
+            "--scenario",
+            "lift",
+            "--episodes",
+            "3",
+            "--seed-start",
+            "7",
+            "--max-steps",
+            "12",
+            "--jobs",
+            jobs,
+            "--out",
+        ];
+        let mut a: Vec<&str> = args.to_vec();
+        let o = out.to_str().unwrap().to_string();
+        a.push(&o);
+        expect_code(&run(&a), 0);
+        out
+    };
+    let (one, two) = (make("a.zarr", "1"), make("b.zarr", "2"));
+    assert_eq!(tree_bytes(&one), tree_bytes(&two), "--jobs 1 and --jobs 2 differ");
+    let res = run(&["dataset", "info", one.to_str().unwrap(), "--json"]);
+    let (stdout, _) = expect_code(&res, 0);
+    let info: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    // 3 episodes of 12 steps: no behaviour lifts the cube in 12 steps (the
+    // expert needs about 50), so every episode scores 0, read from data/success.
+    assert_eq!(info["steps"], 36, "{info}");
+    assert_eq!(info["state_dim"], 23);
+    assert_eq!(info["action_dim"], 7);
+    assert_eq!(info["image"], serde_json::json!([96, 96, 3]));
+    assert_eq!(info["score_source"], "data/success");
+    assert_eq!(info["score"]["success_rate"], 0.0);
+    let attrs = read_json(&one.join(".zattrs"));
+    assert_eq!(attrs["evalharness"]["scenario"], "lift");
+    assert_eq!(attrs["evalharness"]["state_columns"].as_array().unwrap().len(), 23);
+}
+
+#[test]
+fn bad_lift_input_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x");
+    let o = out.to_str().unwrap();
+    // An unknown key in a Lift scenario file.
+    let toml = dir.path().join("lift.toml");
+    std::fs::write(&toml, "name = \"lift\"\ncube_sise = 0.02\n").unwrap();
+    let res = run(&["simulate", "--scenario", toml.to_str().unwrap(), "--episodes", "1", "--out", o]);
+    let (_, stderr) = expect_code(&res, 2);
+    assert!(stderr.contains("cube_sise"), "{stderr}");
+    // Missing assets name the fix.
+    let res = evalharness()
+        .env("EVALHARNESS_ROBOSUITE_ASSETS", dir.path().join("nowhere"))
+        .args(["simulate", "--scenario", "lift", "--episodes", "1", "--out", o])
+        .output()
+        .unwrap();
+    let (_, stderr) = expect_code(&res, 2);
+    assert!(stderr.contains("scripts/setup.sh"), "{stderr}");
+    // An unknown behaviour lists the built-in ones.
+    let res = run(&["simulate", "--scenario", "lift", "--policy", "teleop", "--out", o]);
+    let (_, stderr) = expect_code(&res, 2);
+    assert!(stderr.contains("expert, miss, drop, push, hesitate, random"), "{stderr}");
+    // rank cannot use Lift yet, and says so.
+    let res = run(&["rank", "--scenario", "lift", "--policies", o, "--out", o]);
+    let (_, stderr) = expect_code(&res, 2);
+    assert!(stderr.contains("does not support"), "{stderr}");
+    assert!(!out.exists(), "nothing written on refusal");
+}
