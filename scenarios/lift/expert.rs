@@ -78,9 +78,10 @@ impl LiftExpert {
 
     /// The action for the episode's current state.
     pub fn act(&mut self, ep: &LiftEpisode) -> [f64; 7] {
-        let cube = ep.cube_pos();
+        let ep = ep.arm();
+        let cube = ep.object_pos();
         let eef = ep.eef_pos();
-        let target_ori = grasp_orientation(&ep.eef_mat(), ep.cube_quat());
+        let target_ori = grasp_orientation(&ep.eef_mat(), ep.object_quat());
         // The closing axis is the gripper's y axis (the second column).
         let side = [target_ori[0][1], target_ori[1][1], target_ori[2][1]];
         let offset = if self.flaws.push { -PUSH_SIDE } else { self.flaws.aim_offset };

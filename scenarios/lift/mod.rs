@@ -10,7 +10,7 @@ pub mod sim;
 
 pub use config::LiftConfig;
 pub use expert::{LiftExpert, LiftFlaws};
-pub use rollout::{LiftBehaviour, LiftEpisodeRecord, LiftPerturbation, LiftRow, run_lift_episode};
+pub use rollout::{LiftBehaviour, LiftEpisodeRecord};
 pub use sim::{LiftEpisode, LiftInit, LiftSim, STATE_COLUMNS};
 
 #[cfg(test)]

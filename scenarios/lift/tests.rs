@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::robosuite::osc::{axis_angle_to_mat, orientation_error};
+use crate::robosuite::rollout::{ArmTask, Perturbation, RunLimits};
 
 fn sim() -> LiftSim {
     LiftSim::new(LiftConfig::default()).expect("robosuite assets (scripts/setup.sh)")
@@ -36,20 +37,20 @@ fn the_reset_is_a_pure_function_of_the_seed() {
 fn the_controller_holds_still_and_tracks_a_commanded_pose() {
     let s = sim();
     let mut ep = s.reset(3).unwrap();
-    let start = ep.eef_pos();
+    let start = ep.arm().eef_pos();
     // A zero action asks to stay: gravity compensation and the held goal keep
     // the grip site within a millimetre over 20 steps (1 s).
     for _ in 0..20 {
         ep.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0]).unwrap();
     }
-    let drift = norm([0, 1, 2].map(|i| ep.eef_pos()[i] - start[i]));
+    let drift = norm([0, 1, 2].map(|i| ep.arm().eef_pos()[i] - start[i]));
     assert!(drift < 1e-3, "drifted {drift} m");
     // Track a pose 8 cm away, turned 0.3 rad about z, with a proportional action.
     let target = [start[0] + 0.05, start[1] - 0.04, start[2] - 0.06];
-    let goal_ori = crate::robosuite::linalg::mul(&axis_angle_to_mat([0.0, 0.0, 0.3]), &ep.eef_mat());
+    let goal_ori = crate::robosuite::linalg::mul(&axis_angle_to_mat([0.0, 0.0, 0.3]), &ep.arm().eef_mat());
     for _ in 0..40 {
-        let p = ep.eef_pos();
-        let r = orientation_error(&goal_ori, &ep.eef_mat());
+        let p = ep.arm().eef_pos();
+        let r = orientation_error(&goal_ori, &ep.arm().eef_mat());
         let mut a = [0.0; 7];
         for i in 0..3 {
             a[i] = (10.0 * (target[i] - p[i])).clamp(-1.0, 1.0);
@@ -58,8 +59,8 @@ fn the_controller_holds_still_and_tracks_a_commanded_pose() {
         a[6] = -1.0;
         ep.step(&a).unwrap();
     }
-    let err = norm([0, 1, 2].map(|i| ep.eef_pos()[i] - target[i]));
-    let rot = norm(orientation_error(&goal_ori, &ep.eef_mat()));
+    let err = norm([0, 1, 2].map(|i| ep.arm().eef_pos()[i] - target[i]));
+    let rot = norm(orientation_error(&goal_ori, &ep.arm().eef_mat()));
     assert!(err < 2e-3, "position error {err} m");
     assert!(rot < 0.01, "orientation error {rot} rad");
 }
@@ -81,21 +82,20 @@ fn success_is_the_cube_centre_above_table_plus_four_centimetres() {
     for _ in 0..10 {
         ep.step(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0]).unwrap();
     }
-    assert!(!ep.success(), "cube at {:?}", ep.cube_pos());
+    assert!(!ep.success(), "cube at {:?}", ep.arm().object_pos());
 }
 
 #[test]
 fn the_expert_lifts_and_a_miss_does_not() {
     let s = sim();
+    let limits = RunLimits { max_steps: 80, stop_at_success: true, frame_size: None };
     for seed in 0..3 {
-        let ep =
-            run_lift_episode(&s, LiftBehaviour::Expert, LiftPerturbation::default(), seed, 80, true, None)
-                .unwrap();
+        let ep = s.episode(seed, LiftBehaviour::Expert, Perturbation::default(), limits).unwrap();
         assert!(ep.success, "seed {seed}: {} steps", ep.rows.len());
-        let miss =
-            run_lift_episode(&s, LiftBehaviour::Miss, LiftPerturbation::default(), seed, 80, true, None)
-                .unwrap();
+        assert!(ep.rows.last().unwrap().success, "ends at the first success");
+        let miss = s.episode(seed, LiftBehaviour::Miss, Perturbation::default(), limits).unwrap();
         assert!(!miss.success, "seed {seed}");
+        assert_eq!(miss.rows.len(), 80);
     }
 }
 

@@ -6,8 +6,10 @@
 //! the scenes, actions and success checks.
 
 pub mod assets;
+pub mod episode;
 pub mod linalg;
 pub mod osc;
+pub mod rollout;
 pub mod scene;
 
 #[cfg(test)]

@@ -83,5 +83,5 @@ fn the_cube_weighs_what_robosuites_does_for_the_same_size() {
     let sim = LiftSim::new(LiftConfig::default()).unwrap();
     let init = LiftInit::draw(sim.config(), 0);
     let ep = sim.reset_to(0, init).unwrap();
-    assert_eq!(ep.arm_q(), init.arm_q);
+    assert_eq!(ep.arm().arm_q(), init.arm_q);
 }

@@ -130,7 +130,10 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
     let cfg =
         match scenarios::scenario(&c.scenario).with_context(|| format!("loading scenario {}", c.scenario))? {
-            scenarios::Scenario::Lift(cfg) => return super::collect_lift::run(args, cfg, quiet),
+            scenarios::Scenario::Lift(cfg) => {
+                let task = scenarios::lift::LiftSim::new(cfg).context("setting up Lift")?;
+                return super::collect_arm::run(args, &task, quiet);
+            }
             scenarios::Scenario::PushT(cfg) => *cfg,
         };
     let mix_text = args.mix.as_deref().unwrap_or(PUSHT_MIX);

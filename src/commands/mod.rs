@@ -2,7 +2,7 @@
 
 pub(crate) mod agreement;
 mod collect;
-mod collect_lift;
+mod collect_arm;
 mod collect_policy;
 mod dataset;
 mod dataset_merge;
@@ -12,7 +12,7 @@ mod goal_free;
 mod scripted;
 mod sessions;
 mod simulate;
-mod simulate_lift;
+mod simulate_arm;
 mod simulate_policy;
 mod train;
 mod train_policy;

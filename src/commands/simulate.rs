@@ -39,7 +39,10 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
     let cfg =
         match scenarios::scenario(&c.scenario).with_context(|| format!("loading scenario {}", c.scenario))? {
-            scenarios::Scenario::Lift(cfg) => return super::simulate_lift::run(args, cfg, quiet),
+            scenarios::Scenario::Lift(cfg) => {
+                let task = scenarios::lift::LiftSim::new(cfg).context("setting up Lift")?;
+                return super::simulate_arm::run(args, &task, quiet);
+            }
             scenarios::Scenario::PushT(cfg) => *cfg,
         };
     if args.no_early_stop {

@@ -1,11 +1,11 @@
-//! `evalharness simulate --scenario lift`: a scripted behaviour in robosuite's
-//! Lift, simulated in MuJoCo.
+//! `evalharness simulate --scenario lift|can`: a scripted behaviour in one of
+//! robosuite's tasks (any [`ArmTask`]), simulated in MuJoCo.
 //!
 //! Writes into `--out` (staged, so an interrupted run leaves only `OUT.partial`):
 //! - `config.json`: the resolved scenario and arguments;
 //! - `episodes.jsonl`: one line per control step (seed, step, the state row
 //!   before the action, the 7-D action, success after it);
-//! - `initial_states.jsonl`: each episode's drawn initial state (cube size and
+//! - `initial_states.jsonl`: each episode's drawn initial state (object size and
 //!   pose, arm joints), so that another simulator can start from it;
 //! - `summary.json`: success rate and per-episode results;
 //! - a GIF of the first episode's agentview frames.
@@ -18,9 +18,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
-use scenarios::lift::{
-    LiftBehaviour, LiftConfig, LiftEpisodeRecord, LiftPerturbation, LiftSim, STATE_COLUMNS, run_lift_episode,
-};
+use scenarios::robosuite::rollout::{ArmTask, Episode, Perturbation, RunLimits};
 use serde::Serialize;
 use serde_json::json;
 
@@ -40,28 +38,27 @@ struct StepLine<'a> {
 
 /// One line of `initial_states.jsonl`.
 #[derive(Serialize)]
-struct InitLine {
+struct InitLine<'a, I: Serialize> {
     seed: u64,
-    cube_half: [f64; 3],
-    cube_pos: [f64; 3],
-    cube_quat: [f64; 4],
-    arm_q: [f64; 7],
+    #[serde(flatten)]
+    init: &'a I,
 }
 
-/// Parses `--policy` for Lift.
-pub fn behaviour(name: &str) -> Result<LiftBehaviour> {
-    LiftBehaviour::parse(name).with_context(|| {
-        let names: Vec<&str> = LiftBehaviour::ALL.iter().map(|(n, _)| *n).collect();
-        format!("unknown Lift behaviour '{name}' (built-in: {})", names.join(", "))
+/// Parses a behaviour name (`--policy`, `--mix`) for `task`.
+pub fn behaviour<T: ArmTask>(task: &T, name: &str) -> Result<T::Behaviour> {
+    let all = task.behaviours();
+    all.iter().find(|(n, _)| *n == name).map(|(_, b)| *b).with_context(|| {
+        let names: Vec<&str> = all.iter().map(|(n, _)| *n).collect();
+        format!("unknown {} behaviour '{name}' (built-in: {})", task.name(), names.join(", "))
     })
 }
 
-/// How a batch of Lift episodes runs.
-pub struct LiftRun<'a> {
-    /// The simulator.
-    pub sim: &'a LiftSim,
+/// How a batch of episodes runs.
+pub struct ArmRun<'a, T: ArmTask> {
+    /// The task.
+    pub task: &'a T,
     /// Noise and lag on the behaviours' actions.
-    pub perturbation: LiftPerturbation,
+    pub perturbation: Perturbation,
     /// Step limit per episode.
     pub max_steps: usize,
     /// End an episode at its first success.
@@ -70,35 +67,33 @@ pub struct LiftRun<'a> {
     pub jobs: usize,
 }
 
-impl LiftRun<'_> {
+impl<T: ArmTask> ArmRun<'_, T> {
     /// Runs `work` on the worker threads in batches, handing the episodes to
     /// `done` in order; `frames(i)` asks episode `i` for frames of that side.
     pub fn run(
         &self,
-        work: &[(u64, LiftBehaviour)],
+        work: &[(u64, T::Behaviour)],
         frames: impl Fn(usize) -> Option<usize> + Sync,
-        mut done: impl FnMut(usize, LiftEpisodeRecord) -> Result<()>,
+        mut done: impl FnMut(usize, Episode<T::Init, T::Behaviour>) -> Result<()>,
     ) -> Result<()> {
         let jobs = self.jobs.max(1);
         let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build()?;
         let batch = jobs * 4;
         for (b, chunk) in work.chunks(batch).enumerate() {
-            let results: Vec<Result<LiftEpisodeRecord>> = pool.install(|| {
+            let results: Vec<Result<Episode<T::Init, T::Behaviour>>> = pool.install(|| {
                 chunk
                     .par_iter()
                     .enumerate()
                     .map(|(k, &(seed, kind))| {
-                        let size = frames(b * batch + k);
-                        run_lift_episode(
-                            self.sim,
-                            kind,
-                            self.perturbation,
-                            seed,
-                            self.max_steps,
-                            self.stop_at_success,
-                            size,
-                        )
-                        .with_context(|| format!("Lift episode seed {seed} ({})", kind.name()))
+                        let limits = RunLimits {
+                            max_steps: self.max_steps,
+                            stop_at_success: self.stop_at_success,
+                            frame_size: frames(b * batch + k),
+                        };
+                        let name = self.task.behaviour_name(kind);
+                        self.task
+                            .episode(seed, kind, self.perturbation, limits)
+                            .with_context(|| format!("{} episode seed {seed} ({name})", self.task.name()))
                     })
                     .collect()
             });
@@ -111,35 +106,35 @@ impl LiftRun<'_> {
 }
 
 /// Runs the command.
-pub fn run(args: &SimulateArgs, cfg: LiftConfig, quiet: bool) -> Result<ExitCode> {
+pub fn run<T: ArmTask>(args: &SimulateArgs, task: &T, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
-    let kind = behaviour(&args.policy)?;
+    let name = task.name();
+    let kind = behaviour(task, &args.policy)?;
     if !(16..=1024).contains(&args.gif_size) {
         bail!("--gif-size must be in 16..=1024, got {}", args.gif_size);
     }
     if !(c.noise.is_finite() && c.noise >= 0.0) {
         bail!("--noise must be a finite std >= 0, got {}", c.noise);
     }
-    let sim = LiftSim::new(cfg.clone()).context("setting up Lift")?;
-    let max_steps = c.max_steps.map_or(cfg.max_steps, |m| m as usize);
-    let perturbation = LiftPerturbation { noise: c.noise, lag: c.lag };
-    let work: Vec<(u64, LiftBehaviour)> =
+    let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
+    let perturbation = Perturbation { noise: c.noise, lag: c.lag };
+    let work: Vec<(u64, T::Behaviour)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, kind)).collect();
     let out = Staged::new(&args.out, c.force)?;
     write_json(
         &out.file("config.json"),
         &json!({
             "command": "simulate",
-            "scenario": "lift",
-            "lift": cfg,
-            "policy": kind.name(),
+            "scenario": name,
+            "scenario_config": task.config_json(),
+            "policy": args.policy,
             "episodes": c.episodes,
             "seed_start": c.seed_start,
             "max_steps": max_steps,
             "stop_at_success": !args.no_early_stop,
             "noise": c.noise,
             "lag": c.lag,
-            "state_columns": STATE_COLUMNS,
+            "state_columns": task.state_columns(),
             "evalharness_version": env!("CARGO_PKG_VERSION"),
         }),
     )?;
@@ -150,11 +145,10 @@ pub fn run(args: &SimulateArgs, cfg: LiftConfig, quiet: bool) -> Result<ExitCode
     };
     let (jsonl_path, mut jsonl) = open("episodes.jsonl")?;
     let (init_path, mut inits) = open("initial_states.jsonl")?;
-    let pb = progress::bar(c.episodes, "simulate lift", quiet);
+    let pb = progress::bar(c.episodes, &format!("simulate {name}"), quiet);
     let mut per_episode = Vec::new();
     let gif_size = args.gif_size;
-    let runner =
-        LiftRun { sim: &sim, perturbation, max_steps, stop_at_success: !args.no_early_stop, jobs: c.jobs };
+    let runner = ArmRun { task, perturbation, max_steps, stop_at_success: !args.no_early_stop, jobs: c.jobs };
     runner.run(
         &work,
         |i| (i == 0).then_some(gif_size),
@@ -170,13 +164,7 @@ pub fn run(args: &SimulateArgs, cfg: LiftConfig, quiet: bool) -> Result<ExitCode
                 serde_json::to_writer(&mut jsonl, &line)?;
                 writeln!(jsonl).with_context(|| format!("writing {}", jsonl_path.display()))?;
             }
-            let init = InitLine {
-                seed: ep.seed,
-                cube_half: ep.init.cube_half,
-                cube_pos: ep.init.cube_pos,
-                cube_quat: ep.init.cube_quat,
-                arm_q: ep.init.arm_q,
-            };
+            let init = InitLine { seed: ep.seed, init: &ep.init };
             serde_json::to_writer(&mut inits, &init)?;
             writeln!(inits).with_context(|| format!("writing {}", init_path.display()))?;
             if i == 0 {
@@ -208,8 +196,8 @@ pub fn run(args: &SimulateArgs, cfg: LiftConfig, quiet: bool) -> Result<ExitCode
     write_json(
         &out.file("summary.json"),
         &json!({
-            "scenario": "lift",
-            "policy": kind.name(),
+            "scenario": name,
+            "policy": args.policy,
             "episodes": per_episode.len(),
             "success_rate": success_rate,
             "per_episode": per_episode,
@@ -217,8 +205,8 @@ pub fn run(args: &SimulateArgs, cfg: LiftConfig, quiet: bool) -> Result<ExitCode
     )?;
     let dir = out.commit()?;
     println!(
-        "lift {}: {} episodes, success rate {:.1}% -> {}",
-        kind.name(),
+        "{name} {}: {} episodes, success rate {:.1}% -> {}",
+        args.policy,
         c.episodes,
         100.0 * success_rate,
         dir.display()

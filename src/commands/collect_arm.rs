@@ -1,13 +1,14 @@
-//! `evalharness collect --scenario lift`: a Lift dataset in the replay-buffer
-//! zarr layout, from a seeded mix of scripted behaviours.
+//! `evalharness collect --scenario lift|can`: a dataset of one of robosuite's
+//! tasks in the replay-buffer zarr layout, from a seeded mix of scripted
+//! behaviours.
 //!
-//! The layout is Push-T's with Lift's sizes:
+//! The layout is Push-T's with the task's sizes:
 //! - `data/img`: the agentview image before each action, `size`² RGB (96 by
 //!   default, the paper's size for simulated tasks);
 //! - `data/action`: robomimic's 7-D OSC_POSE actions;
-//! - `data/state`: the 23 columns of [`scenarios::lift::STATE_COLUMNS`] (cube
-//!   pose, grip-site pose, fingers, arm joints);
-//! - `data/success`: 1 once the cube is lifted, after each action.
+//! - `data/state`: the task's 23 columns (object pose, grip-site pose, fingers,
+//!   arm joints);
+//! - `data/success`: 1 while the task's success holds, after each action.
 //!
 //! Each episode's behaviour is drawn from `--mix` with a random number derived
 //! from its seed, so the dataset is a pure function of the arguments, whatever
@@ -15,27 +16,32 @@
 
 use std::process::ExitCode;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use harness::replay::{EpisodeArrays, ReplaySpec, ReplayWriter};
-use scenarios::lift::{
-    LiftBehaviour, LiftConfig, LiftEpisodeRecord, LiftPerturbation, LiftSim, STATE_COLUMNS,
-};
+use scenarios::robosuite::rollout::{ArmTask, Episode, Perturbation};
 use serde_json::json;
 
 use super::collect::{draw, parse_mix_with};
-use super::simulate_lift::{LiftRun, behaviour};
+use super::simulate_arm::{ArmRun, behaviour};
 use crate::cli::CollectArgs;
 use crate::progress;
 
-/// Lift's default `--mix`: half expert episodes, half the ways weak policies fail.
-pub const LIFT_MIX: &str = "expert=0.5,miss=0.1,drop=0.1,push=0.1,hesitate=0.1,random=0.1";
+/// The default `--mix` of a task: half expert episodes, the other half spread
+/// evenly over the ways weak policies fail.
+fn default_mix<T: ArmTask>(task: &T) -> String {
+    let all = task.behaviours();
+    let others = (all.len() - 1).max(1) as f64;
+    let mut parts = vec![format!("{}=0.5", all[0].0)];
+    parts.extend(all[1..].iter().map(|(n, _)| format!("{n}={}", 0.5 / others)));
+    parts.join(",")
+}
 
 /// Side of the stored images.
 const IMAGE_SIZE: usize = 96;
 
 /// One episode's arrays: the frame before each action, its state row, the
 /// action and success after it.
-fn episode_arrays(ep: &LiftEpisodeRecord) -> EpisodeArrays {
+fn episode_arrays<I, B>(ep: &Episode<I, B>) -> EpisodeArrays {
     let mut arrays = EpisodeArrays::default();
     for f in &ep.frames[..ep.rows.len()] {
         arrays.img.extend_from_slice(f);
@@ -51,28 +57,28 @@ fn episode_arrays(ep: &LiftEpisodeRecord) -> EpisodeArrays {
 }
 
 /// Runs the command.
-pub fn run(args: &CollectArgs, cfg: LiftConfig, quiet: bool) -> Result<ExitCode> {
+pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
+    let name = task.name();
     if !(c.noise.is_finite() && c.noise >= 0.0) {
         bail!("--noise must be a finite std >= 0, got {}", c.noise);
     }
-    let mix_text = args.mix.as_deref().unwrap_or(LIFT_MIX);
-    let mix = parse_mix_with(mix_text, behaviour)?;
-    let sim = LiftSim::new(cfg.clone()).context("setting up Lift")?;
-    let max_steps = c.max_steps.map_or(cfg.max_steps, |m| m as usize);
-    let perturbation = LiftPerturbation { noise: c.noise, lag: c.lag };
-    let work: Vec<(u64, LiftBehaviour)> =
+    let mix_text = args.mix.clone().unwrap_or_else(|| default_mix(task));
+    let mix = parse_mix_with(&mix_text, |n| behaviour(task, n))?;
+    let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
+    let perturbation = Perturbation { noise: c.noise, lag: c.lag };
+    let work: Vec<(u64, T::Behaviour)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, draw(&mix, seed))).collect();
     let spec = ReplaySpec {
         image_hw: [IMAGE_SIZE, IMAGE_SIZE],
         action_dim: 7,
-        state_dim: STATE_COLUMNS.len(),
+        state_dim: task.state_columns().len(),
         extras: vec!["success".into()],
     };
     let mut writer = ReplayWriter::create(&args.out, spec, c.force)?;
-    let pb = progress::bar(c.episodes, "collect lift", quiet);
+    let pb = progress::bar(c.episodes, &format!("collect {name}"), quiet);
     let mut episodes = Vec::new();
-    let runner = LiftRun { sim: &sim, perturbation, max_steps, stop_at_success: true, jobs: c.jobs };
+    let runner = ArmRun { task, perturbation, max_steps, stop_at_success: true, jobs: c.jobs };
     runner.run(
         &work,
         |_| Some(IMAGE_SIZE),
@@ -80,7 +86,7 @@ pub fn run(args: &CollectArgs, cfg: LiftConfig, quiet: bool) -> Result<ExitCode>
             writer.append(&episode_arrays(&ep))?;
             episodes.push(json!({
                 "seed": ep.seed,
-                "behaviour": ep.behaviour.name(),
+                "behaviour": task.behaviour_name(ep.behaviour),
                 "steps": ep.rows.len(),
                 "success": ep.success,
             }));
@@ -93,11 +99,11 @@ pub fn run(args: &CollectArgs, cfg: LiftConfig, quiet: bool) -> Result<ExitCode>
     let steps: u64 = episodes.iter().filter_map(|e| e["steps"].as_u64()).sum();
     let attrs = json!({ "evalharness": {
         "version": env!("CARGO_PKG_VERSION"),
-        "scenario": "lift",
-        "scenario_config": cfg,
-        "state_columns": STATE_COLUMNS,
+        "scenario": name,
+        "scenario_config": task.config_json(),
+        "state_columns": task.state_columns(),
         "action": "robomimic OSC_POSE: delta position (x0.05 m), delta axis-angle (x0.5 rad), gripper (+1 close)",
-        "success": "data/success: 1 once the cube's centre is 0.04 m above the table top, after each action",
+        "success": "data/success: 1 while the task's success check holds, after each action",
         "image": "agentview, upright",
         "seed_start": c.seed_start,
         "mix": mix_text,
@@ -107,6 +113,6 @@ pub fn run(args: &CollectArgs, cfg: LiftConfig, quiet: bool) -> Result<ExitCode>
         "episodes": episodes,
     }});
     let path = writer.finish(&attrs)?;
-    println!("lift dataset: {n} episodes, {steps} steps -> {}", path.display());
+    println!("{name} dataset: {n} episodes, {steps} steps -> {}", path.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -1,0 +1,234 @@
+//! One robosuite episode in progress, whatever the task: the Panda on its
+//! controller, one free object, the control step with its divergence check, the
+//! state row and the agentview render. Lift and Can add their success checks.
+
+use std::cell::RefCell;
+use std::sync::Arc;
+
+use mujoco_rs::prelude::*;
+use mujoco_rs::renderer::MjRenderer;
+
+use super::osc::{Osc, PandaIndex};
+use crate::error::ScenarioError;
+
+/// The Panda's initial joints in robosuite (`Panda.init_qpos`).
+pub const PANDA_INIT_QPOS: [f64; 7] = [
+    0.0,
+    std::f64::consts::PI / 16.0,
+    0.0,
+    -std::f64::consts::PI / 2.0 - std::f64::consts::PI / 3.0,
+    0.0,
+    std::f64::consts::PI - 0.2,
+    std::f64::consts::PI / 4.0,
+];
+/// The gripper's initial finger positions (`PandaGripper.init_qpos`).
+pub const GRIPPER_INIT_QPOS: [f64; 2] = [0.020833, -0.020833];
+
+/// Names of the state columns after the object's seven (position, quaternion).
+pub const ROBOT_COLUMNS: [&str; 16] = [
+    "eef_x", "eef_y", "eef_z", "eef_qw", "eef_qx", "eef_qy", "eef_qz", "finger_1", "finger_2", "joint_1",
+    "joint_2", "joint_3", "joint_4", "joint_5", "joint_6", "joint_7",
+];
+
+/// A compiled scene's object: its body and free joint, by robosuite's names.
+pub struct ObjectNames<'a> {
+    /// The object's body (`cube_main`, `Can_main`).
+    pub body: &'a str,
+    /// Its free joint.
+    pub joint: &'a str,
+}
+
+/// One episode in progress.
+pub struct ArmEpisode {
+    scenario: &'static str,
+    seed: u64,
+    step: u32,
+    data: MjData<Arc<MjModel>>,
+    osc: Osc,
+    object: usize,
+}
+
+impl ArmEpisode {
+    /// Places the arm at `arm_q`, the fingers at their initial opening and the
+    /// object at `pose` (x, y, z, qw, qx, qy, qz), then starts the controller.
+    ///
+    /// # Errors
+    /// [`ScenarioError::Model`] when the model lacks the Panda or the object.
+    pub fn start(
+        scenario: &'static str,
+        seed: u64,
+        model: MjModel,
+        object: &ObjectNames<'_>,
+        arm_q: [f64; 7],
+        pose: [f64; 7],
+    ) -> Result<Self, ScenarioError> {
+        let model = Arc::new(model);
+        let index = PandaIndex::new(&model)?;
+        let miss = |kind: &str, name: &str| ScenarioError::Model {
+            scenario: scenario.into(),
+            message: format!("no {kind} '{name}'"),
+        };
+        let body = model.body(object.body).ok_or_else(|| miss("body", object.body))?.id;
+        let joint = model.joint(object.joint).ok_or_else(|| miss("joint", object.joint))?.id;
+        let adr = model.jnt_qposadr()[joint] as usize;
+        let mut data = MjData::new(model.clone());
+        {
+            let q = data.qpos_mut();
+            for (i, &a) in index.arm_qpos.iter().enumerate() {
+                q[a] = arm_q[i];
+            }
+            for (i, &a) in index.finger_qpos.iter().enumerate() {
+                q[a] = GRIPPER_INIT_QPOS[i];
+            }
+            q[adr..adr + 7].copy_from_slice(&pose);
+        }
+        data.forward();
+        let osc = Osc::new(&data, index);
+        Ok(Self { scenario, seed, step: 0, data, osc, object: body })
+    }
+
+    /// The episode's seed.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// Control steps taken.
+    pub fn steps(&self) -> u32 {
+        self.step
+    }
+
+    /// One control step (robomimic's 7-D action).
+    ///
+    /// # Errors
+    /// A non-finite action, or a state that became non-finite (naming seed and step).
+    pub fn step(&mut self, action: &[f64; 7]) -> Result<(), ScenarioError> {
+        let fail = |step: u32, detail: String| ScenarioError::NonFinite {
+            scenario: self.scenario.into(),
+            seed: self.seed,
+            step,
+            detail,
+        };
+        if action.iter().any(|v| !v.is_finite()) {
+            return Err(fail(self.step, format!("action {action:?}")));
+        }
+        self.osc.step(&mut self.data, action);
+        self.step += 1;
+        let bad =
+            |what: &str, v: &[f64]| v.iter().position(|x| !x.is_finite()).map(|i| format!("{what}[{i}]"));
+        if let Some(detail) = bad("qpos", self.data.qpos()).or_else(|| bad("qvel", self.data.qvel())) {
+            return Err(fail(self.step, detail));
+        }
+        Ok(())
+    }
+
+    /// The object's body position, m.
+    pub fn object_pos(&self) -> [f64; 3] {
+        self.data.xpos()[self.object]
+    }
+
+    /// The object's orientation (w, x, y, z).
+    pub fn object_quat(&self) -> [f64; 4] {
+        self.data.xquat()[self.object]
+    }
+
+    /// The grip site's position, m.
+    pub fn eef_pos(&self) -> [f64; 3] {
+        self.data.site_xpos()[self.osc.index().grip_site]
+    }
+
+    /// The grip site's rotation matrix (row-major).
+    pub fn eef_mat(&self) -> [[f64; 3]; 3] {
+        let x = self.data.site_xmat()[self.osc.index().grip_site];
+        [[x[0], x[1], x[2]], [x[3], x[4], x[5]], [x[6], x[7], x[8]]]
+    }
+
+    /// The finger joints, m (open: ±0.04).
+    pub fn fingers(&self) -> [f64; 2] {
+        self.osc.index().finger_qpos.map(|a| self.data.qpos()[a])
+    }
+
+    /// The arm's joints, rad.
+    pub fn arm_q(&self) -> [f64; 7] {
+        self.osc.index().arm_qpos.map(|a| self.data.qpos()[a])
+    }
+
+    /// The state row: the object's pose (7), then [`ROBOT_COLUMNS`].
+    pub fn state(&self) -> Vec<f64> {
+        let mut s = Vec::with_capacity(7 + ROBOT_COLUMNS.len());
+        s.extend(self.object_pos());
+        s.extend(self.object_quat());
+        s.extend(self.eef_pos());
+        s.extend(mat_to_quat(&self.eef_mat()));
+        s.extend(self.fingers());
+        s.extend(self.arm_q());
+        s
+    }
+
+    /// The agentview camera's `size`² RGB image, upright (rows top to bottom).
+    ///
+    /// # Errors
+    /// [`ScenarioError::Render`] when no offscreen GL context can be made.
+    pub fn render(&mut self, size: usize) -> Result<Vec<u8>, ScenarioError> {
+        render_agentview(&mut self.data, size)
+    }
+}
+
+/// A rotation matrix's quaternion (w, x, y, z), w ≥ 0.
+pub fn mat_to_quat(m: &[[f64; 3]; 3]) -> [f64; 4] {
+    let tr = m[0][0] + m[1][1] + m[2][2];
+    let q = if tr > 0.0 {
+        let s = (tr + 1.0).sqrt() * 2.0;
+        [0.25 * s, (m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s]
+    } else if m[0][0] > m[1][1] && m[0][0] > m[2][2] {
+        let s = (1.0 + m[0][0] - m[1][1] - m[2][2]).sqrt() * 2.0;
+        [(m[2][1] - m[1][2]) / s, 0.25 * s, (m[0][1] + m[1][0]) / s, (m[0][2] + m[2][0]) / s]
+    } else if m[1][1] > m[2][2] {
+        let s = (1.0 + m[1][1] - m[0][0] - m[2][2]).sqrt() * 2.0;
+        [(m[0][2] - m[2][0]) / s, (m[0][1] + m[1][0]) / s, 0.25 * s, (m[1][2] + m[2][1]) / s]
+    } else {
+        let s = (1.0 + m[2][2] - m[0][0] - m[1][1]).sqrt() * 2.0;
+        [(m[1][0] - m[0][1]) / s, (m[0][2] + m[2][0]) / s, (m[1][2] + m[2][1]) / s, 0.25 * s]
+    };
+    if q[0] < 0.0 { q.map(|v| -v) } else { q }
+}
+
+thread_local! {
+    /// One offscreen renderer per thread and image size (GL contexts are not `Send`).
+    static RENDERER: RefCell<Option<(usize, MjRenderer)>> = const { RefCell::new(None) };
+}
+
+/// Renders robosuite's `agentview` camera, showing only visual geoms (group 1)
+/// and no sites, as robosuite's offscreen renderer does by default. A model with
+/// other meshes or textures than the last one (another task) gets a fresh GL
+/// context from mujoco-rs.
+fn render_agentview(data: &mut MjData<Arc<MjModel>>, size: usize) -> Result<Vec<u8>, ScenarioError> {
+    let err = |e: &dyn std::fmt::Display| ScenarioError::Render { message: e.to_string() };
+    let cam = data.model().camera("agentview").map(|c| c.id).ok_or_else(|| err(&"no camera 'agentview'"))?;
+    RENDERER.with(|cell| {
+        let mut slot = cell.borrow_mut();
+        if slot.as_ref().is_none_or(|(s, _)| *s != size) {
+            let side = u32::try_from(size).map_err(|e| err(&e))?;
+            let mut r = MjRenderer::builder()
+                .width(side)
+                .height(side)
+                .rgb(true)
+                .depth(false)
+                .camera(MjvCamera::new_fixed(cam))
+                .build(data.model())
+                .map_err(|e| err(&e))?;
+            let o = r.opts_mut();
+            o.geomgroup = [0, 1, 0, 0, 0, 0];
+            o.sitegroup = [0; 6];
+            *slot = Some((size, r));
+        }
+        let (_, r) = slot.as_mut().expect("set above");
+        r.set_camera(MjvCamera::new_fixed(cam));
+        r.sync_data(data).map_err(|e| err(&e))?;
+        r.render().map_err(|e| err(&e))?;
+        // mujoco-rs hands the rows over top to bottom: the image is upright, as
+        // robomimic stores agentview after flipping robosuite's raw (OpenGL-order)
+        // observation.
+        let rgb = r.rgb_flat().ok_or_else(|| err(&"renderer returned no RGB image"))?;
+        Ok(rgb.to_vec())
+    })
+}
