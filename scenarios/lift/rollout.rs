@@ -92,7 +92,7 @@ impl ArmTask for LiftSim {
         let init = *ep.init();
         let r = if behaviour == LiftBehaviour::Random {
             let mut random = RandomActions::new("lift", seed);
-            run(&mut ep, |_| random.next(), perturbation, behaviour.name(), limits)?
+            run(&mut ep, |_| random.action(), perturbation, behaviour.name(), limits)?
         } else {
             let mut expert = LiftExpert::new(behaviour.flaws());
             run(&mut ep, |e| expert.act(e), perturbation, behaviour.name(), limits)?

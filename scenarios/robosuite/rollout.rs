@@ -87,8 +87,8 @@ impl RandomActions {
     }
 
     /// The next action.
-    pub fn next(&mut self) -> [f64; 7] {
-        if self.step % 5 == 0 {
+    pub fn action(&mut self) -> [f64; 7] {
+        if self.step.is_multiple_of(5) {
             self.held = std::array::from_fn(|_| self.rng.random_range(-1.0..=1.0));
         }
         self.step += 1;
