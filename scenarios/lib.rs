@@ -7,6 +7,7 @@
 //! `--scenario`. Push-T implements the task interface; robomimic Lift so far has
 //! its reference simulator, scripted behaviours and data commands.
 
+pub mod can;
 pub mod error;
 pub mod lift;
 pub mod pusht;
@@ -25,8 +26,8 @@ use harness::task::Task;
 pub fn load_task(spec: &str) -> Result<Box<dyn Task>, ScenarioError> {
     match scenario(spec)? {
         Scenario::PushT(cfg) => Ok(Box::new(pusht::PushTTask::new(*cfg)?)),
-        Scenario::Lift(_) => Err(ScenarioError::Unsupported {
-            scenario: "lift".into(),
+        Scenario::Lift(_) | Scenario::Can(_) => Err(ScenarioError::Unsupported {
+            scenario: spec.into(),
             what: "policies and world models (it runs with `simulate` and `collect` and its scripted \
                    behaviours)"
                 .into(),
@@ -45,10 +46,11 @@ pub fn pusht_config(spec: &str) -> Result<pusht::PushTConfig, ScenarioError> {
     }
     let path = std::path::Path::new(spec);
     let file = spec.ends_with(".toml") || path.exists();
-    if spec == "lift" || (file && file_names(path)?.as_deref() == Some("lift")) {
+    let named = if file { file_names(path)? } else { Some(spec.to_string()) };
+    if let Some(name @ ("lift" | "can")) = named.as_deref() {
         return Err(ScenarioError::Unsupported {
-            scenario: "lift".into(),
-            what: "this command (Lift runs with `simulate` and `collect` and its scripted behaviours)".into(),
+            scenario: name.into(),
+            what: "this command (it runs with `simulate` and `collect` and its scripted behaviours)".into(),
         });
     }
     if file {
@@ -58,7 +60,7 @@ pub fn pusht_config(spec: &str) -> Result<pusht::PushTConfig, ScenarioError> {
 }
 
 /// Names of the scenarios this build can simulate.
-pub const SCENARIOS: &[&str] = &["pusht", "lift"];
+pub const SCENARIOS: &[&str] = &["pusht", "lift", "can"];
 
 /// A resolved `--scenario`: which simulator, with its parameters.
 #[derive(Clone, Debug)]
@@ -67,6 +69,8 @@ pub enum Scenario {
     PushT(Box<pusht::PushTConfig>),
     /// robomimic Lift.
     Lift(lift::LiftConfig),
+    /// robomimic Can (robosuite's PickPlaceCan).
+    Can(can::CanConfig),
 }
 
 /// Resolves `--scenario`: a name (`pusht`, `lift`: the shipped parameters) or a
@@ -75,15 +79,18 @@ pub enum Scenario {
 /// # Errors
 /// An unknown name, or an unreadable or invalid file.
 pub fn scenario(spec: &str) -> Result<Scenario, ScenarioError> {
-    if spec == "lift" {
-        return Ok(Scenario::Lift(lift::LiftConfig::default()));
+    match spec {
+        "lift" => return Ok(Scenario::Lift(lift::LiftConfig::default())),
+        "can" => return Ok(Scenario::Can(can::CanConfig::default())),
+        _ => {}
     }
     let path = std::path::Path::new(spec);
-    if spec != "pusht"
-        && (spec.ends_with(".toml") || path.exists())
-        && file_names(path)?.as_deref() == Some("lift")
-    {
-        return Ok(Scenario::Lift(lift::LiftConfig::from_file(path)?));
+    if spec != "pusht" && (spec.ends_with(".toml") || path.exists()) {
+        match file_names(path)?.as_deref() {
+            Some("lift") => return Ok(Scenario::Lift(lift::LiftConfig::from_file(path)?)),
+            Some("can") => return Ok(Scenario::Can(can::CanConfig::from_file(path)?)),
+            _ => {}
+        }
     }
     Ok(Scenario::PushT(Box::new(pusht_config(spec)?)))
 }

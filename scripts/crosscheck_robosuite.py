@@ -1,20 +1,21 @@
 #!/usr/bin/env python3
-"""Cross-check evalharness's Lift against robosuite's own Lift.
+"""Cross-check evalharness's Lift and Can against robosuite's own Lift and PickPlaceCan.
 
 Evidence, not a CI test: it needs the package index. It
 1. installs robosuite==1.5.2 and mujoco==3.17.0 into a throw-away virtual
    environment (``--venv``, default ``.robosuite/venv``, git-ignored);
-2. runs ``evalharness simulate --scenario lift`` for one expert and one
+2. runs ``evalharness simulate --scenario lift|can`` for one expert and one
    random-action episode, stepping past success (``--no-early-stop``);
-3. starts robosuite's ``Lift`` from the same initial state (the cube's size,
-   position and yaw, the arm's joints), feeds it the same 7-D actions and prints,
-   for 25, 50, 100 and 200 steps, the largest end-effector and cube position
-   differences so far and whether success agrees;
+3. starts robosuite's ``Lift`` / ``PickPlaceCan`` from the same initial state
+   (the object's size, position and yaw, the arm's joints), feeds it the same
+   7-D actions and prints, for 25, 50, 100 and 200 steps, the largest
+   end-effector and object position differences so far and whether success
+   agrees;
 4. with ``--picture PATH``, saves robosuite's agentview renders over
    evalharness's at steps 0 and 40 of the expert episode, and prints their mean
    absolute pixel difference.
 
-Usage: scripts/crosscheck_robosuite.py [--seed 0] [--binary target/release/evalharness]
+Usage: scripts/crosscheck_robosuite.py [--task lift|can|both] [--seed 0] [--binary target/release/evalharness]
 """
 
 import argparse
@@ -43,9 +44,9 @@ def ensure_venv(venv: Path) -> Path:
     return py
 
 
-def run_evalharness(binary: str, policy: str, seed: int, out: Path) -> None:
+def run_evalharness(binary: str, task: str, policy: str, seed: int, out: Path) -> None:
     subprocess.run(
-        [binary, "--quiet", "simulate", "--scenario", "lift", "--policy", policy, "--episodes", "1",
+        [binary, "--quiet", "simulate", "--scenario", task, "--policy", policy, "--episodes", "1",
          "--seed-start", str(seed), "--max-steps", str(max(STEPS) + 1), "--no-early-stop",
          "--jobs", "1", "--force", "--out", str(out)],
         check=True,
@@ -79,22 +80,25 @@ bu.MjData.qM = property(lambda self: self._data)
 case = json.load(open(sys.argv[1]))
 PICTURE_STEPS = (0, 40)
 init = case["init"]
-half = init["cube_half"]
-orig_box = lift_mod.BoxObject
-lift_mod.BoxObject = lambda **kw: orig_box(**{**kw, "size_min": half, "size_max": half})
+if case["task"] == "lift":
+    half = init["cube_half"]
+    orig_box = lift_mod.BoxObject
+    lift_mod.BoxObject = lambda **kw: orig_box(**{**kw, "size_min": half, "size_max": half})
+    env_name, joint, body, pose = "Lift", "cube_joint0", "cube_main", init["cube_pos"] + init["cube_quat"]
+else:
+    env_name, joint, body, pose = "PickPlaceCan", "Can_joint0", "Can_main", init["can_pos"] + init["can_quat"]
 
 # No hard reset: a hard reset rebuilds the robots and forgets init_qpos.
-env = suite.make("Lift", robots="Panda", initialization_noise=None, has_renderer=False,
+env = suite.make(env_name, robots="Panda", initialization_noise=None, has_renderer=False,
                  has_offscreen_renderer=True, use_camera_obs=False, ignore_done=True, hard_reset=False, seed=0)
 env.robots[0].init_qpos = np.array(init["arm_q"])
 env.reset()
 sim = env.sim
-qpos = np.concatenate([init["cube_pos"], init["cube_quat"]])
-sim.data.set_joint_qpos("cube_joint0", qpos)
-sim.data.set_joint_qvel("cube_joint0", np.zeros(6))
+sim.data.set_joint_qpos(joint, np.array(pose))
+sim.data.set_joint_qvel(joint, np.zeros(6))
 sim.forward()
 site = "gripper0_right_grip_site"
-cube = sim.model.body_name2id("cube_main")
+cube = sim.model.body_name2id(body)
 out = {"eef": [], "cube": [], "success": []}
 def record():
     out["eef"].append(np.array(sim.data.get_site_xpos(site)).tolist())
@@ -123,22 +127,26 @@ def load_episode(out: Path):
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--task", choices=("lift", "can", "both"), default="both")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--binary", default=str(ROOT / "target" / "release" / "evalharness"))
     ap.add_argument("--venv", default=str(ROOT / ".robosuite" / "venv"))
-    ap.add_argument("--picture", help="save robosuite's and evalharness's agentview side by side (PNG)")
+    ap.add_argument("--picture", help="save robosuite's and evalharness's agentview renders (PNG; with "
+                    "--task both, TASK in the path is replaced by the task's name)")
     args = ap.parse_args()
     py = ensure_venv(Path(args.venv))
-    print(f"| behaviour | steps | max end-effector diff (mm) | max cube diff (mm) | success (evalharness / robosuite) |")
-    print("|---|---|---|---|---|")
+    print("| task | behaviour | steps | max end-effector diff (mm) | max object diff (mm) | success (evalharness / robosuite) |")
+    print("|---|---|---|---|---|---|")
+    tasks = ("lift", "can") if args.task == "both" else (args.task,)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        for policy in ("expert", "random"):
-            out = tmp / policy
-            run_evalharness(args.binary, policy, args.seed, out)
+        for task, policy in ((t, p) for t in tasks for p in ("expert", "random")):
+            out = tmp / f"{task}-{policy}"
+            run_evalharness(args.binary, task, policy, args.seed, out)
             rows, init = load_episode(out)
-            case = {"init": init, "actions": [r["action"] for r in rows[: max(STEPS)]]}
-            if args.picture and policy == "expert":
+            case = {"task": task, "init": init, "actions": [r["action"] for r in rows[: max(STEPS)]]}
+            picture = Path(args.picture.replace("TASK", task)) if args.picture else None
+            if picture and policy == "expert":
                 case["picture"] = str(tmp / "robosuite_{}.png")
             (tmp / "case.json").write_text(json.dumps(case))
             subprocess.run([str(py), "-c", INNER, str(tmp / "case.json"), str(tmp / "rs.json")], check=True,
@@ -152,9 +160,9 @@ def main() -> int:
             for n in STEPS:
                 de = max(diff(eh_eef[k], rs["eef"][k]) for k in range(n + 1))
                 dc = max(diff(eh_cube[k], rs["cube"][k]) for k in range(n + 1))
-                print(f"| {policy} | {n} | {de:.3f} | {dc:.3f} | {eh_success[n]} / {rs['success'][n]} |")
-            if args.picture and policy == "expert":
-                side_by_side(out, tmp, Path(args.picture), py)
+                print(f"| {task} | {policy} | {n} | {de:.3f} | {dc:.3f} | {eh_success[n]} / {rs['success'][n]} |")
+            if picture and policy == "expert":
+                side_by_side(out, tmp, picture, py)
     return 0
 
 

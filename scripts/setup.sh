@@ -85,7 +85,8 @@ RS_VERSION=1.5.2
 RS_WHEEL="robosuite-${RS_VERSION}-py3-none-any.whl"
 RS_SHA256=b9e02df55de8949739de6ba1d196d2ba59cf33c51a76efcfbe5c2f73cdcf99ce
 RS_DIR="$root/.robosuite"
-RS_STAMP="$RS_DIR/assets/.robosuite-${RS_VERSION}"
+# The stamp names the asset list: a new list re-unpacks.
+RS_STAMP="$RS_DIR/assets/.robosuite-${RS_VERSION}-lift-can-2"
 if [ -f "$RS_STAMP" ]; then
   say "robosuite ${RS_VERSION} assets already in .robosuite/assets"
 else
@@ -103,7 +104,8 @@ else
     "$a/base.xml" "$a/robots/panda/*" "$a/grippers/panda_gripper.xml" \
     "$a/grippers/meshes/panda_gripper/*" "$a/bases/rethink_mount.xml" \
     "$a/bases/meshes/rethink_mount/*" "$a/arenas/table_arena.xml" "$a/arenas/bins_arena.xml" \
-    "$a/objects/can.xml" "$a/objects/meshes/can.*" \
+    "$a/objects/can.xml" "$a/objects/meshes/can.*" "$a/objects/meshes/milk.stl" \
+    "$a/objects/meshes/bread.stl" "$a/objects/meshes/cereal.stl" \
     "$a/textures/light-gray-floor-tile.png" "$a/textures/ceramic.png" \
     "$a/textures/steel-brushed.png" "$a/textures/light-gray-plaster.png" \
     "$a/textures/red-wood.png" "$a/textures/dark-wood.png" "$a/textures/light-wood.png" \

@@ -1,4 +1,4 @@
-//! `simulate` and `collect` on robomimic Lift: the expert lifts, outputs are
+//! `simulate` and `collect` on robomimic Lift and Can: the experts succeed, outputs are
 //! byte-identical for any `--jobs`, and bad input is refused by name.
 
 use crate::util::{evalharness, expect_code, read_json, run, tree_bytes};
@@ -136,4 +136,47 @@ fn bad_lift_input_is_refused_by_name() {
     let (_, stderr) = expect_code(&res, 2);
     assert!(stderr.contains("does not support"), "{stderr}");
     assert!(!out.exists(), "nothing written on refusal");
+}
+
+#[test]
+fn the_can_expert_places_the_can_and_any_jobs_gives_the_same_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = |name: &str, jobs: &str| {
+        let out = dir.path().join(name);
+        let res = run(&[
+            "simulate",
+            "--scenario",
+            "can",
+            "--episodes",
+            "2",
+            "--seed-start",
+            "60",
+            "--max-steps",
+            "220",
+            "--gif-size",
+            "32",
+            "--jobs",
+            jobs,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        (out, res)
+    };
+    let (one, res) = sim("one", "1");
+    let (stdout, _) = expect_code(&res, 0);
+    assert!(stdout.contains("can expert: 2 episodes, success rate 100.0%"), "{stdout}");
+    let (two, res) = sim("two", "2");
+    expect_code(&res, 0);
+    assert_eq!(tree_bytes(&one), tree_bytes(&two), "--jobs 1 and --jobs 2 differ");
+    let lines = std::fs::read_to_string(one.join("episodes.jsonl")).unwrap();
+    let last: serde_json::Value = serde_json::from_str(lines.lines().last().unwrap()).unwrap();
+    assert_eq!(last["success"], true);
+    // The can starts in bin 1 (y around −0.25) and its state row starts with its position.
+    let first: serde_json::Value = serde_json::from_str(lines.lines().next().unwrap()).unwrap();
+    let y = first["state"][1].as_f64().unwrap();
+    assert!((-0.41..=-0.09).contains(&y), "{y}");
+    // rank cannot use Can yet, and says so.
+    let res = run(&["rank", "--scenario", "can", "--policies", one.to_str().unwrap(), "--out", "unused"]);
+    let (_, stderr) = expect_code(&res, 2);
+    assert!(stderr.contains("does not support"), "{stderr}");
 }

@@ -91,12 +91,7 @@ pub fn lift_model(cfg: &LiftConfig, dir: &Path, cube_half: [f64; 3]) -> Result<M
 </body></worldbody></mujoco>"#,
         tex.display()
     );
-    let mut spec = MjSpec::from_xml_string(&cube)
-        .map_err(|e| ScenarioError::Model { scenario: "lift".into(), message: format!("cube: {e}") })?;
-    b.spec_mut()
-        .world_body_mut()
-        .attach_by_deep_copy(&mut spec, "cube_", "")
-        .map_err(|e| ScenarioError::Model { scenario: "lift".into(), message: format!("cube: {e}") })?;
+    b.attach_object("cube_", &cube)?;
     b.compile("lift")
 }
 

@@ -38,7 +38,12 @@ const REQUIRED: &[&str] = &[
     "arenas/table_arena.xml",
     "arenas/bins_arena.xml",
     "objects/can.xml",
+    "objects/meshes/can.msh",
+    "objects/meshes/milk.stl",
+    "objects/meshes/bread.stl",
+    "objects/meshes/cereal.stl",
     "textures/red-wood.png",
+    "textures/soda.png",
 ];
 
 fn check(dir: &Path) -> Result<(), ScenarioError> {

@@ -3,6 +3,7 @@
 //! state row and the agentview render. Lift and Can add their success checks.
 
 use std::cell::RefCell;
+use std::mem::ManuallyDrop;
 use std::sync::Arc;
 
 use mujoco_rs::prelude::*;
@@ -193,8 +194,24 @@ pub fn mat_to_quat(m: &[[f64; 3]; 3]) -> [f64; 4] {
 }
 
 thread_local! {
-    /// One offscreen renderer per thread and image size (GL contexts are not `Send`).
-    static RENDERER: RefCell<Option<(usize, MjRenderer)>> = const { RefCell::new(None) };
+    /// One offscreen renderer per thread and image size (GL contexts are not
+    /// `Send`). It is never dropped by the thread's exit: tearing a GL context
+    /// down from a thread-local destructor, while EGL and Mesa tear themselves
+    /// down at process exit, corrupted the heap now and then (seen as a glibc
+    /// abort after the results were written). [`release_renderer`] drops it
+    /// while the thread is alive; a thread that never calls it leaks one context
+    /// until the process ends.
+    static RENDERER: RefCell<Option<(usize, ManuallyDrop<MjRenderer>)>> = const { RefCell::new(None) };
+}
+
+/// Drops this thread's agentview renderer, if it has one. Call it on every
+/// thread that rendered, before the thread or the process ends.
+pub fn release_renderer() {
+    RENDERER.with(|cell| {
+        if let Some((_, r)) = cell.borrow_mut().take() {
+            drop(ManuallyDrop::into_inner(r));
+        }
+    });
 }
 
 /// Renders robosuite's `agentview` camera, showing only visual geoms (group 1)
@@ -219,7 +236,10 @@ fn render_agentview(data: &mut MjData<Arc<MjModel>>, size: usize) -> Result<Vec<
             let o = r.opts_mut();
             o.geomgroup = [0, 1, 0, 0, 0, 0];
             o.sitegroup = [0; 6];
-            *slot = Some((size, r));
+            if let Some((_, old)) = slot.take() {
+                drop(ManuallyDrop::into_inner(old));
+            }
+            *slot = Some((size, ManuallyDrop::new(r)));
         }
         let (_, r) = slot.as_mut().expect("set above");
         r.set_camera(MjvCamera::new_fixed(cam));

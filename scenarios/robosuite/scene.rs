@@ -153,6 +153,31 @@ impl SceneBuilder {
         Ok(Self { spec: arena, dir: dir.to_path_buf() })
     }
 
+    /// A scene rooted in robosuite's bins arena (`arenas/bins_arena.xml`) with
+    /// robosuite's global options. PickPlace's defaults put the bins where the
+    /// file does, so nothing is moved.
+    ///
+    /// # Errors
+    /// The file is missing or MuJoCo refuses it.
+    pub fn bins_arena(dir: &Path) -> Result<Self, ScenarioError> {
+        Ok(Self { spec: load_root(dir, "arenas/bins_arena.xml")?, dir: dir.to_path_buf() })
+    }
+
+    /// Attaches an object given as MJCF text under `prefix` (robosuite's object
+    /// naming: `cube_`, `Can_`, `VisualCan_`, ...).
+    ///
+    /// # Errors
+    /// MuJoCo refuses the text or the attachment.
+    pub fn attach_object(&mut self, prefix: &str, mjcf: &str) -> Result<(), ScenarioError> {
+        let mut spec =
+            MjSpec::from_xml_string(mjcf).map_err(|e| model_err(format!("object {prefix}: {e}")))?;
+        self.spec
+            .world_body_mut()
+            .attach_by_deep_copy(&mut spec, prefix, "")
+            .map_err(|e| model_err(format!("object {prefix}: {e}")))?;
+        Ok(())
+    }
+
     /// Adds the Panda on its Rethink mount with the Panda gripper, its base at
     /// `base` (world frame), as robosuite's `Lift` places it.
     ///

@@ -134,6 +134,10 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
                 let task = scenarios::lift::LiftSim::new(cfg).context("setting up Lift")?;
                 return super::collect_arm::run(args, &task, quiet);
             }
+            scenarios::Scenario::Can(cfg) => {
+                let task = scenarios::can::CanSim::new(cfg).context("setting up Can")?;
+                return super::collect_arm::run(args, &task, quiet);
+            }
             scenarios::Scenario::PushT(cfg) => *cfg,
         };
     let mix_text = args.mix.as_deref().unwrap_or(PUSHT_MIX);

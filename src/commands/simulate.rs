@@ -43,10 +43,16 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
                 let task = scenarios::lift::LiftSim::new(cfg).context("setting up Lift")?;
                 return super::simulate_arm::run(args, &task, quiet);
             }
+            scenarios::Scenario::Can(cfg) => {
+                let task = scenarios::can::CanSim::new(cfg).context("setting up Can")?;
+                return super::simulate_arm::run(args, &task, quiet);
+            }
             scenarios::Scenario::PushT(cfg) => *cfg,
         };
     if args.no_early_stop {
-        anyhow::bail!("--no-early-stop applies to Lift; Push-T episodes run to their step limit or success");
+        anyhow::bail!(
+            "--no-early-stop applies to Lift and Can; Push-T episodes run to their step limit or success"
+        );
     }
     let kind = BehaviourKind::parse(&args.policy)?;
     if !(16..=1024).contains(&args.gif_size) {

@@ -18,6 +18,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
+use scenarios::robosuite::episode::release_renderer;
 use scenarios::robosuite::rollout::{ArmTask, Episode, Perturbation, RunLimits};
 use serde::Serialize;
 use serde_json::json;
@@ -78,6 +79,20 @@ impl<T: ArmTask> ArmRun<'_, T> {
     ) -> Result<()> {
         let jobs = self.jobs.max(1);
         let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build()?;
+        let result = self.run_in(&pool, jobs, work, frames, &mut done);
+        // Free every worker's GL context while the workers are alive.
+        pool.broadcast(|_| release_renderer());
+        result
+    }
+
+    fn run_in(
+        &self,
+        pool: &rayon::ThreadPool,
+        jobs: usize,
+        work: &[(u64, T::Behaviour)],
+        frames: impl Fn(usize) -> Option<usize> + Sync,
+        done: &mut impl FnMut(usize, Episode<T::Init, T::Behaviour>) -> Result<()>,
+    ) -> Result<()> {
         let batch = jobs * 4;
         for (b, chunk) in work.chunks(batch).enumerate() {
             let results: Vec<Result<Episode<T::Init, T::Behaviour>>> = pool.install(|| {

@@ -1,0 +1,64 @@
+//! Lift and Can benchmarks (criterion): the cost of one control step of physics
+//! (25 MuJoCo steps under the OSC_POSE controller), of one agentview render, and
+//! of an episode's reset (Lift composes and compiles its scene per episode for
+//! the cube's size; Can copies one compiled model).
+//!
+//! `cargo bench --bench robosuite`; results are recorded in BENCHMARKS.md.
+
+// criterion_group! generates undocumented functions.
+#![allow(missing_docs)]
+
+use std::hint::black_box;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use scenarios::can::{CanConfig, CanSim};
+use scenarios::lift::{LiftConfig, LiftSim};
+use scenarios::robosuite::episode::release_renderer;
+
+fn lift(c: &mut Criterion) {
+    let sim = LiftSim::new(LiftConfig::default()).expect("robosuite assets (scripts/setup.sh)");
+    let mut g = c.benchmark_group("lift");
+    // A control step with the gripper closing on nothing while the arm moves.
+    let mut ep = sim.reset(1).expect("reset");
+    let mut k = 0u32;
+    g.bench_function("control_step", |b| {
+        b.iter(|| {
+            // Alternate directions so the arm stays near its start.
+            k += 1;
+            let s = if k % 20 < 10 { 0.3 } else { -0.3 };
+            ep.step(black_box(&[s, -s, 0.0, 0.0, 0.0, 0.1 * s, 1.0])).expect("steps")
+        })
+    });
+    for size in [96usize, 256] {
+        g.bench_function(format!("render_agentview_{size}"), |b| {
+            b.iter(|| ep.render(black_box(size)).expect("renders"))
+        });
+    }
+    g.sample_size(10);
+    g.bench_function("reset_compile", |b| b.iter(|| sim.reset(black_box(2)).expect("reset")));
+    g.finish();
+    release_renderer();
+}
+
+fn can(c: &mut Criterion) {
+    let sim = CanSim::new(CanConfig::default()).expect("robosuite assets (scripts/setup.sh)");
+    let mut g = c.benchmark_group("can");
+    let mut ep = sim.reset(1).expect("reset");
+    let mut k = 0u32;
+    g.bench_function("control_step", |b| {
+        b.iter(|| {
+            k += 1;
+            let s = if k % 20 < 10 { 0.3 } else { -0.3 };
+            ep.arm_mut().step(black_box(&[s, -s, 0.0, 0.0, 0.0, 0.1 * s, 1.0])).expect("steps")
+        })
+    });
+    g.bench_function("render_agentview_96", |b| {
+        b.iter(|| ep.arm_mut().render(black_box(96)).expect("renders"))
+    });
+    g.bench_function("reset", |b| b.iter(|| sim.reset(black_box(2)).expect("reset")));
+    g.finish();
+    release_renderer();
+}
+
+criterion_group!(benches, lift, can);
+criterion_main!(benches);
