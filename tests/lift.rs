@@ -180,3 +180,37 @@ fn the_can_expert_places_the_can_and_any_jobs_gives_the_same_bytes() {
     let (_, stderr) = expect_code(&res, 2);
     assert!(stderr.contains("does not support"), "{stderr}");
 }
+
+#[test]
+fn collect_writes_a_can_dataset_with_its_default_mix() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("can.zarr");
+    let o = out.to_str().unwrap();
+    let res = run(&[
+        "collect",
+        "--scenario",
+        "can",
+        "--episodes",
+        "4",
+        "--seed-start",
+        "3",
+        "--max-steps",
+        "6",
+        "--out",
+        o,
+    ]);
+    let (stdout, _) = expect_code(&res, 0);
+    assert!(stdout.contains("can dataset: 4 episodes, 24 steps"), "{stdout}");
+    let attrs = read_json(&out.join(".zattrs"));
+    let e = &attrs["evalharness"];
+    assert_eq!(e["scenario"], "can");
+    // Half expert, the other half spread over the five flawed behaviours: 0.5 / 5 = 0.1 each.
+    assert_eq!(e["mix"], "expert=0.5,miss=0.1,drop=0.1,wrong-bin=0.1,hesitate=0.1,random=0.1");
+    assert_eq!(e["state_columns"][0], "can_x");
+    // An unknown behaviour in the mix names the task's behaviours.
+    let bad = dir.path().join("bad.zarr");
+    let res = run(&["collect", "--scenario", "can", "--mix", "push=1", "--out", bad.to_str().unwrap()]);
+    let (_, stderr) = expect_code(&res, 2);
+    assert!(stderr.contains("unknown can behaviour 'push'"), "{stderr}");
+    assert!(!bad.exists());
+}
