@@ -127,6 +127,12 @@ fn bad_lift_input_is_refused_by_name() {
         .unwrap();
     let (_, stderr) = expect_code(&res, 2);
     assert!(stderr.contains("scripts/setup.sh"), "{stderr}");
+    // A zero step limit would write empty episodes.
+    for cmd in ["simulate", "collect"] {
+        let res = run(&[cmd, "--scenario", "lift", "--episodes", "1", "--max-steps", "0", "--out", o]);
+        let (_, stderr) = expect_code(&res, 2);
+        assert!(stderr.contains("--max-steps must be at least 1"), "{stderr}");
+    }
     // An unknown behaviour lists the built-in ones.
     let res = run(&["simulate", "--scenario", "lift", "--policy", "teleop", "--out", o]);
     let (_, stderr) = expect_code(&res, 2);

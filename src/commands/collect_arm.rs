@@ -66,6 +66,9 @@ pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<Exit
     let mix_text = args.mix.clone().unwrap_or_else(|| default_mix(task));
     let mix = parse_mix_with(&mix_text, |n| behaviour(task, n))?;
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
+    if max_steps == 0 {
+        bail!("--max-steps must be at least 1");
+    }
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };
     let work: Vec<(u64, T::Behaviour)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, draw(&mix, seed))).collect();
