@@ -210,13 +210,17 @@ fn collect_writes_a_can_dataset_with_its_default_mix() {
     let attrs = read_json(&out.join(".zattrs"));
     let e = &attrs["evalharness"];
     assert_eq!(e["scenario"], "can");
-    // Half expert, the other half spread over the five flawed behaviours: 0.5 / 5 = 0.1 each.
-    assert_eq!(e["mix"], "expert=0.5,miss=0.1,drop=0.1,wrong-bin=0.1,hesitate=0.1,random=0.1");
+    // Half expert, the other half spread over the six flawed behaviours: 0.5 / 6 each.
+    let sixth = 0.5 / 6.0;
+    let want = format!(
+        "expert=0.5,miss={sixth},drop={sixth},wrong-bin={sixth},push={sixth},hesitate={sixth},random={sixth}"
+    );
+    assert_eq!(e["mix"], want.as_str());
     assert_eq!(e["state_columns"][0], "can_x");
     // An unknown behaviour in the mix names the task's behaviours.
     let bad = dir.path().join("bad.zarr");
-    let res = run(&["collect", "--scenario", "can", "--mix", "push=1", "--out", bad.to_str().unwrap()]);
+    let res = run(&["collect", "--scenario", "can", "--mix", "teleop=1", "--out", bad.to_str().unwrap()]);
     let (_, stderr) = expect_code(&res, 2);
-    assert!(stderr.contains("unknown can behaviour 'push'"), "{stderr}");
+    assert!(stderr.contains("unknown can behaviour 'teleop'"), "{stderr}");
     assert!(!bad.exists());
 }

@@ -22,6 +22,9 @@ pub struct CanFlaws {
     pub wrong_bin: bool,
     /// Steps of standing still before each phase (hesitation).
     pub hesitate: u32,
+    /// Instead of grasping, come down beside the can with the gripper closed and
+    /// shove it across bin 1 (it tips or slides; it never reaches bin 2).
+    pub push: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -60,6 +63,8 @@ const GRASP_ABOVE: f64 = 0.02;
 const CARRY_Z: f64 = 0.99;
 /// Release height of the grip site over bin 2's reference height, m.
 const RELEASE_Z: f64 = 0.10;
+/// How far beside the can's axis a push starts, m.
+const PUSH_SIDE: f64 = 0.07;
 /// Steps to close (1 / 0.2 × 2, plus settling) and to open.
 const GRIP_STEPS: u32 = 12;
 
@@ -86,7 +91,8 @@ impl CanExpert {
             [[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]]
         });
         let side = [down[0][1], down[1][1]];
-        let aim = [can[0] + side[0] * self.flaws.aim_offset, can[1] + side[1] * self.flaws.aim_offset];
+        let offset = if self.flaws.push { -PUSH_SIDE } else { self.flaws.aim_offset };
+        let aim = [can[0] + side[0] * offset, can[1] + side[1] * offset];
         self.phase_steps += 1;
         let closed = matches!(self.phase, Phase::Close | Phase::Lift | Phase::Carry | Phase::Lower);
         if self.held < self.flaws.hesitate {
@@ -94,9 +100,15 @@ impl CanExpert {
             return [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, if closed { 1.0 } else { -1.0 }];
         }
         let goal = [self.target[0], self.target[1] - self.flaws.drop_short];
+        // A push comes down with the gripper already closed.
+        let open = if self.flaws.push { 1.0 } else { -1.0 };
         let (target, grip) = match self.phase {
-            Phase::Above => ([aim[0], aim[1], can[2] + ABOVE], -1.0),
-            Phase::Descend => ([aim[0], aim[1], can[2] + GRASP_ABOVE], -1.0),
+            Phase::Above => ([aim[0], aim[1], can[2] + ABOVE], open),
+            Phase::Descend => ([aim[0], aim[1], can[2] + GRASP_ABOVE], open),
+            // Pushing: aim through the can at its far side, wherever it has moved to.
+            Phase::Close if self.flaws.push => {
+                ([can[0] + side[0] * PUSH_SIDE, can[1] + side[1] * PUSH_SIDE, can[2] + GRASP_ABOVE], 1.0)
+            }
             Phase::Close => ([aim[0], aim[1], can[2] + GRASP_ABOVE], 1.0),
             Phase::Lift => ([eef[0], eef[1], CARRY_Z], 1.0),
             Phase::Carry => ([goal[0], goal[1], CARRY_Z], 1.0),
@@ -114,7 +126,7 @@ impl CanExpert {
             // Contact with the can's rim can hold the fingers a few millimetres
             // short: close anyway once the descent has had its time.
             Phase::Descend if dist < 0.008 || self.phase_steps > 40 => self.next(Phase::Close),
-            Phase::Close if self.phase_steps >= GRIP_STEPS => self.next(Phase::Lift),
+            Phase::Close if self.phase_steps >= GRIP_STEPS && !self.flaws.push => self.next(Phase::Lift),
             Phase::Lift if err[2].abs() < 0.02 => self.next(Phase::Carry),
             // A drop on the way lets go as soon as the can is over the short goal.
             Phase::Carry if xy < 0.01 && self.flaws.drop_short > 0.0 => self.next(Phase::Release),

@@ -17,6 +17,8 @@ pub enum CanBehaviour {
     Drop,
     /// The expert carrying the can to the neighbouring quadrant.
     WrongBin,
+    /// The expert coming down beside the can with the gripper closed and shoving it.
+    Push,
     /// The expert standing still 15 steps before every phase.
     Hesitate,
     /// Uniform random actions in [−1, 1]⁷, a fresh one every 5 steps.
@@ -25,11 +27,12 @@ pub enum CanBehaviour {
 
 impl CanBehaviour {
     /// Every behaviour, by name.
-    pub const ALL: [(&'static str, CanBehaviour); 6] = [
+    pub const ALL: [(&'static str, CanBehaviour); 7] = [
         ("expert", Self::Expert),
         ("miss", Self::Miss),
         ("drop", Self::Drop),
         ("wrong-bin", Self::WrongBin),
+        ("push", Self::Push),
         ("hesitate", Self::Hesitate),
         ("random", Self::Random),
     ];
@@ -39,6 +42,7 @@ impl CanBehaviour {
             Self::Miss => CanFlaws { aim_offset: 0.04, ..CanFlaws::default() },
             Self::Drop => CanFlaws { drop_short: 0.25, ..CanFlaws::default() },
             Self::WrongBin => CanFlaws { wrong_bin: true, ..CanFlaws::default() },
+            Self::Push => CanFlaws { push: true, ..CanFlaws::default() },
             Self::Hesitate => CanFlaws { hesitate: 15, ..CanFlaws::default() },
             Self::Expert | Self::Random => CanFlaws::default(),
         }
