@@ -8,7 +8,7 @@
 
 use crate::robosuite::episode::ArmEpisode;
 use crate::robosuite::linalg::Mat;
-use crate::robosuite::osc::orientation_error;
+use crate::robosuite::osc::{orientation_error, pointing_down, servo_action};
 
 /// How the scripted behaviour departs from the expert.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -51,10 +51,6 @@ pub struct CanExpert {
     down: Option<Mat<3, 3>>,
 }
 
-/// Position gain: a 1 cm error asks for 0.2 of the 0.05 m step.
-const POS_GAIN: f64 = 10.0;
-/// Rotation gain per radian, in units of the 0.5 rad step.
-const ROT_GAIN: f64 = 4.0;
 /// Approach height of the grip site over the can's origin, m.
 const ABOVE: f64 = 0.10;
 /// Grasp height of the grip site over the can's origin, m.
@@ -85,11 +81,7 @@ impl CanExpert {
         let can = ep.object_pos();
         let eef = ep.eef_pos();
         let cur = ep.eef_mat();
-        let down = *self.down.get_or_insert_with(|| {
-            let yaw = cur[1][0].atan2(cur[0][0]);
-            let (s, c) = yaw.sin_cos();
-            [[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]]
-        });
+        let down = *self.down.get_or_insert_with(|| pointing_down(cur[1][0].atan2(cur[0][0])));
         let side = [down[0][1], down[1][1]];
         let offset = if self.flaws.push { -PUSH_SIDE } else { self.flaws.aim_offset };
         let aim = [can[0] + side[0] * offset, can[1] + side[1] * offset];
@@ -135,12 +127,6 @@ impl CanExpert {
             Phase::Release if self.phase_steps >= GRIP_STEPS => self.next(Phase::Withdraw),
             _ => {}
         }
-        let mut a = [0.0; 7];
-        for i in 0..3 {
-            a[i] = (POS_GAIN * err[i]).clamp(-1.0, 1.0);
-            a[3 + i] = (ROT_GAIN * rot[i]).clamp(-1.0, 1.0);
-        }
-        a[6] = grip;
-        a
+        servo_action(err, rot, grip)
     }
 }

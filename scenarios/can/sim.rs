@@ -12,12 +12,11 @@ use harness::seed::{derive, fnv1a};
 use mujoco_rs::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
 
 use super::config::CanConfig;
 use crate::error::ScenarioError;
 use crate::robosuite::assets::assets_dir;
-use crate::robosuite::episode::{ArmEpisode, ObjectNames, PANDA_INIT_QPOS};
+use crate::robosuite::episode::{ArmEpisode, ObjectNames, noisy_init_qpos};
 use crate::robosuite::scene::SceneBuilder;
 
 /// Names of the state columns, in order.
@@ -55,11 +54,7 @@ impl CanInit {
     /// reference height as robosuite's `UniformRandomSampler` puts it).
     pub fn draw(cfg: &CanConfig, seed: u64) -> Self {
         let mut rng = ChaCha8Rng::seed_from_u64(derive(seed, &[fnv1a("can/reset")]));
-        let mut arm_q = PANDA_INIT_QPOS;
-        for q in &mut arm_q {
-            let n: f64 = rng.sample(StandardNormal);
-            *q += cfg.init_noise * n;
-        }
+        let arm_q = noisy_init_qpos(&mut rng, cfg.init_noise);
         let half = [0, 1].map(|i| cfg.bin_size[i] / 2.0 - cfg.placement_margin - cfg.can_radius);
         let x = cfg.bin1_pos[0] + half[0] * (2.0 * rng.random::<f64>() - 1.0);
         let y = cfg.bin1_pos[1] + half[1] * (2.0 * rng.random::<f64>() - 1.0);

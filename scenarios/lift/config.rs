@@ -8,6 +8,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::ScenarioError;
+use crate::robosuite::read_named_toml;
 
 /// Everything that defines a Lift episode except the seed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -62,21 +63,7 @@ impl LiftConfig {
     /// The file is unreadable, malformed, names another scenario, has an unknown
     /// key, or a value is out of range.
     pub fn from_file(path: &Path) -> Result<Self, ScenarioError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| ScenarioError::Io { path: path.into(), source })?;
-        let parse = |e: toml::de::Error| ScenarioError::Parse { path: path.into(), message: e.to_string() };
-        let mut table: toml::Table = toml::from_str(&text).map_err(parse)?;
-        match table.remove("name") {
-            Some(toml::Value::String(n)) if n == "lift" => {}
-            other => {
-                return Err(ScenarioError::InvalidField {
-                    path: path.into(),
-                    field: "name".into(),
-                    reason: format!("a Lift scenario file says name = \"lift\", not {other:?}"),
-                });
-            }
-        }
-        let cfg: LiftConfig = table.try_into().map_err(parse)?;
+        let cfg: LiftConfig = read_named_toml(path, "lift")?;
         cfg.validate(path)?;
         Ok(cfg)
     }

@@ -9,7 +9,7 @@
 
 use super::sim::LiftEpisode;
 use crate::robosuite::linalg::Mat;
-use crate::robosuite::osc::orientation_error;
+use crate::robosuite::osc::{orientation_error, pointing_down, servo_action};
 
 /// How the scripted behaviour departs from the expert.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -49,10 +49,6 @@ pub struct LiftExpert {
     dropping: bool,
 }
 
-/// Position gain: a 1 cm error asks for 0.2 of the 0.05 m step.
-const POS_GAIN: f64 = 10.0;
-/// Rotation gain, per radian of orientation error, in units of the 0.5 rad step.
-const ROT_GAIN: f64 = 4.0;
 /// Height of the approach waypoint above the cube's centre, m.
 const ABOVE: f64 = 0.08;
 /// How far down the fingers reach past the grip site to centre on the cube, m.
@@ -128,13 +124,7 @@ impl LiftExpert {
             Phase::Close if self.phase_steps >= CLOSE_STEPS && !self.flaws.push => self.next(Phase::Lift),
             _ => {}
         }
-        let mut a = [0.0; 7];
-        for i in 0..3 {
-            a[i] = (POS_GAIN * err[i]).clamp(-1.0, 1.0);
-            a[3 + i] = (ROT_GAIN * rot[i]).clamp(-1.0, 1.0);
-        }
-        a[6] = grip;
-        a
+        servo_action(err, rot, grip)
     }
 }
 
@@ -148,10 +138,7 @@ pub fn grasp_orientation(current: &Mat<3, 3>, cube_quat: [f64; 4]) -> Mat<3, 3> 
     let cur_yaw = current[1][0].atan2(current[0][0]);
     let quarter = std::f64::consts::FRAC_PI_2;
     let k = ((cur_yaw - cube_yaw) / quarter).round();
-    let yaw = cube_yaw + k * quarter;
-    let (s, c) = yaw.sin_cos();
-    // Columns: x = (c, s, 0), y = z × x = (s, −c, 0), z = (0, 0, −1).
-    [[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]]
+    pointing_down(cube_yaw + k * quarter)
 }
 
 #[cfg(test)]

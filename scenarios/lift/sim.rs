@@ -12,12 +12,11 @@ use harness::seed::{derive, fnv1a};
 use mujoco_rs::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
 
 use super::config::LiftConfig;
 use crate::error::ScenarioError;
 use crate::robosuite::assets::assets_dir;
-use crate::robosuite::episode::{ArmEpisode, ObjectNames, PANDA_INIT_QPOS};
+use crate::robosuite::episode::{ArmEpisode, ObjectNames, noisy_init_qpos};
 use crate::robosuite::scene::{SceneBuilder, Table};
 
 /// Names of the state columns, in order.
@@ -50,11 +49,7 @@ impl LiftInit {
         for (i, h) in cube_half.iter_mut().enumerate() {
             *h = cfg.cube_half_min[i] + (cfg.cube_half_max[i] - cfg.cube_half_min[i]) * rng.random::<f64>();
         }
-        let mut arm_q = PANDA_INIT_QPOS;
-        for q in &mut arm_q {
-            let n: f64 = rng.sample(StandardNormal);
-            *q += cfg.init_noise * n;
-        }
+        let arm_q = noisy_init_qpos(&mut rng, cfg.init_noise);
         let u = |rng: &mut ChaCha8Rng, r: [f64; 2]| r[0] + (r[1] - r[0]) * rng.random::<f64>();
         let x = cfg.table_offset[0] + u(&mut rng, cfg.cube_x_range);
         let y = cfg.table_offset[1] + u(&mut rng, cfg.cube_y_range);

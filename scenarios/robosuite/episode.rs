@@ -22,6 +22,15 @@ pub const PANDA_INIT_QPOS: [f64; 7] = [
     std::f64::consts::PI - 0.2,
     std::f64::consts::PI / 4.0,
 ];
+/// The Panda's initial joints plus Gaussian noise of std `noise` per joint, as
+/// robosuite's default `initialization_noise` draws them.
+pub fn noisy_init_qpos(rng: &mut impl rand::Rng, noise: f64) -> [f64; 7] {
+    PANDA_INIT_QPOS.map(|q| {
+        let n: f64 = rng.sample(rand_distr::StandardNormal);
+        q + noise * n
+    })
+}
+
 /// The gripper's initial finger positions (`PandaGripper.init_qpos`).
 pub const GRIPPER_INIT_QPOS: [f64; 2] = [0.020833, -0.020833];
 

@@ -129,6 +129,32 @@ pub fn orientation_error(desired: &Mat<3, 3>, current: &Mat<3, 3>) -> [f64; 3] {
     e
 }
 
+/// The scripted behaviours' position gain: a 1 cm error asks for 0.2 of the
+/// controller's 0.05 m step.
+pub const SERVO_POS_GAIN: f64 = 10.0;
+/// The scripted behaviours' rotation gain per radian, in units of the 0.5 rad step.
+pub const SERVO_ROT_GAIN: f64 = 4.0;
+
+/// A proportional action toward a pose: the position error `err` (m) and the
+/// orientation error `rot` (rad, [`orientation_error`]) scaled by the servo
+/// gains and clipped to [−1, 1], then the gripper command.
+pub fn servo_action(err: [f64; 3], rot: [f64; 3], grip: f64) -> [f64; 7] {
+    let mut a = [0.0; 7];
+    for i in 0..3 {
+        a[i] = (SERVO_POS_GAIN * err[i]).clamp(-1.0, 1.0);
+        a[3 + i] = (SERVO_ROT_GAIN * rot[i]).clamp(-1.0, 1.0);
+    }
+    a[6] = grip;
+    a
+}
+
+/// The gripper pointing straight down with its x axis at `yaw` about z. Columns:
+/// x = (c, s, 0), y = z × x = (s, −c, 0), z = (0, 0, −1); a proper rotation.
+pub fn pointing_down(yaw: f64) -> Mat<3, 3> {
+    let (s, c) = yaw.sin_cos();
+    [[c, s, 0.0], [s, -c, 0.0], [0.0, 0.0, -1.0]]
+}
+
 /// The grip site's pose, the arm's Jacobians, mass matrix and bias forces, read
 /// after `mj_step1`.
 struct ArmState {
