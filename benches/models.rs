@@ -45,14 +45,14 @@ fn path(var: &str, default: &str) -> PathBuf {
 
 /// A grey 96 × 96 observation history of two frames.
 fn observation() -> Observation {
-    Observation { frames: vec![vec![200u8; 96 * 96 * 3]; 2], agent_pos: vec![[256.0, 256.0]; 2], size: 96 }
+    Observation { frames: vec![vec![200u8; 96 * 96 * 3]; 2], proprio: vec![vec![256.0, 256.0]; 2], size: 96 }
 }
 
 fn policy(c: &mut Criterion) {
     let dir = path("BENCH_POLICY", "checkpoints/pusht/policies");
     let first = checkpoint_dirs(&dir).ok().and_then(|d| d.into_iter().next()).unwrap_or(dir);
     let device = world_model::device::selected().expect("EVALHARNESS_DEVICE");
-    let p = load_policy(&first, Expectations { image_size: 96, action_dim: 2 }, &device)
+    let p = load_policy(&first, &Expectations::pusht(96), &device)
         .unwrap_or_else(|e| panic!("benchmark needs a policy checkpoint: {e}"));
     let mut g = c.benchmark_group("policy_decision");
     g.sample_size(10).measurement_time(Duration::from_secs(20));

@@ -241,6 +241,11 @@ pub struct RankArgs {
     /// The world model (from `train world-model`).
     #[arg(long, default_value = "checkpoints/pusht/world_model")]
     pub world_model: PathBuf,
+    /// A learned judge (from `train judge`) that scores the imagined frames in place
+    /// of the task's own judge (whose scene checks are kept); its error on the
+    /// simulator branch's real frames is reported as for any judge.
+    #[arg(long)]
+    pub judge: Option<PathBuf>,
     /// Action-accentuation strength α, for a world model trained with
     /// `--accentuation` (default: its configured α).
     #[arg(long)]
@@ -327,7 +332,7 @@ pub struct ReportArgs {
 /// Options shared by commands that run a scenario.
 #[derive(Debug, Args)]
 pub struct ScenarioArgs {
-    /// Scenario name (pusht, lift) or path to a scenario .toml file.
+    /// Scenario name (pusht, lift, can) or path to a scenario .toml file.
     #[arg(long, default_value = "pusht")]
     pub scenario: String,
     /// Number of episodes.

@@ -18,7 +18,7 @@ use policies::dir::{Expectations, PolicyLoadError, load_policy};
 /// unreadable `policy.json`, a bad config, or a task without scripted policies).
 pub fn load_any(
     dir: &Path,
-    expect: Expectations,
+    expect: &Expectations,
     device: &Device,
     task: &dyn Task,
 ) -> Result<Box<dyn Policy>, PolicyLoadError> {
@@ -33,7 +33,14 @@ pub fn load_any(
     load_policy(dir, expect, device)
 }
 
-/// What a learned checkpoint must match to run on `task`: its frame size and action width.
+/// What a learned checkpoint must match to run on `task`: its frame size, its
+/// proprioception and its actions' width and bounds.
 pub fn expectations(task: &dyn Task) -> Expectations {
-    Expectations { image_size: task.observation_spec().image_size, action_dim: task.action_spec().dim }
+    let (obs, act) = (task.observation_spec(), task.action_spec());
+    Expectations {
+        image_size: obs.image_size,
+        proprio_dim: obs.proprio.len(),
+        action_low: act.low,
+        action_high: act.high,
+    }
 }

@@ -390,6 +390,8 @@ fn pipeline_end_to_end() {
 
     // GPC-RANK planning with the same models.
     crate::plan::check(dir, &wm, &gf, &pol.join("epoch-0001"));
+    // A learned judge of the same dataset, and a rank scored by it.
+    crate::judge::check(dir, &data, &wm, &set);
 }
 
 #[test]

@@ -2,6 +2,7 @@
 
 mod agreement;
 mod dataset;
+mod judge;
 mod lift;
 mod pipeline;
 mod plan;

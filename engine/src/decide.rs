@@ -38,7 +38,7 @@ pub(crate) fn decide(
     timing: &mut Timing,
 ) -> Result<(Vec<ActionChunk>, usize), EngineError> {
     let tp = Instant::now();
-    let obs: Vec<Observation> = active.iter().map(|&i| obs_of(&hist[i], size)).collect::<Result<_, _>>()?;
+    let obs: Vec<Observation> = active.iter().map(|&i| obs_of(&hist[i], size)).collect();
     let mut sub: Vec<Rng> = active.iter().map(|&i| rngs[i].clone()).collect();
     let chunks = policy.act(&obs, &mut sub)?;
     for (&i, r) in active.iter().zip(sub) {

@@ -2,7 +2,7 @@
 
 use harness::policy::PolicyError;
 use harness::task::TaskError;
-use world_model::rollout::NonFiniteLatents;
+use world_model::rollout::RolloutError;
 
 /// What can stop a branch or a run of batches.
 #[derive(Debug, thiserror::Error)]
@@ -19,7 +19,7 @@ pub enum EngineError {
         /// The policy.
         policy: String,
     },
-    /// The world model generated NaN or infinite latents.
+    /// The world model generated NaN or infinite latents, or cannot read the task's actions.
     #[error("policy {policy}, episode steps {first}..{end}")]
     WorldModel {
         /// The policy whose episodes were being imagined.
@@ -28,12 +28,9 @@ pub enum EngineError {
         first: usize,
         /// One past its last step.
         end: usize,
-        /// Which generated frames.
-        source: NonFiniteLatents,
+        /// What went wrong (which generated frames diverged).
+        source: RolloutError,
     },
-    /// A task the engine cannot drive yet (what is missing).
-    #[error("{0}")]
-    Unsupported(String),
     /// A batch of a policy that had already failed.
     #[error("policy {policy}: skipped after an earlier failure")]
     Skipped {

@@ -73,14 +73,15 @@ pub fn wm_branch(
         let mut done = 0;
         while done < len {
             let f = f_max.min(len - done);
-            let pred = roll.step(wm, f, |p, j| chunks[p][done + j], &mut sub).map_err(|source| {
-                EngineError::WorldModel {
-                    policy: name.clone(),
-                    first: steps + done,
-                    end: steps + done + f,
-                    source,
-                }
-            })?; // [a, f, C, s, s]
+            let pred =
+                roll.step(wm, f, |p, j| chunks[p][done + j].as_slice(), &mut sub).map_err(|source| {
+                    EngineError::WorldModel {
+                        policy: name.clone(),
+                        first: steps + done,
+                        end: steps + done + f,
+                        source,
+                    }
+                })?; // [a, f, C, s, s]
             // Decode only the frames the policy will see (the chunk's last `o`): decoding
             // is the most expensive part of the branch. They are also the frames judged.
             let first_seen = len.saturating_sub(o).max(done).min(done + f) - done; // <= f

@@ -178,14 +178,14 @@ mod tests {
             if self.fail {
                 return Err(PolicyError::NonFinite { policy: self.name.into(), episode: 0 });
             }
-            Ok(obs.iter().map(|_| vec![[256.0, 256.0]; 4]).collect())
+            Ok(obs.iter().map(|_| vec![vec![256.0, 256.0]; 4]).collect())
         }
     }
 
     #[test]
     fn any_worker_count_hands_on_the_same_batches_and_stops_a_failing_policy() {
         let task = scenarios::load_task("pusht").unwrap();
-        let setup = Setup { task: task.as_ref(), master_seed: 3, max_steps: 4 };
+        let setup = Setup { task: task.as_ref(), master_seed: 3, max_steps: 4, judge: None };
         // A tiny pixel-space world model with random weights: the rows only need to be
         // a deterministic function of the batch.
         let device = Device::flex();

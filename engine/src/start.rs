@@ -7,7 +7,7 @@
 
 use std::collections::VecDeque;
 
-use harness::judge::{Judge, SceneCheck};
+use harness::judge::{Judge, Replaced, SceneCheck};
 use harness::policy::{Observation, Policy};
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
@@ -48,6 +48,9 @@ pub struct Setup<'a> {
     pub master_seed: u64,
     /// Control steps per episode.
     pub max_steps: usize,
+    /// A judge of every episode's frames in place of the task's (`rank --judge`);
+    /// the task's judge still makes the scene checks.
+    pub judge: Option<&'a std::sync::Arc<dyn Judge>>,
 }
 
 /// What both branches start from: episodes reset to the seeds, their judges, the
@@ -110,7 +113,15 @@ impl Start {
             envs.push(s.task.reset(seed)?);
         }
         Ok(Self {
-            judges: envs.iter().map(|e| e.judge()).collect(),
+            judges: envs
+                .iter()
+                .map(|e| match &s.judge {
+                    Some(j) => {
+                        Box::new(Replaced { scorer: (*j).clone(), checks: e.judge() }) as Box<dyn Judge>
+                    }
+                    None => e.judge(),
+                })
+                .collect(),
             first: envs.iter().map(|e| e.observe()).collect(),
             goals: envs.iter().map(|e| e.goal_pose()).collect(),
             policy_rngs: seeds
@@ -171,22 +182,13 @@ pub(crate) struct Begin {
     pub(crate) rec: Vec<Vec<Vec<u8>>>,
 }
 
-/// The observation of an episode's last frames (oldest first) and agent positions.
-///
-/// # Errors
-/// A proprioceptive vector that is not the 2-D position the policy interface takes.
-pub fn obs_of(hist: &VecDeque<Seen>, size: usize) -> Result<Observation, EngineError> {
-    let agent_pos = hist
-        .iter()
-        .map(|s| match s.proprio[..] {
-            [x, y] => Ok([x, y]),
-            _ => Err(EngineError::Unsupported(format!(
-                "the policy interface reads a 2-D agent position; the task's proprioception has {} entries",
-                s.proprio.len()
-            ))),
-        })
-        .collect::<Result<_, _>>()?;
-    Ok(Observation { frames: hist.iter().map(|s| s.frame.clone()).collect(), agent_pos, size })
+/// The observation of an episode's last frames and proprioceptive vectors (oldest first).
+pub fn obs_of(hist: &VecDeque<Seen>, size: usize) -> Observation {
+    Observation {
+        frames: hist.iter().map(|s| s.frame.clone()).collect(),
+        proprio: hist.iter().map(|s| s.proprio.clone()).collect(),
+        size,
+    }
 }
 
 /// Appends `item` and keeps the newest `keep` items.
@@ -275,12 +277,13 @@ mod tests {
     }
 
     #[test]
-    fn observations_need_the_two_dimensional_agent_position() {
+    fn observations_carry_the_proprioception_of_any_size() {
         let seen = |p: Vec<f32>| Seen { frame: vec![0; 3], proprio: p };
         let hist: VecDeque<Seen> = [seen(vec![1.0, 2.0]), seen(vec![3.0, 4.0])].into();
-        let obs = obs_of(&hist, 1).unwrap();
-        assert_eq!(obs.agent_pos, vec![[1.0, 2.0], [3.0, 4.0]]);
-        let lift: VecDeque<Seen> = [seen(vec![0.0; 9])].into();
-        assert!(obs_of(&lift, 1).unwrap_err().to_string().contains("9 entries"));
+        let obs = obs_of(&hist, 1);
+        assert_eq!(obs.proprio, vec![vec![1.0, 2.0], vec![3.0, 4.0]]);
+        assert_eq!(obs.frames.len(), 2);
+        let lift: VecDeque<Seen> = [seen(vec![0.5; 9])].into();
+        assert_eq!(obs_of(&lift, 1).proprio, vec![vec![0.5; 9]]);
     }
 }

@@ -1,6 +1,7 @@
 //! The engine on a task that is not Push-T: a toy "reach" task scored by success
-//! alone (as robomimic's Lift and Can are), to show that nothing in the simulator
-//! branch assumes Push-T's coverage.
+//! alone (as robomimic's Lift and Can are), with 1-D actions and a 1-D proprioceptive
+//! vector, to show that nothing in the simulator branch assumes Push-T's coverage or
+//! its 2-D positions.
 
 use harness::judge::Judge;
 use harness::policy::{ActionChunk, Observation, Policy, PolicyError};
@@ -32,14 +33,10 @@ impl Task for Reach {
         "reach"
     }
     fn action_spec(&self) -> ActionSpec {
-        ActionSpec { dim: 2, low: vec![0.0; 2], high: vec![10.0; 2], kind: ActionKind::Absolute }
+        ActionSpec { dim: 1, low: vec![0.0], high: vec![10.0], kind: ActionKind::Absolute }
     }
     fn observation_spec(&self) -> ObservationSpec {
-        ObservationSpec {
-            image_size: 1,
-            cameras: vec!["line".into()],
-            proprio: vec!["x".into(), "zero".into()],
-        }
+        ObservationSpec { image_size: 1, cameras: vec!["line".into()], proprio: vec!["x".into()] }
     }
     fn score_kind(&self) -> ScoreKind {
         ScoreKind::Success
@@ -69,7 +66,7 @@ impl Env for ReachEnv {
         self.seed
     }
     fn observe(&self) -> Seen {
-        Seen { frame: vec![(self.x * 25.0) as u8, 0, 0], proprio: vec![self.x as f32, 0.0] }
+        Seen { frame: vec![(self.x * 25.0) as u8, 0, 0], proprio: vec![self.x as f32] }
     }
     fn step(&mut self, action: &[f32]) -> Result<f64, TaskError> {
         self.x += (f64::from(action[0]) - self.x) / 2.0;
@@ -109,13 +106,14 @@ impl Policy for ToGoal {
         2
     }
     fn act(&self, obs: &[Observation], _: &mut [Rng]) -> Result<Vec<ActionChunk>, PolicyError> {
-        Ok(obs.iter().map(|_| vec![[GOAL as f32, 0.0]; 2]).collect())
+        assert!(obs.iter().flat_map(|o| &o.proprio).all(|p| p.len() == 1), "1-D proprioception");
+        Ok(obs.iter().map(|_| vec![vec![GOAL as f32]; 2]).collect())
     }
 }
 
 #[test]
 fn a_success_scored_task_runs_through_the_simulator_branch() {
-    let setup = Setup { task: &Reach, master_seed: 0, max_steps: 10 };
+    let setup = Setup { task: &Reach, master_seed: 0, max_steps: 10, judge: None };
     let mut start = Start::new("to-goal", &[0, 2, 4], &setup).unwrap();
     start.trajectories = true;
     let out = sim_branch(&ToGoal, start, &setup, &mut Timing::default()).unwrap();
@@ -144,7 +142,7 @@ fn a_success_scored_task_runs_through_the_simulator_branch() {
 fn episodes_that_never_succeed_run_to_the_step_limit() {
     // Seed 1 starts at 3 and is commanded to the goal; with max_steps 2 it reaches 5 then 6:
     // never within 0.5, so the row is a failure after exactly 2 steps.
-    let setup = Setup { task: &Reach, master_seed: 0, max_steps: 2 };
+    let setup = Setup { task: &Reach, master_seed: 0, max_steps: 2, judge: None };
     let start = Start::new("to-goal", &[1], &setup).unwrap();
     let out = sim_branch(&ToGoal, start, &setup, &mut Timing::default()).unwrap();
     let r = &out.rows[0];

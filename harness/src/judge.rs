@@ -36,3 +36,53 @@ pub trait Judge: Send + Sync {
         None
     }
 }
+
+/// A judge whose scores come from one judge (e.g. a learned one, shared by every
+/// episode) and whose scene checks come from another (the task's own, which knows
+/// the episode's goal): what `rank --judge` puts in place of the task's judge.
+pub struct Replaced {
+    /// Gives the scores.
+    pub scorer: std::sync::Arc<dyn Judge>,
+    /// Gives the scene checks.
+    pub checks: Box<dyn Judge>,
+}
+
+impl Judge for Replaced {
+    fn score(&self, frame: &[u8]) -> f64 {
+        self.scorer.score(frame)
+    }
+    fn scene(&self, frame: &[u8]) -> Option<SceneCheck> {
+        self.checks.scene(frame)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Mean;
+    impl Judge for Mean {
+        fn score(&self, frame: &[u8]) -> f64 {
+            frame.iter().map(|&b| f64::from(b)).sum::<f64>() / frame.len() as f64 / 255.0
+        }
+    }
+
+    struct Checks;
+    impl Judge for Checks {
+        fn score(&self, _: &[u8]) -> f64 {
+            -1.0
+        }
+        fn scene(&self, _: &[u8]) -> Option<SceneCheck> {
+            Some(SceneCheck { block_area: 1.0, goal_kept: 0.5, agent_kept: 0.25 })
+        }
+    }
+
+    #[test]
+    fn a_replaced_judge_scores_with_one_and_checks_with_the_other() {
+        let j = Replaced { scorer: std::sync::Arc::new(Mean), checks: Box::new(Checks) };
+        // Mean of 0 and 255 over 255: 0.5.
+        assert_eq!(j.score(&[0, 255]), 0.5);
+        assert_eq!(j.scene(&[0, 255]).map(|c| c.goal_kept), Some(0.5));
+        assert_eq!(Mean.scene(&[0]), None);
+    }
+}

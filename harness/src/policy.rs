@@ -8,19 +8,23 @@
 
 use crate::rng::Rng;
 
-/// What a policy sees of one episode: the last `obs_horizon` frames and agent positions.
+/// What a policy sees of one episode: the last `obs_horizon` frames and the
+/// proprioceptive vectors seen with them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Observation {
     /// Frames, oldest first, each `size x size x 3` bytes (HWC RGB).
     pub frames: Vec<Vec<u8>>,
-    /// Agent positions (world units), oldest first, one per frame.
-    pub agent_pos: Vec<[f32; 2]>,
+    /// Proprioception, oldest first, one vector per frame, with the entries the
+    /// task's observation spec names (Push-T: the agent's position in world units).
+    pub proprio: Vec<Vec<f32>>,
     /// Frame side in pixels.
     pub size: usize,
 }
 
-/// A chunk of target positions (world units) to execute in order.
-pub type ActionChunk = Vec<[f32; 2]>;
+/// Actions to execute in order, each with the task's action dimension (Push-T: a
+/// target position in world units; robomimic: 6 end-effector deltas and a gripper
+/// command).
+pub type ActionChunk = Vec<Vec<f32>>;
 
 /// Why a policy could not act.
 #[derive(Debug, thiserror::Error)]
@@ -58,21 +62,39 @@ pub trait Policy: Send + Sync {
     fn act(&self, obs: &[Observation], rngs: &mut [Rng]) -> Result<Vec<ActionChunk>, PolicyError>;
 }
 
-/// Checks chunks for NaN/inf (an error naming the policy) and clamps out-of-range
-/// actions into `[lo, hi]²`; returns how many coordinates were clamped.
+/// Checks chunks for NaN/inf (an error naming the policy) and clamps each action's
+/// entry d into `[low[d], high[d]]`; returns how many entries were clamped.
 ///
 /// # Errors
-/// [`PolicyError::NonFinite`] for the first episode with a non-finite action.
-pub fn sanitize(policy: &str, chunks: &mut [ActionChunk], lo: f32, hi: f32) -> Result<usize, PolicyError> {
+/// [`PolicyError::NonFinite`] for the first episode with a non-finite action;
+/// [`PolicyError::Input`] for an action whose size is not the bounds'.
+pub fn sanitize(
+    policy: &str,
+    chunks: &mut [ActionChunk],
+    low: &[f32],
+    high: &[f32],
+) -> Result<usize, PolicyError> {
     let mut clamped = 0;
     for (episode, chunk) in chunks.iter_mut().enumerate() {
-        for a in chunk.iter_mut().flat_map(|a| a.iter_mut()) {
-            if !a.is_finite() {
-                return Err(PolicyError::NonFinite { policy: policy.to_string(), episode });
+        for action in chunk.iter_mut() {
+            if action.len() != low.len() || action.len() != high.len() {
+                return Err(PolicyError::Input {
+                    policy: policy.to_string(),
+                    message: format!(
+                        "episode {episode}: an action has {} entries, the task takes {}",
+                        action.len(),
+                        low.len()
+                    ),
+                });
             }
-            if *a < lo || *a > hi {
-                *a = a.clamp(lo, hi);
-                clamped += 1;
+            for (a, (&lo, &hi)) in action.iter_mut().zip(low.iter().zip(high)) {
+                if !a.is_finite() {
+                    return Err(PolicyError::NonFinite { policy: policy.to_string(), episode });
+                }
+                if *a < lo || *a > hi {
+                    *a = a.clamp(lo, hi);
+                    clamped += 1;
+                }
             }
         }
     }
@@ -83,17 +105,37 @@ pub fn sanitize(policy: &str, chunks: &mut [ActionChunk], lo: f32, hi: f32) -> R
 mod tests {
     use super::*;
 
+    const LOW: [f32; 2] = [0.0, 0.0];
+    const HIGH: [f32; 2] = [512.0, 512.0];
+
     #[test]
     fn sanitize_clamps_and_counts() {
-        let mut c = vec![vec![[-3.0, 10.0], [600.0, 512.0]]];
-        assert_eq!(sanitize("p", &mut c, 0.0, 512.0).unwrap(), 2);
-        assert_eq!(c[0], vec![[0.0, 10.0], [512.0, 512.0]]);
+        let mut c = vec![vec![vec![-3.0, 10.0], vec![600.0, 512.0]]];
+        assert_eq!(sanitize("p", &mut c, &LOW, &HIGH).unwrap(), 2);
+        assert_eq!(c[0], vec![vec![0.0, 10.0], vec![512.0, 512.0]]);
+    }
+
+    #[test]
+    fn sanitize_clamps_each_entry_to_its_own_bounds() {
+        // robomimic-like: six deltas in [-1, 1] and a gripper command in [-1, 1];
+        // here the last entry is bounded by [0, 0.5] to tell the bounds apart.
+        let (low, high) = ([-1.0; 3].to_vec(), vec![1.0, 1.0, 0.5]);
+        let mut c = vec![vec![vec![-2.0, 0.3, 0.9]]];
+        assert_eq!(sanitize("p", &mut c, &low, &high).unwrap(), 2);
+        assert_eq!(c[0][0], vec![-1.0, 0.3, 0.5]);
     }
 
     #[test]
     fn sanitize_names_the_policy_on_nan() {
-        let mut c = vec![vec![[1.0, 1.0]], vec![[f32::NAN, 0.0]]];
-        let e = sanitize("epoch-10", &mut c, 0.0, 512.0).unwrap_err();
+        let mut c = vec![vec![vec![1.0, 1.0]], vec![vec![f32::NAN, 0.0]]];
+        let e = sanitize("epoch-10", &mut c, &LOW, &HIGH).unwrap_err();
         assert_eq!(e.to_string(), "policy epoch-10: non-finite action in episode 1 of the batch");
+    }
+
+    #[test]
+    fn sanitize_refuses_an_action_of_the_wrong_size() {
+        let mut c = vec![vec![vec![1.0, 1.0, 1.0]]];
+        let e = sanitize("epoch-10", &mut c, &LOW, &HIGH).unwrap_err();
+        assert_eq!(e.to_string(), "policy epoch-10: episode 0: an action has 3 entries, the task takes 2");
     }
 }

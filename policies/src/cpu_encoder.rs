@@ -1,6 +1,6 @@
 //! The diffusion policy's frame encoder on the CPU without burn: the same network
 //! as [`ObsEncoder::forward`], on the world model's direct 3x3 kernels
-//! ([`world_model::direct_conv`]) for the stride-1 residual blocks and on matrix
+//! ([`kernels::direct_conv`]) for the stride-1 residual blocks and on matrix
 //! products (im2col + the `gemm` crate) for the stride-2 downsampling convolutions.
 //!
 //! Why: once the U-Net ran on [`crate::cpu_unet`], encoding the two observed frames
@@ -11,11 +11,11 @@
 
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::Conv2d;
+use kernels::direct_conv::{Conv3x3, Norm};
+use kernels::matrix::{Conv2dShape, matmul};
+use kernels::padded::Padded;
 use world_model::cpu_decoder::{conv3x3_of, norm_of};
-use world_model::cpu_kernels::{Conv2dShape, matmul};
-use world_model::direct_conv::{Conv3x3, Norm};
 use world_model::error::UnsupportedLayer;
-use world_model::padded::Padded;
 
 use crate::net::{ObsEncoder, Res2d};
 
@@ -165,7 +165,7 @@ fn residual(b: &Block, x: Vec<f32>, side: usize) -> Vec<f32> {
 mod tests {
     use burn::module::Module;
     use burn::tensor::{Device, Distribution, Tensor};
-    use world_model::cpu_kernels::Jitter;
+    use world_model::weights::Jitter;
 
     use super::*;
     use crate::net::NetConfig;

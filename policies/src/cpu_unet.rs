@@ -17,9 +17,10 @@
 use burn::nn::conv::{Conv1d, ConvTranspose1d};
 use burn::nn::{GroupNorm, Linear, PaddingConfig1d};
 
+use kernels::direct_conv::Norm;
+use kernels::matrix::{Dense, group_norm_cols, matmul};
 use world_model::cpu_decoder::norm_of;
-use world_model::cpu_kernels::{Dense, bias_values, group_norm_cols, matmul, values};
-use world_model::direct_conv::Norm;
+use world_model::weights::{bias_values, dense_of, values};
 
 use crate::net::{CondRes1d, CondUnet1d, Conv1dBlock, Level1d};
 
@@ -34,7 +35,7 @@ fn unsupported(layer: &str, message: impl Into<String>) -> UnsupportedLayer {
 
 /// A dense layer, its errors named for this network.
 fn dense(l: &Linear, layer: &str) -> Result<Dense, UnsupportedLayer> {
-    Ok(Dense::new(l, layer)?)
+    Ok(dense_of(l, layer)?)
 }
 
 /// Mish, `x · tanh(softplus(x))`, with one (polynomial) `exp`: tanh(ln(1 + e)) = n / (n + 2) for
@@ -43,7 +44,7 @@ fn mish(x: f32) -> f32 {
     if x > 20.0 {
         return x;
     }
-    let e = world_model::direct_conv::exp(x);
+    let e = kernels::direct_conv::exp(x);
     let n = e * (e + 2.0);
     x * n / (n + 2.0)
 }
@@ -395,7 +396,7 @@ impl CpuUnet1d {
 mod tests {
     use burn::module::Module;
     use burn::tensor::{Device, Distribution, Tensor};
-    use world_model::cpu_kernels::Jitter;
+    use world_model::weights::Jitter;
 
     use super::*;
     use crate::net::NetConfig;

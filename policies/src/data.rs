@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use harness::replay::ReplayReader;
 
-use crate::diffusion::{Normalisation, Range2};
+use crate::diffusion::{Normalisation, Range};
 
 /// Why demonstrations could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -109,7 +109,7 @@ impl Demos {
     /// Min-max statistics of agent positions and actions.
     pub fn normalisation(&self) -> Normalisation {
         let range = |v: &[[f32; 2]]| {
-            let mut r = Range2 { min: [f32::INFINITY; 2], max: [f32::NEG_INFINITY; 2] };
+            let mut r = Range { min: vec![f32::INFINITY; 2], max: vec![f32::NEG_INFINITY; 2] };
             for p in v {
                 for (d, x) in p.iter().enumerate() {
                     r.min[d] = r.min[d].min(*x);

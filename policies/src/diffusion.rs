@@ -16,25 +16,35 @@ use crate::cpu_encoder::CpuEncoder;
 use crate::cpu_unet::CpuUnet1d;
 use crate::net::{CondUnet1d, NetConfig, ObsEncoder};
 
-/// Min-max statistics of one 2-D quantity.
+/// Per-entry min-max statistics of a vector quantity.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Range2 {
-    /// Per-dimension minimum.
-    pub min: [f32; 2],
-    /// Per-dimension maximum.
-    pub max: [f32; 2],
+pub struct Range {
+    /// Per-entry minimum.
+    pub min: Vec<f32>,
+    /// Per-entry maximum.
+    pub max: Vec<f32>,
 }
 
-impl Range2 {
-    /// To [-1, 1].
-    pub fn normalise(&self, v: [f32; 2]) -> [f32; 2] {
-        [0, 1].map(|d| 2.0 * (v[d] - self.min[d]) / (self.max[d] - self.min[d]).max(1e-6) - 1.0)
+impl Range {
+    /// Entries per vector.
+    pub fn dim(&self) -> usize {
+        self.min.len()
     }
 
-    /// From [-1, 1].
-    pub fn denormalise(&self, v: [f32; 2]) -> [f32; 2] {
-        [0, 1].map(|d| (v[d] + 1.0) / 2.0 * (self.max[d] - self.min[d]) + self.min[d])
+    /// To [-1, 1], entry by entry (`v` has [`Range::dim`] entries).
+    pub fn normalise<'a>(&'a self, v: &'a [f32]) -> impl Iterator<Item = f32> + 'a {
+        v.iter()
+            .zip(self.min.iter().zip(&self.max))
+            .map(|(x, (lo, hi))| 2.0 * (x - lo) / (hi - lo).max(1e-6) - 1.0)
+    }
+
+    /// From [-1, 1], entry by entry.
+    pub fn denormalise(&self, v: &[f32]) -> Vec<f32> {
+        v.iter()
+            .zip(self.min.iter().zip(&self.max))
+            .map(|(x, (lo, hi))| (x + 1.0) / 2.0 * (hi - lo) + lo)
+            .collect()
     }
 }
 
@@ -42,10 +52,11 @@ impl Range2 {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Normalisation {
-    /// Agent positions.
-    pub agent_pos: Range2,
+    /// The proprioceptive vector (Push-T: the agent's position; the name is the
+    /// one `policy.json` files carry).
+    pub agent_pos: Range,
     /// Actions.
-    pub action: Range2,
+    pub action: Range,
 }
 
 /// The `diffusion` kind's configuration (`policy.json` "config").
@@ -112,19 +123,19 @@ impl DiffusionNet {
     ///
     /// # Shapes
     /// - `frames`: `[b·o, 3, 96, 96]` in [-1, 1] (episode-major, oldest first)
-    /// - `pos`: `[b, o, 2]` normalised
-    /// - returns `[b, o·(feature + 2)]`
+    /// - `pos`: `[b, o, p]` normalised proprioception
+    /// - returns `[b, o·(feature + p)]`
     pub fn obs_cond(&self, frames: Tensor<4>, pos: Tensor<3>) -> Tensor<2> {
-        let [b, o, _] = pos.dims();
+        let [b, o, p] = pos.dims();
         let feat = self.encoder.forward(frames); // [b o, f]
         let f = feat.dims()[1];
-        Tensor::cat(vec![feat.reshape([b, o, f]), pos], 2).reshape([b, o * (f + 2)])
+        Tensor::cat(vec![feat.reshape([b, o, f]), pos], 2).reshape([b, o * (f + p)])
     }
 
     /// The ε-prediction loss of noisy actions at integer steps `t`.
     ///
     /// # Shapes
-    /// `cond: [b, c]`, `actions, noise: [b, horizon, 2]`, `t: [b]`
+    /// `cond: [b, c]`, `actions, noise: [b, horizon, action_dim]`, `t: [b]`
     pub fn loss(
         &self,
         cond: Tensor<2>,
@@ -145,7 +156,7 @@ impl DiffusionNet {
         (pred - noise).powf_scalar(2.0).mean()
     }
 
-    /// Deterministic DDIM from noise `x` (`[b, horizon, 2]`) with `k` steps.
+    /// Deterministic DDIM from noise `x` (`[b, horizon, action_dim]`) with `k` steps.
     pub fn sample(&self, cond: Tensor<2>, mut x: Tensor<3>, k: usize, ac: &[f64]) -> Tensor<3> {
         let b = x.dims()[0];
         let device = x.device();
@@ -172,16 +183,16 @@ pub fn ddim_steps(k: usize, ac: &[f64]) -> Vec<(usize, f64, f64)> {
         .collect()
 }
 
-/// [`DiffusionNet::sample`] on [`CpuUnet1d`]: `x` is `[b, horizon, 2]`, `cond` `[b, c]`.
+/// [`DiffusionNet::sample`] on [`CpuUnet1d`]: `x` is `[b, horizon, action_dim]`, `cond` `[b, c]`.
 fn sample_cpu(
     unet: &CpuUnet1d,
     cond: &[f32],
     mut x: Vec<f32>,
-    horizon: usize,
+    [horizon, action_dim]: [usize; 2],
     k: usize,
     ac: &[f64],
 ) -> Vec<f32> {
-    let prep = unet.prepare(cond, x.len() / (2 * horizon));
+    let prep = unet.prepare(cond, x.len() / (action_dim * horizon).max(1));
     for (t, a, a_prev) in ddim_steps(k, ac) {
         let eps = unet.forward(&prep, &x, horizon, t as f32);
         let (sa, s1a) = (a.sqrt() as f32, (1.0 - a).sqrt() as f32);
@@ -202,6 +213,8 @@ pub struct DiffusionPolicy {
     pub cfg: DiffusionConfig,
     /// Normalisation.
     pub norm: Normalisation,
+    /// Each action entry's bounds in the task: outputs are clamped into them.
+    pub bounds: (Vec<f32>, Vec<f32>),
     net: DiffusionNet,
     /// The U-Net on plain CPU loops (Flex device, unless [`POLICY_KERNELS_ENV`] says `burn`).
     cpu_unet: Option<CpuUnet1d>,
@@ -215,11 +228,12 @@ pub struct DiffusionPolicy {
 pub const POLICY_KERNELS_ENV: &str = "EVALHARNESS_POLICY_KERNELS";
 
 impl DiffusionPolicy {
-    /// Wraps trained networks.
+    /// Wraps trained networks; `bounds` are the task's action bounds (low, high).
     pub fn new(
         name: String,
         cfg: DiffusionConfig,
         norm: Normalisation,
+        bounds: (Vec<f32>, Vec<f32>),
         net: DiffusionNet,
         device: &Device,
     ) -> Self {
@@ -238,7 +252,7 @@ impl DiffusionPolicy {
                     .inspect_err(|e| tracing::warn!(policy = %name, "burn's encoder kept: {e}"))
             })
             .and_then(Result::ok);
-        Self { name, cfg, norm, net, cpu_unet, cpu_encoder, ac, device: device.clone() }
+        Self { name, cfg, norm, bounds, net, cpu_unet, cpu_encoder, ac, device: device.clone() }
     }
 }
 
@@ -259,11 +273,12 @@ impl Policy for DiffusionPolicy {
 
     fn act(&self, obs: &[Observation], rngs: &mut [Rng]) -> Result<Vec<ActionChunk>, PolicyError> {
         let (o, s, h) = (self.cfg.net.obs_horizon, self.cfg.net.image_size, self.cfg.horizon);
+        let (p, ad) = (self.norm.agent_pos.dim(), self.norm.action.dim());
         let bad = |m: String| PolicyError::Input { policy: self.name.clone(), message: m };
         let mut frames = Vec::with_capacity(obs.len() * o);
-        let mut pos = Vec::with_capacity(obs.len() * o * 2);
+        let mut pos = Vec::with_capacity(obs.len() * o * p);
         for (i, ob) in obs.iter().enumerate() {
-            if ob.frames.len() != o || ob.agent_pos.len() != o {
+            if ob.frames.len() != o || ob.proprio.len() != o {
                 return Err(bad(format!("episode {i}: {} frames, the policy takes {o}", ob.frames.len())));
             }
             if ob.size != s || ob.frames.iter().any(|f| f.len() != s * s * 3) {
@@ -272,53 +287,59 @@ impl Policy for DiffusionPolicy {
                     ob.size
                 )));
             }
+            if let Some(v) = ob.proprio.iter().find(|v| v.len() != p) {
+                return Err(bad(format!(
+                    "episode {i}: a proprioceptive vector of {} entries, the policy reads {p}",
+                    v.len()
+                )));
+            }
             frames.extend(ob.frames.iter().map(Vec::as_slice));
-            pos.extend(ob.agent_pos.iter().flat_map(|p| self.norm.agent_pos.normalise(*p)));
+            pos.extend(ob.proprio.iter().flat_map(|v| self.norm.agent_pos.normalise(v)));
         }
         let b = obs.len();
-        // Conditioning [b, o·(features + 2)]: per observed frame, its features and position.
+        // Conditioning [b, o·(features + p)]: per observed frame, its features and proprioception.
         let cond: Vec<f32> = match &self.cpu_encoder {
             Some(enc) => {
                 let feat = enc.forward(&frames_to_vec(&frames, s), b * o, s); // [b o, f]
                 let f = feat.len() / (b * o).max(1);
-                feat.chunks(f).zip(pos.chunks(2)).flat_map(|(x, p)| x.iter().chain(p)).copied().collect()
+                feat.chunks(f).zip(pos.chunks(p)).flat_map(|(x, q)| x.iter().chain(q)).copied().collect()
             }
             None => self
                 .net
                 .obs_cond(
                     frames_to_tensor(&frames, s, &self.device),
-                    Tensor::from_data(TensorData::new(pos, [b, o, 2]), &self.device),
+                    Tensor::from_data(TensorData::new(pos, [b, o, p]), &self.device),
                 )
                 .into_data()
                 .convert::<f32>()
                 .try_into_vec::<f32>()
                 .unwrap_or_default(),
         };
-        let noise: Vec<f32> = rngs.iter_mut().flat_map(|r| r.normals_f32(h * 2)).collect();
+        let noise: Vec<f32> = rngs.iter_mut().flat_map(|r| r.normals_f32(h * ad)).collect();
         let v: Vec<f32> = match &self.cpu_unet {
-            Some(unet) => sample_cpu(unet, &cond, noise, h, self.cfg.inference_steps, &self.ac),
+            Some(unet) => sample_cpu(unet, &cond, noise, [h, ad], self.cfg.inference_steps, &self.ac),
             None => {
                 let c = cond.len() / b.max(1);
                 let cond = Tensor::from_data(TensorData::new(cond, [b, c]), &self.device);
-                let x = Tensor::from_data(TensorData::new(noise, [b, h, 2]), &self.device);
+                let x = Tensor::from_data(TensorData::new(noise, [b, h, ad]), &self.device);
                 let out = self.net.sample(cond, x, self.cfg.inference_steps, &self.ac);
                 out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
             }
         };
-        if v.len() != b * h * 2 {
-            return Err(bad(format!("the network returned {} values, expected {}", v.len(), b * h * 2)));
+        if v.len() != b * h * ad {
+            return Err(bad(format!("the network returned {} values, expected {}", v.len(), b * h * ad)));
         }
         let start = o - 1;
         let mut chunks: Vec<ActionChunk> = (0..b)
             .map(|i| {
                 (start..(start + self.cfg.action_horizon).min(h))
-                    .map(|t| self.norm.action.denormalise([v[(i * h + t) * 2], v[(i * h + t) * 2 + 1]]))
+                    .map(|t| self.norm.action.denormalise(&v[(i * h + t) * ad..(i * h + t + 1) * ad]))
                     .collect()
             })
             .collect();
-        let clamped = sanitize(&self.name, &mut chunks, 0.0, 512.0)?;
+        let clamped = sanitize(&self.name, &mut chunks, &self.bounds.0, &self.bounds.1)?;
         if clamped > 0 {
-            tracing::warn!(policy = %self.name, clamped, "actions outside the world clamped");
+            tracing::warn!(policy = %self.name, clamped, "actions outside the task's bounds clamped");
         }
         Ok(chunks)
     }
@@ -341,9 +362,11 @@ mod tests {
 
     #[test]
     fn normalisation_round_trips() {
-        let r = Range2 { min: [10.0, 0.0], max: [500.0, 512.0] };
-        assert_eq!(r.normalise([10.0, 512.0]), [-1.0, 1.0]);
-        let back = r.denormalise(r.normalise([123.0, 45.0]));
-        assert!((back[0] - 123.0).abs() < 1e-4 && (back[1] - 45.0).abs() < 1e-4);
+        let r = Range { min: vec![10.0, 0.0, -1.0], max: vec![500.0, 512.0, 1.0] };
+        // 2(10 − 10)/490 − 1 = −1; 2(512 − 0)/512 − 1 = 1; 2(0 + 1)/2 − 1 = 0.
+        assert_eq!(r.normalise(&[10.0, 512.0, 0.0]).collect::<Vec<_>>(), vec![-1.0, 1.0, 0.0]);
+        let back = r.denormalise(&r.normalise(&[123.0, 45.0, 0.25]).collect::<Vec<_>>());
+        assert!((back[0] - 123.0).abs() < 1e-4 && (back[1] - 45.0).abs() < 1e-4, "{back:?}");
+        assert!((back[2] - 0.25).abs() < 1e-6, "{back:?}");
     }
 }

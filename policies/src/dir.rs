@@ -116,12 +116,28 @@ pub fn write_policy(dir: &Path, file: &PolicyFile, net: &DiffusionNet) -> Result
 }
 
 /// What the scenario feeds a policy and accepts from it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Expectations {
     /// Frame side in pixels.
     pub image_size: usize,
-    /// Action dimension.
-    pub action_dim: usize,
+    /// Entries of the proprioceptive vector.
+    pub proprio_dim: usize,
+    /// Each action entry's lower bound (its length is the action dimension).
+    pub action_low: Vec<f32>,
+    /// Each action entry's upper bound.
+    pub action_high: Vec<f32>,
+}
+
+impl Expectations {
+    /// Push-T's: `image_size`² frames, the agent's 2-D position, targets in [0, 512]².
+    pub fn pusht(image_size: usize) -> Self {
+        Self { image_size, proprio_dim: 2, action_low: vec![0.0; 2], action_high: vec![512.0; 2] }
+    }
+
+    /// Entries per action.
+    pub fn action_dim(&self) -> usize {
+        self.action_low.len()
+    }
 }
 
 /// A checkpoint's name: its folder's name (the whole path when it has none).
@@ -137,7 +153,7 @@ pub fn checkpoint_name(dir: &Path) -> String {
 /// missing, truncated or do not match the config.
 pub fn load_policy(
     dir: &Path,
-    expect: Expectations,
+    expect: &Expectations,
     device: &Device,
 ) -> Result<Box<dyn Policy>, PolicyLoadError> {
     let err = |m: String| PolicyLoadError::new(dir, m);
@@ -152,14 +168,34 @@ pub fn load_policy(
                     cfg.net.image_size, expect.image_size
                 )));
             }
-            if cfg.net.action_dim != expect.action_dim {
+            if cfg.net.action_dim != expect.action_dim() {
                 return Err(err(format!(
                     "outputs {}-D actions, the scenario takes {}-D",
-                    cfg.net.action_dim, expect.action_dim
+                    cfg.net.action_dim,
+                    expect.action_dim()
+                )));
+            }
+            if cfg.net.proprio() != expect.proprio_dim {
+                return Err(err(format!(
+                    "reads {} proprioceptive entries, the scenario gives {}",
+                    cfg.net.proprio(),
+                    expect.proprio_dim
+                )));
+            }
+            let (n, a) = (&file.normalisation, cfg.net.action_dim);
+            let lengths_agree =
+                n.agent_pos.max.len() == n.agent_pos.dim() && n.action.max.len() == n.action.dim();
+            if !lengths_agree || n.agent_pos.dim() != cfg.net.proprio() || n.action.dim() != a {
+                return Err(err(format!(
+                    "policy.json \"normalisation\": {} proprioceptive and {} action entries, the config says {} and {a}",
+                    n.agent_pos.dim(),
+                    n.action.dim(),
+                    cfg.net.proprio()
                 )));
             }
             let net = diffusion_weights(dir, &cfg, device)?;
-            Ok(Box::new(DiffusionPolicy::new(name, cfg, file.normalisation, net, device)))
+            let bounds = (expect.action_low.clone(), expect.action_high.clone());
+            Ok(Box::new(DiffusionPolicy::new(name, cfg, file.normalisation, bounds, net, device)))
         }
         other => Err(err(format!("unknown policy kind \"{other}\" (known: diffusion, scripted)"))),
     }
@@ -260,11 +296,11 @@ mod tests {
         let tmp = std::env::temp_dir().join(format!("evalharness-policy-{}", std::process::id()));
         let ck = tmp.join("epoch-0001");
         std::fs::create_dir_all(&ck).unwrap();
-        let expect = Expectations { image_size: 96, action_dim: 2 };
+        let expect = &Expectations::pusht(96);
         let device = Device::flex();
         let e = load_policy(&ck, expect, &device).err().unwrap();
         assert!(e.to_string().contains("epoch-0001") && e.to_string().contains("policy.json"), "{e}");
-        let norm = crate::diffusion::Range2 { min: [0.0; 2], max: [1.0; 2] };
+        let norm = crate::diffusion::Range { min: vec![0.0; 2], max: vec![1.0; 2] };
         let mut file = PolicyFile::diffusion(
             &DiffusionConfig::default(),
             &Normalisation { agent_pos: norm.clone(), action: norm },
@@ -279,7 +315,7 @@ mod tests {
         assert!(e.to_string().contains("unknown policy kind \"transformer\""), "{e}");
         file.kind = "diffusion".into();
         std::fs::write(ck.join("policy.json"), serde_json::to_string(&file).unwrap()).unwrap();
-        let e = load_policy(&ck, Expectations { image_size: 64, action_dim: 2 }, &device).err().unwrap();
+        let e = load_policy(&ck, &Expectations::pusht(64), &device).err().unwrap();
         assert!(e.to_string().contains("96x96"), "{e}");
         // Weights missing, then truncated.
         let e = load_policy(&ck, expect, &device).err().unwrap();

@@ -8,13 +8,17 @@
 //! - [`data`]: demonstrations from a replay-buffer dataset;
 //! - [`pretrain`]: pose pre-training of the frame encoder and the frozen-feature cache;
 //! - [`train`]: the trainer, which saves a checkpoint every few epochs;
-//! - [`dir`]: the policy directory format and its validating loader.
+//! - [`dir`]: the policy directory format and its validating loader;
+//! - [`judge`], [`judge_train`]: a learned judge of imagined frames (the same frame
+//!   encoder and one logit) and its trainer.
 
 pub mod cpu_encoder;
 pub mod cpu_unet;
 pub mod data;
 pub mod diffusion;
 pub mod dir;
+pub mod judge;
+pub mod judge_train;
 pub mod net;
 pub mod pretrain;
 pub mod train;

@@ -42,12 +42,20 @@ pub struct NetConfig {
     /// Action dimension.
     #[config(default = 2)]
     pub action_dim: usize,
+    /// Entries of the proprioceptive vector (absent: the action dimension, as for
+    /// Push-T, where both are a 2-D position).
+    pub proprio_dim: Option<usize>,
 }
 
 impl NetConfig {
-    /// Conditioning size: per obs frame, features + agent position.
+    /// Entries of the proprioceptive vector read with each frame.
+    pub fn proprio(&self) -> usize {
+        self.proprio_dim.unwrap_or(self.action_dim)
+    }
+
+    /// Conditioning size: per obs frame, features + proprioception.
     pub fn obs_cond_dim(&self) -> usize {
-        self.obs_horizon * (self.feature_dim + self.action_dim)
+        self.obs_horizon * (self.feature_dim + self.proprio())
     }
 }
 

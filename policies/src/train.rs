@@ -284,9 +284,9 @@ pub fn train_policy(
             let (oi, ai) = demos.sample_indices(t, o, h);
             obs.extend_from_slice(&oi);
             pos.extend(
-                oi.iter().flat_map(|&i| configs.normalisation.agent_pos.normalise(demos.agent_pos[i])),
+                oi.iter().flat_map(|&i| configs.normalisation.agent_pos.normalise(&demos.agent_pos[i])),
             );
-            act.extend(ai.iter().flat_map(|&i| configs.normalisation.action.normalise(demos.actions[i])));
+            act.extend(ai.iter().flat_map(|&i| configs.normalisation.action.normalise(&demos.actions[i])));
         }
         let mut rng = Rng::new(derive(tc.seed, &[u64::MAX, state.step]));
         let t: Vec<usize> = (0..b).map(|_| rng.below(pc.train_steps as u64) as usize).collect();

@@ -128,18 +128,18 @@ impl ScriptedPolicy {
     }
 
     /// The expert's plan for one observation (before lag and noise).
-    fn plan(&self, o: &Observation) -> ActionChunk {
+    fn plan(&self, o: &Observation) -> Vec<[f32; 2]> {
         let h = self.cfg.action_horizon;
-        let last = o.agent_pos.last().map_or([0.0; 2], |p| [f64::from(p[0]), f64::from(p[1])]);
+        let last = o.proprio.last().map_or([0.0; 2], |p| [f64::from(p[0]), f64::from(p[1])]);
         let hold = vec![[last[0] as f32, last[1] as f32]; h];
         let Some(seen) = o.frames.last().and_then(|f| self.perceiver.perceive(f, Some(last))) else {
             return hold;
         };
         // The PD law's velocity, from the last two positions one control step apart.
         let hz = f64::from(self.scenario.timing.control_hz);
-        let vel = match o.agent_pos.len() {
+        let vel = match o.proprio.len() {
             n if n >= 2 => {
-                let p = o.agent_pos[n - 2];
+                let p = &o.proprio[n - 2];
                 [(last[0] - f64::from(p[0])) * hz, (last[1] - f64::from(p[1])) * hz]
             }
             _ => [0.0; 2],
@@ -188,19 +188,23 @@ impl Policy for ScriptedPolicy {
             let message = format!("takes {0}x{0} RGB frames, got {1}x{1}", self.size, o.size);
             return Err(PolicyError::Input { policy: self.name.clone(), message });
         }
+        if let Some(v) = obs.iter().flat_map(|o| &o.proprio).find(|v| v.len() != 2) {
+            let message = format!("reads the agent's 2-D position, got {} proprioceptive entries", v.len());
+            return Err(PolicyError::Input { policy: self.name.clone(), message });
+        }
         // Planning is deterministic per episode; the noise is drawn afterwards, in
         // episode order, from each episode's own stream.
-        let plans: Vec<ActionChunk> = obs.par_iter().map(|o| self.plan(o)).collect();
+        let plans: Vec<Vec<[f32; 2]>> = obs.par_iter().map(|o| self.plan(o)).collect();
         let world = self.scenario.world.size as f32;
         let out = plans
             .into_iter()
             .zip(obs)
             .zip(rngs.iter_mut())
             .map(|((plan, o), rng)| {
-                let here = o.agent_pos.last().copied().unwrap_or([0.0; 2]);
+                let here = o.proprio.last().cloned().unwrap_or_else(|| vec![0.0; 2]);
                 let lag = self.cfg.lag;
                 let mut chunk: ActionChunk = std::iter::repeat_n(here, lag)
-                    .chain(plan.into_iter().take(self.cfg.action_horizon - lag))
+                    .chain(plan.into_iter().take(self.cfg.action_horizon - lag).map(Vec::from))
                     .collect();
                 if self.cfg.noise > 0.0 {
                     for a in &mut chunk {
@@ -233,8 +237,8 @@ mod tests {
     fn observe(cfg: &PushTConfig, seed: u64) -> Observation {
         let (state, goal) = initial_state(cfg, seed).unwrap();
         let frame = Rasterizer::new(cfg).render(&state, &goal);
-        let p = [state.agent[0] as f32, state.agent[1] as f32];
-        Observation { frames: vec![frame.clone(), frame], agent_pos: vec![p, p], size: 96 }
+        let p = vec![state.agent[0] as f32, state.agent[1] as f32];
+        Observation { frames: vec![frame.clone(), frame], proprio: vec![p.clone(), p], size: 96 }
     }
 
     #[test]
@@ -280,7 +284,7 @@ mod tests {
         for (c, l) in clean.iter().zip(&lagged) {
             assert_eq!(&l[3..], &c[..5]);
         }
-        assert!(lagged[0][..3].iter().all(|a| *a == obs[0].agent_pos[1]));
+        assert!(lagged[0][..3].iter().all(|a| *a == obs[0].proprio[1]));
         let noisy = make(20.0, 0);
         let a = noisy.act(&obs, &mut [Rng::new(1), Rng::new(2)]).unwrap();
         // Episode 1's noise depends on its own stream only, not on its batch mates.

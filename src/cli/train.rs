@@ -1,4 +1,4 @@
-//! `evalharness train ...` arguments: the three trainers and the session flags
+//! `evalharness train ...` arguments: the four trainers and the session flags
 //! they share.
 
 use std::path::PathBuf;
@@ -14,6 +14,69 @@ pub enum TrainCommand {
     WorldModel(TrainWorldModelArgs),
     /// A diffusion policy; checkpoints every few epochs form a graded policy set.
     Policy(TrainPolicyArgs),
+    /// A learned judge of imagined frames: a small CNN trained on simulator frames
+    /// labelled with the exact score (`rank --judge`).
+    Judge(TrainJudgeArgs),
+}
+
+/// What a judge learns to read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum JudgeLabelArg {
+    /// Push-T's goal coverage (`data/coverage`); success above 0.95.
+    Coverage,
+    /// robomimic's success (`data/success`); success above 0.5.
+    Success,
+}
+
+/// `evalharness train judge`.
+#[derive(Debug, Args)]
+pub struct TrainJudgeArgs {
+    /// Dataset of simulator frames with a per-step label array (zarr replay buffer).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output folder: `judge.json`, `model.bpk`, `log.jsonl`.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The label to learn (default: coverage if the dataset has it, else success).
+    #[arg(long, value_enum)]
+    pub label: Option<JudgeLabelArg>,
+    /// Optimiser steps.
+    #[arg(long, default_value_t = 2000)]
+    pub steps: u64,
+    /// Frames per step.
+    #[arg(long, default_value_t = 64)]
+    pub batch: usize,
+    /// Peak learning rate (after a 100-step warm-up).
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Frame-encoder width.
+    #[arg(long, default_value_t = 16)]
+    pub encoder_width: usize,
+    /// Feature size before the one-logit head.
+    #[arg(long, default_value_t = 64)]
+    pub feature_dim: usize,
+    /// Use at most this many episodes (the first ones).
+    #[arg(long)]
+    pub episodes: Option<usize>,
+    /// Draw batches uniformly instead of half from frames above the threshold.
+    #[arg(long)]
+    pub no_balance: bool,
+    /// Augment with the 8 symmetries of the square world (right for Push-T's
+    /// top-down view, wrong for a perspective camera).
+    #[arg(long)]
+    pub symmetries: bool,
+    /// Evaluate on the held-out episodes every this many steps.
+    #[arg(long, default_value_t = 250)]
+    pub eval_every: u64,
+    /// Seed of the weights and the frame order.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Stop after this many minutes (nothing is written then).
+    #[arg(long)]
+    pub max_minutes: Option<f64>,
+    /// Replace an existing `--out` once the new judge is complete.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// `evalharness train policy`.

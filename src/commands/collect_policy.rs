@@ -44,7 +44,7 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
     if max_steps == 0 || c.episodes == 0 {
         bail!("--episodes and --max-steps must be at least 1");
     }
-    let setup = Setup { task: &task, master_seed: 0, max_steps };
+    let setup = Setup { task: &task, master_seed: 0, max_steps, judge: None };
     let device = world_model::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
     let size = cfg.render.size as usize;
@@ -57,8 +57,8 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
     let pb = progress::bar(dirs.len() as u64 * c.episodes, "collect", quiet);
     let (mut episodes, mut checkpoints) = (Vec::new(), Vec::new());
     for d in &dirs {
-        let policy =
-            load_any(d, expect, &device, &task).with_context(|| format!("loading policy {}", d.display()))?;
+        let policy = load_any(d, &expect, &device, &task)
+            .with_context(|| format!("loading policy {}", d.display()))?;
         let name = policy.name().to_string();
         let mut timing = Timing::default();
         let mut score = 0.0;

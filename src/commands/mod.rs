@@ -15,6 +15,7 @@ mod simulate;
 mod simulate_arm;
 mod simulate_policy;
 mod train;
+mod train_judge;
 mod train_policy;
 mod train_wm;
 mod wm_eval;
@@ -54,6 +55,7 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
                 TrainCommand::Autoencoder(a) => train::autoencoder(a, cli.quiet),
                 TrainCommand::WorldModel(a) => train_wm::run(a, cli.quiet),
                 TrainCommand::Policy(a) => train_policy::run(a, cli.quiet),
+                TrainCommand::Judge(a) => train_judge::run(a, cli.quiet),
             }
         }
         Command::Agreement(a) => agreement::run(a),

@@ -26,7 +26,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let dir = std::path::Path::new(&args.policy);
     let task = load_task(&c.scenario)?;
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
-    let setup = Setup { task: task.as_ref(), master_seed: 0, max_steps };
+    let setup = Setup { task: task.as_ref(), master_seed: 0, max_steps, judge: None };
     let device = world_model::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
     let out = Staged::new(&args.out, c.force)?;
@@ -42,7 +42,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
         let name = policies::dir::checkpoint_name(d);
         let started = Instant::now();
         let rows: Result<Vec<EpisodeRow>> = (|| {
-            let policy = load_any(d, expect, &device, task.as_ref())?;
+            let policy = load_any(d, &expect, &device, task.as_ref())?;
             let mut timing = Timing::default();
             let mut rows = Vec::new();
             for batch in seeds.chunks(100) {

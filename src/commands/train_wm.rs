@@ -180,6 +180,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
                 prediction: fresh_prediction(a),
                 alpha: a.accentuation.then_some(a.alpha.unwrap_or(DEFAULT_ALPHA)),
                 goal_free: a.goal_free.then_some(true),
+                actions: None,
             }
         }
     };

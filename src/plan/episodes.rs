@@ -125,13 +125,8 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
     while steps < ctx.max_steps && !active.is_empty() {
         // Proposals, k per active episode, episode-major.
         let tp = Instant::now();
-        let obs: Vec<Observation> = active
-            .iter()
-            .map(|&i| Ok(std::iter::repeat_n(obs_of(&live[i].seen, size)?, k)))
-            .collect::<Result<Vec<_>>>()?
-            .into_iter()
-            .flatten()
-            .collect();
+        let obs: Vec<Observation> =
+            active.iter().flat_map(|&i| std::iter::repeat_n(obs_of(&live[i].seen, size), k)).collect();
         let mut rngs: Vec<Rng> = active
             .iter()
             .flat_map(|&i| {
@@ -234,7 +229,7 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
 /// Executes `actions` in the real environment, updating the score and the histories.
 fn execute(
     l: &mut Live,
-    actions: &[[f32; 2]],
+    actions: &[Vec<f32>],
     raster: &Rasterizer,
     o: usize,
     keep_wm: usize,
@@ -293,8 +288,9 @@ mod tests {
     fn spread_scales_about_each_episodes_mean() {
         // Episode 0's two proposals at x = 10 and 20 (mean 15) move to 15 ∓ 2·5 = 5, 25;
         // episode 1's at 500 and 510 (mean 505) to 495 and 515, clamped to 512.
-        let mut c = vec![vec![[10.0, 1.0]], vec![[20.0, 1.0]], vec![[500.0, 7.0]], vec![[510.0, 7.0]]];
+        let one = |x: f32, y: f32| vec![vec![x, y]];
+        let mut c = vec![one(10.0, 1.0), one(20.0, 1.0), one(500.0, 7.0), one(510.0, 7.0)];
         spread(&mut c, 2, 2.0, 512.0);
-        assert_eq!(c, vec![vec![[5.0, 1.0]], vec![[25.0, 1.0]], vec![[495.0, 7.0]], vec![[512.0, 7.0]]]);
+        assert_eq!(c, vec![one(5.0, 1.0), one(25.0, 1.0), one(495.0, 7.0), one(512.0, 7.0)]);
     }
 }

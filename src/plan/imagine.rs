@@ -113,7 +113,7 @@ pub fn in_world_model(ctx: &Ctx, wm: &WorldModel, d: &Decision, size: usize) -> 
     while roll.generated() < ctx.imagine {
         let (done, f) = (roll.generated(), f_max.min(ctx.imagine - roll.generated()));
         let pred = roll
-            .step(wm, f, |q, j| d.chunks[q][done + j], &mut rngs)
+            .step(wm, f, |q, j| d.chunks[q][done + j].as_slice(), &mut rngs)
             .map_err(|e| anyhow!("imagining proposals of policy {name} at decision {}: {e}", d.index))?; // [b, f, C, s, s]
         last = Some(pred.narrow(1, f - 1, 1).reshape([b, c, ls, ls]));
     }

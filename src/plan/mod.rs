@@ -41,7 +41,7 @@ use state::{Ctx, PlanRow, plan_key};
 /// resolved `--imagine` and `--execute`.
 fn load_proposer(
     a: &PlanArgs,
-    image_size: usize,
+    [image_size, world]: [usize; 2],
     device: &burn::tensor::Device,
 ) -> Result<(DiffusionPolicy, usize, usize)> {
     let dir = &a.policy;
@@ -82,7 +82,8 @@ fn load_proposer(
     let net = diffusion_weights(dir, &cfg, device)?;
     cfg.action_horizon = imagine.max(execute);
     let name = checkpoint_name(dir);
-    Ok((DiffusionPolicy::new(name, cfg, file.normalisation, net, device), imagine, execute))
+    let bounds = (vec![0.0; 2], vec![world as f32; 2]); // Push-T's world, as `PushTTask` declares it
+    Ok((DiffusionPolicy::new(name, cfg, file.normalisation, bounds, net, device), imagine, execute))
 }
 
 /// `evalharness plan`.
@@ -120,7 +121,8 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     } else {
         None
     };
-    let (policy, imagine, execute) = load_proposer(a, cfg.render.size as usize, &device)?;
+    let (policy, imagine, execute) =
+        load_proposer(a, [cfg.render.size as usize, cfg.world.size as usize], &device)?;
     // Every input is checked; only now is the output folder touched.
     let inputs = crate::rank::model_inputs(
         wm.as_ref().map(|w| (a.world_model.as_path(), w)),

@@ -5,7 +5,8 @@
 //! Output folder: `config.json` (resolved arguments), `episodes.jsonl` (appended
 //! as batches finish), `episodes.csv` and `episodes.parquet` (the same rows, sorted),
 //! `results.json`. `--resume` skips episodes
-//! already in `episodes.jsonl`; `--shard i/n` runs every n-th batch.
+//! already in `episodes.jsonl`; `--shard i/n` runs every n-th batch; `--judge`
+//! scores the imagined frames with a learned judge instead of the task's own.
 
 mod media;
 pub mod merge;
@@ -21,7 +22,9 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use engine::schedule::{self, Batch};
 use engine::{EngineError, Setup};
+use harness::task::{ScoreKind, Task};
 use policies::dir::{checkpoint_dirs, checkpoint_name};
+use policies::judge::{Label, LearnedJudge};
 
 use crate::policy_kinds::{expectations, load_any};
 use harness::results::{FailedPolicy, RankResults, RunTiming};
@@ -58,11 +61,16 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     let task = crate::scenario::load_task(&a.scenario)?;
     let device = world_model::device::selected()?;
     let wm = load_world_model(&a.world_model, a.alpha, &device)?;
+    let judge = a.judge.as_deref().map(|d| load_judge(d, task.as_ref(), &device)).transpose()?;
     let dirs = checkpoint_dirs(&a.policies)?;
-    let inputs = model_inputs(Some((&a.world_model, &wm)), &dirs)?;
+    let mut inputs = model_inputs(Some((&a.world_model, &wm)), &dirs)?;
+    if let Some(d) = &a.judge {
+        let f = harness::fingerprint::folder(d)?;
+        inputs.push(("judge".to_string(), d.clone(), f));
+    }
     let flags: Vec<(&str, &Path)> = vec![("--policies", &a.policies), ("--world-model", &a.world_model)];
     let (out_dir, jsonl) = prepare_run(&a.out, flags, &inputs, a.resume, a.force)?;
-    let config = json!({
+    let mut config = json!({
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "scenario": a.scenario, "policies": a.policies, "world_model": a.world_model,
         "world_model_config": serde_json::to_value(&wm.cfg)?,
@@ -71,6 +79,10 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         "checkpoints": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
         "fingerprints": inputs.iter().map(|(k, _, f)| (k.clone(), json!(f))).collect::<serde_json::Map<_, _>>(),
     });
+    if let (Some(dir), Some(j)) = (&a.judge, &judge) {
+        config["judge"] = json!({"path": dir, "label": j.file.label, "threshold": j.file.threshold,
+            "heldout": j.file.heldout});
+    }
     if a.resume {
         resume::check_config(&a.out.join("config.json"), &config)?;
     }
@@ -83,7 +95,9 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         .num_threads(a.jobs.max(1))
         .build()
         .context("starting worker threads")?;
-    let setup = Setup { task: task.as_ref(), master_seed: a.seed, max_steps: a.max_steps };
+    let judge = judge.map(|j| std::sync::Arc::new(j) as std::sync::Arc<dyn harness::judge::Judge>);
+    let setup =
+        Setup { task: task.as_ref(), master_seed: a.seed, max_steps: a.max_steps, judge: judge.as_ref() };
     let expect = expectations(task.as_ref());
     let pb = progress::bar((dirs.len() * a.episodes) as u64, "rank", quiet);
     let mut failed: Vec<FailedPolicy> = Vec::new();
@@ -95,7 +109,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     for (pi, dir) in dirs.iter().enumerate() {
         let name = checkpoint_name(dir);
         names.push(name.clone());
-        match load_any(dir, expect, &device, task.as_ref()) {
+        match load_any(dir, &expect, &device, task.as_ref()) {
             Ok(p) => loaded.push((pi, p)),
             Err(e) => {
                 tracing::error!("{e}; continuing with the other policies");
@@ -193,6 +207,37 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     summary::gates(a.min_pearson, a.max_inversions, &res)
 }
 
+/// Loads `rank --judge`'s folder and checks that it reads the task's frames and scores
+/// what the task scores.
+///
+/// # Errors
+/// An unloadable judge, or one of another frame size or score kind, naming its folder.
+fn load_judge(dir: &Path, task: &dyn Task, device: &burn::tensor::Device) -> Result<LearnedJudge> {
+    let j = LearnedJudge::load(dir, device)?;
+    let size = task.observation_spec().image_size;
+    if j.image_size() != size {
+        bail!(
+            "--judge {}: reads {1}x{1} frames, the task renders {size}x{size}",
+            dir.display(),
+            j.image_size()
+        );
+    }
+    let fits = matches!(
+        (j.file.label, task.score_kind()),
+        (Label::Coverage, ScoreKind::Coverage { .. }) | (Label::Success, ScoreKind::Success)
+    );
+    if !fits || j.file.threshold != task.score_kind().threshold() {
+        bail!(
+            "--judge {}: estimates {} with success above {}, the task scores {}",
+            dir.display(),
+            j.file.label.array(),
+            j.file.threshold,
+            task.score_kind().describe()
+        );
+    }
+    Ok(j)
+}
+
 /// The model folders a run depends on, each as (name in `config.json`'s
 /// `fingerprints`, folder, content fingerprint): the world model (when the run uses
 /// one, with its folder) and its autoencoder, and every policy checkpoint.
@@ -274,7 +319,7 @@ fn rollouts(
         if failed.contains(&name.as_str()) {
             continue;
         }
-        let Ok(policy) = load_any(d, expect, &device, setup.task) else { continue };
+        let Ok(policy) = load_any(d, &expect, &device, setup.task) else { continue };
         let picks = media::pick_seeds(rows, &name);
         let strips = pool.install(|| media::write_rollouts(&dir, policy.as_ref(), &picks, setup, wm, 4))?;
         for (png, caption) in strips {

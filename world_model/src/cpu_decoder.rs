@@ -14,11 +14,11 @@ use burn::nn::{GroupNorm, PaddingConfig2d};
 use burn::tensor::Tensor;
 
 use crate::autoencoder::{Autoencoder, ResBlock};
-use crate::cpu_kernels::values;
-use crate::direct_conv::{Conv3x3, Norm, winograd_enabled};
 use crate::error::UnsupportedLayer;
-use crate::padded::Padded;
-use crate::winograd::upsample::Upsample3x3;
+use crate::weights::values;
+use kernels::direct_conv::{Conv3x3, Norm, winograd_enabled};
+use kernels::padded::Padded;
+use kernels::winograd::upsample::Upsample3x3;
 
 /// GroupNorm -> SiLU -> conv, twice, plus the input (as [`ResBlock`]).
 #[derive(Clone, Debug)]

@@ -17,8 +17,10 @@ use crate::error::WorldModelError;
 pub struct EpisodeData {
     /// `n x h x w x 3` bytes.
     pub frames: Vec<u8>,
-    /// `n x 2` actions (world units).
+    /// `n x action_dim` actions (Push-T: world units).
     pub actions: Vec<f32>,
+    /// Entries per action.
+    pub action_dim: usize,
     /// Image side.
     pub size: usize,
     /// Step ranges of each episode.
@@ -61,7 +63,7 @@ impl EpisodeData {
         let actions: Vec<f32> =
             r.action.read_f64().map_err(|e| err(e.to_string()))?.into_iter().map(|v| v as f32).collect();
         let episodes = (0..r.episodes()).map(|i| r.episode_range(i)).collect();
-        Ok(Self { frames, actions, size: expected_size, episodes })
+        Ok(Self { frames, actions, action_dim: r.action.row_len(), size: expected_size, episodes })
     }
 
     /// Number of frames.
@@ -163,6 +165,7 @@ mod tests {
         let data = EpisodeData {
             frames: (0..2 * 4 * 4 * 3).map(|i| (i * 5 % 256) as u8).collect(),
             actions: vec![0.0; 4],
+            action_dim: 2,
             size: 4,
             episodes: std::iter::once(0..2).collect(),
         };

@@ -127,8 +127,11 @@ pub fn rollout(
     while roll.generated() < len {
         let (done, f) = (roll.generated(), f_max.min(len - roll.generated()));
         // a_{t+k-1+done+j} drives frame t+k+done+j.
-        let action =
-            |r: usize, j: usize| [0, 1].map(|d| data.actions[(starts[r] + k - 1 + done + j) * 2 + d]);
+        let d = data.action_dim;
+        let action = |r: usize, j: usize| {
+            let t = starts[r] + k - 1 + done + j;
+            &data.actions[t * d..(t + 1) * d]
+        };
         let pred = roll.step(wm, f, action, &mut rngs).map_err(|e| {
             let videos: Vec<String> = starts.iter().map(usize::to_string).collect();
             format!("{e} (a batch of videos whose context starts at steps {})", videos.join(", "))
@@ -330,6 +333,7 @@ mod tests {
         let data = EpisodeData {
             frames,
             actions: vec![0.0; 12],
+            action_dim: 2,
             size: 8,
             episodes: std::iter::once(0..6).collect(),
         };
@@ -371,6 +375,7 @@ mod tests {
         let data = EpisodeData {
             frames: vec![0; 6 * 192],
             actions: vec![0.0; 12],
+            action_dim: 2,
             size: 8,
             episodes: std::iter::once(0..6).collect(),
         };

@@ -19,6 +19,7 @@
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 
+use crate::action::ActionScale;
 use crate::codec::FrameCodec;
 use crate::data::{EpisodeData, Split};
 
@@ -34,11 +35,6 @@ pub struct LatentStats {
     pub mean: Vec<f32>,
     /// Per-channel standard deviation of the raw encoded frames.
     pub std: Vec<f32>,
-}
-
-/// Normalises world-unit actions: a' = 2a/511 − 1 (spec §1, world-model stats 0..511).
-pub fn normalise_action(a: f32) -> f32 {
-    2.0 * a / 511.0 - 1.0
 }
 
 /// Lazily encoded, normalised latents (or normalised pixels) of every frame of a dataset.
@@ -155,7 +151,7 @@ pub struct Window {
     pub targets: Vec<usize>,
     /// The episode's first frame index (the anchor).
     pub anchor: usize,
-    /// Normalised actions a_t..a_{t+F-1}, `F x 2`.
+    /// Normalised actions a_t..a_{t+F-1}, `F x action_dim`.
     pub actions: Vec<f32>,
 }
 
@@ -169,13 +165,17 @@ pub fn window_starts(data: &EpisodeData, split: Split, future: usize) -> Vec<usi
         .collect()
 }
 
-/// The window of `history` + `future` frames at global step `t`.
-pub fn window(data: &EpisodeData, t: usize, history: usize, future: usize) -> Window {
+/// The window of `history` + `future` frames at global step `t`, its actions
+/// normalised with `scale` (whose size the caller checked against the data's).
+pub fn window(data: &EpisodeData, t: usize, history: usize, future: usize, scale: &ActionScale) -> Window {
     let ep_start = data.episodes.iter().find(|r| r.contains(&t)).map_or(0, |r| r.start);
     let hist = (0..history).map(|k| (t + k + 1).saturating_sub(history).max(ep_start)).collect();
     let targets = (1..=future).map(|f| t + f).collect();
-    let actions =
-        (0..future).flat_map(|f| [0, 1].map(|d| normalise_action(data.actions[(t + f) * 2 + d]))).collect();
+    let d = data.action_dim;
+    let mut actions = Vec::with_capacity(future * d);
+    for f in 0..future {
+        scale.normalise_into(&data.actions[(t + f) * d..(t + f + 1) * d], &mut actions);
+    }
     Window { history: hist, targets, anchor: ep_start, actions }
 }
 
@@ -188,6 +188,7 @@ mod tests {
         EpisodeData {
             frames: vec![0; 9 * 3],
             actions: (0..9).flat_map(|k| [k as f32, 511.0]).collect(),
+            action_dim: 2,
             size: 1,
             episodes: vec![0..6, 6..9],
         }
@@ -198,7 +199,7 @@ mod tests {
         let d = toy();
         // Episode 0 (6 frames) with F = 4 has starts 0 and 1; episode 1 is too short.
         assert_eq!(window_starts(&d, Split::Train, 4), vec![0, 1]);
-        let w = window(&d, 1, 4, 4);
+        let w = window(&d, 1, 4, 4, &ActionScale::pusht());
         assert_eq!(w.history, vec![0, 0, 0, 1]);
         assert_eq!(w.targets, vec![2, 3, 4, 5]);
         assert_eq!(w.anchor, 0);
@@ -206,8 +207,8 @@ mod tests {
         assert!((w.actions[0] - (2.0 / 511.0 - 1.0)).abs() < 1e-6);
         assert_eq!(w.actions[1], 1.0);
         // A window in the second episode repeats that episode's first frame.
-        assert_eq!(window(&d, 7, 4, 1).history, vec![6, 6, 6, 7]);
-        assert_eq!(window(&d, 7, 4, 1).anchor, 6);
+        assert_eq!(window(&d, 7, 4, 1, &ActionScale::pusht()).history, vec![6, 6, 6, 7]);
+        assert_eq!(window(&d, 7, 4, 1, &ActionScale::pusht()).anchor, 6);
     }
 
     #[test]
@@ -216,6 +217,7 @@ mod tests {
         let d = EpisodeData {
             frames: (0..3 * 4 * 3).map(|i| (i * 20) as u8).collect(),
             actions: vec![0.0; 6],
+            action_dim: 2,
             size: 2,
             episodes: std::iter::once(0..3).collect(),
         };

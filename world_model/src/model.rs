@@ -16,6 +16,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use harness::rng::Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::action::ActionScale;
 use crate::codec::FrameCodec;
 use crate::cpu_decoder::CpuDecoder;
 use crate::error::WorldModelError;
@@ -88,12 +89,20 @@ pub struct WorldModelConfig {
     /// the known goal onto what it generates. Absent: the frames show the goal.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub goal_free: Option<bool>,
+    /// How actions are normalised (absent: Push-T's world units, [`ActionScale::pusht`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub actions: Option<ActionScale>,
 }
 
 impl WorldModelConfig {
     /// Whether the model works on goal-free frames (see [`WorldModelConfig::goal_free`]).
     pub fn is_goal_free(&self) -> bool {
         self.goal_free == Some(true)
+    }
+
+    /// How the model normalises actions ([`WorldModelConfig::actions`]).
+    pub fn action_scale(&self) -> ActionScale {
+        self.actions.clone().unwrap_or_else(ActionScale::pusht)
     }
 
     /// A one-pass drifting model on raw 3-channel frames of `size`² (no autoencoder,
@@ -109,6 +118,7 @@ impl WorldModelConfig {
             prediction: None,
             alpha: None,
             goal_free: None,
+            actions: None,
         }
     }
 

@@ -10,7 +10,6 @@
 use burn::tensor::{Tensor, TensorData};
 use harness::rng::Rng;
 
-use crate::latents::normalise_action;
 use crate::model::WorldModel;
 
 /// Latents that are NaN or infinite, by the generated frames they were found in
@@ -22,6 +21,17 @@ pub struct NonFiniteLatents {
     pub first: usize,
     /// One past its last frame.
     pub end: usize,
+}
+
+/// Why a rollout step failed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RolloutError {
+    /// The model diverged.
+    #[error(transparent)]
+    NonFinite(#[from] NonFiniteLatents),
+    /// Actions of a size the model does not read.
+    #[error("{0}")]
+    Actions(String),
 }
 
 /// A batch of autoregressive rollouts: each row's last K normalised latents and
@@ -48,32 +58,40 @@ impl Rollout {
     }
 
     /// Predicts each row's next `f` frames (`f` ≤ the model's `future`) and appends
-    /// them to its history. `action(row, j)` is the world-unit action (0..511) that
-    /// drives the row's j-th frame of the chunk; `rngs` holds one generator stream
-    /// per row.
+    /// them to its history. `action(row, j)` is the task's action (Push-T: world
+    /// units, 0..511) that drives the row's j-th frame of the chunk, normalised here
+    /// with the model's [`ActionScale`](crate::action::ActionScale); `rngs` holds one
+    /// generator stream per row.
     ///
     /// # Shapes
     /// - returns `[b, f, C, s, s]`
     ///
     /// # Errors
-    /// Any NaN or infinite latent in the chunk; the history is then left unchanged.
-    pub fn step(
+    /// Any NaN or infinite latent in the chunk (the history is then left unchanged),
+    /// or an action whose size is not the model's.
+    pub fn step<'a>(
         &mut self,
         wm: &WorldModel,
         f: usize,
-        action: impl Fn(usize, usize) -> [f32; 2],
+        action: impl Fn(usize, usize) -> &'a [f32],
         rngs: &mut [Rng],
-    ) -> Result<Tensor<5>, NonFiniteLatents> {
+    ) -> Result<Tensor<5>, RolloutError> {
         let [b, k, _, _, _] = self.history.dims();
-        let acts: Vec<f32> = (0..b)
-            .flat_map(|r| (0..f).map(move |j| (r, j)))
-            .flat_map(|(r, j)| action(r, j).map(normalise_action))
-            .collect();
-        let act = Tensor::<3>::from_data(TensorData::new(acts, [b, f, 2]), wm.device()); // [b, f, 2]
+        let scale = wm.cfg.action_scale();
+        let d = scale.dim();
+        let mut acts: Vec<f32> = Vec::with_capacity(b * f * d);
+        for r in 0..b {
+            for j in 0..f {
+                let a = action(r, j);
+                scale.check(a.len()).map_err(RolloutError::Actions)?;
+                scale.normalise_into(a, &mut acts);
+            }
+        }
+        let act = Tensor::<3>::from_data(TensorData::new(acts, [b, f, d]), wm.device()); // [b, f, d]
         let pred = wm.predict(self.history.clone(), self.anchor.clone(), act, rngs); // [b, f, C, s, s]
         let check: f32 = pred.clone().abs().sum().into_scalar();
         if !check.is_finite() {
-            return Err(NonFiniteLatents { first: self.generated, end: self.generated + f });
+            return Err(NonFiniteLatents { first: self.generated, end: self.generated + f }.into());
         }
         self.history = Tensor::cat(vec![self.history.clone(), pred.clone()], 1).narrow(1, f, k);
         self.generated += f;
@@ -120,9 +138,10 @@ mod tests {
         let hist = Tensor::<5>::random([2, 4, 3, 8, 8], Distribution::Default, &device); // [b, K, C, s, s]
         let anchor = hist.clone().narrow(1, 0, 1).reshape([2, 3, 8, 8]);
         // Row r's j-th action is (100 r + 10 j, 50): normalised 2a/511 − 1.
-        let raw = |r: usize, j: usize| [(100 * r + 10 * j) as f32, 50.0];
-        let acts: Vec<f32> =
-            (0..2).flat_map(|r| (0..3).flat_map(move |j| raw(r, j).map(normalise_action))).collect();
+        let table: Vec<Vec<[f32; 2]>> =
+            (0..2).map(|r| (0..3).map(|j| [(100 * r + 10 * j) as f32, 50.0]).collect()).collect();
+        let raw = |r: usize, j: usize| table[r][j].as_slice();
+        let acts: Vec<f32> = table.iter().flatten().flat_map(|a| a.map(|v| 2.0 * v / 511.0 - 1.0)).collect();
         let direct = wm.predict(
             hist.clone(),
             anchor.clone(),
@@ -153,19 +172,31 @@ mod tests {
         let hist = Tensor::<5>::random([2, 4, 3, 8, 8], Distribution::Default, &device);
         let anchor = hist.clone().narrow(1, 0, 1).reshape([2, 3, 8, 8]);
         let mut roll = Rollout::new(hist.clone(), anchor);
-        roll.step(&wm, 4, |_, _| [256.0, 256.0], &mut rngs()).unwrap();
+        roll.step(&wm, 4, |_, _| &[256.0, 256.0], &mut rngs()).unwrap();
         // A NaN in row 0's history spreads through the convolutions into its prediction.
         let nan = Tensor::<5>::full([1, 1, 3, 8, 8], f32::NAN, &device);
         roll.history = Tensor::cat(vec![nan, roll.history.clone().narrow(0, 1, 1).narrow(1, 0, 1)], 0)
             .expand([2, 4, 3, 8, 8]);
         let before = roll.history.clone();
-        let err = roll.step(&wm, 2, |_, _| [256.0, 256.0], &mut rngs()).unwrap_err();
-        assert_eq!(err, NonFiniteLatents { first: 4, end: 6 });
+        let err = roll.step(&wm, 2, |_, _| &[256.0, 256.0], &mut rngs()).unwrap_err();
+        assert_eq!(err, RolloutError::NonFinite(NonFiniteLatents { first: 4, end: 6 }));
         assert_eq!(err.to_string(), "the world model produced non-finite latents in generated frames 4..6");
         assert_eq!(roll.generated(), 4, "a failed step generates nothing");
         // A failed step keeps the history: row 1 as it was, row 0 still all NaN.
         let row = |t: &Tensor<5>, r: usize| t.clone().narrow(0, r, 1);
         assert!(row(&roll.history, 1).equal(row(&before, 1)).all().into_scalar::<bool>());
         assert!(row(&roll.history, 0).is_nan().all().into_scalar::<bool>());
+    }
+
+    #[test]
+    fn actions_of_another_size_are_an_error() {
+        let wm = model();
+        let device = wm.device().clone();
+        let hist = Tensor::<5>::random([1, 4, 3, 8, 8], Distribution::Default, &device);
+        let anchor = hist.clone().narrow(1, 0, 1).reshape([1, 3, 8, 8]);
+        let mut roll = Rollout::new(hist, anchor);
+        let err = roll.step(&wm, 1, |_, _| &[0.0; 7], &mut rngs()).unwrap_err();
+        assert_eq!(err.to_string(), "actions have 7 entries, the world model reads 2");
+        assert_eq!(roll.generated(), 0);
     }
 }

@@ -161,7 +161,7 @@ struct Stacked {
     targets: Vec<usize>,
     /// `[b]` anchor frame indices (each episode's first frame).
     anchors: Vec<usize>,
-    /// `[b, F, 2]` normalised actions.
+    /// `[b, F, action_dim]` normalised actions.
     act: Tensor<3>,
 }
 
@@ -176,7 +176,8 @@ fn stack(windows: &[Window], repeat: usize, device: &Device) -> Stacked {
         }
     }
     let f = windows.first().map_or(0, |w| w.targets.len());
-    let act = Tensor::from_data(TensorData::new(acts, [windows.len() * repeat, f, 2]), device);
+    let d = windows.first().map_or(0, |w| w.actions.len() / w.targets.len().max(1));
+    let act = Tensor::from_data(TensorData::new(acts, [windows.len() * repeat, f, d]), device);
     Stacked { hist, targets, anchors, act }
 }
 
@@ -235,9 +236,13 @@ pub fn train_world_model(
             message: format!("need episodes longer than {f} steps in both splits (every 10th is held out)"),
         });
     }
+    let scale = model_cfg.action_scale();
+    scale
+        .check(data.action_dim)
+        .map_err(|message| WorldModelError::Data { path: out.to_path_buf(), message })?;
     let stride = (held.len() / cfg.eval_windows.max(1)).max(1);
     let eval_windows: Vec<Window> =
-        held.iter().step_by(stride).take(cfg.eval_windows).map(|&t| window(data, t, k, f)).collect();
+        held.iter().step_by(stride).take(cfg.eval_windows).map(|&t| window(data, t, k, f, &scale)).collect();
     let mut latents = Latents::new(data, model_cfg.latents.clone(), codec);
     let mut unet: UNet = model_cfg.unet.init(&device);
     let mut optim = AdamWConfig::new().with_beta_1(0.9).with_beta_2(0.95).with_weight_decay(0.01).init();
@@ -302,7 +307,7 @@ pub fn train_world_model(
         let windows: Vec<Window> = (0..cfg.contexts)
             .map(|_| {
                 rng = splitmix64(rng);
-                window(data, starts[(rng % starts.len() as u64) as usize], k, f * chunks)
+                window(data, starts[(rng % starts.len() as u64) as usize], k, f * chunks, &scale)
             })
             .collect();
         let n = if objective == Objective::Drifting { cfg.samples } else { 1 };

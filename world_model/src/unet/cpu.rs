@@ -4,8 +4,8 @@
 //! about three quarters of `rank`'s time. burn-flex runs each factorised
 //! convolution as a 2-D convolution, four permutations and a 1-D convolution,
 //! and GroupNorm, FiLM and SiLU as separate passes over small tensors. Here
-//! activations stay channel-major, `[c, n, F, h, w]` (see [`crate::cpu_kernels`]):
-//! - a 3x3 spatial convolution is Winograd's F(2x2, 3x3) ([`crate::winograd_batch`]),
+//! activations stay channel-major, `[c, n, F, h, w]` (see [`kernels::matrix`]):
+//! - a 3x3 spatial convolution is Winograd's F(2x2, 3x3) ([`kernels::winograd_batch`]),
 //!   any other im2col + one GEMM per chunk of images;
 //! - the temporal convolution is one GEMM per (sample, tap) on column ranges
 //!   shifted by a frame;
@@ -23,13 +23,14 @@ use burn::nn::PaddingConfig2d;
 use super::blocks::{Attention, Conv3dF, ResBlock};
 use super::{Level, UNet};
 use crate::cpu_decoder::norm_of;
-use crate::cpu_kernels::{
-    Conv2dShape, Dense, Film, View, ViewMut, bias_values, group_norm_cols, matmul, matmul_strided, silu,
-    values,
-};
-use crate::direct_conv::{Norm, exp, winograd_enabled};
 use crate::error::UnsupportedLayer;
-use crate::winograd_batch::BatchWinograd;
+use crate::weights::{bias_values, dense_of, values};
+use kernels::attention::{Heads, attend};
+use kernels::direct_conv::{Norm, winograd_enabled};
+use kernels::matrix::{
+    Conv2dShape, Dense, Film, View, ViewMut, group_norm_cols, matmul, matmul_strided, silu,
+};
+use kernels::winograd_batch::BatchWinograd;
 
 /// Elements of one im2col chunk (16 MB of f32).
 const IM2COL_CHUNK: usize = 1 << 22;
@@ -233,7 +234,7 @@ impl Res {
         Ok(Self {
             norm1: norm_of(&r.norm1, &format!("{layer}.norm1"))?,
             conv1: Conv::new(&r.conv1, &format!("{layer}.conv1"))?,
-            film: Dense::new(&r.film, &format!("{layer}.film"))?,
+            film: dense_of(&r.film, &format!("{layer}.film"))?,
             norm2: norm_of(&r.norm2, &format!("{layer}.norm2"))?,
             conv2: Conv::new(&r.conv2, &format!("{layer}.conv2"))?,
             skip: r.skip.as_ref().map(|s| Conv::new(s, &format!("{layer}.skip"))).transpose()?,
@@ -288,73 +289,17 @@ impl Attn {
         })
     }
 
-    /// `x + proj(MHA(qkv(GN(x))))`, attention over each frame's `h·w` positions.
+    /// `x + proj(MHA(qkv(GN(x))))`, attention over each frame's `h·w` positions
+    /// ([`kernels::attention::attend`]).
     fn forward(&self, x: &Video) -> Video {
-        #[cfg(target_arch = "x86_64")]
-        if crate::elementwise::has_avx2_fma() {
-            // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
-            // requirement of calling a function compiled with those features.
-            #[allow(unsafe_code)]
-            return unsafe { self.forward_avx2(x) };
-        }
-        self.forward_impl(x)
-    }
-
-    /// [`Attn::forward`] compiled for AVX2 + FMA (its loops vectorise 8 wide).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn forward_avx2(&self, x: &Video) -> Video {
-        self.forward_impl(x)
-    }
-
-    /// Scores row by row (`q·k` accumulated over the head's channels), softmax, then the
-    /// values weighted through the transposed weights so every inner loop runs along
-    /// contiguous positions.
-    #[inline(always)]
-    fn forward_impl(&self, x: &Video) -> Video {
         let (c, t) = (x.c, x.h * x.w);
         let cols = x.cols();
         let mut y = x.data.clone();
         group_norm_cols(&mut y, &self.norm, x.n, x.f, t, None, |v| v);
         let mut qkv: Vec<f32> = self.qkv_b.iter().flat_map(|&b| std::iter::repeat_n(b, cols)).collect();
         matmul(3 * c, c, cols, &self.qkv_w, &y, &mut qkv, true); // [3c, cols]
-        let d = c / self.heads;
-        let scale = 1.0 / (d as f32).sqrt();
-        let mut o = vec![0.0; c * cols];
-        let mut attn = vec![0.0f32; t * t];
-        let mut attn_t = vec![0.0f32; t * t];
-        for img in 0..x.n * x.f {
-            for hd in 0..self.heads {
-                let row = |part: usize, dd: usize| &qkv[(part * c + hd * d + dd) * cols + img * t..][..t];
-                attn.fill(0.0);
-                for dd in 0..d {
-                    let (q, k) = (row(0, dd), row(1, dd));
-                    for (t1, &qv) in q.iter().enumerate() {
-                        let qv = qv * scale;
-                        attn[t1 * t..][..t].iter_mut().zip(k).for_each(|(a, &kv)| *a += qv * kv);
-                    }
-                }
-                for r in attn.chunks_mut(t) {
-                    let max = r.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-                    r.iter_mut().for_each(|v| *v = exp(*v - max));
-                    let sum: f32 = r.iter().sum();
-                    r.iter_mut().for_each(|v| *v /= sum);
-                }
-                // attn_t[t2][t1] = attn[t1][t2].
-                for (t1, r) in attn.chunks(t).enumerate() {
-                    for (t2, &a) in r.iter().enumerate() {
-                        attn_t[t2 * t + t1] = a;
-                    }
-                }
-                for dd in 0..d {
-                    let v = row(2, dd);
-                    let out = &mut o[(hd * d + dd) * cols + img * t..][..t];
-                    for (col, &vv) in attn_t.chunks(t).zip(v) {
-                        out.iter_mut().zip(col).for_each(|(ov, &a)| *ov += a * vv);
-                    }
-                }
-            }
-        }
+        let heads = Heads { channels: c, heads: self.heads, images: x.n * x.f, positions: t };
+        let o = attend(&qkv, heads); // [c, cols]
         let mut out = x.clone();
         for (r, &b) in out.data.chunks_mut(cols).zip(&self.proj_b) {
             r.iter_mut().for_each(|v| *v += b);

@@ -1,5 +1,5 @@
 //! Winograd F(2x2, 3x3) for channel-major batches of images, `[c, imgs, h, w]`:
-//! the 3x3 spatial convolutions of the CPU U-Net ([`crate::unet::cpu`]).
+//! the 3x3 spatial convolutions of the CPU U-Net (`world_model::unet::cpu`).
 //!
 //! Why: after the decoder, those convolutions (im2col + one GEMM) were the
 //! largest part of `rank`'s world-model time. Here every 4x4 input tile of a
@@ -15,7 +15,7 @@
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 
-use crate::cpu_kernels::matmul;
+use crate::matrix::matmul;
 use crate::winograd::{Winograd3x3, input_2d, output_2d, transform_filter};
 
 /// Floats per transformed buffer (`[16, c, tiles]`) per chunk of images: 8 MB.
@@ -216,7 +216,7 @@ fn transform_output(m: &[f32], c: usize, g: &Geometry, buf: &mut [f32], out: &mu
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cpu_kernels::Conv2dShape;
+    use crate::matrix::Conv2dShape;
 
     use crate::elementwise::test_values as values;
 

@@ -1,5 +1,5 @@
 //! Direct 3x3 convolution, GroupNorm + SiLU and nearest 2x upsampling on the
-//! CPU, in plain Rust: the kernels of [`crate::cpu_decoder`].
+//! CPU, in plain Rust: the kernels of the world model's decoder (`world_model::cpu_decoder`).
 //!
 //! Why: `rank` spends about half its CPU time decoding imagined latents, and
 //! burn-flex runs every conv2d as an im2col copy plus a small GEMM. This kernel

@@ -1,8 +1,7 @@
-//! Whole-batch CPU kernels shared by the inference paths that run without burn
-//! (the world model's U-Net in [`crate::unet::cpu`], the policies' U-Net and
-//! encoder): matrix products on the `gemm` crate, dense layers, GroupNorm with
-//! a fused activation and per-frame FiLM, and 2-D convolutions as im2col + one
-//! product per chunk of images.
+//! Whole-batch CPU kernels of the inference paths that run without burn (the
+//! world model's U-Net, the policies' U-Net and encoder): matrix products on the
+//! `gemm` crate, dense layers, GroupNorm with a fused activation and per-frame
+//! FiLM, and 2-D convolutions as im2col + one product per chunk of images.
 //!
 //! Activations are channel-major, `[c, n, l]` flattened: channel, then sample,
 //! then the sample's `l` positions (frames × pixels for video, time steps for
@@ -10,42 +9,7 @@
 //! `W [c_out, c_in·k] × columns [c_in·k, n·l]`, and concatenating channels is
 //! concatenating buffers.
 
-use burn::module::{ModuleMapper, Param};
-use burn::nn::Linear;
-use burn::tensor::{Distribution, Tensor};
-
-use crate::direct_conv::{Norm, exp};
-use crate::elementwise::mean_var;
-use crate::error::UnsupportedLayer;
-
-/// A burn tensor's values as f32, or why not.
-pub fn values<const D: usize>(t: Tensor<D>, layer: &str) -> Result<Vec<f32>, UnsupportedLayer> {
-    t.into_data().try_to_vec::<f32>().map_err(|e| UnsupportedLayer::new(layer, format!("{e:?}")))
-}
-
-/// A bias's values, zeros when the layer has none.
-pub fn bias_values(
-    b: &Option<Param<Tensor<1>>>,
-    n: usize,
-    layer: &str,
-) -> Result<Vec<f32>, UnsupportedLayer> {
-    b.as_ref().map_or(Ok(vec![0.0; n]), |b| values(b.val(), layer))
-}
-
-/// Adds N(0, 0.1) to every weight of a module. The kernels' tests compare them with
-/// burn on jittered networks, so that init values (GroupNorm's γ = 1 and β = 0, identity
-/// temporal convolutions, zero-initialised layers) become distinct and a mis-wired
-/// tap, affine or FiLM half shows.
-pub struct Jitter;
-
-impl ModuleMapper for Jitter {
-    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-        param.map(|t| {
-            let noise = Tensor::random(t.shape(), Distribution::Normal(0.0, 0.1), &t.device());
-            t + noise
-        })
-    }
-}
+use crate::elementwise::{Norm, exp, mean_var};
 
 /// A matrix view: the slice, and the distance between rows (columns are adjacent).
 #[derive(Clone, Copy)]
@@ -139,14 +103,20 @@ pub struct Dense {
 }
 
 impl Dense {
-    /// Copies a burn [`Linear`].
+    /// A layer of `din` inputs and `dout` outputs: `w` in burn's layout `[d_in, d_out]`
+    /// (row-major), `b` of `dout`.
     ///
-    /// # Errors
-    /// [`UnsupportedLayer`] for non-f32 weights.
-    pub fn new(l: &Linear, layer: &str) -> Result<Self, UnsupportedLayer> {
-        let w = l.weight.val(); // [d_in, d_out]
-        let [din, dout] = w.dims();
-        Ok(Self { din, dout, w: values(w, layer)?, b: bias_values(&l.bias, dout, layer)? })
+    /// # Panics
+    /// When the sizes disagree (a caller's bug, not bad input: callers copy them from
+    /// one layer).
+    pub fn from_parts(din: usize, dout: usize, w: Vec<f32>, b: Vec<f32>) -> Self {
+        assert!(
+            w.len() == din * dout && b.len() == dout,
+            "dense layer of {din} x {dout}: {} weights, {} biases",
+            w.len(),
+            b.len()
+        );
+        Self { din, dout, w, b }
     }
 
     /// Output size.

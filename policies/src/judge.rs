@@ -1,0 +1,269 @@
+//! A learned judge of imagined frames: a small CNN that reads one frame and
+//! estimates the raw score the task would give the scene it shows (Push-T: the
+//! goal coverage; robomimic: the probability of success).
+//!
+//! It implements [`harness::judge::Judge`], so `rank --judge DIR` can score the
+//! imagined branch with it instead of the task's hand-written pixel rules, and the
+//! engine reports its error against the exact score on the simulator branch's real
+//! frames in every run, as it does for any judge. It is trained by
+//! `evalharness train judge` ([`crate::judge_train`]) on simulator frames labelled
+//! with the exact score.
+//!
+//! The network is the diffusion policy's frame encoder ([`ObsEncoder`]: 4 stride-2
+//! convolutions with GroupNorm residual blocks, a linear layer to `feature_dim`)
+//! and a linear head to one logit; the score is its sigmoid. Inference runs the
+//! encoder on the project's CPU kernels ([`CpuEncoder`]) on the Flex device.
+//!
+//! A judge folder holds `judge.json` ([`JudgeFile`]) and `model.bpk` (f16 weights).
+
+use std::path::Path;
+
+use burn::module::Module;
+use burn::nn::{Linear, LinearConfig};
+use burn::tensor::{Device, Tensor};
+use harness::judge::Judge;
+use serde::{Deserialize, Serialize};
+
+use crate::cpu_encoder::CpuEncoder;
+use crate::diffusion::{frames_to_tensor, frames_to_vec};
+use crate::dir::{PolicyLoadError, load_weights, save_f16};
+use crate::net::{NetConfig, ObsEncoder};
+
+/// The judge's network: frame encoder and a one-logit head.
+#[derive(Module, Debug)]
+pub struct JudgeNet {
+    /// The frame encoder.
+    pub encoder: ObsEncoder,
+    /// Features to one logit.
+    pub head: Linear,
+}
+
+impl JudgeNet {
+    /// Fresh weights for `cfg` (its image size, encoder width and feature size).
+    pub fn new(cfg: &NetConfig, device: &Device) -> Self {
+        Self {
+            encoder: ObsEncoder::new(cfg, device),
+            head: LinearConfig::new(cfg.feature_dim, 1).init(device),
+        }
+    }
+
+    /// # Shapes
+    /// `[n, 3, s, s]` in [-1, 1] → `[n, 1]` logits
+    pub fn forward(&self, frames: Tensor<4>) -> Tensor<2> {
+        self.head.forward(self.encoder.forward(frames))
+    }
+}
+
+/// What a judge was trained to read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Label {
+    /// Push-T's goal coverage in [0, 1] (`data/coverage`).
+    Coverage,
+    /// robomimic's success, 0 or 1 (`data/success`).
+    Success,
+}
+
+impl Label {
+    /// The per-step dataset array holding the label.
+    pub fn array(self) -> &'static str {
+        match self {
+            Self::Coverage => "coverage",
+            Self::Success => "success",
+        }
+    }
+}
+
+/// How well a judge reads a set of real frames.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JudgeMetrics {
+    /// Frames judged.
+    pub frames: usize,
+    /// Frames whose label is above the threshold.
+    pub positives: usize,
+    /// Mean |estimate − label|.
+    pub mean_abs_error: f64,
+    /// Fraction of frames on the label's side of the threshold.
+    pub accuracy: f64,
+    /// Of the frames above the threshold, the fraction the judge puts above it.
+    pub recall: Option<f64>,
+    /// Of the frames the judge puts above the threshold, the fraction truly above it.
+    pub precision: Option<f64>,
+}
+
+/// `judge.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JudgeFile {
+    /// Always `"learned"`.
+    pub kind: String,
+    /// The encoder's configuration (image size, width, feature size; the rest unused).
+    pub net: NetConfig,
+    /// What it estimates.
+    pub label: Label,
+    /// The raw value above which an episode succeeds (0.95 coverage, 0.5 success).
+    pub threshold: f64,
+    /// Training steps done.
+    pub steps: u64,
+    /// Its reading of the held-out episodes' frames.
+    pub heldout: JudgeMetrics,
+    /// How it was made: command, dataset and its fingerprint, seed, commit.
+    pub provenance: serde_json::Value,
+}
+
+/// Writes a judge folder (`judge.json` + `model.bpk`), each file atomically.
+///
+/// # Errors
+/// [`PolicyLoadError`] naming the file that could not be written.
+pub fn write_judge(dir: &Path, net: &JudgeNet, file: &JudgeFile) -> Result<(), PolicyLoadError> {
+    std::fs::create_dir_all(dir).map_err(|e| PolicyLoadError::new(dir, e.to_string()))?;
+    let weights = dir.join("model.bpk");
+    let tmp = dir.join(".model.bpk.tmp");
+    save_f16(net, &tmp).map_err(|e| PolicyLoadError::new(&weights, e))?;
+    std::fs::rename(&tmp, &weights).map_err(|e| PolicyLoadError::new(&weights, e.to_string()))?;
+    let text = serde_json::to_string_pretty(file).unwrap_or_default() + "\n";
+    harness::runfile::write_atomic(&dir.join("judge.json"), &text)
+        .map_err(|e| PolicyLoadError::new(&e.path, e.message))
+}
+
+/// A trained judge, for inference.
+pub struct LearnedJudge {
+    /// Its `judge.json`.
+    pub file: JudgeFile,
+    net: JudgeNet,
+    /// The encoder on direct CPU kernels (Flex device), with the head's weights.
+    cpu: Option<(CpuEncoder, Vec<f32>, f32)>,
+    device: Device,
+}
+
+impl LearnedJudge {
+    /// Loads a judge folder.
+    ///
+    /// # Errors
+    /// [`PolicyLoadError`] naming the folder for a missing or invalid `judge.json`,
+    /// or weights that are missing, truncated or do not match it.
+    pub fn load(dir: &Path, device: &Device) -> Result<Self, PolicyLoadError> {
+        let err = |m: String| PolicyLoadError::new(dir, m);
+        let path = dir.join("judge.json");
+        let text = std::fs::read_to_string(&path).map_err(|e| err(format!("judge.json: {e}")))?;
+        let file: JudgeFile = serde_json::from_str(&text).map_err(|e| err(format!("judge.json: {e}")))?;
+        if file.kind != "learned" {
+            return Err(err(format!("judge.json: kind \"{}\", expected \"learned\"", file.kind)));
+        }
+        let net = load_weights(JudgeNet::new(&file.net, device), &dir.join("model.bpk"))
+            .map_err(|e| err(format!("model.bpk: {e}")))?;
+        Ok(Self::new(file, net, device))
+    }
+
+    /// Wraps trained weights.
+    pub fn new(file: JudgeFile, net: JudgeNet, device: &Device) -> Self {
+        let cpu = (*device == Device::flex())
+            .then(|| {
+                let enc = CpuEncoder::new(&net.encoder)
+                    .inspect_err(|e| tracing::warn!("judge: burn's encoder kept: {e}"))
+                    .ok()?;
+                let w = net.head.weight.val().into_data().convert::<f32>().try_into_vec::<f32>().ok()?;
+                let b = match &net.head.bias {
+                    Some(b) => b.val().into_data().convert::<f32>().try_into_vec::<f32>().ok()?[0],
+                    None => 0.0,
+                };
+                Some((enc, w, b))
+            })
+            .flatten();
+        Self { file, net, cpu, device: device.clone() }
+    }
+
+    /// The frame side it reads.
+    pub fn image_size(&self) -> usize {
+        self.file.net.image_size
+    }
+
+    /// Estimates for `frames` (each `s x s x 3` bytes), in [0, 1].
+    pub fn score_frames(&self, frames: &[&[u8]]) -> Vec<f64> {
+        let s = self.image_size();
+        let logits: Vec<f32> = match &self.cpu {
+            Some((enc, w, b)) => {
+                let feat = enc.forward(&frames_to_vec(frames, s), frames.len(), s); // [n, f]
+                let f = w.len();
+                feat.chunks(f).map(|x| x.iter().zip(w).map(|(a, c)| a * c).sum::<f32>() + b).collect()
+            }
+            None => self
+                .net
+                .forward(frames_to_tensor(frames, s, &self.device))
+                .into_data()
+                .convert::<f32>()
+                .try_into_vec::<f32>()
+                .unwrap_or_default(),
+        };
+        logits.into_iter().map(|z| 1.0 / (1.0 + (-f64::from(z)).exp())).collect()
+    }
+}
+
+impl Judge for LearnedJudge {
+    fn score(&self, frame: &[u8]) -> f64 {
+        let s = self.image_size();
+        if frame.len() != s * s * 3 {
+            // The engine checks the world model's frame size against the judge's at
+            // start-up; a frame of another size here is a bug, and scores nothing.
+            return f64::NAN;
+        }
+        self.score_frames(&[frame])[0]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn file(net: NetConfig) -> JudgeFile {
+        JudgeFile {
+            kind: "learned".into(),
+            net,
+            label: Label::Coverage,
+            threshold: 0.95,
+            steps: 0,
+            heldout: JudgeMetrics::default(),
+            provenance: serde_json::Value::Null,
+        }
+    }
+
+    #[test]
+    fn cpu_kernels_and_burn_agree_and_a_saved_judge_loads() {
+        let device = Device::flex();
+        let cfg = NetConfig::new().with_encoder_width(8).with_feature_dim(16);
+        let net = JudgeNet::new(&cfg, &device);
+        let frames: Vec<Vec<u8>> =
+            (0..3).map(|k| (0..96 * 96 * 3).map(|i| ((i * 7 + k * 31) % 256) as u8).collect()).collect();
+        let refs: Vec<&[u8]> = frames.iter().map(Vec::as_slice).collect();
+        let burn: Vec<f64> = net
+            .forward(frames_to_tensor(&refs, 96, &device))
+            .into_data()
+            .convert::<f32>()
+            .try_into_vec::<f32>()
+            .unwrap()
+            .into_iter()
+            .map(|z| 1.0 / (1.0 + (-f64::from(z)).exp()))
+            .collect();
+        let judge = LearnedJudge::new(file(cfg.clone()), net.clone(), &device);
+        assert!(judge.cpu.is_some());
+        let cpu = judge.score_frames(&refs);
+        for (a, b) in cpu.iter().zip(&burn) {
+            assert!((a - b).abs() < 1e-4, "{cpu:?} vs {burn:?}");
+        }
+        // One frame alone: the same estimate up to the batched products' rounding.
+        assert!((judge.score(&frames[1]) - cpu[1]).abs() < 1e-6);
+        assert!(judge.score(&[0u8; 12]).is_nan());
+        // Saved in f16 and loaded back: the same estimates to f16 rounding.
+        let dir = std::env::temp_dir().join(format!("evalharness-judge-{}", std::process::id()));
+        write_judge(&dir, &net, &file(cfg)).unwrap();
+        let back = LearnedJudge::load(&dir, &device).unwrap();
+        for (a, b) in back.score_frames(&refs).iter().zip(&cpu) {
+            assert!((a - b).abs() < 1e-2, "{a} vs {b}");
+        }
+        std::fs::write(dir.join("model.bpk"), b"truncated").unwrap();
+        let e = LearnedJudge::load(&dir, &device).err().unwrap().to_string();
+        assert!(e.contains("model.bpk") && e.contains("evalharness-judge"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

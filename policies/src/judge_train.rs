@@ -1,0 +1,272 @@
+//! Training a learned judge ([`crate::judge`]) on simulator frames labelled with the
+//! exact score: Push-T's `data/coverage`, robomimic's `data/success`.
+//!
+//! Every 10th episode (index % 10 == 9) is held out; the judge's reading of those
+//! frames ([`JudgeMetrics`]: mean absolute error, accuracy, recall and precision at
+//! the success threshold) is logged while training and stored in `judge.json`.
+//! Successes are rare in most datasets (a frame above coverage 0.95, a lifted
+//! cube), so by default half of each batch is drawn from the frames above the
+//! threshold. The loss is binary cross-entropy against the label, which for
+//! coverage is a soft target in [0, 1]. Push-T frames can be augmented with the 8
+//! symmetries of the square world ([`augment_frame`]): coverage is invariant under
+//! them, since block and goal move together.
+//!
+//! Training takes minutes, so a stopped run (Ctrl-C or `--max-minutes`) does not
+//! resume: it writes nothing, and the folder is written, atomically, only when the
+//! run completes.
+
+use std::io::Write;
+use std::path::Path;
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::optim::{AdamWConfig, GradientsParams};
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Tensor, TensorData};
+use harness::replay::ReplayReader;
+use harness::rng::Rng;
+use harness::seed::derive;
+use serde::{Deserialize, Serialize};
+
+use crate::diffusion::frames_to_tensor;
+use crate::dir::PolicyLoadError;
+use crate::judge::{JudgeFile, JudgeMetrics, JudgeNet, Label, LearnedJudge};
+use crate::pretrain::augment_frame;
+
+/// Linear warm-up steps of the learning rate.
+const WARMUP: u64 = 100;
+/// Held-out frames evaluated at most (evenly spaced).
+const EVAL_FRAMES: usize = 2048;
+
+/// Frames and labels of a dataset.
+pub struct JudgeData {
+    /// `n x s x s x 3` bytes.
+    pub frames: Vec<u8>,
+    /// `n` labels.
+    pub labels: Vec<f32>,
+    /// Frame side.
+    pub size: usize,
+    /// Step ranges of each episode.
+    pub episodes: Vec<std::ops::Range<usize>>,
+}
+
+impl JudgeData {
+    /// Loads the first `limit` episodes (all if `None`) of a dataset with its
+    /// `data/<label>` array.
+    ///
+    /// # Errors
+    /// [`PolicyLoadError`] naming the dataset for an unreadable layout, a missing
+    /// label array, non-finite labels or no episodes.
+    pub fn load(path: &Path, label: Label, limit: Option<usize>) -> Result<Self, PolicyLoadError> {
+        let err = |m: String| PolicyLoadError::new(path, m);
+        let r = ReplayReader::open(path).map_err(|e| err(e.to_string()))?;
+        let Some(all) = r.extra(label.array()).map_err(|e| err(e.to_string()))? else {
+            return Err(err(format!("no data/{} array to learn from", label.array())));
+        };
+        if let Some(t) = all.iter().position(|v| !v.is_finite()) {
+            return Err(err(format!("data/{} is not finite at step {t}", label.array())));
+        }
+        let n = limit.unwrap_or(usize::MAX).min(r.episodes());
+        if n == 0 {
+            return Err(err("no episodes".into()));
+        }
+        let episodes: Vec<_> = (0..n).map(|i| r.episode_range(i)).collect();
+        let end = episodes.last().map_or(0, |e| e.end);
+        let frames = r.img.read_rows(0, end).map_err(|e| err(e.to_string()))?;
+        let labels = all[..end].iter().map(|&v| v as f32).collect();
+        Ok(Self { frames, labels, size: r.img.meta.shape[1], episodes })
+    }
+
+    /// Frame `i`.
+    pub fn frame(&self, i: usize) -> &[u8] {
+        let n = self.size * self.size * 3;
+        &self.frames[i * n..(i + 1) * n]
+    }
+
+    /// Steps of the training and held-out episodes (every 10th episode is held out).
+    pub fn split(&self) -> (Vec<usize>, Vec<usize>) {
+        let mut sets = (Vec::new(), Vec::new());
+        for (e, r) in self.episodes.iter().enumerate() {
+            if e % 10 == 9 { sets.1.extend(r.clone()) } else { sets.0.extend(r.clone()) }
+        }
+        sets
+    }
+}
+
+/// Training hyper-parameters (written into `judge.json`'s provenance).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JudgeTrainConfig {
+    /// Optimiser steps.
+    pub steps: u64,
+    /// Frames per step.
+    pub batch: usize,
+    /// Peak learning rate (AdamW).
+    pub lr: f64,
+    /// Seed of the weights and the frame order.
+    pub seed: u64,
+    /// Draw half of each batch from frames above the threshold.
+    pub balance: bool,
+    /// Augment with the 8 symmetries of the square (Push-T only).
+    pub symmetries: bool,
+    /// Evaluate on the held-out frames every this many steps.
+    pub eval_every: u64,
+}
+
+/// Mean binary cross-entropy of `logits` against soft `targets` in [0, 1]:
+/// max(z, 0) − y·z + log(1 + e^−|z|), stable for any logit.
+///
+/// # Shapes
+/// `logits, targets: [n, 1]` → `[1]`
+pub fn bce_with_logits(logits: Tensor<2>, targets: Tensor<2>) -> Tensor<1> {
+    let softplus_neg_abs = logits.clone().abs().neg().exp().add_scalar(1.0).log();
+    (relu(logits.clone()) - targets * logits + softplus_neg_abs).mean()
+}
+
+/// The judge's reading of `steps` (up to [`EVAL_FRAMES`], evenly spaced).
+pub fn evaluate(judge: &LearnedJudge, data: &JudgeData, steps: &[usize], threshold: f64) -> JudgeMetrics {
+    let pick: Vec<usize> = if steps.len() <= EVAL_FRAMES {
+        steps.to_vec()
+    } else {
+        (0..EVAL_FRAMES).map(|k| steps[k * steps.len() / EVAL_FRAMES]).collect()
+    };
+    let mut est = Vec::with_capacity(pick.len());
+    for part in pick.chunks(64) {
+        let frames: Vec<&[u8]> = part.iter().map(|&i| data.frame(i)).collect();
+        est.extend(judge.score_frames(&frames));
+    }
+    metrics(&est, &pick.iter().map(|&i| f64::from(data.labels[i])).collect::<Vec<_>>(), threshold)
+}
+
+/// [`JudgeMetrics`] of estimates against labels.
+pub fn metrics(est: &[f64], labels: &[f64], threshold: f64) -> JudgeMetrics {
+    let n = est.len().min(labels.len());
+    let (mut abs, mut right, mut tp, mut pos, mut said) = (0.0, 0usize, 0usize, 0usize, 0usize);
+    for (&e, &y) in est.iter().zip(labels) {
+        abs += (e - y).abs();
+        let (pe, py) = (e > threshold, y > threshold);
+        right += usize::from(pe == py);
+        tp += usize::from(pe && py);
+        pos += usize::from(py);
+        said += usize::from(pe);
+    }
+    let frac = |a: usize, b: usize| (b > 0).then(|| a as f64 / b as f64);
+    JudgeMetrics {
+        frames: n,
+        positives: pos,
+        mean_abs_error: if n > 0 { abs / n as f64 } else { 0.0 },
+        accuracy: frac(right, n).unwrap_or(0.0),
+        recall: frac(tp, pos),
+        precision: frac(tp, said),
+    }
+}
+
+/// Trains a judge of `data`'s label with the network and threshold of `judge`
+/// (the folder's `judge.json` as it will be written); returns it (inference
+/// device) and its held-out metrics, or `None` when stopped before the last step.
+///
+/// # Errors
+/// [`PolicyLoadError`] naming `log` for an unwritable log, or the dataset for a
+/// non-finite loss (naming the step) or too few episodes to hold any out.
+#[allow(clippy::too_many_arguments)]
+pub fn train_judge(
+    data: &JudgeData,
+    dataset: &Path,
+    judge: &JudgeFile,
+    cfg: &JudgeTrainConfig,
+    log: &Path,
+    deadline: Option<Instant>,
+    inner: &Device,
+    on_step: &mut dyn FnMut(u64, f64),
+) -> Result<Option<(JudgeNet, JudgeMetrics)>, PolicyLoadError> {
+    let err = |m: String| PolicyLoadError::new(dataset, m);
+    let threshold = judge.threshold;
+    let (train, held) = data.split();
+    if train.is_empty() || held.is_empty() {
+        return Err(err(format!(
+            "{} episodes: need at least 10, every 10th is held out for evaluation",
+            data.episodes.len()
+        )));
+    }
+    let positives: Vec<usize> =
+        train.iter().copied().filter(|&i| f64::from(data.labels[i]) > threshold).collect();
+    if cfg.balance && positives.is_empty() {
+        tracing::warn!("no training frame is above the threshold {threshold}; batches are not balanced");
+    }
+    let device = inner.clone().autodiff();
+    device.seed(derive(cfg.seed, &[0x6a75_6467]));
+    let mut net = JudgeNet::new(&judge.net, &device);
+    let mut optim = AdamWConfig::new().with_weight_decay(1e-6).init();
+    let mut logf = std::fs::File::create(log).map_err(|e| PolicyLoadError::new(log, e.to_string()))?;
+    let s = data.size;
+    let eval = |net: &JudgeNet| {
+        evaluate(&LearnedJudge::new(judge.clone(), net.valid(), inner), data, &held, threshold)
+    };
+    for step in 0..cfg.steps {
+        if deadline.is_some_and(|d| Instant::now() >= d) || harness::stop::requested() {
+            return Ok(None);
+        }
+        let mut rng = Rng::new(derive(cfg.seed, &[step]));
+        let idx: Vec<(usize, u8)> = (0..cfg.batch)
+            .map(|j| {
+                let pool =
+                    if cfg.balance && !positives.is_empty() && j % 2 == 1 { &positives } else { &train };
+                let k = if cfg.symmetries { rng.below(8) as u8 } else { 0 };
+                (pool[rng.below(pool.len() as u64) as usize], k)
+            })
+            .collect();
+        let owned: Vec<Vec<u8>> = idx.iter().map(|&(i, k)| augment_frame(data.frame(i), s, k)).collect();
+        let frames: Vec<&[u8]> = owned.iter().map(Vec::as_slice).collect();
+        let y: Vec<f32> = idx.iter().map(|&(i, _)| data.labels[i].clamp(0.0, 1.0)).collect();
+        let y = Tensor::from_data(TensorData::new(y, [cfg.batch, 1]), &device);
+        let loss = bce_with_logits(net.forward(frames_to_tensor(&frames, s, &device)), y);
+        let lv: f64 = loss.clone().into_scalar::<f32>().into();
+        if !lv.is_finite() {
+            return Err(err(format!("non-finite judge loss at step {step}")));
+        }
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        let lr = cfg.lr * ((step + 1) as f64 / WARMUP as f64).min(1.0);
+        net = optim.step(lr, net, grads);
+        on_step(step + 1, lv);
+        let last = step + 1 == cfg.steps;
+        if (step + 1).is_multiple_of(cfg.eval_every.max(1)) || last {
+            let m = eval(&net);
+            let line = serde_json::json!({"step": step + 1, "loss": lv, "heldout": m});
+            writeln!(logf, "{line}").map_err(|e| PolicyLoadError::new(log, e.to_string()))?;
+            if last {
+                return Ok(Some((net.valid(), m)));
+            }
+        }
+    }
+    Ok(None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metrics_count_each_side_of_the_threshold() {
+        // Threshold 0.5. Labels 1, 1, 0, 0; estimates 0.9 (TP), 0.2 (FN), 0.7 (FP), 0.1 (TN).
+        // |errors| 0.1 + 0.8 + 0.7 + 0.1 = 1.7, mean 0.425; accuracy 2/4; recall 1/2; precision 1/2.
+        let m = metrics(&[0.9, 0.2, 0.7, 0.1], &[1.0, 1.0, 0.0, 0.0], 0.5);
+        assert_eq!((m.frames, m.positives), (4, 2));
+        assert!((m.mean_abs_error - 0.425).abs() < 1e-12);
+        assert_eq!((m.accuracy, m.recall, m.precision), (0.5, Some(0.5), Some(0.5)));
+        // Nothing above the threshold: no recall; nothing said above it: no precision.
+        let m = metrics(&[0.1], &[0.2], 0.5);
+        assert_eq!((m.accuracy, m.recall, m.precision), (1.0, None, None));
+    }
+
+    #[test]
+    fn bce_matches_its_definition() {
+        let device = Device::flex();
+        // z = 2, y = 1: max(2, 0) − 1·2 + log(1 + e^−2) = 0.126928;
+        // z = −3, y = 0.25: max(−3, 0) − 0.25·(−3) + log(1 + e^−3) = 0.75 + 0.048587 = 0.798587.
+        // Mean (0.126928 + 0.798587) / 2 = 0.462758.
+        let z = Tensor::<2>::from_floats([[2.0], [-3.0]], &device);
+        let y = Tensor::<2>::from_floats([[1.0], [0.25]], &device);
+        let v: f32 = bce_with_logits(z, y).into_scalar();
+        assert!((f64::from(v) - 0.462_758).abs() < 1e-5, "{v}");
+    }
+}

@@ -1,0 +1,146 @@
+//! `evalharness train judge`: trains a learned judge of imagined frames on a
+//! dataset's frames and its exact per-step label, and writes the judge folder
+//! (`judge.json` with its held-out metrics and provenance, `model.bpk`,
+//! `log.jsonl`) only once training is complete.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use policies::judge::{JudgeFile, JudgeMetrics, Label, write_judge};
+use policies::judge_train::{JudgeData, JudgeTrainConfig, train_judge};
+use policies::net::NetConfig;
+use serde_json::json;
+
+use super::git_commit;
+use super::train::dataset_origin;
+use crate::cli::{JudgeLabelArg, TrainJudgeArgs};
+use crate::progress;
+
+/// The label `--label` names, or the one the dataset has (coverage first).
+fn label_of(a: &TrainJudgeArgs) -> Result<Label> {
+    if let Some(l) = a.label {
+        return Ok(match l {
+            JudgeLabelArg::Coverage => Label::Coverage,
+            JudgeLabelArg::Success => Label::Success,
+        });
+    }
+    let r = harness::replay::ReplayReader::open(&a.data)
+        .with_context(|| format!("--data {}", a.data.display()))?;
+    let names = r.extra_names().with_context(|| format!("--data {}", a.data.display()))?;
+    [Label::Coverage, Label::Success].into_iter().find(|l| names.iter().any(|n| n == l.array())).with_context(
+        || format!("--data {}: no data/coverage or data/success array to learn from", a.data.display()),
+    )
+}
+
+/// `OUT.partial`, where the judge is written before it replaces `OUT`.
+fn partial(out: &Path) -> PathBuf {
+    let mut name = out.file_name().unwrap_or_default().to_os_string();
+    name.push(".partial");
+    out.with_file_name(name)
+}
+
+/// `evalharness train judge`.
+pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
+    if a.steps == 0 || a.batch == 0 || a.eval_every == 0 {
+        bail!("--steps, --batch and --eval-every must be positive");
+    }
+    if !(a.lr.is_finite() && a.lr > 0.0) {
+        bail!("--lr {}: must be a positive number", a.lr);
+    }
+    if !a.data.exists() {
+        bail!("--data {}: no such file or folder", a.data.display());
+    }
+    crate::output::check_apart(&a.out, &[("--data", &a.data)])?;
+    if a.out.exists() && !a.force {
+        bail!(
+            "{} already exists (pass --force to replace it once the new judge is complete)",
+            a.out.display()
+        );
+    }
+    let label = label_of(a)?;
+    let threshold = match label {
+        Label::Coverage => 0.95,
+        Label::Success => 0.5,
+    };
+    tracing::info!(data = %a.data.display(), ?label, "loading frames");
+    let data = JudgeData::load(&a.data, label, a.episodes)?;
+    let frames = data.labels.len();
+    tracing::info!(episodes = data.episodes.len(), frames, "loaded");
+    let net = NetConfig::new()
+        .with_image_size(data.size)
+        .with_encoder_width(a.encoder_width)
+        .with_feature_dim(a.feature_dim);
+    let cfg = JudgeTrainConfig {
+        steps: a.steps,
+        batch: a.batch,
+        lr: a.lr,
+        seed: a.seed,
+        balance: !a.no_balance,
+        symmetries: a.symmetries,
+        eval_every: a.eval_every,
+    };
+    let args: Vec<String> = std::env::args().collect();
+    let mut file = JudgeFile {
+        kind: "learned".into(),
+        net,
+        label,
+        threshold,
+        steps: a.steps,
+        heldout: JudgeMetrics::default(),
+        provenance: json!({
+            "command": args.join(" "),
+            "commit": git_commit(),
+            "seed": a.seed,
+            "train": cfg,
+            "data": {
+                "path": a.data.display().to_string(),
+                "fingerprint": harness::fingerprint::folder(&a.data).ok(),
+                "episodes": data.episodes.len(),
+                "frames": frames,
+                "held_out": "episodes with index % 10 == 9",
+                "collected_with": dataset_origin(&a.data),
+            },
+        }),
+    };
+    let tmp = partial(&a.out);
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp)
+            .with_context(|| format!("removing the unfinished {}", tmp.display()))?;
+    }
+    std::fs::create_dir_all(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
+    let deadline = a.max_minutes.map(|m| Instant::now() + Duration::from_secs_f64(m.max(0.0) * 60.0));
+    let pb = progress::bar(a.steps, "judge", quiet);
+    let device = world_model::device::selected()?;
+    let outcome =
+        train_judge(&data, &a.data, &file, &cfg, &tmp.join("log.jsonl"), deadline, &device, &mut |s, l| {
+            pb.set_position(s);
+            pb.set_message(format!("loss {l:.4}"));
+        });
+    pb.finish_and_clear();
+    let Some((net, heldout)) = outcome? else {
+        std::fs::remove_dir_all(&tmp).ok();
+        bail!("stopped before step {}; nothing was written (a judge trains in one go)", a.steps);
+    };
+    file.heldout = heldout;
+    write_judge(&tmp, &net, &file)?;
+    if a.out.exists() {
+        std::fs::remove_dir_all(&a.out).with_context(|| format!("replacing {}", a.out.display()))?;
+    }
+    std::fs::rename(&tmp, &a.out)
+        .with_context(|| format!("moving {} to {}", tmp.display(), a.out.display()))?;
+    let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));
+    println!(
+        "judge of {}: held-out {} frames ({} above {threshold}): mean abs error {:.4}, accuracy {}, recall {}, precision {} -> {}",
+        label.array(),
+        heldout.frames,
+        heldout.positives,
+        heldout.mean_abs_error,
+        pct(Some(heldout.accuracy)),
+        pct(heldout.recall),
+        pct(heldout.precision),
+        a.out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,71 @@
+//! `train judge` and `rank --judge`, on the pipeline test's tiny dataset, world model
+//! and policies (called from `pipeline_end_to_end`).
+
+use std::path::Path;
+
+use crate::util::{expect_code, read_json, run};
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Trains a tiny coverage judge on `data`, ranks `set` with it, and checks the refusals.
+pub fn check(dir: &Path, data: &Path, wm: &Path, set: &Path) {
+    let judge = dir.join("judge");
+    let train = ["train", "judge", "--data", s(data), "--out", s(&judge)];
+    let tiny =
+        ["--steps", "3", "--batch", "4", "--encoder-width", "8", "--feature-dim", "8", "--eval-every", "2"];
+    let (stdout, _) = expect_code(&run(&[&train[..], &tiny[..]].concat()), 0);
+    assert!(stdout.contains("judge of coverage: held-out 68 frames"), "{stdout}");
+    let file = read_json(&judge.join("judge.json"));
+    // The dataset's coverage array is the label, success above 0.95; episode 9 (68
+    // frames) is held out, and its reading is stored with the provenance.
+    assert_eq!((file["label"].as_str(), file["threshold"].as_f64()), (Some("coverage"), Some(0.95)));
+    assert_eq!(file["heldout"]["frames"], 68);
+    assert!(file["heldout"]["mean_abs_error"].as_f64().unwrap().is_finite());
+    assert_eq!(file["provenance"]["data"]["episodes"], 10);
+    assert_eq!(file["provenance"]["train"]["steps"], 3);
+    // Evaluations at steps 2 and 3 (the last).
+    let log = std::fs::read_to_string(judge.join("log.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), 2, "{log}");
+    // An existing judge is kept without --force; with it, replaced once the new one is done.
+    let (_, err) = expect_code(&run(&[&train[..], &tiny[..]].concat()), 2);
+    assert!(err.contains("already exists"), "{err}");
+    expect_code(&run(&[&train[..], &tiny[..], &["--force"]].concat()), 0);
+    assert!(!dir.join("judge.partial").exists());
+    // A label the dataset lacks is named.
+    let (_, err) =
+        expect_code(&run(&[&train[..], &tiny[..], &["--force", "--label", "success"]].concat()), 2);
+    assert!(err.contains("data/success"), "{err}");
+    assert!(judge.join("judge.json").is_file(), "the old judge stays when the new one fails");
+
+    // rank --judge: the learned judge scores the imagined frames; its error on the
+    // simulator branch's real frames is reported as for any judge.
+    let out = dir.join("rank_judge");
+    let rank = ["rank", "--policies", s(set), "--world-model", s(wm), "--episodes", "2", "--max-steps", "8"];
+    let args =
+        [&rank[..], &["--bootstrap", "20", "--no-report", "--judge", s(&judge), "--out", s(&out)]].concat();
+    expect_code(&run(&args), 0);
+    let config = read_json(&out.join("config.json"));
+    assert_eq!(config["judge"]["label"], "coverage");
+    assert!(config["fingerprints"]["judge"].is_string(), "{config}");
+    let res = read_json(&out.join("results.json"));
+    let err = res["policies"][0]["frame_scorer_mean_abs_error"].as_f64();
+    assert!(err.is_some_and(|e| (0.0..=1.0).contains(&e)), "{res}");
+    // A judge of another label, or a folder without a judge, is refused before anything runs.
+    let mut other = read_json(&judge.join("judge.json"));
+    other["label"] = serde_json::json!("success");
+    other["threshold"] = serde_json::json!(0.5);
+    let wrong = dir.join("judge_success");
+    std::fs::create_dir_all(&wrong).unwrap();
+    std::fs::copy(judge.join("model.bpk"), wrong.join("model.bpk")).unwrap();
+    std::fs::write(wrong.join("judge.json"), serde_json::to_string(&other).unwrap()).unwrap();
+    let out2 = dir.join("rank_judge_wrong");
+    let args = [&rank[..], &["--judge", s(&wrong), "--out", s(&out2)]].concat();
+    let (_, err) = expect_code(&run(&args), 2);
+    assert!(err.contains("judge_success") && err.contains("estimates success"), "{err}");
+    assert!(!out2.exists());
+    let args = [&rank[..], &["--judge", s(set), "--out", s(&out2)]].concat();
+    let (_, err) = expect_code(&run(&args), 2);
+    assert!(err.contains("judge.json"), "{err}");
+}
