@@ -17,21 +17,18 @@ pub use error::ScenarioError;
 
 use harness::task::Task;
 
-/// The task `--scenario` names: a scenario name (`pusht`, its shipped parameters) or
-/// a scenario .toml file (today a Push-T one). The only place that maps a scenario
-/// to its implementation: adding a task adds its line here.
+/// The task `--scenario` names: a scenario name (`pusht`, `lift`, `can`: the shipped
+/// parameters) or a scenario .toml file. The only place that maps a scenario to its
+/// implementation: adding a task adds its line here.
 ///
 /// # Errors
 /// An unknown name, an unreadable or invalid file, or a scene MuJoCo refuses.
 pub fn load_task(spec: &str) -> Result<Box<dyn Task>, ScenarioError> {
+    use robosuite::task::RobosuiteTask;
     match scenario(spec)? {
         Scenario::PushT(cfg) => Ok(Box::new(pusht::PushTTask::new(*cfg)?)),
-        Scenario::Lift(_) | Scenario::Can(_) => Err(ScenarioError::Unsupported {
-            scenario: spec.into(),
-            what: "policies and world models (it runs with `simulate` and `collect` and its scripted \
-                   behaviours)"
-                .into(),
-        }),
+        Scenario::Lift(cfg) => Ok(Box::new(RobosuiteTask::new(lift::LiftSim::new(cfg)?))),
+        Scenario::Can(cfg) => Ok(Box::new(RobosuiteTask::new(can::CanSim::new(cfg)?))),
     }
 }
 

@@ -137,10 +137,10 @@ fn bad_lift_input_is_refused_by_name() {
     let res = run(&["simulate", "--scenario", "lift", "--policy", "teleop", "--out", o]);
     let (_, stderr) = expect_code(&res, 2);
     assert!(stderr.contains("expert, miss, drop, push, hesitate, random"), "{stderr}");
-    // rank cannot use Lift yet, and says so.
+    // rank needs a judge of imagined Lift frames (there is no hand-written one), and says so.
     let res = run(&["rank", "--scenario", "lift", "--policies", o, "--out", o]);
     let (_, stderr) = expect_code(&res, 2);
-    assert!(stderr.contains("does not support"), "{stderr}");
+    assert!(stderr.contains("no hand-written judge") && stderr.contains("--judge"), "{stderr}");
     assert!(!out.exists(), "nothing written on refusal");
 }
 
@@ -181,10 +181,10 @@ fn the_can_expert_places_the_can_and_any_jobs_gives_the_same_bytes() {
     let first: serde_json::Value = serde_json::from_str(lines.lines().next().unwrap()).unwrap();
     let y = first["state"][1].as_f64().unwrap();
     assert!((-0.41..=-0.09).contains(&y), "{y}");
-    // rank cannot use Can yet, and says so.
+    // rank needs a judge of imagined Can frames, and says so.
     let res = run(&["rank", "--scenario", "can", "--policies", one.to_str().unwrap(), "--out", "unused"]);
     let (_, stderr) = expect_code(&res, 2);
-    assert!(stderr.contains("does not support"), "{stderr}");
+    assert!(stderr.contains("no hand-written judge") && stderr.contains("--judge"), "{stderr}");
 }
 
 #[test]

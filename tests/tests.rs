@@ -4,6 +4,7 @@ mod agreement;
 mod dataset;
 mod judge;
 mod lift;
+mod lift_models;
 mod pipeline;
 mod plan;
 mod reliability;

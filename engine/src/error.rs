@@ -31,6 +31,14 @@ pub enum EngineError {
         /// What went wrong (which generated frames diverged).
         source: RolloutError,
     },
+    /// A task without a judge of imagined frames, and none given.
+    #[error(
+        "task {task} has no hand-written judge of imagined frames: give a learned one (`train judge`, then `rank --judge DIR`)"
+    )]
+    NoJudge {
+        /// The task.
+        task: String,
+    },
     /// A batch of a policy that had already failed.
     #[error("policy {policy}: skipped after an earlier failure")]
     Skipped {

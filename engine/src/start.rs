@@ -112,16 +112,16 @@ impl Start {
         for &seed in seeds {
             envs.push(s.task.reset(seed)?);
         }
+        let judges = envs
+            .iter()
+            .map(|e| match (s.judge, e.judge()) {
+                (Some(j), checks) => Ok(Box::new(Replaced { scorer: j.clone(), checks }) as Box<dyn Judge>),
+                (None, Some(own)) => Ok(own),
+                (None, None) => Err(EngineError::NoJudge { task: s.task.name().to_string() }),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
-            judges: envs
-                .iter()
-                .map(|e| match &s.judge {
-                    Some(j) => {
-                        Box::new(Replaced { scorer: (*j).clone(), checks: e.judge() }) as Box<dyn Judge>
-                    }
-                    None => e.judge(),
-                })
-                .collect(),
+            judges,
             first: envs.iter().map(|e| e.observe()).collect(),
             goals: envs.iter().map(|e| e.goal_pose()).collect(),
             policy_rngs: seeds

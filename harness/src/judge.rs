@@ -39,12 +39,13 @@ pub trait Judge: Send + Sync {
 
 /// A judge whose scores come from one judge (e.g. a learned one, shared by every
 /// episode) and whose scene checks come from another (the task's own, which knows
-/// the episode's goal): what `rank --judge` puts in place of the task's judge.
+/// the episode's goal, where the task has one): what `rank --judge` puts in place
+/// of the task's judge.
 pub struct Replaced {
     /// Gives the scores.
     pub scorer: std::sync::Arc<dyn Judge>,
     /// Gives the scene checks.
-    pub checks: Box<dyn Judge>,
+    pub checks: Option<Box<dyn Judge>>,
 }
 
 impl Judge for Replaced {
@@ -52,7 +53,7 @@ impl Judge for Replaced {
         self.scorer.score(frame)
     }
     fn scene(&self, frame: &[u8]) -> Option<SceneCheck> {
-        self.checks.scene(frame)
+        self.checks.as_ref().and_then(|c| c.scene(frame))
     }
 }
 
@@ -79,10 +80,13 @@ mod tests {
 
     #[test]
     fn a_replaced_judge_scores_with_one_and_checks_with_the_other() {
-        let j = Replaced { scorer: std::sync::Arc::new(Mean), checks: Box::new(Checks) };
+        let j = Replaced { scorer: std::sync::Arc::new(Mean), checks: Some(Box::new(Checks)) };
         // Mean of 0 and 255 over 255: 0.5.
         assert_eq!(j.score(&[0, 255]), 0.5);
         assert_eq!(j.scene(&[0, 255]).map(|c| c.goal_kept), Some(0.5));
         assert_eq!(Mean.scene(&[0]), None);
+        // Without the task's judge there are no scene checks.
+        let j = Replaced { scorer: std::sync::Arc::new(Mean), checks: None };
+        assert_eq!((j.score(&[255]), j.scene(&[255])), (1.0, None));
     }
 }

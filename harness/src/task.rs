@@ -176,9 +176,10 @@ pub trait Env: Send {
     fn object_pose(&self) -> Option<[f64; 3]>;
     /// The goal pose (x, y, θ), where the task has one.
     fn goal_pose(&self) -> Option<[f64; 3]>;
-    /// The judge of this episode's imagined frames, from its public conditions only
-    /// (Push-T: the goal pose).
-    fn judge(&self) -> Box<dyn Judge>;
+    /// The task's own judge of this episode's imagined frames, from its public
+    /// conditions only (Push-T: the goal pose); `None` for a task without a
+    /// hand-written one (robomimic's: a learned judge, `rank --judge`, scores them).
+    fn judge(&self) -> Option<Box<dyn Judge>>;
     /// The world-model adaptor of this episode; call right after reset.
     fn imagination(&self, view: ModelView) -> Box<dyn Imagination>;
 }

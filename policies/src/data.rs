@@ -60,6 +60,12 @@ impl Demos {
         if shape[1] != size || shape[2] != size {
             return Err(err(format!("images are {}x{}, the policy takes {size}x{size}", shape[1], shape[2])));
         }
+        if let Some(other) = r.attrs["evalharness"]["scenario"].as_str().filter(|s| *s != "pusht") {
+            return Err(err(format!(
+                "a {other} dataset: the policy trainer reads Push-T's agent, block and goal columns, \
+                 and does not train {other} policies yet"
+            )));
+        }
         let behaviours = r.attrs["evalharness"]["episodes"].as_array().cloned().unwrap_or_default();
         let state = r.state.read_f64().map_err(|e| err(e.to_string()))?;
         let sdim = r.state.row_len();

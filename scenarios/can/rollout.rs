@@ -52,6 +52,14 @@ impl CanBehaviour {
 /// A finished Can episode.
 pub type CanEpisodeRecord = Episode<CanInit, CanBehaviour>;
 
+impl crate::robosuite::task::ArmEngine for CanSim {
+    type Ep = CanEpisode;
+
+    fn reset_episode(&self, seed: u64) -> Result<CanEpisode, ScenarioError> {
+        self.reset(seed)
+    }
+}
+
 impl TaskEpisode for CanEpisode {
     fn arm(&self) -> &ArmEpisode {
         self.arm()

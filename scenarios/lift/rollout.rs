@@ -101,6 +101,14 @@ impl ArmTask for LiftSim {
     }
 }
 
+impl crate::robosuite::task::ArmEngine for LiftSim {
+    type Ep = LiftEpisode;
+
+    fn reset_episode(&self, seed: u64) -> Result<LiftEpisode, ScenarioError> {
+        self.reset(seed)
+    }
+}
+
 /// A finished Lift episode.
 pub type LiftEpisodeRecord = Episode<LiftInit, LiftBehaviour>;
 

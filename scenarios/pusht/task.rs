@@ -152,8 +152,8 @@ impl Env for PushTEpisode {
         Some(self.env.goal().to_array())
     }
 
-    fn judge(&self) -> Box<dyn Judge> {
-        Box::new(self.scorer())
+    fn judge(&self) -> Option<Box<dyn Judge>> {
+        Some(Box::new(self.scorer()))
     }
 
     fn imagination(&self, view: ModelView) -> Box<dyn Imagination> {

@@ -1,5 +1,7 @@
 //! What robosuite's manipulation scenes share: the asset folder, the scene
-//! composer (Panda, mount, gripper, arenas) and the OSC_POSE arm controller.
+//! composer (Panda, mount, gripper, arenas), the OSC_POSE arm controller, the
+//! scripted-episode runner, and the engine's [`Task`](harness::task::Task)
+//! implementation ([`task`]).
 //!
 //! Lift and Can (`crate::lift`, `crate::can`) build on it. Everything follows
 //! robosuite 1.5.2 at its default settings, so that a robomimic user recognises
@@ -11,6 +13,7 @@ pub mod linalg;
 pub mod osc;
 pub mod rollout;
 pub mod scene;
+pub mod task;
 
 #[cfg(test)]
 mod tests;

@@ -46,6 +46,24 @@ pub(super) fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
 /// authors' RT-1 evaluation setting, spec §3).
 const DEFAULT_ALPHA: f32 = 2.5;
 
+/// How a new model reads the dataset's actions: Push-T's world units (recorded as
+/// absent, as in every Push-T model) or the bounds of the action space of the task
+/// the dataset was collected in (its attributes name it).
+///
+/// # Errors
+/// A task that cannot be loaded, or actions of another width than the task's.
+fn action_scale_of(data: &Path, action_dim: usize) -> Result<Option<world_model::action::ActionScale>> {
+    let attrs = harness::zarr::read_attrs(data).unwrap_or_default();
+    let scenario = attrs["evalharness"]["scenario"].as_str().unwrap_or("pusht").to_string();
+    let spec =
+        if scenario == "pusht" { None } else { Some(crate::scenario::load_task(&scenario)?.action_spec()) };
+    let expected = spec.as_ref().map_or(2, |s| s.dim);
+    if action_dim != expected {
+        bail!("{}: actions of {action_dim} entries, a {scenario} task's have {expected}", data.display());
+    }
+    Ok(spec.map(|s| world_model::action::ActionScale { low: s.low, high: s.high }))
+}
+
 /// `evalharness train world-model`.
 pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     let objective = fresh_objective(a.objective);
@@ -144,6 +162,13 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     let model_cfg = match saved {
         Some(saved) => saved,
         None => {
+            let actions = action_scale_of(&a.data, data.action_dim)?;
+            if actions.is_some() && a.action_maps {
+                bail!(
+                    "--action-maps draws Push-T's 2-D targets onto the frame; {} holds other actions",
+                    a.data.display()
+                );
+            }
             let family = match a.config {
                 WmConfigArg::PushtLatent => UNetConfig::pusht_latent(codec.channels()),
                 WmConfigArg::PushtPixel => UNetConfig::pusht_pixel(),
@@ -157,6 +182,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
                 action_maps: a.action_maps.then_some(true),
                 anchor: a.anchor.then_some(true),
                 accentuation: a.accentuation.then_some(true),
+                action_dim: data.action_dim,
                 ..family
             };
             let stats = match &a.init_from {
@@ -180,7 +206,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
                 prediction: fresh_prediction(a),
                 alpha: a.accentuation.then_some(a.alpha.unwrap_or(DEFAULT_ALPHA)),
                 goal_free: a.goal_free.then_some(true),
-                actions: None,
+                actions,
             }
         }
     };

@@ -59,6 +59,13 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     let seeds: Vec<u64> = harness::seed::range(a.seed_start, a.episodes as u64)?.collect();
     // Every input is checked before the output folder is touched.
     let task = crate::scenario::load_task(&a.scenario)?;
+    if a.judge.is_none() && task.reset(a.seed_start)?.judge().is_none() {
+        bail!(
+            "--scenario {}: the task has no hand-written judge of imagined frames; train one on its \
+             frames (`evalharness train judge --data DATASET --label success --out DIR`) and pass --judge DIR",
+            a.scenario
+        );
+    }
     let device = world_model::device::selected()?;
     let wm = load_world_model(&a.world_model, a.alpha, &device)?;
     let judge = a.judge.as_deref().map(|d| load_judge(d, task.as_ref(), &device)).transpose()?;

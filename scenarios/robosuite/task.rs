@@ -1,0 +1,296 @@
+//! robomimic Lift and Can as [`Task`]s: what the paired engine drives.
+//!
+//! - Actions: robomimic's 7-D vector, six end-effector deltas in [-1, 1] (scaled
+//!   by OSC_POSE to 0.05 m and 0.5 rad) and the gripper command (−1 open, +1 closed).
+//! - Observation: the 96x96 `agentview` frame and the **commanded pose**: the six
+//!   deltas summed over the episode, scaled to metres and radians, and the last
+//!   gripper command (7 entries; −1 before any command, the gripper starting open).
+//!   The simulator branch computes it from the actions it executed, exactly as the
+//!   imagined branch does from the same commands, so the policy reads the same
+//!   quantity in both and the imagined branch never needs the simulator's state.
+//!   It is not the arm's measured pose: a blocked or lagging arm differs from it,
+//!   and the frame shows by how much.
+//! - Score: success 0/1 exactly as robosuite checks it ([`ScoreKind::Success`]).
+//! - Judge of imagined frames: none hand-written; a learned one (`train judge
+//!   --label success`, `rank --judge DIR`) scores them.
+//! - Imagination: the world model starts from the first frame as the policy sees it.
+//!
+//! One implementation serves both tasks, through [`ArmTask`]'s episode reset.
+
+use std::cell::RefCell;
+
+use harness::judge::Judge;
+use harness::task::{
+    ActionKind, ActionSpec, Env, Imagination, ModelView, ObservationSpec, ScoreKind, Seen, Task, TaskError,
+};
+
+use super::rollout::{ArmTask, TaskEpisode};
+use crate::error::ScenarioError;
+
+/// Side of the agentview frames policies and world models read.
+pub const IMAGE_SIZE: usize = 96;
+/// OSC_POSE's scale of the position deltas (metres per unit action).
+const POS_SCALE: f32 = 0.05;
+/// OSC_POSE's scale of the rotation deltas (radians per unit action).
+const ROT_SCALE: f32 = 0.5;
+/// Names of the proprioceptive entries.
+pub const PROPRIO: [&str; 7] = ["cmd_x", "cmd_y", "cmd_z", "cmd_rx", "cmd_ry", "cmd_rz", "gripper_cmd"];
+
+/// The commanded pose: the scaled deltas summed, and the last gripper command.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Commanded([f32; 7]);
+
+impl Default for Commanded {
+    fn default() -> Self {
+        Self([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0])
+    }
+}
+
+impl Commanded {
+    /// Takes one executed action (entries clipped to [-1, 1], as the controller clips them).
+    pub fn add(&mut self, action: &[f32]) {
+        for (d, &a) in action.iter().take(6).enumerate() {
+            let scale = if d < 3 { POS_SCALE } else { ROT_SCALE };
+            self.0[d] += a.clamp(-1.0, 1.0) * scale;
+        }
+        if let Some(&g) = action.get(6) {
+            self.0[6] = g.clamp(-1.0, 1.0);
+        }
+    }
+
+    /// The proprioceptive vector ([`PROPRIO`]).
+    pub fn vector(&self) -> Vec<f32> {
+        self.0.to_vec()
+    }
+}
+
+/// A robosuite task the engine can drive: its episodes, reset by seed.
+pub trait ArmEngine: ArmTask + Send + Sync {
+    /// An episode in progress.
+    type Ep: TaskEpisode + Send + 'static;
+    /// Episode `seed` at its initial state.
+    ///
+    /// # Errors
+    /// A model MuJoCo refuses.
+    fn reset_episode(&self, seed: u64) -> Result<Self::Ep, ScenarioError>;
+}
+
+/// A robosuite task as a [`Task`].
+pub struct RobosuiteTask<T> {
+    sim: T,
+}
+
+impl<T: ArmEngine> RobosuiteTask<T> {
+    /// Wraps a task's simulator.
+    pub fn new(sim: T) -> Self {
+        Self { sim }
+    }
+}
+
+impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
+    fn name(&self) -> &str {
+        ArmTask::name(&self.sim)
+    }
+
+    fn action_spec(&self) -> ActionSpec {
+        ActionSpec { dim: 7, low: vec![-1.0; 7], high: vec![1.0; 7], kind: ActionKind::Delta }
+    }
+
+    fn observation_spec(&self) -> ObservationSpec {
+        ObservationSpec {
+            image_size: IMAGE_SIZE,
+            cameras: vec!["agentview".into()],
+            proprio: PROPRIO.iter().map(|s| (*s).to_string()).collect(),
+        }
+    }
+
+    fn score_kind(&self) -> ScoreKind {
+        ScoreKind::Success
+    }
+
+    fn max_steps(&self) -> usize {
+        ArmTask::max_steps(&self.sim)
+    }
+
+    fn control_hz(&self) -> f64 {
+        20.0
+    }
+
+    fn reset(&self, seed: u64) -> Result<Box<dyn Env>, TaskError> {
+        let ep = self.sim.reset_episode(seed).map_err(TaskError::new)?;
+        let success = ep.success();
+        Ok(Box::new(ArmEnv {
+            seed,
+            ep: RefCell::new(ep),
+            frame: RefCell::new(None),
+            cmd: Commanded::default(),
+            success,
+        }))
+    }
+}
+
+/// One episode: the simulator, its frame (rendered when first observed after a
+/// step) and the commanded pose.
+struct ArmEnv<E> {
+    seed: u64,
+    ep: RefCell<E>,
+    frame: RefCell<Option<Vec<u8>>>,
+    cmd: Commanded,
+    success: bool,
+}
+
+impl<E: TaskEpisode> ArmEnv<E> {
+    /// The current frame, rendered once per state.
+    fn frame(&self) -> Result<Vec<u8>, ScenarioError> {
+        if let Some(f) = self.frame.borrow().as_ref() {
+            return Ok(f.clone());
+        }
+        let f = self.ep.borrow_mut().arm_mut().render(IMAGE_SIZE)?;
+        *self.frame.borrow_mut() = Some(f.clone());
+        Ok(f)
+    }
+}
+
+impl<E: TaskEpisode + Send + 'static> Env for ArmEnv<E> {
+    fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    fn observe(&self) -> Seen {
+        // A renderer that cannot start fails on the first frame of every episode; an
+        // empty frame then makes the policy refuse it with an error naming its size.
+        let frame = self.frame().unwrap_or_else(|e| {
+            tracing::error!(seed = self.seed, "rendering: {e}");
+            Vec::new()
+        });
+        Seen { frame, proprio: self.cmd.vector() }
+    }
+
+    fn step(&mut self, action: &[f32]) -> Result<f64, TaskError> {
+        let a: [f32; 7] = action.try_into().map_err(|_| {
+            TaskError::new(ScenarioError::BadActionSize { seed: self.seed, expected: 7, got: action.len() })
+        })?;
+        self.ep.get_mut().arm_mut().step(&a.map(f64::from)).map_err(TaskError::new)?;
+        *self.frame.get_mut() = None;
+        self.cmd.add(&a);
+        self.success = self.ep.get_mut().success();
+        Ok(self.score())
+    }
+
+    fn score(&self) -> f64 {
+        if self.success { 1.0 } else { 0.0 }
+    }
+
+    fn state(&self) -> Vec<f64> {
+        self.ep.borrow().arm().state()
+    }
+
+    fn object_pose(&self) -> Option<[f64; 3]> {
+        let ep = self.ep.borrow();
+        let ([x, y, _], [w, qx, qy, qz]) = (ep.arm().object_pos(), ep.arm().object_quat());
+        // Yaw of the object's rotation about the world's z axis.
+        let yaw = (2.0 * (w * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
+        Some([x, y, yaw])
+    }
+
+    fn goal_pose(&self) -> Option<[f64; 3]> {
+        None
+    }
+
+    fn judge(&self) -> Option<Box<dyn Judge>> {
+        None
+    }
+
+    fn imagination(&self, _view: ModelView) -> Box<dyn Imagination> {
+        // The scenes have no goal drawn in them, so both views are the observation.
+        let first = self.frame().unwrap_or_default();
+        Box::new(ArmImagination { first, cmd: self.cmd })
+    }
+}
+
+/// What the imagined branch knows of an episode: its first frame, then its commands.
+struct ArmImagination {
+    first: Vec<u8>,
+    cmd: Commanded,
+}
+
+impl Imagination for ArmImagination {
+    fn first_frame(&self) -> &[u8] {
+        &self.first
+    }
+
+    fn to_observation(&self, _frame: &mut [u8]) {}
+
+    fn advance(&mut self, action: &[f32]) {
+        self.cmd.add(action);
+    }
+
+    fn proprio(&self) -> Vec<f32> {
+        self.cmd.vector()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::can::{CanConfig, CanSim};
+    use crate::lift::{LiftConfig, LiftSim};
+
+    fn lift() -> RobosuiteTask<LiftSim> {
+        RobosuiteTask::new(LiftSim::new(LiftConfig::default()).expect("robosuite assets (scripts/setup.sh)"))
+    }
+
+    #[test]
+    fn lift_declares_robomimics_action_and_success_and_resets_by_seed() {
+        let t = lift();
+        assert_eq!((t.name(), t.action_spec().dim, t.action_spec().kind), ("lift", 7, ActionKind::Delta));
+        assert_eq!(t.score_kind(), ScoreKind::Success);
+        assert_eq!(t.observation_spec().proprio.len(), 7);
+        let (a, b) = (t.reset(3).unwrap(), t.reset(3).unwrap());
+        let seen = a.observe();
+        assert_eq!(seen, b.observe());
+        assert_eq!(seen.frame.len(), 96 * 96 * 3);
+        // Nothing commanded yet: zero deltas and the gripper open.
+        assert_eq!(seen.proprio, vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0]);
+        assert_eq!((a.score(), a.state().len(), a.goal_pose()), (0.0, 23, None));
+        assert!(a.judge().is_none(), "no hand-written judge of Lift frames");
+        assert_ne!(t.reset(4).unwrap().state(), a.state());
+    }
+
+    #[test]
+    fn both_branches_read_the_same_commanded_pose() {
+        let t = lift();
+        let mut env = t.reset(5).unwrap();
+        let mut imagine = env.imagination(ModelView::Observation);
+        let before = env.observe().frame;
+        assert_eq!(imagine.first_frame(), &before[..]);
+        // Clipped to [-1, 1], then 0.05 m or 0.5 rad per unit: x 1 → 0.05, y −0.5 → −0.025,
+        // z 3 (clipped to 1) → 0.05, rz 0.2 → 0.1; gripper 1 (closed).
+        let actions = [[1.0f32, -0.5, 3.0, 0.0, 0.0, 0.2, 1.0], [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.5]];
+        for a in &actions {
+            assert_eq!(env.step(a).unwrap(), 0.0);
+            imagine.advance(a);
+        }
+        let want = [0.1, -0.025, 0.05, 0.0, 0.0, 0.1, -0.5];
+        let got = env.observe().proprio;
+        for (g, w) in got.iter().zip(want) {
+            assert!((g - w).abs() < 1e-6, "{got:?}");
+        }
+        assert_eq!(imagine.proprio(), got);
+        assert_ne!(env.observe().frame, before, "the frame is rendered again after a step");
+        let e = env.step(&[0.0; 2]).unwrap_err().to_string();
+        assert_eq!(e, "action of 2 entries at seed 5: the task takes 7");
+    }
+
+    #[test]
+    fn can_is_the_same_kind_of_task() {
+        let t = RobosuiteTask::new(CanSim::new(CanConfig::default()).unwrap());
+        assert_eq!(
+            (t.name(), t.max_steps(), t.score_kind()),
+            ("can", CanConfig::default().max_steps, ScoreKind::Success)
+        );
+        let env = t.reset(1).unwrap();
+        assert_eq!(env.observe().frame.len(), 96 * 96 * 3);
+        assert!(env.object_pose().is_some());
+    }
+}
