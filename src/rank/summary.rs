@@ -100,22 +100,38 @@ fn write_csv(path: &Path, sorted: &[&EpisodeRow]) -> Result<()> {
 
 /// The per-policy table and the agreement line (stdout carries results only).
 pub(super) fn print(res: &RankResults, out: &Path) {
-    println!(
-        "{:<16} {:>10} {:>12} {:>12} {:>10} {:>11}",
-        "policy", "MuJoCo", "world model", "block kept", "goal kept", "agent kept"
-    );
     let or_nan = |v: Option<f64>| v.unwrap_or(f64::NAN);
+    let scene = res.policies.iter().any(|p| p.world_model.block_area.is_some() || p.sim.block_area.is_some());
+    if scene {
+        println!(
+            "{:<16} {:>10} {:>12} {:>12} {:>10} {:>11}",
+            "policy", "MuJoCo", "world model", "block kept", "goal kept", "agent kept"
+        );
+    } else {
+        // A task without scene checks (robomimic's): the success rates instead.
+        println!(
+            "{:<16} {:>10} {:>12} {:>15} {:>20}",
+            "policy", "MuJoCo", "world model", "MuJoCo success", "world model success"
+        );
+    }
     for p in &res.policies {
         let wm = &p.world_model;
-        println!(
-            "{:<16} {:>10.3} {:>12.3} {:>12.2} {:>10.2} {:>11.2}",
-            p.name,
-            p.sim.mean,
-            wm.mean,
-            or_nan(wm.block_area),
-            or_nan(wm.goal_kept),
-            or_nan(wm.agent_kept)
-        );
+        if scene {
+            println!(
+                "{:<16} {:>10.3} {:>12.3} {:>12.2} {:>10.2} {:>11.2}",
+                p.name,
+                p.sim.mean,
+                wm.mean,
+                or_nan(wm.block_area),
+                or_nan(wm.goal_kept),
+                or_nan(wm.agent_kept)
+            );
+        } else {
+            println!(
+                "{:<16} {:>10.3} {:>12.3} {:>15.3} {:>20.3}",
+                p.name, p.sim.mean, wm.mean, p.sim.success_rate, wm.success_rate
+            );
+        }
     }
     let ag = &res.agreement;
     let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.3}"));
