@@ -118,13 +118,11 @@ impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
 
     fn reset(&self, seed: u64) -> Result<Box<dyn Env>, TaskError> {
         let ep = self.sim.reset_episode(seed).map_err(TaskError::new)?;
-        let success = ep.success();
         Ok(Box::new(ArmEnv {
             seed,
             ep: RefCell::new(ep),
             frame: RefCell::new(None),
             cmd: Commanded::default(),
-            success,
         }))
     }
 }
@@ -136,7 +134,6 @@ struct ArmEnv<E> {
     ep: RefCell<E>,
     frame: RefCell<Option<Vec<u8>>>,
     cmd: Commanded,
-    success: bool,
 }
 
 impl<E: TaskEpisode> ArmEnv<E> {
@@ -173,12 +170,11 @@ impl<E: TaskEpisode + Send + 'static> Env for ArmEnv<E> {
         self.ep.get_mut().arm_mut().step(&a.map(f64::from)).map_err(TaskError::new)?;
         *self.frame.get_mut() = None;
         self.cmd.add(&a);
-        self.success = self.ep.get_mut().success();
         Ok(self.score())
     }
 
     fn score(&self) -> f64 {
-        if self.success { 1.0 } else { 0.0 }
+        if self.ep.borrow().success() { 1.0 } else { 0.0 }
     }
 
     fn state(&self) -> Vec<f64> {

@@ -3,7 +3,6 @@
 //! (`judge.json` with its held-out metrics and provenance, `model.bpk`,
 //! `log.jsonl`) only once training is complete.
 
-use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -34,13 +33,6 @@ fn label_of(a: &TrainJudgeArgs) -> Result<Label> {
     )
 }
 
-/// `OUT.partial`, where the judge is written before it replaces `OUT`.
-fn partial(out: &Path) -> PathBuf {
-    let mut name = out.file_name().unwrap_or_default().to_os_string();
-    name.push(".partial");
-    out.with_file_name(name)
-}
-
 /// `evalharness train judge`.
 pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     if a.steps == 0 || a.batch == 0 || a.eval_every == 0 {
@@ -53,12 +45,8 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
         bail!("--data {}: no such file or folder", a.data.display());
     }
     crate::output::check_apart(&a.out, &[("--data", &a.data)])?;
-    if a.out.exists() && !a.force {
-        bail!(
-            "{} already exists (pass --force to replace it once the new judge is complete)",
-            a.out.display()
-        );
-    }
+    // Written into OUT.partial; an old OUT is replaced only once the judge is complete.
+    let staged = crate::output::Staged::new(&a.out, a.force)?;
     let label = label_of(a)?;
     let threshold = match label {
         Label::Coverage => 0.95,
@@ -104,32 +92,29 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
             },
         }),
     };
-    let tmp = partial(&a.out);
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp)
-            .with_context(|| format!("removing the unfinished {}", tmp.display()))?;
-    }
-    std::fs::create_dir_all(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
     let deadline = a.max_minutes.map(|m| Instant::now() + Duration::from_secs_f64(m.max(0.0) * 60.0));
     let pb = progress::bar(a.steps, "judge", quiet);
     let device = world_model::device::selected()?;
-    let outcome =
-        train_judge(&data, &a.data, &file, &cfg, &tmp.join("log.jsonl"), deadline, &device, &mut |s, l| {
+    let outcome = train_judge(
+        &data,
+        &a.data,
+        &file,
+        &cfg,
+        &staged.file("log.jsonl"),
+        deadline,
+        &device,
+        &mut |s, l| {
             pb.set_position(s);
             pb.set_message(format!("loss {l:.4}"));
-        });
+        },
+    );
     pb.finish_and_clear();
     let Some((net, heldout)) = outcome? else {
-        std::fs::remove_dir_all(&tmp).ok();
         bail!("stopped before step {}; nothing was written (a judge trains in one go)", a.steps);
     };
     file.heldout = heldout;
-    write_judge(&tmp, &net, &file)?;
-    if a.out.exists() {
-        std::fs::remove_dir_all(&a.out).with_context(|| format!("replacing {}", a.out.display()))?;
-    }
-    std::fs::rename(&tmp, &a.out)
-        .with_context(|| format!("moving {} to {}", tmp.display(), a.out.display()))?;
+    write_judge(staged.dir(), &net, &file)?;
+    staged.commit()?;
     let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));
     println!(
         "judge of {}: held-out {} frames ({} above {threshold}): mean abs error {:.4}, accuracy {}, recall {}, precision {} -> {}",

@@ -41,7 +41,8 @@ use state::{Ctx, PlanRow, plan_key};
 /// resolved `--imagine` and `--execute`.
 fn load_proposer(
     a: &PlanArgs,
-    [image_size, world]: [usize; 2],
+    image_size: usize,
+    world: f32,
     device: &burn::tensor::Device,
 ) -> Result<(DiffusionPolicy, usize, usize)> {
     let dir = &a.policy;
@@ -82,7 +83,7 @@ fn load_proposer(
     let net = diffusion_weights(dir, &cfg, device)?;
     cfg.action_horizon = imagine.max(execute);
     let name = checkpoint_name(dir);
-    let bounds = (vec![0.0; 2], vec![world as f32; 2]); // Push-T's world, as `PushTTask` declares it
+    let bounds = (vec![0.0; 2], vec![world; 2]); // Push-T's world, as `PushTTask` declares it
     Ok((DiffusionPolicy::new(name, cfg, file.normalisation, bounds, net, device), imagine, execute))
 }
 
@@ -122,7 +123,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         None
     };
     let (policy, imagine, execute) =
-        load_proposer(a, [cfg.render.size as usize, cfg.world.size as usize], &device)?;
+        load_proposer(a, cfg.render.size as usize, cfg.world.size as f32, &device)?;
     // Every input is checked; only now is the output folder touched.
     let inputs = crate::rank::model_inputs(
         wm.as_ref().map(|w| (a.world_model.as_path(), w)),
