@@ -1,5 +1,6 @@
-//! Models on robomimic Lift data: a world model that reads 7-D actions, a learned
-//! judge of success, and the trainers and commands that must refuse Lift for now.
+//! The Lift pipeline on tiny settings: collect, a world model that reads 7-D
+//! actions, a learned judge of success, diffusion policies that read the commanded
+//! pose, and `rank` on all three.
 
 use crate::util::{expect_code, read_json, run};
 
@@ -8,7 +9,7 @@ fn s(p: &std::path::Path) -> &str {
 }
 
 #[test]
-fn a_lift_world_model_reads_7d_actions_and_a_judge_learns_success() {
+fn the_lift_pipeline_collects_trains_every_model_and_ranks() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     // 10 short episodes (every 10th is held out): no behaviour lifts the cube in 12 steps.
@@ -42,22 +43,58 @@ fn a_lift_world_model_reads_7d_actions_and_a_judge_learns_success() {
     assert!(stdout.contains("judge of success: held-out 12 frames (0 above 0.5)"), "{stdout}");
     assert_eq!(read_json(&judge.join("judge.json"))["threshold"], 0.5);
 
-    // The policy trainer reads Push-T's columns: it refuses Lift data by name.
+    // Policies: 7-D actions and the 7-entry commanded pose, whose range starts at the
+    // open gripper (−1) and nothing commanded (0); the encoder is pre-trained on the
+    // object's, end effector's and fingers' positions.
     let pol = dir.join("pol");
-    let args = ["train", "policy", "--data", s(&data), "--out", s(&pol), "--epochs", "1"];
-    let (_, err) = expect_code(&run(&args), 2);
-    assert!(err.contains("lift dataset") && err.contains("does not train lift policies"), "{err}");
-    // rank with this judge and model, but a Push-T policy: the policy is refused by name
-    // (2-D actions) and reported, and nothing is ranked (exit 1).
+    let args =
+        ["train", "policy", "--data", s(&data), "--out", s(&pol), "--epochs", "2", "--behaviour", "all"];
+    let tiny = ["--batch", "8", "--encoder-steps", "2", "--down-dims", "8,16", "--encoder-width", "8"];
+    expect_code(&run(&[&args[..], &tiny[..]].concat()), 0);
+    let file = read_json(&pol.join("epoch-0002").join("policy.json"));
+    assert_eq!(file["config"]["net"]["action_dim"], 7, "{file}");
+    let proprio = &file["normalisation"]["agent_pos"];
+    assert_eq!(proprio["min"].as_array().map(Vec::len), Some(7), "{proprio}");
+    assert_eq!(proprio["min"][6], -1.0, "{proprio}");
+    let pre = &file["provenance"]["encoder_pretraining"];
+    assert_eq!(pre["steps"], 2, "{pre}");
+    // 10 episodes: none is held out of the pre-training (every 20th), so no error is claimed.
+    assert!(pre["heldout_mean_abs_error"].is_null(), "{pre}");
+
+    // rank the two epochs with this model and judge: both branches run every episode.
     let out = dir.join("rank");
     let args = ["rank", "--scenario", "lift", "--world-model", s(&wm), "--judge", s(&judge)];
-    let more = ["--policies", "checkpoints/pusht/policies/epoch-0001", "--episodes", "1", "--max-steps", "4"];
-    let (stdout, _) = expect_code(&run(&[&args[..], &more[..], &["--out", s(&out)]].concat()), 1);
+    let more = ["--episodes", "2", "--max-steps", "4", "--no-report"];
+    let (stdout, _) =
+        expect_code(&run(&[&args[..], &more[..], &["--policies", s(&pol), "--out", s(&out)]].concat()), 0);
     // No scene checks in a Lift run: the table shows success rates, not Push-T's columns.
     assert!(stdout.contains("MuJoCo success") && !stdout.contains("block kept"), "{stdout}");
+    let res = read_json(&out.join("results.json"));
+    assert_eq!(res["policies"].as_array().map(Vec::len), Some(2), "{res}");
+    assert_eq!(res["failed_policies"].as_array().map(Vec::len), Some(0), "{res}");
+
+    // A Push-T policy is refused by name (2-D actions) and reported; nothing is ranked (exit 1).
+    let out = dir.join("rank_pusht");
+    let more = ["--policies", "checkpoints/pusht/policies/epoch-0001", "--episodes", "1", "--max-steps", "4"];
+    expect_code(&run(&[&args[..], &more[..], &["--out", s(&out)]].concat()), 1);
     let res = read_json(&out.join("results.json"));
     let failed = &res["failed_policies"][0];
     assert_eq!(failed["policy"], "epoch-0001");
     assert!(failed["error"].as_str().unwrap().contains("2-D actions, the scenario takes 7-D"), "{res}");
     assert_eq!(res["policies"].as_array().map(Vec::len), Some(0));
+}
+
+/// Regression: the trainers named their `--out` folder as the dataset when it held
+/// too few episodes; they name the dataset.
+#[test]
+fn too_few_episodes_name_the_dataset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let data = dir.join("two.zarr");
+    let collect = ["collect", "--scenario", "lift", "--episodes", "2", "--max-steps", "2", "--out", s(&data)];
+    expect_code(&run(&collect), 0);
+    let ae = dir.join("ae");
+    let (_, err) =
+        expect_code(&run(&["train", "autoencoder", "--data", s(&data), "--out", s(&ae), "--steps", "1"]), 2);
+    assert!(err.contains(&format!("dataset {}: 2 episodes: need at least 10", data.display())), "{err}");
 }

@@ -55,6 +55,9 @@ impl Task for Reach {
     fn reset(&self, seed: u64) -> Result<Box<dyn Env>, TaskError> {
         Ok(Box::new(ReachEnv { seed, x: 3.0 * seed as f64 }))
     }
+    fn recorded_proprio(&self, states: &[Vec<f64>], _actions: &[Vec<f32>]) -> Vec<Vec<f32>> {
+        states.iter().map(|s| vec![s[0] as f32]).collect()
+    }
 }
 
 /// Reads the position back from the frame.

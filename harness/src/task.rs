@@ -203,6 +203,19 @@ pub trait Task: Send + Sync {
     /// # Errors
     /// A seed whose reset fails (an impossible reset, a diverging first step).
     fn reset(&self, seed: u64) -> Result<Box<dyn Env>, TaskError>;
+    /// The proprioception a policy read at each step of a recorded episode, given
+    /// the episode's dataset rows (`states[t]` as [`Env::state`] gives it, `actions[t]`
+    /// the action executed at step t): exactly what [`Env::observe`] gave at step t,
+    /// so that policies train on what they will read. Push-T: the agent's position
+    /// from the state; robomimic: the commanded pose integrated from the actions
+    /// before step t.
+    fn recorded_proprio(&self, states: &[Vec<f64>], actions: &[Vec<f32>]) -> Vec<Vec<f32>>;
+    /// State columns (index into [`Env::state`], and name) that a frame shows and a
+    /// policy must locate: privileged labels a policy's frame encoder may be
+    /// pre-trained to regress, never a policy input. Empty when the task names none.
+    fn frame_labels(&self) -> Vec<(usize, String)> {
+        Vec::new()
+    }
     /// A `scripted` policy checkpoint of this task (its expert acting from frames);
     /// tasks without scripted policies refuse.
     ///

@@ -2,7 +2,7 @@
 //!
 //! Only episodes of the chosen behaviour (the scripted expert by default, as
 //! recorded in the dataset's attributes) are used, optionally only the first N.
-//! A sample at step t of an episode is: frames and agent positions at t−1 and t
+//! A sample at step t of an episode is: frames and proprioception at t−1 and t
 //! (repeating the first frame at the episode start) and the 16 actions from t−1
 //! (repeating the first action before the start and the last one past the end), as
 //! diffusion_policy's sequence sampler windows and pads them: the action window
@@ -12,6 +12,7 @@
 use std::path::{Path, PathBuf};
 
 use harness::replay::ReplayReader;
+use harness::task::Task;
 
 use crate::diffusion::{Normalisation, Range};
 
@@ -25,18 +26,45 @@ pub struct DataError {
     pub message: String,
 }
 
-/// Frames, agent positions and actions of the selected episodes.
+/// Privileged per-step labels of what a frame shows, used only to pre-train the
+/// frame encoder ([`crate::pretrain`]); never a policy input.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FrameLabels {
+    /// Push-T: the block's and the (randomised) goal's poses (x, y, θ); the agent's
+    /// position is the proprioception. Pre-training maps them through the square
+    /// world's symmetries.
+    PushT {
+        /// `n` block poses.
+        block: Vec<[f32; 3]>,
+        /// `n` goal poses (drawn in every frame).
+        goal: Vec<[f32; 3]>,
+    },
+    /// The state columns a task names ([`Task::frame_labels`]), `names.len()` per
+    /// step, step-major.
+    Columns {
+        /// The columns' names.
+        names: Vec<String>,
+        /// Their values.
+        values: Vec<f32>,
+    },
+    /// None: the encoder cannot be pre-trained on this data.
+    None,
+}
+
+/// Frames, proprioception and actions of the selected episodes.
 pub struct Demos {
     /// `n x s x s x 3` bytes.
     pub frames: Vec<u8>,
-    /// `n` agent positions.
-    pub agent_pos: Vec<[f32; 2]>,
-    /// `n` block poses (x, y, θ), privileged: used only to pre-train the encoder.
-    pub block: Vec<[f32; 3]>,
-    /// `n` goal poses (x, y, θ; drawn in every frame), used only to pre-train the encoder.
-    pub goal: Vec<[f32; 3]>,
-    /// `n` actions.
-    pub actions: Vec<[f32; 2]>,
+    /// `n x proprio_dim`: what the policy read at each step ([`Task::recorded_proprio`]).
+    pub proprio: Vec<f32>,
+    /// Entries per proprioceptive vector.
+    pub proprio_dim: usize,
+    /// `n x action_dim` actions.
+    pub actions: Vec<f32>,
+    /// Entries per action.
+    pub action_dim: usize,
+    /// What the frames show, for encoder pre-training.
+    pub labels: FrameLabels,
     /// Frame side.
     pub size: usize,
     /// Step ranges (into the arrays above) of each selected episode.
@@ -44,12 +72,15 @@ pub struct Demos {
 }
 
 impl Demos {
-    /// Loads the episodes whose behaviour is `behaviour` (all if `None`), at most `limit`.
+    /// Loads the episodes whose behaviour is `behaviour` (all if `None`), at most
+    /// `limit`, of a dataset of `task`.
     ///
     /// # Errors
-    /// [`DataError`] naming the dataset for unreadable arrays, a wrong image size or no episodes.
+    /// [`DataError`] naming the dataset for unreadable arrays, another task's data, a
+    /// wrong image size or action width, or no episodes.
     pub fn load(
         path: &Path,
+        task: &dyn Task,
         behaviour: Option<&str>,
         limit: Option<usize>,
         size: usize,
@@ -60,27 +91,40 @@ impl Demos {
         if shape[1] != size || shape[2] != size {
             return Err(err(format!("images are {}x{}, the policy takes {size}x{size}", shape[1], shape[2])));
         }
-        if let Some(other) = r.attrs["evalharness"]["scenario"].as_str().filter(|s| *s != "pusht") {
+        let scenario = r.attrs["evalharness"]["scenario"].as_str().unwrap_or("pusht");
+        if scenario != task.name() {
+            return Err(err(format!("a {scenario} dataset, not {}", task.name())));
+        }
+        let (action_dim, sdim) = (r.action.row_len(), r.state.row_len());
+        if action_dim != task.action_spec().dim {
             return Err(err(format!(
-                "a {other} dataset: the policy trainer reads Push-T's agent, block and goal columns, \
-                 and does not train {other} policies yet"
+                "data/action has {action_dim} columns, {} actions have {}",
+                task.name(),
+                task.action_spec().dim
             )));
         }
-        let behaviours = r.attrs["evalharness"]["episodes"].as_array().cloned().unwrap_or_default();
-        let state = r.state.read_f64().map_err(|e| err(e.to_string()))?;
-        let sdim = r.state.row_len();
-        if sdim < 8 {
+        let pusht = task.name() == "pusht";
+        if pusht && sdim < 8 {
             return Err(err(format!(
                 "data/state has {sdim} columns, expected agent x, y, block x, y, θ, goal x, y, θ"
             )));
         }
+        let named = task.frame_labels();
+        if let Some((c, name)) = named.iter().find(|(c, _)| *c >= sdim) {
+            return Err(err(format!("data/state has {sdim} columns, label {name} is column {c}")));
+        }
+        let proprio_dim = task.observation_spec().proprio.len();
+        let behaviours = r.attrs["evalharness"]["episodes"].as_array().cloned().unwrap_or_default();
+        let state = r.state.read_f64().map_err(|e| err(e.to_string()))?;
         let action = r.action.read_f64().map_err(|e| err(e.to_string()))?;
+        let (mut block, mut goal, mut columns) = (Vec::new(), Vec::new(), Vec::new());
         let mut d = Demos {
             frames: Vec::new(),
-            agent_pos: Vec::new(),
-            block: Vec::new(),
-            goal: Vec::new(),
+            proprio: Vec::new(),
+            proprio_dim,
             actions: Vec::new(),
+            action_dim,
+            labels: FrameLabels::None,
             size,
             episodes: Vec::new(),
         };
@@ -95,46 +139,71 @@ impl Demos {
                 }
             }
             let rg = r.episode_range(i);
-            let start = d.agent_pos.len();
+            let start = d.len();
             d.frames.extend(r.img.read_rows(rg.start, rg.end).map_err(|e| err(e.to_string()))?);
-            for t in rg.clone() {
-                let row = &state[t * sdim..(t + 1) * sdim];
-                d.agent_pos.push([row[0] as f32, row[1] as f32]);
-                d.block.push([row[2] as f32, row[3] as f32, row[4] as f32]);
-                d.goal.push([row[5] as f32, row[6] as f32, row[7] as f32]);
-                d.actions.push([action[t * 2] as f32, action[t * 2 + 1] as f32]);
+            let states: Vec<Vec<f64>> =
+                rg.clone().map(|t| state[t * sdim..(t + 1) * sdim].to_vec()).collect();
+            let acts: Vec<Vec<f32>> = rg
+                .clone()
+                .map(|t| action[t * action_dim..(t + 1) * action_dim].iter().map(|&v| v as f32).collect())
+                .collect();
+            let proprio = task.recorded_proprio(&states, &acts);
+            if proprio.len() != acts.len() || proprio.iter().any(|p| p.len() != proprio_dim) {
+                return Err(err(format!(
+                    "episode {i}: the task's proprioception is not {proprio_dim} entries per step"
+                )));
             }
-            d.episodes.push(start..d.agent_pos.len());
+            d.proprio.extend(proprio.into_iter().flatten());
+            d.actions.extend(acts.into_iter().flatten());
+            for row in &states {
+                if pusht {
+                    block.push([row[2] as f32, row[3] as f32, row[4] as f32]);
+                    goal.push([row[5] as f32, row[6] as f32, row[7] as f32]);
+                } else {
+                    columns.extend(named.iter().map(|(c, _)| row[*c] as f32));
+                }
+            }
+            d.episodes.push(start..d.len());
         }
         if d.episodes.is_empty() {
             return Err(err(format!("no episodes with behaviour {behaviour:?}")));
         }
+        d.labels = if pusht {
+            FrameLabels::PushT { block, goal }
+        } else if named.is_empty() {
+            FrameLabels::None
+        } else {
+            FrameLabels::Columns { names: named.into_iter().map(|(_, n)| n).collect(), values: columns }
+        };
         Ok(d)
     }
 
-    /// Min-max statistics of agent positions and actions.
+    /// The proprioception read at step `i`.
+    pub fn proprio_at(&self, i: usize) -> &[f32] {
+        &self.proprio[i * self.proprio_dim..(i + 1) * self.proprio_dim]
+    }
+
+    /// The action executed at step `i`.
+    pub fn action_at(&self, i: usize) -> &[f32] {
+        &self.actions[i * self.action_dim..(i + 1) * self.action_dim]
+    }
+
+    /// Min-max statistics of the proprioception and the actions.
     pub fn normalisation(&self) -> Normalisation {
-        let range = |v: &[[f32; 2]]| {
-            let mut r = Range { min: vec![f32::INFINITY; 2], max: vec![f32::NEG_INFINITY; 2] };
-            for p in v {
-                for (d, x) in p.iter().enumerate() {
-                    r.min[d] = r.min[d].min(*x);
-                    r.max[d] = r.max[d].max(*x);
-                }
-            }
-            r
-        };
-        Normalisation { agent_pos: range(&self.agent_pos), action: range(&self.actions) }
+        Normalisation {
+            agent_pos: min_max(&self.proprio, self.proprio_dim),
+            action: min_max(&self.actions, self.action_dim),
+        }
     }
 
     /// Number of samples (one per step).
     pub fn len(&self) -> usize {
-        self.agent_pos.len()
+        self.proprio.len() / self.proprio_dim.max(1)
     }
 
     /// Whether there are no samples.
     pub fn is_empty(&self) -> bool {
-        self.agent_pos.is_empty()
+        self.proprio.is_empty()
     }
 
     /// Observation step indices (`obs` of them, oldest first) and action indices
@@ -153,6 +222,18 @@ impl Demos {
     }
 }
 
+/// Per-entry minimum and maximum of `dim`-wide rows.
+fn min_max(rows: &[f32], dim: usize) -> Range {
+    let mut r = Range { min: vec![f32::INFINITY; dim], max: vec![f32::NEG_INFINITY; dim] };
+    for row in rows.chunks(dim.max(1)) {
+        for (d, x) in row.iter().enumerate() {
+            r.min[d] = r.min[d].min(*x);
+            r.max[d] = r.max[d].max(*x);
+        }
+    }
+    r
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -161,10 +242,11 @@ mod tests {
     fn samples_pad_at_both_ends() {
         let d = Demos {
             frames: vec![],
-            agent_pos: vec![[0.0; 2]; 5],
-            block: vec![[0.0; 3]; 5],
-            goal: vec![[0.0; 3]; 5],
-            actions: vec![[0.0; 2]; 5],
+            proprio: vec![0.0; 10],
+            proprio_dim: 2,
+            actions: vec![0.0; 10],
+            action_dim: 2,
+            labels: FrameLabels::None,
             size: 1,
             episodes: vec![0..3, 3..5],
         };

@@ -186,6 +186,17 @@ pub fn train_policy(
     let (pc, tc) = (&configs.policy, &configs.train);
     let device = inner.clone().autodiff();
     let (o, h, s) = (pc.net.obs_horizon, pc.horizon, pc.net.image_size);
+    let (pd, ad) = (demos.proprio_dim, demos.action_dim);
+    if (pc.net.proprio(), pc.net.action_dim) != (pd, ad) {
+        return Err(PolicyLoadError::new(
+            out,
+            format!(
+                "the policy takes {}-entry proprioception and {}-entry actions, the demonstrations have {pd} and {ad}",
+                pc.net.proprio(),
+                pc.net.action_dim
+            ),
+        ));
+    }
     let n = demos.len();
     let per_epoch = n.div_ceil(tc.batch.max(1)) as u64;
     let total = per_epoch * tc.epochs;
@@ -243,6 +254,9 @@ pub fn train_policy(
             return Ok(PolicyOutcome { step: state.step, total, saved: Vec::new(), loss: f64::NAN });
         };
         provenance["encoder_pretraining"] = json!({"steps": ps.step, "heldout_pose_error": ps.heldout});
+        if let Some(columns) = &ps.heldout_columns {
+            provenance["encoder_pretraining"]["heldout_mean_abs_error"] = json!(columns);
+        }
         if state.step == 0 {
             net.encoder = probe.encoder;
             ema = Ema::new(&net, tc.ema);
@@ -279,38 +293,38 @@ pub fn train_policy(
         let b = batch.len();
         // Observation steps of the batch, `o` per sample (oldest first).
         let mut obs = Vec::with_capacity(b * o);
-        let (mut pos, mut act) = (Vec::with_capacity(b * o * 2), Vec::with_capacity(b * h * 2));
+        let (mut pos, mut act) = (Vec::with_capacity(b * o * pd), Vec::with_capacity(b * h * ad));
         for &t in batch {
             let (oi, ai) = demos.sample_indices(t, o, h);
             obs.extend_from_slice(&oi);
             pos.extend(
-                oi.iter().flat_map(|&i| configs.normalisation.agent_pos.normalise(&demos.agent_pos[i])),
+                oi.iter().flat_map(|&i| configs.normalisation.agent_pos.normalise(demos.proprio_at(i))),
             );
-            act.extend(ai.iter().flat_map(|&i| configs.normalisation.action.normalise(&demos.actions[i])));
+            act.extend(ai.iter().flat_map(|&i| configs.normalisation.action.normalise(demos.action_at(i))));
         }
         let mut rng = Rng::new(derive(tc.seed, &[u64::MAX, state.step]));
         let t: Vec<usize> = (0..b).map(|_| rng.below(pc.train_steps as u64) as usize).collect();
-        let noise = Tensor::from_data(TensorData::new(rng.normals_f32(b * h * 2), [b, h, 2]), &device);
+        let noise = Tensor::from_data(TensorData::new(rng.normals_f32(b * h * ad), [b, h, ad]), &device);
         let cond = match &features {
-            // Frozen encoder: [b, o·(f + 2)] from the cache, no gradient reaches the encoder.
+            // Frozen encoder: [b, o·(f + pd)] from the cache, no gradient reaches the encoder.
             Some(cache) => {
                 let f = pc.net.feature_dim;
-                let mut c = Vec::with_capacity(b * o * (f + 2));
+                let mut c = Vec::with_capacity(b * o * (f + pd));
                 for (j, &i) in obs.iter().enumerate() {
                     c.extend_from_slice(&cache[i * f..(i + 1) * f]);
-                    c.extend_from_slice(&pos[j * 2..j * 2 + 2]);
+                    c.extend_from_slice(&pos[j * pd..(j + 1) * pd]);
                 }
-                Tensor::from_data(TensorData::new(c, [b, o * (f + 2)]), &device)
+                Tensor::from_data(TensorData::new(c, [b, o * (f + pd)]), &device)
             }
             None => {
                 let frames: Vec<&[u8]> = obs.iter().map(|&i| demos.frame(i)).collect();
                 net.obs_cond(
                     frames_to_tensor(&frames, s, &device),
-                    Tensor::from_data(TensorData::new(pos, [b, o, 2]), &device),
+                    Tensor::from_data(TensorData::new(pos, [b, o, pd]), &device),
                 )
             }
         };
-        let actions = Tensor::from_data(TensorData::new(act, [b, h, 2]), &device);
+        let actions = Tensor::from_data(TensorData::new(act, [b, h, ad]), &device);
         let loss = net.loss(cond, actions, noise, &t, &ac);
         let lv: f64 = loss.clone().into_scalar::<f32>().into();
         if !lv.is_finite() {

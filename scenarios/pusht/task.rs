@@ -91,6 +91,11 @@ impl Task for PushTTask {
         Ok(Box::new(PushTEpisode { env, raster: self.raster.clone() }))
     }
 
+    fn recorded_proprio(&self, states: &[Vec<f64>], _actions: &[Vec<f32>]) -> Vec<Vec<f32>> {
+        // The agent's position: the state's first two columns, as `observe` reads it.
+        states.iter().map(|s| s.iter().take(2).map(|&v| v as f32).collect()).collect()
+    }
+
     fn scripted_policy(&self, dir: &Path) -> Result<Box<dyn Policy>, String> {
         let p = ScriptedPolicy::load(dir, &self.cfg, self.model.clone(), self.raster.size())?;
         Ok(Box::new(p))

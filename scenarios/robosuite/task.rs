@@ -24,6 +24,7 @@ use harness::task::{
     ActionKind, ActionSpec, Env, Imagination, ModelView, ObservationSpec, ScoreKind, Seen, Task, TaskError,
 };
 
+use super::episode::ROBOT_COLUMNS;
 use super::rollout::{ArmTask, TaskEpisode};
 use crate::error::ScenarioError;
 
@@ -114,6 +115,34 @@ impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
 
     fn control_hz(&self) -> f64 {
         20.0
+    }
+
+    fn recorded_proprio(&self, _states: &[Vec<f64>], actions: &[Vec<f32>]) -> Vec<Vec<f32>> {
+        // Step t reads the pose commanded by the actions before it, as `observe` does.
+        let mut cmd = Commanded::default();
+        actions
+            .iter()
+            .map(|a| {
+                let seen = cmd.vector();
+                cmd.add(a);
+                seen
+            })
+            .collect()
+    }
+
+    fn frame_labels(&self) -> Vec<(usize, String)> {
+        // The object's position (the state's first three columns), the end effector's
+        // position and the two finger joints ([`ROBOT_COLUMNS`] after the object's seven).
+        let robot = |name: &str| ROBOT_COLUMNS.iter().position(|c| *c == name).map(|i| 7 + i);
+        let mut labels: Vec<(usize, String)> = ["object_x", "object_y", "object_z"]
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (i, (*n).to_string()))
+            .collect();
+        for name in ["eef_x", "eef_y", "eef_z", "finger_1", "finger_2"] {
+            labels.extend(robot(name).map(|i| (i, name.to_string())));
+        }
+        labels
     }
 
     fn reset(&self, seed: u64) -> Result<Box<dyn Env>, TaskError> {
@@ -273,6 +302,12 @@ mod tests {
             assert!((g - w).abs() < 1e-6, "{got:?}");
         }
         assert_eq!(imagine.proprio(), got);
+        // A dataset of these steps trains policies on the same vectors: step 0 reads the
+        // initial (0, …, 0, −1), step 1 the first action's pose (0.05, −0.025, 0.05, 0, 0, 0.1, 1).
+        let recorded = t.recorded_proprio(&[], &actions.map(|a| a.to_vec()));
+        assert_eq!(recorded[0], vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0]);
+        let first = [0.05, -0.025, 0.05, 0.0, 0.0, 0.1, 1.0];
+        assert!(recorded[1].iter().zip(first).all(|(g, w)| (g - w).abs() < 1e-6), "{recorded:?}");
         assert_ne!(env.observe().frame, before, "the frame is rendered again after a step");
         let e = env.step(&[0.0; 2]).unwrap_err().to_string();
         assert_eq!(e, "action of 2 entries at seed 5: the task takes 7");
@@ -288,5 +323,15 @@ mod tests {
         let env = t.reset(1).unwrap();
         assert_eq!(env.observe().frame.len(), 96 * 96 * 3);
         assert!(env.object_pose().is_some());
+        // Labels name the object's position, then the end effector's and the fingers'.
+        let labels = t.frame_labels();
+        let names: Vec<&str> = labels.iter().map(|(_, n)| n.as_str()).collect();
+        assert_eq!(
+            names,
+            ["object_x", "object_y", "object_z", "eef_x", "eef_y", "eef_z", "finger_1", "finger_2"]
+        );
+        let columns: Vec<usize> = labels.iter().map(|(i, _)| *i).collect();
+        // Object (0..3), then the robot's columns from 7: eef 7..10, fingers 14, 15.
+        assert_eq!(columns, [0, 1, 2, 7, 8, 9, 14, 15]);
     }
 }

@@ -6,7 +6,7 @@
 
 use std::process::ExitCode;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use serde_json::json;
 use world_model::autoencoder::AutoencoderConfig;
 use world_model::data::EpisodeData;
@@ -16,6 +16,16 @@ use super::sessions::{open_session, read_step, record_session};
 use crate::cli::TrainAutoencoderArgs;
 use crate::output::write_json;
 use crate::progress;
+
+/// The task a dataset was collected in (its attributes name it; Push-T when absent).
+///
+/// # Errors
+/// A task this build cannot load.
+pub(super) fn dataset_task(data: &std::path::Path) -> Result<Box<dyn harness::task::Task>> {
+    let attrs = harness::zarr::read_attrs(data).unwrap_or_default();
+    let scenario = attrs["evalharness"]["scenario"].as_str().unwrap_or("pusht");
+    crate::scenario::load_task(scenario).with_context(|| format!("{}: its task {scenario}", data.display()))
+}
 
 /// How an evalharness dataset was collected (from its attributes), to regenerate it:
 /// `collect` is deterministic, so the same arguments give the same bytes. A merged

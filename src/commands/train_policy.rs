@@ -12,7 +12,7 @@ use policies::train::{Phase, PolicyRun, PolicyTrainConfig, RunConfigs, train_pol
 use serde_json::json;
 
 use super::git_commit;
-use super::train::{dataset_origin, fixed_fields, prepare_out, refuse_contradicting_flags};
+use super::train::{dataset_origin, dataset_task, fixed_fields, prepare_out, refuse_contradicting_flags};
 use crate::cli::TrainPolicyArgs;
 use crate::progress;
 
@@ -24,8 +24,15 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
     if a.ema.is_some_and(|d| !(0.0..1.0).contains(&d)) {
         bail!("--ema must be in [0, 1), got {}", a.ema.unwrap_or_default());
     }
+    let task = dataset_task(&a.data)?;
+    let (ad, pd) = (task.action_spec().dim, task.observation_spec().proprio.len());
     let mut policy = DiffusionConfig {
-        net: NetConfig::new().with_encoder_width(a.encoder_width).with_down_dims(a.down_dims.clone()),
+        net: NetConfig::new()
+            .with_encoder_width(a.encoder_width)
+            .with_down_dims(a.down_dims.clone())
+            .with_action_dim(ad)
+            // Absent when it equals the action width (Push-T), as in every Push-T checkpoint.
+            .with_proprio_dim((pd != ad).then_some(pd)),
         inference_steps: a.inference_steps,
         ..DiffusionConfig::default()
     };
@@ -40,7 +47,7 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
     let out_dir = prepare_out(&a.out, a.session.resume, a.session.force, ".train/state.json", &inputs)?;
     let behaviour = (a.behaviour != "all").then_some(a.behaviour.as_str());
     tracing::info!(data = %a.data.display(), ?behaviour, "loading demonstrations");
-    let demos = Demos::load(&a.data, behaviour, a.episodes, policy.net.image_size)?;
+    let demos = Demos::load(&a.data, task.as_ref(), behaviour, a.episodes, policy.net.image_size)?;
     tracing::info!(episodes = demos.episodes.len(), samples = demos.len(), "loaded");
     let normalisation = match &start {
         Some(s) => {
@@ -201,9 +208,9 @@ fn starting_checkpoint(dir: &std::path::Path, typed: &DiffusionConfig) -> Result
 /// normalisation ranges (the network then sees inputs beyond [-1, 1]).
 fn warn_outside(data: &Normalisation, ck: &Normalisation) {
     for (what, d, c) in
-        [("agent position", &data.agent_pos, &ck.agent_pos), ("action", &data.action, &ck.action)]
+        [("proprioception", &data.agent_pos, &ck.agent_pos), ("action", &data.action, &ck.action)]
     {
-        if (0..2).any(|i| d.min[i] < c.min[i] || d.max[i] > c.max[i]) {
+        if d.min.iter().zip(&c.min).any(|(d, c)| d < c) || d.max.iter().zip(&c.max).any(|(d, c)| d > c) {
             tracing::warn!(
                 "the data's {what} range {:?}..{:?} exceeds the starting checkpoint's {:?}..{:?}; \
                  normalised values leave [-1, 1]",

@@ -25,6 +25,8 @@ pub struct EpisodeData {
     pub size: usize,
     /// Step ranges of each episode.
     pub episodes: Vec<std::ops::Range<usize>>,
+    /// The dataset it was read from (named in errors about its contents).
+    pub source: std::path::PathBuf,
 }
 
 /// Which episodes a step index set is drawn from.
@@ -63,7 +65,14 @@ impl EpisodeData {
         let actions: Vec<f32> =
             r.action.read_f64().map_err(|e| err(e.to_string()))?.into_iter().map(|v| v as f32).collect();
         let episodes = (0..r.episodes()).map(|i| r.episode_range(i)).collect();
-        Ok(Self { frames, actions, action_dim: r.action.row_len(), size: expected_size, episodes })
+        Ok(Self {
+            frames,
+            actions,
+            action_dim: r.action.row_len(),
+            size: expected_size,
+            episodes,
+            source: path.to_path_buf(),
+        })
     }
 
     /// Number of frames.
@@ -168,6 +177,7 @@ mod tests {
             action_dim: 2,
             size: 4,
             episodes: std::iter::once(0..2).collect(),
+            source: std::path::PathBuf::new(),
         };
         let t = data.frames_tensor(&[1, 0], &Device::flex());
         let back = tensor_to_frames(t);

@@ -336,6 +336,7 @@ mod tests {
             action_dim: 2,
             size: 8,
             episodes: std::iter::once(0..6).collect(),
+            source: std::path::PathBuf::new(),
         };
         // Context 0..4, last context frame 3; video = frames 4 and 5.
         let row = persistence(&data, &[(0, 2)], 4, "64");
@@ -378,6 +379,7 @@ mod tests {
             action_dim: 2,
             size: 8,
             episodes: std::iter::once(0..6).collect(),
+            source: std::path::PathBuf::new(),
         };
         assert!(round_trip(&wm, ("wm", None), &data, &[(0, 2)], "64").is_none());
     }

@@ -191,6 +191,7 @@ mod tests {
             action_dim: 2,
             size: 1,
             episodes: vec![0..6, 6..9],
+            source: std::path::PathBuf::new(),
         }
     }
 
@@ -220,6 +221,7 @@ mod tests {
             action_dim: 2,
             size: 2,
             episodes: std::iter::once(0..3).collect(),
+            source: std::path::PathBuf::new(),
         };
         let stats =
             LatentStats { channels: 3, size: 2, mean: vec![0.0, 0.5, -0.5], std: vec![1.0, 2.0, 0.5] };

@@ -255,8 +255,8 @@ pub fn train_autoencoder(
     let held = data.frame_indices(Split::HeldOut);
     if train_idx.is_empty() || held.is_empty() {
         return Err(WorldModelError::Data {
-            path: out.to_path_buf(),
-            message: "need at least 10 episodes (every 10th is held out)".into(),
+            path: data.source.clone(),
+            message: format!("{} episodes: need at least 10 (every 10th is held out)", data.episodes.len()),
         });
     }
     let stride = (held.len() / cfg.eval_frames.max(1)).max(1);

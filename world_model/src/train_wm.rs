@@ -232,14 +232,14 @@ pub fn train_world_model(
     let held = window_starts(data, Split::HeldOut, f);
     if starts.is_empty() || held.is_empty() {
         return Err(WorldModelError::Data {
-            path: out.to_path_buf(),
+            path: data.source.clone(),
             message: format!("need episodes longer than {f} steps in both splits (every 10th is held out)"),
         });
     }
     let scale = model_cfg.action_scale();
     scale
         .check(data.action_dim)
-        .map_err(|message| WorldModelError::Data { path: out.to_path_buf(), message })?;
+        .map_err(|message| WorldModelError::Data { path: data.source.clone(), message })?;
     let stride = (held.len() / cfg.eval_windows.max(1)).max(1);
     let eval_windows: Vec<Window> =
         held.iter().step_by(stride).take(cfg.eval_windows).map(|&t| window(data, t, k, f, &scale)).collect();
