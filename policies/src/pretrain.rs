@@ -495,7 +495,7 @@ mod tests {
                 values: vec![1.0, 5.0, 3.0, 5.0, 100.0, 5.0],
             },
             size: 1,
-            episodes: vec![0..3],
+            episodes: std::iter::once(0..3).collect(),
         };
         // Over training steps 0 and 1: a has mean 2, std 1 (population: ((1−2)² + (3−2)²)/2 = 1);
         // b is constant: mean 5, unit scale. Step 2 (held out) maps a = 100 to (100 − 2)/1 = 98.
