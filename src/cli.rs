@@ -235,15 +235,16 @@ pub struct WmEvalArgs {
 /// `evalharness rank`.
 #[derive(Debug, Args)]
 pub struct RankArgs {
-    /// A policy checkpoint, or a folder of them.
-    #[arg(long, default_value = "checkpoints/pusht/policies")]
-    pub policies: PathBuf,
-    /// The world model (from `train world-model`).
-    #[arg(long, default_value = "checkpoints/pusht/world_model")]
-    pub world_model: PathBuf,
+    /// A policy checkpoint, or a folder of them [default: checkpoints/<task>/policies].
+    #[arg(long)]
+    pub policies: Option<PathBuf>,
+    /// The world model (from `train world-model`) [default: checkpoints/<task>/world_model].
+    #[arg(long)]
+    pub world_model: Option<PathBuf>,
     /// A learned judge (from `train judge`) that scores the imagined frames in place
     /// of the task's own judge (whose scene checks are kept); its error on the
-    /// simulator branch's real frames is reported as for any judge.
+    /// simulator branch's real frames is reported as for any judge [default, for a task
+    /// without a judge of its own (Lift, Can): checkpoints/<task>/judge].
     #[arg(long)]
     pub judge: Option<PathBuf>,
     /// Action-accentuation strength α, for a world model trained with
@@ -253,15 +254,16 @@ pub struct RankArgs {
     /// Scenario name or .toml file.
     #[arg(long, default_value = "pusht")]
     pub scenario: String,
-    /// Episodes per policy.
-    #[arg(long, default_value_t = 100)]
-    pub episodes: usize,
+    /// Episodes per policy [default: checkpoints/<task>/rank.toml's, else 100].
+    #[arg(long)]
+    pub episodes: Option<usize>,
     /// First episode seed (training data uses seeds from 0).
     #[arg(long, default_value_t = 100_000)]
     pub seed_start: u64,
-    /// Control steps per episode.
-    #[arg(long, default_value_t = 300)]
-    pub max_steps: usize,
+    /// Control steps per episode [default: checkpoints/<task>/rank.toml's, else the
+    /// task's (Push-T 300, robomimic 400)].
+    #[arg(long)]
+    pub max_steps: Option<usize>,
     /// Episodes advanced together (one batched policy / world-model call). 50 splits
     /// the default run into 14 batches, so the workers finish together (with 100, one
     /// idled during the last world-model batch). Part of the run's settings: float

@@ -61,6 +61,14 @@ fn the_lift_pipeline_collects_trains_every_model_and_ranks() {
     // 10 episodes: none is held out of the pre-training (every 20th), so no error is claimed.
     assert!(pre["heldout_mean_abs_error"].is_null(), "{pre}");
 
+    // MuJoCo alone needs no judge of frames: `simulate --policy` scores a Lift policy exactly
+    // (regression: it refused, asking for a judge only the world-model branch uses).
+    let (sim, epoch2) = (dir.join("sim"), pol.join("epoch-0002"));
+    let args = ["simulate", "--scenario", "lift", "--policy", s(&epoch2), "--episodes", "1"];
+    expect_code(&run(&[&args[..], &["--max-steps", "4", "--out", s(&sim)]].concat()), 0);
+    let summary = read_json(&sim.join("summary.json"));
+    assert_eq!(summary["policies"][0]["mujoco"]["episodes"], 1, "{summary}");
+
     // rank the two epochs with this model and judge: both branches run every episode.
     let out = dir.join("rank");
     let args = ["rank", "--scenario", "lift", "--world-model", s(&wm), "--judge", s(&judge)];

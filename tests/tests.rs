@@ -2,6 +2,7 @@
 
 mod agreement;
 mod dataset;
+mod docs;
 mod judge;
 mod lift;
 mod lift_models;

@@ -15,6 +15,7 @@
 
 use std::time::Instant;
 
+use harness::judge::Judge;
 use harness::results::Branch;
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
@@ -47,7 +48,13 @@ pub fn wm_branch(
         .iter()
         .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(&name), sd, fnv1a("world_model")])))
         .collect();
-    for ((t, judge), f) in track.iter_mut().zip(&start.judges).zip(&start.first) {
+    // Imagined frames can only be scored by a judge of frames.
+    let judges: Vec<&dyn Judge> = start
+        .judges
+        .iter()
+        .map(|j| j.as_deref().ok_or_else(|| EngineError::NoJudge { task: s.task.name().to_string() }))
+        .collect::<Result<_, _>>()?;
+    for ((t, judge), f) in track.iter_mut().zip(&judges).zip(&start.first) {
         t.add(judge.score(&f.frame), &kind);
         t.scene = judge.scene(&f.frame);
     }
@@ -98,7 +105,7 @@ pub fn wm_branch(
                     if j >= first_seen {
                         let fr = &mut frames[p * m + j - first_seen];
                         imagine[i].to_observation(fr);
-                        track[i].add(start.judges[i].score(fr), &kind);
+                        track[i].add(judges[i].score(fr), &kind);
                         let seen = Seen { frame: std::mem::take(fr), proprio: imagine[i].proprio() };
                         push(&mut hist[i], seen, o);
                     }
@@ -112,7 +119,7 @@ pub fn wm_branch(
             track[i].steps += len;
             // Scene checks of the chunk's last seen frame only (the row keeps the last).
             if let Some(f) = hist[i].back() {
-                track[i].scene = start.judges[i].scene(&f.frame);
+                track[i].scene = judges[i].scene(&f.frame);
             }
         }
         record_chunk(&mut rec, &hist);

@@ -47,7 +47,7 @@ pub fn sim_branch(
     let mut traj: Vec<Trajectory> = vec![Trajectory::default(); n];
     for (((t, env), judge), f) in track.iter_mut().zip(&start.envs).zip(&start.judges).zip(&start.first) {
         t.add(env.score(), &kind);
-        t.scene = judge.scene(&f.frame);
+        t.scene = judge.as_ref().and_then(|j| j.scene(&f.frame));
     }
     let mut steps = 0;
     let mut active: Vec<usize> = (0..n).collect();
@@ -76,7 +76,9 @@ pub fn sim_branch(
                         }
                         if j + o >= len {
                             let seen = env.observe();
-                            out.err += (judge.score(&seen.frame) - raw).abs();
+                            if let Some(j) = judge {
+                                out.err += (j.score(&seen.frame) - raw).abs();
+                            }
                             out.seen.push(seen);
                         }
                     }
@@ -93,7 +95,7 @@ pub fn sim_branch(
             judge_err[i].0 += out.err;
             judge_err[i].1 += out.seen.len();
             if let Some(f) = out.seen.last() {
-                track[i].scene = start.judges[i].scene(&f.frame);
+                track[i].scene = start.judges[i].as_ref().and_then(|j| j.scene(&f.frame));
             }
             out.seen.into_iter().for_each(|f| push(&mut hist[i], f, o));
             let t = &mut traj[i];
@@ -113,11 +115,12 @@ pub fn sim_branch(
     let rows = (0..n)
         .map(|i| {
             let env = &start.envs[i];
-            let err = judge_err[i].0 / judge_err[i].1.max(1) as f64;
+            // The judge's error on the real frames; none without a judge.
+            let err = start.judges[i].is_some().then(|| judge_err[i].0 / judge_err[i].1.max(1) as f64);
             track[i]
                 .row(&name, start.seeds[i], Branch::Sim, &kind)
                 .with_poses(env.object_pose(), start.goals[i].unwrap_or_default())
-                .with_scorer_error(Some(err))
+                .with_scorer_error(err)
         })
         .collect();
     let episodes = if trajectories {

@@ -57,7 +57,9 @@ pub struct Setup<'a> {
 /// first observations and the policy noise streams.
 pub struct Start {
     pub(crate) envs: Vec<Box<dyn Env>>,
-    pub(crate) judges: Vec<Box<dyn Judge>>,
+    /// Each episode's judge of frames; `None` for a task without one when none was
+    /// given (the simulator branch runs, scoring exactly; the world-model branch refuses).
+    pub(crate) judges: Vec<Option<Box<dyn Judge>>>,
     pub(crate) first: Vec<Seen>,
     /// Each episode's goal pose at reset (for the rows of both branches).
     pub(crate) goals: Vec<Option<[f64; 3]>>,
@@ -103,7 +105,8 @@ pub struct BranchOut {
 }
 
 impl Start {
-    /// Resets one episode per seed.
+    /// Resets one episode per seed, each with its judge of frames: the given one, else
+    /// the task's own, else none.
     ///
     /// # Errors
     /// A seed whose reset fails, naming it.
@@ -115,11 +118,10 @@ impl Start {
         let judges = envs
             .iter()
             .map(|e| match (s.judge, e.judge()) {
-                (Some(j), checks) => Ok(Box::new(Replaced { scorer: j.clone(), checks }) as Box<dyn Judge>),
-                (None, Some(own)) => Ok(own),
-                (None, None) => Err(EngineError::NoJudge { task: s.task.name().to_string() }),
+                (Some(j), checks) => Some(Box::new(Replaced { scorer: j.clone(), checks }) as Box<dyn Judge>),
+                (None, own) => own,
             })
-            .collect::<Result<Vec<_>, _>>()?;
+            .collect();
         Ok(Self {
             judges,
             first: envs.iter().map(|e| e.observe()).collect(),

@@ -190,10 +190,24 @@ impl Judge for Never {
 #[test]
 fn robomimic_lift_runs_through_the_simulator_branch_with_a_given_judge() {
     let task = scenarios::load_task("lift").expect("robosuite assets (scripts/setup.sh)");
-    // Lift has no hand-written judge of frames: without one given, the engine refuses.
+    // Lift has no hand-written judge of frames: without one given, the simulator branch
+    // runs (scored exactly, no judge error to report) and the world-model branch refuses.
     let bare = Setup { task: task.as_ref(), master_seed: 0, max_steps: 4, judge: None };
-    let e = Start::new("up", &[0], &bare).err().unwrap().to_string();
+    let start = Start::new("up", &[0], &bare).unwrap();
+    let wm = WorldModel::from_parts(
+        WorldModelConfig::pixels(
+            UNetConfig { action_dim: 7, ..UNetConfig::new(3, 8, vec![1], vec![]).with_groups(4) },
+            96,
+        ),
+        FrameCodec::pixels(96),
+        UNetConfig { action_dim: 7, ..UNetConfig::new(3, 8, vec![1], vec![]).with_groups(4) }
+            .init(&burn::tensor::Device::flex()),
+        &burn::tensor::Device::flex(),
+    );
+    let e = crate::wm_branch(&Up, &start, &bare, &wm, &mut Timing::default()).err().unwrap().to_string();
     assert!(e.contains("task lift has no hand-written judge"), "{e}");
+    let alone = sim_branch(&Up, start, &bare, &mut Timing::default()).unwrap();
+    assert_eq!((alone.rows[0].steps, alone.rows[0].scorer_abs_error), (4, None));
     let never: std::sync::Arc<dyn Judge> = std::sync::Arc::new(Never);
     let setup = Setup { judge: Some(&never), ..bare };
     let mut start = Start::new("up", &[0], &setup).unwrap();

@@ -151,6 +151,10 @@ pub struct BranchStats {
     pub success_rate: f64,
     /// Its Wilson 95% interval.
     pub success_ci95: [f64; 2],
+    /// Mean control steps of the successful episodes: steps until the end of the
+    /// action chunk in which the episode succeeded (it ends there); null when none did.
+    #[serde(default)]
+    pub steps_to_success: Option<f64>,
     /// Episodes.
     pub episodes: usize,
     /// Mean block area of the last seen frames (null when no row recorded it).

@@ -1,5 +1,6 @@
 //! The statistics of a ranking run, from its rows: per policy and branch the mean
-//! score with a bootstrap CI, the success rate with a Wilson CI and the scene
+//! score with a bootstrap CI, the success rate with a Wilson CI, the steps to
+//! success and the scene
 //! checks; across policies, how well the world model's ranking agrees with the
 //! simulator's (with bootstrap CIs). Rows may come in any order (a resumed,
 //! sharded or multi-threaded run gives the same results as one uninterrupted run).
@@ -22,6 +23,7 @@ pub fn branch_stats(rows: &[&EpisodeRow], bootstrap: usize, seed: u64) -> Branch
         ci95: mean_ci(&scores, bootstrap, seed),
         success_rate: k as f64 / n.max(1) as f64,
         success_ci95: [lo, hi],
+        steps_to_success: mean_of(rows.iter().filter(|r| r.success).map(|r| r.steps as f64).collect()),
         episodes: n,
         block_area: mean_of(rows.iter().filter_map(|r| r.block_area).collect()),
         goal_kept: mean_of(rows.iter().filter_map(|r| r.goal_kept).collect()),
@@ -110,5 +112,22 @@ mod tests {
         let mut rev = rows.clone();
         rev.reverse();
         assert_eq!(summarise(&rev, &["a".into(), "b".into()], 200, 0), s);
+        // No episode succeeded: no steps to success.
+        assert_eq!(s.0[0].sim.steps_to_success, None);
+    }
+
+    #[test]
+    fn steps_to_success_average_the_successful_episodes_only() {
+        // Success at 0.5: two successes after 16 and 40 steps, one failure that ran 400.
+        let rows = [
+            EpisodeRow::new("a", 1, Branch::Sim, 1.0, 1.0, 1.0, 0.5, 16),
+            EpisodeRow::new("a", 2, Branch::Sim, 1.0, 1.0, 1.0, 0.5, 40),
+            EpisodeRow::new("a", 3, Branch::Sim, 0.0, 0.0, 0.0, 0.5, 400),
+        ];
+        let refs: Vec<&EpisodeRow> = rows.iter().collect();
+        let b = branch_stats(&refs, 10, 0);
+        // (16 + 40) / 2 = 28; success rate 2/3.
+        assert_eq!(b.steps_to_success, Some(28.0));
+        assert!((b.success_rate - 2.0 / 3.0).abs() < 1e-12);
     }
 }

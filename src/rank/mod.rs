@@ -8,6 +8,7 @@
 //! already in `episodes.jsonl`; `--shard i/n` runs every n-th batch; `--judge`
 //! scores the imagined frames with a learned judge instead of the task's own.
 
+pub mod defaults;
 mod media;
 pub mod merge;
 pub mod report;
@@ -53,13 +54,14 @@ fn parse_shard(s: Option<&str>) -> Result<(usize, usize)> {
 /// `evalharness rank`.
 pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     let (shard, shards) = parse_shard(a.shard.as_deref())?;
-    if a.max_steps == 0 || a.batch == 0 {
-        bail!("--max-steps and --batch must be positive");
-    }
-    let seeds: Vec<u64> = harness::seed::range(a.seed_start, a.episodes as u64)?.collect();
     // Every input is checked before the output folder is touched.
     let task = crate::scenario::load_task(&a.scenario)?;
-    if a.judge.is_none() && task.reset(a.seed_start)?.judge().is_none() {
+    let r = defaults::resolve(a, task.as_ref(), Path::new("checkpoints"))?;
+    if r.max_steps == 0 || a.batch == 0 {
+        bail!("--max-steps and --batch must be positive");
+    }
+    let seeds: Vec<u64> = harness::seed::range(a.seed_start, r.episodes as u64)?.collect();
+    if r.judge.is_none() && task.reset(a.seed_start)?.judge().is_none() {
         bail!(
             "--scenario {}: the task has no hand-written judge of imagined frames; train one on its \
              frames (`evalharness train judge --data DATASET --label success --out DIR`) and pass --judge DIR",
@@ -67,26 +69,26 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         );
     }
     let device = world_model::device::selected()?;
-    let wm = load_world_model(&a.world_model, a.alpha, &device)?;
-    let judge = a.judge.as_deref().map(|d| load_judge(d, task.as_ref(), &device)).transpose()?;
-    let dirs = checkpoint_dirs(&a.policies)?;
-    let mut inputs = model_inputs(Some((&a.world_model, &wm)), &dirs)?;
-    if let Some(d) = &a.judge {
+    let wm = load_world_model(&r.world_model, a.alpha, &device)?;
+    let judge = r.judge.as_deref().map(|d| load_judge(d, task.as_ref(), &device)).transpose()?;
+    let dirs = checkpoint_dirs(&r.policies)?;
+    let mut inputs = model_inputs(Some((&r.world_model, &wm)), &dirs)?;
+    if let Some(d) = &r.judge {
         let f = harness::fingerprint::folder(d)?;
         inputs.push(("judge".to_string(), d.clone(), f));
     }
-    let flags: Vec<(&str, &Path)> = vec![("--policies", &a.policies), ("--world-model", &a.world_model)];
+    let flags: Vec<(&str, &Path)> = vec![("--policies", &r.policies), ("--world-model", &r.world_model)];
     let (out_dir, jsonl) = prepare_run(&a.out, flags, &inputs, a.resume, a.force)?;
     let mut config = json!({
         "command": std::env::args().collect::<Vec<_>>().join(" "),
-        "scenario": a.scenario, "policies": a.policies, "world_model": a.world_model,
+        "scenario": a.scenario, "policies": r.policies, "world_model": r.world_model,
         "world_model_config": serde_json::to_value(&wm.cfg)?,
-        "episodes": a.episodes, "seed_start": a.seed_start, "max_steps": a.max_steps,
+        "episodes": r.episodes, "seed_start": a.seed_start, "max_steps": r.max_steps,
         "batch": a.batch, "seed": a.seed, "bootstrap": a.bootstrap, "shard": [shard, shards],
         "checkpoints": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
         "fingerprints": inputs.iter().map(|(k, _, f)| (k.clone(), json!(f))).collect::<serde_json::Map<_, _>>(),
     });
-    if let (Some(dir), Some(j)) = (&a.judge, &judge) {
+    if let (Some(dir), Some(j)) = (&r.judge, &judge) {
         config["judge"] = json!({"path": dir, "label": j.file.label, "threshold": j.file.threshold,
             "heldout": j.file.heldout});
     }
@@ -104,9 +106,9 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         .context("starting worker threads")?;
     let judge = judge.map(|j| std::sync::Arc::new(j) as std::sync::Arc<dyn harness::judge::Judge>);
     let setup =
-        Setup { task: task.as_ref(), master_seed: a.seed, max_steps: a.max_steps, judge: judge.as_ref() };
+        Setup { task: task.as_ref(), master_seed: a.seed, max_steps: r.max_steps, judge: judge.as_ref() };
     let expect = expectations(task.as_ref());
-    let pb = progress::bar((dirs.len() * a.episodes) as u64, "rank", quiet);
+    let pb = progress::bar((dirs.len() * r.episodes) as u64, "rank", quiet);
     let mut failed: Vec<FailedPolicy> = Vec::new();
     let mut names = Vec::new();
     let started = Instant::now();
@@ -121,7 +123,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
             Err(e) => {
                 tracing::error!("{e}; continuing with the other policies");
                 failed.push(FailedPolicy { policy: name, error: e.to_string() });
-                pb.inc(a.episodes as u64);
+                pb.inc(r.episodes as u64);
             }
         }
     }
@@ -160,7 +162,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
                 bail!(
                     "world model {}: {source} (while imagining policy {name}'s seeds {todo:?}); \
                      the rows of the batches before this one are kept",
-                    a.world_model.display(),
+                    r.world_model.display(),
                 );
             }
             Err(e) => {
@@ -179,10 +181,10 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     let (policies, agreement) = summarise(&rows, &ok_names, a.bootstrap, a.seed);
     let res = RankResults {
         scenario: a.scenario.clone(),
-        world_model: a.world_model.clone(),
-        episodes: a.episodes,
+        world_model: r.world_model.clone(),
+        episodes: r.episodes,
         seed_start: a.seed_start,
-        max_steps: a.max_steps,
+        max_steps: r.max_steps,
         policies,
         agreement,
         failed_policies: failed.clone(),

@@ -108,10 +108,11 @@ pub(super) fn print(res: &RankResults, out: &Path) {
             "policy", "MuJoCo", "world model", "block kept", "goal kept", "agent kept"
         );
     } else {
-        // A task without scene checks (robomimic's): the success rates instead.
+        // A task without scene checks (robomimic's, scored by success alone): the success
+        // rates with their Wilson 95% intervals, and the mean steps to success.
         println!(
-            "{:<16} {:>10} {:>12} {:>15} {:>20}",
-            "policy", "MuJoCo", "world model", "MuJoCo success", "world model success"
+            "{:<16} {:>22} {:>22} {:>14} {:>14}",
+            "policy", "MuJoCo success", "world model success", "MuJoCo steps", "wm steps"
         );
     }
     for p in &res.policies {
@@ -127,9 +128,17 @@ pub(super) fn print(res: &RankResults, out: &Path) {
                 or_nan(wm.agent_kept)
             );
         } else {
+            let rate = |b: &harness::results::BranchStats| {
+                format!("{:.2} [{:.2}, {:.2}]", b.success_rate, b.success_ci95[0], b.success_ci95[1])
+            };
+            let steps = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.1}"));
             println!(
-                "{:<16} {:>10.3} {:>12.3} {:>15.3} {:>20.3}",
-                p.name, p.sim.mean, wm.mean, p.sim.success_rate, wm.success_rate
+                "{:<16} {:>22} {:>22} {:>14} {:>14}",
+                p.name,
+                rate(&p.sim),
+                rate(wm),
+                steps(p.sim.steps_to_success),
+                steps(wm.steps_to_success)
             );
         }
     }

@@ -1,0 +1,122 @@
+//! `rank`'s per-task defaults: what a bare `rank --scenario NAME` runs.
+//!
+//! Each task's shipped models live in `checkpoints/<task>/` (`policies/`,
+//! `world_model/`, and `judge/` for a task without a hand-written judge of imagined
+//! frames). An optional `checkpoints/<task>/rank.toml` sets the episodes and step
+//! limit that the task's recorded numbers were measured with; without it a run has
+//! 100 episodes per policy and the task's own step limit. Flags override every
+//! default, and `config.json` records what was resolved.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use harness::task::Task;
+use serde::Deserialize;
+
+use crate::cli::RankArgs;
+
+/// Episodes per policy when neither `--episodes` nor the task's `rank.toml` says.
+const EPISODES: usize = 100;
+
+/// `checkpoints/<task>/rank.toml`.
+#[derive(Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+struct TaskDefaults {
+    /// Episodes per policy.
+    episodes: Option<usize>,
+    /// Control steps per episode (e.g. shorter than robomimic's 400-step horizon).
+    max_steps: Option<usize>,
+}
+
+/// The inputs and sizes of a run, flags first, then the task's defaults.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Resolved {
+    /// Policy checkpoint or folder.
+    pub policies: PathBuf,
+    /// World model.
+    pub world_model: PathBuf,
+    /// Learned judge of imagined frames, if any.
+    pub judge: Option<PathBuf>,
+    /// Episodes per policy.
+    pub episodes: usize,
+    /// Control steps per episode.
+    pub max_steps: usize,
+}
+
+/// Resolves `a` for `task` from the shipped folder `root/<task>` (`checkpoints`).
+///
+/// # Errors
+/// An unreadable or invalid `rank.toml`, naming it.
+pub fn resolve(a: &RankArgs, task: &dyn Task, root: &Path) -> Result<Resolved> {
+    let dir = root.join(task.name());
+    let file = dir.join("rank.toml");
+    let d: TaskDefaults = if file.exists() {
+        let text = std::fs::read_to_string(&file).with_context(|| format!("reading {}", file.display()))?;
+        toml::from_str(&text).with_context(|| format!("{}: invalid rank defaults", file.display()))?
+    } else {
+        TaskDefaults::default()
+    };
+    // A shipped judge is the default only where the task has no hand-written one.
+    let shipped_judge = dir.join("judge");
+    let needs_judge = task.reset(a.seed_start).map(|env| env.judge().is_none()).unwrap_or(false);
+    let judge = a.judge.clone().or_else(|| (needs_judge && shipped_judge.is_dir()).then_some(shipped_judge));
+    Ok(Resolved {
+        policies: a.policies.clone().unwrap_or_else(|| dir.join("policies")),
+        world_model: a.world_model.clone().unwrap_or_else(|| dir.join("world_model")),
+        judge,
+        episodes: a.episodes.or(d.episodes).unwrap_or(EPISODES),
+        max_steps: a.max_steps.or(d.max_steps).unwrap_or_else(|| task.max_steps()),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn args(extra: &[&str]) -> RankArgs {
+        let cli = crate::cli::Cli::parse_from([&["evalharness", "rank"], extra].concat());
+        match cli.command {
+            crate::cli::Command::Rank(a) => a,
+            _ => unreachable!("parsed a rank command"),
+        }
+    }
+
+    #[test]
+    fn flags_win_then_the_tasks_file_then_the_fallbacks() {
+        let task = scenarios::load_task("pusht").expect("Push-T");
+        let tmp = tempfile::tempdir().unwrap();
+        // No rank.toml: 100 episodes, Push-T's 300 steps, the shipped folders, no judge
+        // (Push-T judges its frames itself, even if a judge folder were shipped).
+        std::fs::create_dir_all(tmp.path().join("pusht").join("judge")).unwrap();
+        let r = resolve(&args(&[]), task.as_ref(), tmp.path()).unwrap();
+        assert_eq!(
+            r,
+            Resolved {
+                policies: tmp.path().join("pusht/policies"),
+                world_model: tmp.path().join("pusht/world_model"),
+                judge: None,
+                episodes: 100,
+                max_steps: 300,
+            }
+        );
+        std::fs::write(tmp.path().join("pusht/rank.toml"), "episodes = 50\nmax_steps = 120\n").unwrap();
+        let r = resolve(&args(&["--episodes", "7", "--policies", "p"]), task.as_ref(), tmp.path()).unwrap();
+        assert_eq!((r.episodes, r.max_steps, r.policies), (7, 120, PathBuf::from("p")));
+        std::fs::write(tmp.path().join("pusht/rank.toml"), "episode = 50\n").unwrap();
+        let e = format!("{:#}", resolve(&args(&[]), task.as_ref(), tmp.path()).unwrap_err());
+        assert!(e.contains("rank.toml: invalid rank defaults") && e.contains("episode"), "{e}");
+    }
+
+    #[test]
+    fn a_task_without_a_judge_gets_its_shipped_one() {
+        let task = scenarios::load_task("lift").expect("robosuite assets (scripts/setup.sh)");
+        let tmp = tempfile::tempdir().unwrap();
+        let r = resolve(&args(&["--scenario", "lift"]), task.as_ref(), tmp.path()).unwrap();
+        // Lift's own step limit is robomimic's 400; no judge is shipped in this folder.
+        assert_eq!((r.judge.clone(), r.max_steps), (None, 400));
+        std::fs::create_dir_all(tmp.path().join("lift").join("judge")).unwrap();
+        let r = resolve(&args(&["--scenario", "lift"]), task.as_ref(), tmp.path()).unwrap();
+        assert_eq!(r.judge, Some(tmp.path().join("lift/judge")));
+    }
+}
