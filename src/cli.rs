@@ -68,6 +68,9 @@ pub enum Command {
     Merge(MergeArgs),
     /// Re-render a rank run's report (plots, table.tex, summary.csv, report.html) from its files.
     Report(ReportArgs),
+    /// The paper's table of tasks from several rank runs (one row each: task, Pearson,
+    /// Spearman, inversions, MMRV); Markdown on stdout, LaTeX with `--tex`.
+    Tasks(TasksArgs),
     /// World-model tools.
     #[command(subcommand)]
     Wm(WmCommand),
@@ -329,6 +332,17 @@ pub struct MergeArgs {
 pub struct ReportArgs {
     /// A `rank` output folder (with results.json and config.json).
     pub out: PathBuf,
+}
+
+/// `evalharness tasks`.
+#[derive(Debug, Args)]
+pub struct TasksArgs {
+    /// `rank` output folders (with results.json), one per row, in order.
+    #[arg(required = true)]
+    pub runs: Vec<PathBuf>,
+    /// Also write the table as booktabs LaTeX to this file.
+    #[arg(long)]
+    pub tex: Option<PathBuf>,
 }
 
 /// Options shared by commands that run a scenario.

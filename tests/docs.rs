@@ -24,6 +24,7 @@ const PAGES: &[(&str, &[&str])] = &[
     ("merge.md", &["merge"]),
     ("report.md", &["report"]),
     ("agreement.md", &["agreement"]),
+    ("tasks.md", &["tasks"]),
     ("plan.md", &["plan"]),
 ];
 

@@ -80,6 +80,11 @@ fn the_lift_pipeline_collects_trains_every_model_and_ranks() {
     let res = read_json(&out.join("results.json"));
     assert_eq!(res["policies"].as_array().map(Vec::len), Some(2), "{res}");
     assert_eq!(res["failed_policies"].as_array().map(Vec::len), Some(0), "{res}");
+    // The table of tasks reads the run: Lift, 2 policies × 2 episodes from seed 100000.
+    let tex = dir.join("tasks.tex");
+    let (md, _) = expect_code(&run(&["tasks", s(&out), "--tex", s(&tex)]), 0);
+    assert!(md.contains("| lift | 2 × 2 |") && md.contains("| 100000–100001 |"), "{md}");
+    assert!(std::fs::read_to_string(&tex).unwrap().contains("lift & 2 & 2 &"));
 
     // A Push-T policy is refused by name (2-D actions) and reported; nothing is ranked (exit 1).
     let out = dir.join("rank_pusht");

@@ -342,7 +342,8 @@ mod tests {
 
     fn sample() -> serde_json::Value {
         let branch = serde_json::json!({"mean": 0.5, "ci95": [0.4, 0.6], "success_rate": 0.5,
-            "success_ci95": [0.1, 0.9], "episodes": 2, "block_area": null, "goal_kept": null, "agent_kept": 1.0});
+            "success_ci95": [0.1, 0.9], "steps_to_success": 12.5, "episodes": 2, "block_area": null,
+            "goal_kept": null, "agent_kept": 1.0});
         serde_json::json!({
             "scenario": "pusht", "world_model": "wm", "episodes": 2, "seed_start": 5, "max_steps": 300,
             "policies": [{"name": "a", "sim": branch, "world_model": branch, "frame_scorer_mean_abs_error": 0.01}],
@@ -361,6 +362,11 @@ mod tests {
         std::fs::write(&path, sample().to_string()).unwrap();
         let r = RankResults::read(&path).unwrap();
         assert_eq!(r.to_json().unwrap(), sample());
+        // A results.json written before steps to success were recorded still reads (null).
+        let mut old = sample();
+        old["policies"][0]["sim"].as_object_mut().unwrap().remove("steps_to_success");
+        std::fs::write(&path, old.to_string()).unwrap();
+        assert_eq!(RankResults::read(&path).unwrap().policies[0].sim.steps_to_success, None);
         let mut bad = sample();
         bad["policies"][0]["sim"]["mean"] = serde_json::json!("high");
         std::fs::write(&path, bad.to_string()).unwrap();

@@ -17,4 +17,5 @@ pub mod plots;
 pub mod png;
 pub mod summary;
 pub mod tables;
+pub mod tasks;
 pub mod timeplot;

@@ -62,6 +62,7 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Rank(a) => crate::rank::run(a, cli.quiet),
         Command::Plan(a) => crate::plan::run(a, cli.quiet),
         Command::Merge(a) => crate::rank::merge::run(&a.shards, &a.out, a.force, a.no_report),
+        Command::Tasks(a) => crate::rank::report::tasks_table(&a.runs, a.tex.as_deref()),
         Command::Report(a) => {
             let html = crate::rank::report::write_report(&a.out)?;
             println!("{}", html.display());

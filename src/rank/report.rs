@@ -130,3 +130,24 @@ fn filmstrips(out: &Path) -> (Vec<(PathBuf, String)>, Vec<String>) {
     }
     (strips, problems)
 }
+
+/// `evalharness tasks`: one row per run's `results.json`, Markdown on stdout and,
+/// with `tex`, booktabs LaTeX in that file.
+///
+/// # Errors
+/// A run folder without a readable `results.json` (named), or an unwritable `tex`.
+pub fn tasks_table(runs: &[PathBuf], tex: Option<&Path>) -> Result<std::process::ExitCode> {
+    use reports::tasks::{TaskRow, latex_tasks, markdown_tasks};
+    let rows = runs
+        .iter()
+        .map(|dir| {
+            let r = RankResults::read(&dir.join("results.json"))?;
+            Ok(TaskRow { summary: Summary::from_results(&r), minutes: Some(r.timing.wall_seconds / 60.0) })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    if let Some(path) = tex {
+        std::fs::write(path, latex_tasks(&rows)).with_context(|| format!("writing {}", path.display()))?;
+    }
+    print!("{}", markdown_tasks(&rows));
+    Ok(std::process::ExitCode::SUCCESS)
+}
