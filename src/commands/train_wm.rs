@@ -53,10 +53,9 @@ const DEFAULT_ALPHA: f32 = 2.5;
 /// # Errors
 /// A task that cannot be loaded, or actions of another width than the task's.
 fn action_scale_of(data: &Path, action_dim: usize) -> Result<Option<world_model::action::ActionScale>> {
-    let attrs = harness::zarr::read_attrs(data).unwrap_or_default();
-    let scenario = attrs["evalharness"]["scenario"].as_str().unwrap_or("pusht").to_string();
-    let spec =
-        if scenario == "pusht" { None } else { Some(crate::scenario::load_task(&scenario)?.action_spec()) };
+    let task = super::train::dataset_task(data)?;
+    let scenario = task.name();
+    let spec = (scenario != "pusht").then(|| task.action_spec());
     let expected = spec.as_ref().map_or(2, |s| s.dim);
     if action_dim != expected {
         bail!("{}: actions of {action_dim} entries, a {scenario} task's have {expected}", data.display());

@@ -41,6 +41,8 @@ pub struct Resolved {
     pub episodes: usize,
     /// Control steps per episode.
     pub max_steps: usize,
+    /// Whether the task's episodes have a hand-written judge of imagined frames.
+    pub own_judge: bool,
 }
 
 /// Resolves `a` for `task` from the shipped folder `root/<task>` (`checkpoints`).
@@ -58,14 +60,15 @@ pub fn resolve(a: &RankArgs, task: &dyn Task, root: &Path) -> Result<Resolved> {
     };
     // A shipped judge is the default only where the task has no hand-written one.
     let shipped_judge = dir.join("judge");
-    let needs_judge = task.reset(a.seed_start).map(|env| env.judge().is_none()).unwrap_or(false);
-    let judge = a.judge.clone().or_else(|| (needs_judge && shipped_judge.is_dir()).then_some(shipped_judge));
+    let own_judge = task.reset(a.seed_start)?.judge().is_some();
+    let judge = a.judge.clone().or_else(|| (!own_judge && shipped_judge.is_dir()).then_some(shipped_judge));
     Ok(Resolved {
         policies: a.policies.clone().unwrap_or_else(|| dir.join("policies")),
         world_model: a.world_model.clone().unwrap_or_else(|| dir.join("world_model")),
         judge,
         episodes: a.episodes.or(d.episodes).unwrap_or(EPISODES),
         max_steps: a.max_steps.or(d.max_steps).unwrap_or_else(|| task.max_steps()),
+        own_judge,
     })
 }
 
@@ -98,6 +101,7 @@ mod tests {
                 judge: None,
                 episodes: 100,
                 max_steps: 300,
+                own_judge: true,
             }
         );
         std::fs::write(tmp.path().join("pusht/rank.toml"), "episodes = 50\nmax_steps = 120\n").unwrap();

@@ -61,7 +61,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         bail!("--max-steps and --batch must be positive");
     }
     let seeds: Vec<u64> = harness::seed::range(a.seed_start, r.episodes as u64)?.collect();
-    if r.judge.is_none() && task.reset(a.seed_start)?.judge().is_none() {
+    if r.judge.is_none() && !r.own_judge {
         bail!(
             "--scenario {}: the task has no hand-written judge of imagined frames; train one on its \
              frames (`evalharness train judge --data DATASET --label success --out DIR`) and pass --judge DIR",
