@@ -2,6 +2,7 @@
 
 mod agreement;
 mod dataset;
+mod deploy;
 mod docs;
 mod judge;
 mod lift;

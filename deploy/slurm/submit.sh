@@ -4,9 +4,10 @@
 # Queues `evalharness rank` as a Slurm array of SHARDS tasks (rank.sbatch; task i runs
 # `--shard i/SHARDS`) and a merge job (merge.sbatch) that starts once every shard has
 # succeeded. Example:
-#   EVALHARNESS=$PWD/target/release/evalharness deploy/slurm/submit.sh 8 /scratch/rank \
-#       --policies checkpoints/pusht/policies --world-model checkpoints/pusht/world_model
-# Paths are read by the compute nodes, so give ones they share (absolute is safest).
+#   EVALHARNESS=$PWD/target/release/evalharness POLICIES=$PWD/checkpoints/pusht/policies \
+#       WORLD_MODEL=$PWD/checkpoints/pusht/world_model deploy/slurm/submit.sh 8 /scratch/rank
+# Paths are read by the compute nodes, so give ones they share (absolute is safest); the
+# jobs inherit this environment (POLICIES, WORLD_MODEL, EVALHARNESS).
 set -euo pipefail
 if [ $# -lt 2 ]; then
     echo "usage: $0 SHARDS OUT [rank arguments...]" >&2

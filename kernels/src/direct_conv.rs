@@ -41,7 +41,7 @@ pub fn winograd_enabled() -> bool {
 impl Conv3x3 {
     /// From burn's layout: `weight` `[cout, cin, 3, 3]`, `bias` `[cout]` (zeros when absent).
     pub fn new(cin: usize, cout: usize, weight: &[f32], bias: Option<&[f32]>) -> Self {
-        debug_assert_eq!(weight.len(), cout * cin * 9);
+        assert_eq!(weight.len(), cout * cin * 9);
         let blocks = cout.div_ceil(OUT);
         let mut weights = vec![0.0; blocks * cin * 9 * OUT];
         for co in 0..cout {
@@ -88,8 +88,8 @@ impl Conv3x3 {
     /// # Shapes
     /// `x`: `[cin, h, w]` (bordered) -> `out`: `[cout, h, w]`
     pub fn forward_direct(&self, x: &Padded, residual: Option<&[f32]>, out: &mut [f32]) {
-        debug_assert_eq!(x.channels(), self.cin);
-        debug_assert_eq!(out.len(), self.cout * x.height() * x.width());
+        assert_eq!(x.channels(), self.cin);
+        assert_eq!(out.len(), self.cout * x.height() * x.width());
         #[cfg(target_arch = "x86_64")]
         if crate::elementwise::has_avx2_fma() {
             // SAFETY: the CPU supports AVX2 and FMA (checked just above), the

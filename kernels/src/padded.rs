@@ -87,7 +87,7 @@ impl Padded {
     pub fn fill(&mut self, src: &[f32], upsample: bool) {
         let (c, h, w) = (self.c, self.h, self.w);
         let (sh, sw) = if upsample { (h / 2, w / 2) } else { (h, w) };
-        debug_assert_eq!(src.len(), c * sh * sw);
+        assert_eq!(src.len(), c * sh * sw);
         for ch in 0..c {
             for y in 0..h {
                 let sy = if upsample { y / 2 } else { y };

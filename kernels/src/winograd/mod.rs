@@ -49,7 +49,7 @@ pub struct Winograd3x3 {
 impl Winograd3x3 {
     /// From burn's layout: `weight` `[cout, cin, 3, 3]`, `bias` `[cout]` (zeros when absent).
     pub fn new(cin: usize, cout: usize, weight: &[f32], bias: Option<&[f32]>) -> Self {
-        debug_assert_eq!(weight.len(), cout * cin * 9);
+        assert_eq!(weight.len(), cout * cin * 9);
         let u = pack_filters(cin, cout, |co, ci| transform_filter(&weight[(co * cin + ci) * 9..][..9]));
         Self { cin, cout, u, bias: bias_or_zeros(cout, bias) }
     }
@@ -65,9 +65,9 @@ impl Winograd3x3 {
     /// `x`: `[cin, h, w]` (bordered) -> `out`: `[cout, h, w]`
     pub fn forward(&self, x: &Padded, residual: Option<&[f32]>, out: &mut [f32]) {
         let (h, w) = (x.height(), x.width());
-        debug_assert!(Self::supports(h, w));
-        debug_assert_eq!(x.channels(), self.cin);
-        debug_assert_eq!(out.len(), self.cout * h * w);
+        assert!(Self::supports(h, w));
+        assert_eq!(x.channels(), self.cin);
+        assert_eq!(out.len(), self.cout * h * w);
         let (th, tw) = (h / 2, w / 2);
         let rows = (TILES_PER_PASS / tw).clamp(1, th);
         let blocks = self.cout.div_ceil(OUT);
@@ -119,7 +119,7 @@ fn bias_or_zeros(cout: usize, bias: Option<&[f32]>) -> Vec<f32> {
 /// (`nk` a whole number of 8-tile vectors): the Winograd-domain products of
 /// [`Winograd3x3`] (16 points) and of [`upsample::Upsample3x3`] (9 points).
 fn products(u: &[f32], cin: usize, points: usize, v: &[f32], m: &mut [f32], nk: usize) {
-    debug_assert!(nk.is_multiple_of(LANES));
+    assert!(nk.is_multiple_of(LANES));
     #[cfg(target_arch = "x86_64")]
     if crate::elementwise::has_avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above), the

@@ -33,7 +33,7 @@ pub struct BatchWinograd {
 impl BatchWinograd {
     /// From burn's layout, `weight` `[cout, cin, 3, 3]`.
     pub fn new(cin: usize, cout: usize, weight: &[f32]) -> Self {
-        debug_assert_eq!(weight.len(), cout * cin * 9);
+        assert_eq!(weight.len(), cout * cin * 9);
         let mut u = vec![0.0; 16 * cout * cin];
         for co in 0..cout {
             for ci in 0..cin {
@@ -66,9 +66,9 @@ impl BatchWinograd {
     /// Chunks of images: transforms in, 16 GEMMs, transforms out. `simd`: the AVX2
     /// transforms (only when the CPU has them).
     fn run(&self, x: &[f32], imgs: usize, h: usize, w: usize, out: &mut [f32], simd: bool) {
-        debug_assert!(Self::supports(h, w));
-        debug_assert_eq!(x.len(), self.cin * imgs * h * w);
-        debug_assert_eq!(out.len(), self.cout * imgs * h * w);
+        assert!(Self::supports(h, w));
+        assert_eq!(x.len(), self.cin * imgs * h * w);
+        assert_eq!(out.len(), self.cout * imgs * h * w);
         let (cin, cout) = (self.cin, self.cout);
         let per_img = (h / 2) * (w / 2);
         // Images per chunk: a whole number of 8-lane runs where the budget allows.

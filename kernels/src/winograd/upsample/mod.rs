@@ -71,7 +71,7 @@ fn transform_filter(g: &[f64; 4]) -> [f32; 9] {
 impl Upsample3x3 {
     /// From burn's layout: `weight` `[cout, cin, 3, 3]`, `bias` `[cout]` (zeros when absent).
     pub fn new(cin: usize, cout: usize, weight: &[f32], bias: Option<&[f32]>) -> Self {
-        debug_assert_eq!(weight.len(), cout * cin * 9);
+        assert_eq!(weight.len(), cout * cin * 9);
         let u = std::array::from_fn(|phase| {
             pack_filters(cin, cout, |co, ci| {
                 transform_filter(&phase_filter(&weight[(co * cin + ci) * 9..][..9], phase / 2, phase % 2))
@@ -104,8 +104,8 @@ impl Upsample3x3 {
     fn run(&self, x: &Padded, out: &mut [f32], simd: bool) {
         let (h, w) = (x.height(), x.width());
         assert!(Self::supports(h, w), "upsampling convolution of a {h}x{w} map (needs even sides)");
-        debug_assert_eq!(x.channels(), self.cin);
-        debug_assert_eq!(out.len(), self.cout * 4 * h * w);
+        assert_eq!(x.channels(), self.cin);
+        assert_eq!(out.len(), self.cout * 4 * h * w);
         let (th, tw) = (h / 2, w / 2);
         let rows = (TILES_PER_PASS / tw).clamp(1, th);
         let nk = (rows * tw).div_ceil(LANES) * LANES;
