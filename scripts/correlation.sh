@@ -25,6 +25,7 @@ status=0
 "$bin" "${args[@]}" || status=$?
 if [ -f "$out/results.json" ]; then
     "$bin" tasks "$out" --tex "$out/tasks.tex"
-    echo "correlation report: $(pwd)/$out/report.html"
+    case $out in /*) where=$out ;; *) where=$(pwd)/$out ;; esac
+    echo "correlation report: $where/report.html"
 fi
 exit "$status"
