@@ -123,4 +123,14 @@ mod tests {
         let r = resolve(&args(&["--scenario", "lift"]), task.as_ref(), tmp.path()).unwrap();
         assert_eq!(r.judge, Some(tmp.path().join("lift/judge")));
     }
+
+    #[test]
+    fn the_shipped_lift_defaults_are_fifty_episodes_of_150_steps() {
+        let task = scenarios::load_task("lift").expect("robosuite assets (scripts/setup.sh)");
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
+        let r = resolve(&args(&["--scenario", "lift"]), task.as_ref(), &root).unwrap();
+        // checkpoints/lift/rank.toml: the paper's 50 seeds per policy, episodes cut at 150
+        // steps instead of robomimic's 400.
+        assert_eq!((r.episodes, r.max_steps, r.policies), (50, 150, root.join("lift/policies")));
+    }
 }
