@@ -6,11 +6,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-use crate::util::{expect_code, read_json, run};
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 temp path")
-}
+use crate::util::{expect_code, results, run, s};
 
 /// Runs `deploy/slurm/<script>` with bash, the binary under test and `vars`.
 fn slurm(script: &str, vars: &[(&str, &str)], args: &[&str]) -> Output {
@@ -22,13 +18,6 @@ fn slurm(script: &str, vars: &[(&str, &str)], args: &[&str]) -> Output {
         c.env(k, v);
     }
     c.output().expect("bash runs")
-}
-
-/// `results.json` without its timings, which differ between any two runs.
-fn results(dir: &Path) -> serde_json::Value {
-    let mut v = read_json(&dir.join("results.json"));
-    v.as_object_mut().expect("results.json is an object").remove("timing");
-    v
 }
 
 #[test]
@@ -53,27 +42,23 @@ fn slurm_array_and_merge_equal_one_unsharded_run() {
     // Three array tasks (4 seeds: shards of 2, 1 and 1 batches), the paths from the
     // environment as a cluster user sets them, then the merge job.
     let out = tmp.path().join("cluster");
-    let env = |i: &'static str| {
+    let env = |i| {
         [
-            ("OUT", s(&out).to_string()),
-            ("POLICIES", s(&set).to_string()),
-            ("WORLD_MODEL", s(&wm).to_string()),
-            ("SLURM_ARRAY_TASK_ID", i.to_string()),
-            ("SLURM_ARRAY_TASK_COUNT", "3".to_string()),
-            ("SLURM_CPUS_PER_TASK", "1".to_string()),
+            ("OUT", s(&out)),
+            ("POLICIES", s(&set)),
+            ("WORLD_MODEL", s(&wm)),
+            ("SLURM_ARRAY_TASK_ID", i),
+            ("SLURM_ARRAY_TASK_COUNT", "3"),
+            ("SLURM_CPUS_PER_TASK", "1"),
         ]
     };
     for i in ["0", "1", "2"] {
-        let vars = env(i);
-        let vars: Vec<(&str, &str)> = vars.iter().map(|(k, v)| (*k, v.as_str())).collect();
-        expect_code(&slurm("rank.sbatch", &vars, &tiny), 0);
+        expect_code(&slurm("rank.sbatch", &env(i), &tiny), 0);
         assert!(out.join(format!("shard-{i}/episodes.jsonl")).is_file(), "shard {i} wrote no rows");
     }
     // A requeued task finds its rows and redoes nothing.
     let before = std::fs::read(out.join("shard-1/episodes.jsonl")).unwrap();
-    let vars = env("1");
-    let vars: Vec<(&str, &str)> = vars.iter().map(|(k, v)| (*k, v.as_str())).collect();
-    expect_code(&slurm("rank.sbatch", &vars, &tiny), 0);
+    expect_code(&slurm("rank.sbatch", &env("1"), &tiny), 0);
     assert_eq!(std::fs::read(out.join("shard-1/episodes.jsonl")).unwrap(), before);
     // Outside an array task the script refuses, naming the variable.
     let (_, err) = expect_code(&slurm("rank.sbatch", &[("OUT", s(&out))], &tiny), 1);

@@ -3,11 +3,7 @@
 
 use std::path::Path;
 
-use crate::util::{expect_code, read_json, run};
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use crate::util::{expect_code, read_json, run, s};
 
 /// Trains a tiny coverage judge on `data`, ranks `set` with it, and checks the refusals.
 pub fn check(dir: &Path, data: &Path, wm: &Path, set: &Path) {

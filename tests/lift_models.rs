@@ -2,11 +2,7 @@
 //! actions, a learned judge of success, diffusion policies that read the commanded
 //! pose, and `rank` on all three.
 
-use crate::util::{expect_code, read_json, run};
-
-fn s(p: &std::path::Path) -> &str {
-    p.to_str().unwrap()
-}
+use crate::util::{expect_code, read_json, run, s};
 
 #[test]
 fn the_lift_pipeline_collects_trains_every_model_and_ranks() {

@@ -4,11 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::util::{expect_code, read_json, run, with_flag};
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use crate::util::{expect_code, read_json, run, s, with_flag, without_timing};
 
 /// Builds dataset, autoencoder, world model and one policy checkpoint in `dir`.
 fn build(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
@@ -272,10 +268,6 @@ fn pipeline_end_to_end() {
     // More episodes extend a run that ends on a whole batch: 2 episodes at --batch 2,
     // grown to 3, give exactly the straight 3-episode run (seeds 0-1 and 2 are its two
     // batches). Fewer episodes, or growing a run that ends in a part batch, are refused.
-    let strip = |mut v: serde_json::Value| {
-        v.as_object_mut().unwrap().remove("timing");
-        v
-    };
     let (_, err) = expect_code(&run(&with_flag(&again, "--episodes", "2")), 2);
     assert!(err.contains("--episodes 2 would drop"), "{err}");
     let (_, err) = expect_code(&run(&with_flag(&again, "--episodes", "5")), 2);
@@ -289,7 +281,7 @@ fn pipeline_end_to_end() {
     grow.push("--resume");
     expect_code(&run(&grow), 1);
     assert_eq!(std::fs::read(grown.join("episodes.parquet")).unwrap(), parquet);
-    assert_eq!(strip(read_json(&grown.join("results.json"))), strip(res.clone()));
+    assert_eq!(without_timing(read_json(&grown.join("results.json"))), without_timing(res.clone()));
 
     // One thread gives the same rows and results (timings aside).
     let out1 = dir.join("rank1");
@@ -298,7 +290,7 @@ fn pipeline_end_to_end() {
     expect_code(&run(&args1), 1);
     assert_eq!(std::fs::read_to_string(out1.join("episodes.jsonl")).unwrap(), rows);
     assert_eq!(std::fs::read(out1.join("episodes.parquet")).unwrap(), parquet);
-    assert_eq!(strip(read_json(&out1.join("results.json"))), strip(res));
+    assert_eq!(without_timing(read_json(&out1.join("results.json"))), without_timing(res));
 
     // Two shards merged give exactly the unsharded rows and results (timings aside).
     let mut shard_dirs = Vec::new();
@@ -315,7 +307,10 @@ fn pipeline_end_to_end() {
     expect_code(&run(&args), 0);
     assert_eq!(std::fs::read_to_string(merged.join("episodes.jsonl")).unwrap(), rows);
     assert_eq!(std::fs::read(merged.join("episodes.parquet")).unwrap(), parquet);
-    assert_eq!(strip(read_json(&merged.join("results.json"))), strip(read_json(&out1.join("results.json"))));
+    assert_eq!(
+        without_timing(read_json(&merged.join("results.json"))),
+        without_timing(read_json(&out1.join("results.json")))
+    );
 
     // Without the corrupt checkpoint the run passes, unless a gate fails.
     std::fs::remove_dir_all(set.join("c")).unwrap();

@@ -3,11 +3,7 @@
 
 use std::path::Path;
 
-use crate::util::{expect_code, read_json, run, scenario_variant, with_flag};
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use crate::util::{expect_code, read_json, run, s, scenario_variant, with_flag};
 
 /// Runs `plan` with the tiny world model `wm` (and a goal-free one, `gf`) proposing
 /// with the checkpoint `policy`; called by the pipeline test, which built them.

@@ -6,12 +6,8 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 
 use crate::util::{
-    copy_dir, evalharness, expect_code, read_json, run, scenario_variant, tree_bytes, with_flag,
+    copy_dir, evalharness, expect_code, read_json, results, run, s, scenario_variant, tree_bytes, with_flag,
 };
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 const SHIPPED: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/checkpoints/pusht");
 
@@ -48,13 +44,6 @@ fn rank_args<'a>(set: &'a Path, wm: &'a Path, out: &'a Path) -> Vec<&'a str> {
         "--out",
         s(out),
     ]
-}
-
-/// `results.json` without its timing.
-fn results(out: &Path) -> serde_json::Value {
-    let mut v = read_json(&out.join("results.json"));
-    v.as_object_mut().unwrap().remove("timing");
-    v
 }
 
 #[test]

@@ -31,6 +31,22 @@ pub fn expect_code(out: &Output, code: i32) -> (String, String) {
     (stdout, stderr)
 }
 
+/// A temporary path as the `&str` an argument list takes.
+pub fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 temp path")
+}
+
+/// `results.json` without its timings, which differ between any two runs.
+pub fn without_timing(mut v: serde_json::Value) -> serde_json::Value {
+    v.as_object_mut().expect("results.json is an object").remove("timing");
+    v
+}
+
+/// `dir/results.json` without its timings.
+pub fn results(dir: &Path) -> serde_json::Value {
+    without_timing(read_json(&dir.join("results.json")))
+}
+
 /// Reads a JSON file.
 pub fn read_json(path: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
