@@ -34,6 +34,12 @@ pub fn check(dir: &Path, data: &Path, wm: &Path, set: &Path) {
         expect_code(&run(&[&train[..], &tiny[..], &["--force", "--label", "success"]].concat()), 2);
     assert!(err.contains("data/success"), "{err}");
     assert!(judge.join("judge.json").is_file(), "the old judge stays when the new one fails");
+    // Out of time before the first step: an error, and no folder.
+    let none = dir.join("judge_no_time");
+    let args = ["train", "judge", "--data", s(data), "--out", s(&none), "--max-minutes", "0"];
+    let (_, err) = expect_code(&run(&[&args[..], &tiny[..]].concat()), 2);
+    assert!(err.contains("first step"), "{err}");
+    assert!(!none.exists() && !dir.join("judge_no_time.partial").exists());
 
     // rank --judge: the learned judge scores the imagined frames; its error on the
     // simulator branch's real frames is reported as for any judge.

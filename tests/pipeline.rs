@@ -396,7 +396,12 @@ fn rank_reports_a_missing_world_model() {
     let missing = tmp.path().join("nope");
     let args = ["rank", "--world-model", s(&missing), "--out", s(&out)];
     let (_, err) = expect_code(&run(&args), 2);
+    assert!(err.contains("world model: ") && err.contains("nope is not a folder"), "{err}");
+    // A folder without a model names the file it lacks.
+    std::fs::create_dir(&missing).unwrap();
+    let (_, err) = expect_code(&run(&args), 2);
     assert!(err.contains("nope") && err.contains("config.json"), "{err}");
+    assert!(!out.exists(), "nothing written on refusal");
 }
 
 /// Screenshots a report with headless Chromium (Debian's `chromium`; `scripts/setup.sh

@@ -11,13 +11,13 @@
 //! symmetries of the square world ([`augment_frame`]): coverage is invariant under
 //! them, since block and goal move together.
 //!
-//! Training takes minutes, so a stopped run (Ctrl-C or `--max-minutes`) does not
-//! resume: it writes nothing, and the folder is written, atomically, only when the
-//! run completes.
+//! Training takes minutes to an hour, so a run does not resume. A run that reaches
+//! its time limit (`--max-minutes`) ends there: the judge trained so far is
+//! evaluated and written, with the steps it took. Ctrl-C abandons the run, and
+//! the folder is written, atomically, only when the run ends.
 
 use std::io::Write;
 use std::path::Path;
-use std::time::Instant;
 
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
@@ -162,8 +162,10 @@ pub fn metrics(est: &[f64], labels: &[f64], threshold: f64) -> JudgeMetrics {
 }
 
 /// Trains a judge of `data`'s label with the network and threshold of `judge`
-/// (the folder's `judge.json` as it will be written); returns it (inference
-/// device) and its held-out metrics, or `None` when stopped before the last step.
+/// (the folder's `judge.json` as it will be written). `out_of_time` is asked
+/// before each step: once it says yes, training ends there. Returns the judge
+/// (inference device), its held-out metrics and the steps it took; `None` when
+/// stopped (Ctrl-C) or out of time before the first step.
 ///
 /// # Errors
 /// [`PolicyLoadError`] naming `log` for an unwritable log, or the dataset for a
@@ -175,10 +177,10 @@ pub fn train_judge(
     judge: &JudgeFile,
     cfg: &JudgeTrainConfig,
     log: &Path,
-    deadline: Option<Instant>,
+    out_of_time: &mut dyn FnMut() -> bool,
     inner: &Device,
     on_step: &mut dyn FnMut(u64, f64),
-) -> Result<Option<(JudgeNet, JudgeMetrics)>, PolicyLoadError> {
+) -> Result<Option<(JudgeNet, JudgeMetrics, u64)>, PolicyLoadError> {
     let err = |m: String| PolicyLoadError::new(dataset, m);
     let threshold = judge.threshold;
     let (train, held) = data.split();
@@ -202,9 +204,20 @@ pub fn train_judge(
     let eval = |net: &JudgeNet| {
         evaluate(&LearnedJudge::new(judge.clone(), net.valid(), inner), data, &held, threshold)
     };
+    let mut lv = f64::NAN;
     for step in 0..cfg.steps {
-        if deadline.is_some_and(|d| Instant::now() >= d) || harness::stop::requested() {
+        if harness::stop::requested() {
             return Ok(None);
+        }
+        if out_of_time() {
+            if step == 0 {
+                return Ok(None);
+            }
+            tracing::warn!(step, of = cfg.steps, "out of time: the judge ends at this step");
+            let m = eval(&net);
+            let line = serde_json::json!({"step": step, "loss": lv, "heldout": m, "out_of_time": true});
+            writeln!(logf, "{line}").map_err(|e| PolicyLoadError::new(log, e.to_string()))?;
+            return Ok(Some((net.valid(), m, step)));
         }
         let mut rng = Rng::new(derive(cfg.seed, &[step]));
         let idx: Vec<(usize, u8)> = (0..cfg.batch)
@@ -220,7 +233,7 @@ pub fn train_judge(
         let y: Vec<f32> = idx.iter().map(|&(i, _)| data.labels[i].clamp(0.0, 1.0)).collect();
         let y = Tensor::from_data(TensorData::new(y, [cfg.batch, 1]), &device);
         let loss = bce_with_logits(net.forward(frames_to_tensor(&frames, s, &device)), y);
-        let lv: f64 = loss.clone().into_scalar::<f32>().into();
+        lv = loss.clone().into_scalar::<f32>().into();
         if !lv.is_finite() {
             return Err(err(format!("non-finite judge loss at step {step}")));
         }
@@ -234,7 +247,7 @@ pub fn train_judge(
             let line = serde_json::json!({"step": step + 1, "loss": lv, "heldout": m});
             writeln!(logf, "{line}").map_err(|e| PolicyLoadError::new(log, e.to_string()))?;
             if last {
-                return Ok(Some((net.valid(), m)));
+                return Ok(Some((net.valid(), m, cfg.steps)));
             }
         }
     }
@@ -244,6 +257,7 @@ pub fn train_judge(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::net::NetConfig;
 
     #[test]
     fn metrics_count_each_side_of_the_threshold() {
@@ -256,6 +270,57 @@ mod tests {
         // Nothing above the threshold: no recall; nothing said above it: no precision.
         let m = metrics(&[0.1], &[0.2], 0.5);
         assert_eq!((m.accuracy, m.recall, m.precision), (1.0, None, None));
+    }
+
+    #[test]
+    fn out_of_time_ends_training_with_the_judge_so_far() {
+        // 10 episodes of 2 frames (16 x 16), labels alternating 0 / 1; episode 9 is
+        // held out (2 frames). The clock runs out before the 4th of 10 steps.
+        let size = 16;
+        let n = 20;
+        let data = JudgeData {
+            frames: (0..n * size * size * 3).map(|i| (i % 251) as u8).collect(),
+            labels: (0..n).map(|i| (i % 2) as f32).collect(),
+            size,
+            episodes: (0..10).map(|e| 2 * e..2 * e + 2).collect(),
+        };
+        let net = NetConfig::new().with_image_size(size).with_encoder_width(4).with_feature_dim(4);
+        let judge = JudgeFile {
+            kind: "learned".into(),
+            net,
+            label: Label::Success,
+            threshold: 0.5,
+            steps: 10,
+            heldout: JudgeMetrics::default(),
+            provenance: serde_json::Value::Null,
+        };
+        let cfg = JudgeTrainConfig {
+            steps: 10,
+            batch: 2,
+            lr: 1e-3,
+            seed: 0,
+            balance: true,
+            symmetries: false,
+            eval_every: 100,
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let log = dir.path().join("log.jsonl");
+        let device = Device::flex();
+        let mut asked = 0;
+        let mut clock = || {
+            asked += 1;
+            asked > 3
+        };
+        let out = train_judge(&data, dir.path(), &judge, &cfg, &log, &mut clock, &device, &mut |_, _| {});
+        let (_, m, steps) = out.unwrap().expect("the judge trained so far");
+        assert_eq!((steps, m.frames), (3, 2));
+        // One log line, the evaluation where training ended (step 3).
+        let text = std::fs::read_to_string(&log).unwrap();
+        let line: serde_json::Value = serde_json::from_str(text.trim()).unwrap();
+        assert_eq!((line["step"].as_u64(), line["out_of_time"].as_bool()), (Some(3), Some(true)));
+        // Out of time before the first step: nothing trained, nothing returned.
+        let out = train_judge(&data, dir.path(), &judge, &cfg, &log, &mut || true, &device, &mut |_, _| {});
+        assert!(out.unwrap().is_none());
     }
 
     #[test]

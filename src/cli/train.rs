@@ -71,7 +71,8 @@ pub struct TrainJudgeArgs {
     /// Seed of the weights and the frame order.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Stop after this many minutes (nothing is written then).
+    /// End training after this many minutes: the judge trained so far is evaluated and
+    /// written, with the steps it took (`judge.json`'s `steps`).
     #[arg(long)]
     pub max_minutes: Option<f64>,
     /// Replace an existing `--out` once the new judge is complete.

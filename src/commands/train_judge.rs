@@ -93,6 +93,7 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
         }),
     };
     let deadline = a.max_minutes.map(|m| Instant::now() + Duration::from_secs_f64(m.max(0.0) * 60.0));
+    let mut out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
     let pb = progress::bar(a.steps, "judge", quiet);
     let device = world_model::device::selected()?;
     let outcome = train_judge(
@@ -101,7 +102,7 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
         &file,
         &cfg,
         &staged.file("log.jsonl"),
-        deadline,
+        &mut out_of_time,
         &device,
         &mut |s, l| {
             pb.set_position(s);
@@ -109,10 +110,20 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
         },
     );
     pb.finish_and_clear();
-    let Some((net, heldout)) = outcome? else {
-        bail!("stopped before step {}; nothing was written (a judge trains in one go)", a.steps);
+    let Some((net, heldout, steps)) = outcome? else {
+        bail!(
+            "stopped before the judge's first step, or by Ctrl-C; nothing was written (a judge does not resume)"
+        );
     };
     file.heldout = heldout;
+    file.steps = steps;
+    if steps < a.steps {
+        file.provenance["out_of_time"] = json!(format!(
+            "--max-minutes {} ended training at step {steps} of {}",
+            a.max_minutes.unwrap_or(0.0),
+            a.steps
+        ));
+    }
     write_judge(staged.dir(), &net, &file)?;
     staged.commit()?;
     let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));

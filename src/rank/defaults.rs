@@ -72,6 +72,32 @@ pub fn resolve(a: &RankArgs, task: &dyn Task, root: &Path) -> Result<Resolved> {
     })
 }
 
+impl Resolved {
+    /// Every input the run lacks, one line each saying how to supply it, so that a
+    /// task whose models are not shipped yet is told everything at once.
+    pub fn missing(&self, scenario: &str) -> Vec<String> {
+        let mut out = Vec::new();
+        if !self.policies.exists() {
+            out.push(format!("policies: {} does not exist (pass --policies DIR)", self.policies.display()));
+        }
+        if !self.world_model.is_dir() {
+            out.push(format!(
+                "world model: {} is not a folder (train one with `evalharness train world-model` \
+                 and pass --world-model DIR)",
+                self.world_model.display()
+            ));
+        }
+        if self.judge.is_none() && !self.own_judge {
+            out.push(format!(
+                "judge: the {scenario} task has no hand-written judge of imagined frames; train one on \
+                 its frames (`evalharness train judge --data DATASET --label success --out DIR`) and \
+                 pass --judge DIR"
+            ));
+        }
+        out
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -119,9 +145,18 @@ mod tests {
         let r = resolve(&args(&["--scenario", "lift"]), task.as_ref(), tmp.path()).unwrap();
         // Lift's own step limit is robomimic's 400; no judge is shipped in this folder.
         assert_eq!((r.judge.clone(), r.max_steps), (None, 400));
+        // Nothing is shipped in this folder: all three inputs are named at once.
+        let missing = r.missing("lift");
+        assert_eq!(missing.len(), 3, "{missing:?}");
+        assert!(missing[0].starts_with("policies: ") && missing[0].contains("lift/policies"), "{missing:?}");
+        assert!(missing[1].starts_with("world model: ") && missing[2].starts_with("judge: "), "{missing:?}");
         std::fs::create_dir_all(tmp.path().join("lift").join("judge")).unwrap();
         let r = resolve(&args(&["--scenario", "lift"]), task.as_ref(), tmp.path()).unwrap();
         assert_eq!(r.judge, Some(tmp.path().join("lift/judge")));
+        std::fs::create_dir_all(tmp.path().join("lift").join("world_model")).unwrap();
+        let r =
+            resolve(&args(&["--scenario", "lift", "--policies", "."]), task.as_ref(), tmp.path()).unwrap();
+        assert!(r.missing("lift").is_empty());
     }
 
     #[test]

@@ -61,12 +61,9 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         bail!("--max-steps and --batch must be positive");
     }
     let seeds: Vec<u64> = harness::seed::range(a.seed_start, r.episodes as u64)?.collect();
-    if r.judge.is_none() && !r.own_judge {
-        bail!(
-            "--scenario {}: the task has no hand-written judge of imagined frames; train one on its \
-             frames (`evalharness train judge --data DATASET --label success --out DIR`) and pass --judge DIR",
-            a.scenario
-        );
+    let missing = r.missing(&a.scenario);
+    if !missing.is_empty() {
+        bail!("--scenario {}: missing inputs:\n  {}", a.scenario, missing.join("\n  "));
     }
     let device = world_model::device::selected()?;
     let wm = load_world_model(&r.world_model, a.alpha, &device)?;
