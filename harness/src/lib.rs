@@ -13,10 +13,13 @@
 //! - [`rows`]: `episodes.jsonl` (append, read, resume at whole batches), and
 //!   [`summarise`]: per-policy statistics and agreement from the rows;
 //! - [`runfile`]: a training run's config, written at the start and read back on resume;
+//! - [`driver`]: the loop skeleton every resumable trainer shares (deadline, Ctrl-C,
+//!   seconds over sessions, the resumed log, the atomic state file);
 //! - [`stop`]: Ctrl-C / SIGTERM as a cooperative stop that trainers poll between steps;
 //! - [`zarr`] and [`replay`]: the diffusion_policy / GPC replay-buffer dataset layout.
 
 pub mod blosc;
+pub mod driver;
 pub mod fingerprint;
 pub mod image;
 pub mod judge;

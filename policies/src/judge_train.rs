@@ -31,7 +31,7 @@ use serde::{Deserialize, Serialize};
 use crate::diffusion::frames_to_tensor;
 use crate::dir::PolicyLoadError;
 use crate::judge::{JudgeFile, JudgeMetrics, JudgeNet, Label, LearnedJudge};
-use crate::pretrain::augment_frame;
+use crate::symmetry::augment_frame;
 
 /// Linear warm-up steps of the learning rate.
 const WARMUP: u64 = 100;

@@ -7,6 +7,7 @@
 //!   [`harness::policy::Policy`];
 //! - [`data`]: demonstrations from a replay-buffer dataset;
 //! - [`pretrain`]: pose pre-training of the frame encoder and the frozen-feature cache;
+//! - [`symmetry`]: the 8 symmetries of Push-T's square world, exact augmentations;
 //! - [`train`]: the trainer, which saves a checkpoint every few epochs;
 //! - [`dir`]: the policy directory format and its validating loader;
 //! - [`judge`], [`judge_train`]: a learned judge of imagined frames (the same frame
@@ -21,4 +22,5 @@ pub mod judge;
 pub mod judge_train;
 pub mod net;
 pub mod pretrain;
+pub mod symmetry;
 pub mod train;

@@ -24,14 +24,13 @@
 //! Files in the run's `.train/`: `encoder.bpk`, `encoder_optimizer.bpk`,
 //! `encoder_state.json`, and one `encoder` line per 50 steps in `log.jsonl`.
 
-use std::io::Write;
 use std::path::Path;
-use std::time::Instant;
 
 use burn::module::Module;
 use burn::nn::{Linear, LinearConfig};
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
+use harness::driver::{Clock, Driver, read_state, write_state};
 use harness::rng::Rng;
 use harness::seed::derive;
 use serde::{Deserialize, Serialize};
@@ -41,6 +40,7 @@ use crate::data::{Demos, FrameLabels};
 use crate::diffusion::frames_to_tensor;
 use crate::dir::PolicyLoadError;
 use crate::net::{NetConfig, ObsEncoder};
+use crate::symmetry::{augment_frame, augment_point, augment_pose};
 
 /// Pose targets per frame: agent x, y, then block and goal x, y (world / 256 − 1),
 /// cos θ, sin θ.
@@ -49,65 +49,6 @@ const POSE_DIM: usize = 10;
 const BATCH: usize = 64;
 /// Linear warm-up steps of the pre-training learning rate.
 const WARMUP: u64 = 100;
-
-/// Side of the Push-T world in world units.
-const WORLD: f32 = 512.0;
-
-/// Maps a world point through symmetry `k` of the square world: bit 0 transposes
-/// (x ↔ y), then bit 1 mirrors x (x → 512 − x), then bit 2 mirrors y.
-pub fn augment_point(p: [f32; 2], k: u8) -> [f32; 2] {
-    let mut q = if k & 1 != 0 { [p[1], p[0]] } else { p };
-    if k & 2 != 0 {
-        q[0] = WORLD - q[0];
-    }
-    if k & 4 != 0 {
-        q[1] = WORLD - q[1];
-    }
-    q
-}
-
-/// Maps a T's pose (x, y, θ) through symmetry `k`. The T is mirror-symmetric about
-/// its stem (body x → −x), so a mirrored T is a T: with L the map's linear part,
-/// L·R(θ) = R(θ')·diag(−1, 1) gives θ' = −π/2 − θ (transpose), −θ (mirror x) and
-/// π − θ (mirror y).
-pub fn augment_pose(p: [f32; 3], k: u8) -> [f32; 3] {
-    let [x, y] = augment_point([p[0], p[1]], k);
-    let mut t = p[2];
-    if k & 1 != 0 {
-        t = -std::f32::consts::FRAC_PI_2 - t;
-    }
-    if k & 2 != 0 {
-        t = -t;
-    }
-    if k & 4 != 0 {
-        t = std::f32::consts::PI - t;
-    }
-    [x, y, t]
-}
-
-/// An `s x s` HWC frame through symmetry `k` (out[T(p)] = in[p]); walls, disk and T
-/// map onto a valid scene, so this is an exact augmentation.
-pub fn augment_frame(frame: &[u8], s: usize, k: u8) -> Vec<u8> {
-    let mut out = vec![0u8; frame.len()];
-    for y in 0..s {
-        for x in 0..s {
-            // Undo the mirrors, then the transpose: the source pixel of (x, y).
-            let (mut sx, mut sy) = (x, y);
-            if k & 4 != 0 {
-                sy = s - 1 - sy;
-            }
-            if k & 2 != 0 {
-                sx = s - 1 - sx;
-            }
-            if k & 1 != 0 {
-                std::mem::swap(&mut sx, &mut sy);
-            }
-            let (o, i) = ((y * s + x) * 3, (sy * s + sx) * 3);
-            out[o..o + 3].copy_from_slice(&frame[i..i + 3]);
-        }
-    }
-    out
-}
 
 /// The encoder with a linear pose head.
 #[derive(Module, Debug)]
@@ -266,7 +207,8 @@ fn held_out(episode: usize) -> bool {
     episode % 20 == 19
 }
 
-/// Trains (or continues) the pose probe in `dir` until `p.steps` or `deadline`.
+/// Trains (or continues) the pose probe in `dir` until `p.steps`, the deadline of
+/// `clock` (the policy run's session) or Ctrl-C.
 /// Returns the state and the probe (training device) when it has finished, the
 /// state alone when it stopped early.
 ///
@@ -278,7 +220,7 @@ pub fn pretrain_encoder(
     cfg: &NetConfig,
     p: Pretrain,
     dir: &Path,
-    deadline: Option<Instant>,
+    clock: Clock,
     inner: &Device,
     on_step: &mut dyn FnMut(u64, f64),
 ) -> Result<(PretrainState, Option<PoseProbe>), PolicyLoadError> {
@@ -300,26 +242,28 @@ pub fn pretrain_encoder(
     let mut optim = AdamWConfig::new().with_weight_decay(1e-6).init();
     let mut state = PretrainState::default();
     if files[2].exists() {
-        let text = std::fs::read_to_string(&files[2]).map_err(|e| err(&files[2], e.to_string()))?;
-        state = serde_json::from_str(&text).map_err(|e| err(&files[2], e.to_string()))?;
+        state = read_state(&files[2]).map_err(|e| err(&e.path, e.message))?;
         probe = probe.try_load_file(&files[0]).map_err(|e| err(&files[0], e.to_string()))?;
         optim = optim.load(&files[1]).map_err(|e| err(&files[1], e.to_string()))?;
     }
-    let log_path = dir.join("log.jsonl");
-    // Shared with the U-Net stage's lines, which count "step" and are kept.
-    let mut log = harness::runfile::open_log(&log_path, "encoder_step", state.step)
-        .map_err(|e| err(&e.path, e.message))?;
+    // The log is shared with the U-Net stage's lines, which count "step" and are kept.
+    // This stage's seconds start when it does, not with the session's clock.
+    let mut driver = Driver::start(
+        &dir.join("log.jsonl"),
+        "encoder_step",
+        state.step,
+        state.elapsed_s,
+        Clock::start(None),
+    )
+    .map_err(|e| err(&e.path, e.message))?;
     let save = |probe: &PoseProbe, optim: &burn::optim::ModuleOptimizer, state: &PretrainState| {
         probe.clone().save_file(&files[0]).map_err(|e| err(&files[0], e.to_string()))?;
         optim.save(&files[1]).map_err(|e| err(&files[1], e.to_string()))?;
-        let text = serde_json::to_string(state).unwrap_or_default();
-        harness::runfile::write_atomic(&files[2], &text).map_err(|e| err(&e.path, e.message))
+        write_state(&files[2], state).map_err(|e| err(&e.path, e.message))
     };
-    let started = Instant::now();
-    let base = state.elapsed_s;
     let s = cfg.image_size;
     while state.step < p.steps {
-        if deadline.is_some_and(|d| Instant::now() >= d) || harness::stop::requested() {
+        if clock.out_of_time() || driver.should_stop() {
             save(&probe, &optim, &state)?;
             return Ok((state, None));
         }
@@ -346,7 +290,7 @@ pub fn pretrain_encoder(
         let lr = p.lr * ((state.step + 1) as f64 / WARMUP as f64).min(1.0);
         probe = optim.step(lr, probe, grads);
         state.step += 1;
-        state.elapsed_s = base + started.elapsed().as_secs_f64();
+        state.elapsed_s = driver.elapsed_s();
         on_step(state.step, lv);
         if state.step.is_multiple_of(50) || state.step == p.steps {
             // No held-out episode (fewer than 20 demonstrations): no held-out error.
@@ -363,7 +307,7 @@ pub fn pretrain_encoder(
             }
             let line = json!({"encoder_step": state.step, "loss": lv, "heldout": state.heldout,
                 "heldout_columns": state.heldout_columns, "elapsed_s": state.elapsed_s});
-            writeln!(log, "{line}").map_err(|e| err(&log_path, e.to_string()))?;
+            driver.log(&line).map_err(|e| err(&e.path, e.message))?;
             save(&probe, &optim, &state)?;
         }
     }
@@ -505,24 +449,6 @@ mod tests {
         assert_eq!(targets.at(&d, 2, 0), vec![98.0, 0.0]);
         let none = Demos { labels: FrameLabels::None, ..d };
         assert!(Targets::of(&none, &[0]).is_err());
-    }
-
-    #[test]
-    fn symmetries_map_points_and_angles() {
-        // Transpose: (100, 30) → (30, 100); θ = 0.3 → −π/2 − 0.3.
-        let p = augment_pose([100.0, 30.0, 0.3], 1);
-        assert!((p[0] - 30.0).abs() < 1e-6 && (p[1] - 100.0).abs() < 1e-6);
-        assert!((p[2] + std::f32::consts::FRAC_PI_2 + 0.3).abs() < 1e-6);
-        // Mirror x then y: (100, 30) → (412, 482); θ → π − (−θ) = π + θ.
-        let p = augment_pose([100.0, 30.0, 0.3], 6);
-        assert!((p[0] - 412.0).abs() < 1e-6 && (p[1] - 482.0).abs() < 1e-6);
-        assert!((p[2] - std::f32::consts::PI - 0.3).abs() < 1e-6);
-        // A 2 × 2 frame [a b; c d] transposed is [a c; b d]; mirrored in x it is [b a; d c].
-        let f: Vec<u8> = (0..4).flat_map(|v| [v, v, v]).collect();
-        let px = |g: &[u8]| g.chunks(3).map(|c| c[0]).collect::<Vec<_>>();
-        assert_eq!(px(&augment_frame(&f, 2, 1)), vec![0, 2, 1, 3]);
-        assert_eq!(px(&augment_frame(&f, 2, 2)), vec![1, 0, 3, 2]);
-        assert_eq!(px(&augment_frame(&f, 2, 0)), vec![0, 1, 2, 3]);
     }
 
     #[test]

@@ -12,13 +12,12 @@
 //! An epoch is one pass over every sample in a permutation that is a function of
 //! (seed, epoch), so a resumed run visits exactly the samples an uninterrupted one would.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
 
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
+use harness::driver::{Clock, Driver};
 use harness::rng::Rng;
 use harness::seed::derive;
 use serde::{Deserialize, Serialize};
@@ -152,10 +151,6 @@ pub struct PolicyOutcome {
     pub loss: f64,
 }
 
-fn io(path: &Path) -> impl FnOnce(std::io::Error) -> PolicyLoadError + '_ {
-    move |e| PolicyLoadError::new(path, e.to_string())
-}
-
 /// Trains (or resumes) a diffusion policy into `out` on `inner` (its autodiff
 /// wrapper for the gradients; see `world_model::device`).
 ///
@@ -211,8 +206,8 @@ pub fn train_policy(
     if run.resume {
         net = net.try_load_file(&paths[0]).map_err(|e| PolicyLoadError::new(&paths[0], e.to_string()))?;
         optim = optim.load(&paths[1]).map_err(|e| PolicyLoadError::new(&paths[1], e.to_string()))?;
-        let text = std::fs::read_to_string(&paths[2]).map_err(io(&paths[2]))?;
-        state = serde_json::from_str(&text).map_err(|e| PolicyLoadError::new(&paths[2], e.to_string()))?;
+        state =
+            harness::driver::read_state(&paths[2]).map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
     }
     if let Some(src) = tc.init_from.as_ref().filter(|_| !run.resume) {
         net = init_weights(src, pc, &device)?;
@@ -233,19 +228,19 @@ pub fn train_policy(
                     .save_file(&paths[3])
                     .map_err(|e| PolicyLoadError::new(&paths[3], e.to_string()))?;
             }
-            harness::runfile::write_atomic(&paths[2], &serde_json::to_string(state).unwrap_or_default())
+            harness::driver::write_state(&paths[2], state)
                 .map_err(|e| PolicyLoadError::new(&e.path, e.message))
         };
-    let started = Instant::now();
+    // One clock for both stages: `--max-minutes` bounds the session, pre-training included.
+    let clock = Clock::start(run.max_minutes);
     let mut provenance = configs.provenance.clone();
     if run.resume {
         provenance["resumed_with"] = session_command;
     }
     let features = if tc.encoder_steps > 0 {
-        let deadline = run.max_minutes.map(|m| started + Duration::from_secs_f64(m * 60.0));
         let p = Pretrain { steps: tc.encoder_steps, lr: tc.encoder_lr, seed: tc.seed };
         let enc_total = tc.encoder_steps;
-        let (ps, probe) = pretrain_encoder(demos, &pc.net, p, &dir, deadline, inner, &mut |step, loss| {
+        let (ps, probe) = pretrain_encoder(demos, &pc.net, p, &dir, clock, inner, &mut |step, loss| {
             on_progress(&PolicyProgress { phase: Phase::Encoder, step, total: enc_total, epoch: 0, loss });
         })?;
         let Some(probe) = probe else {
@@ -271,17 +266,13 @@ pub fn train_policy(
         None
     };
     let ac = alphas_cumprod(pc.train_steps);
-    let log_path = dir.join("log.jsonl");
-    let mut log = harness::runfile::open_log(&log_path, "step", state.step)
+    let mut driver = Driver::start(&dir.join("log.jsonl"), "step", state.step, state.elapsed_s, clock)
         .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
-    let base = state.elapsed_s;
     let mut recent = Vec::new();
     let mut saved = Vec::new();
     let mut order: (u64, Vec<usize>) = (u64::MAX, Vec::new());
     while state.step < total {
-        if run.max_minutes.is_some_and(|m| started.elapsed().as_secs_f64() >= m * 60.0)
-            || harness::stop::requested()
-        {
+        if driver.should_stop() {
             break;
         }
         let epoch = state.step / per_epoch;
@@ -342,13 +333,13 @@ pub fn train_policy(
             ema.update(&net);
             state.ema_updates += 1;
         }
-        state.elapsed_s = base + started.elapsed().as_secs_f64();
+        state.elapsed_s = driver.elapsed_s();
         recent.push(lv);
         if recent.len() > 50 {
             recent.remove(0);
         }
         let line = json!({"step": state.step, "epoch": epoch + 1, "loss": lv, "elapsed_s": state.elapsed_s});
-        writeln!(log, "{line}").map_err(io(&log_path))?;
+        driver.log(&line).map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
         if state.step.is_multiple_of(per_epoch) {
             let done = state.step / per_epoch;
             if done.is_multiple_of(tc.save_every) || done == tc.epochs {

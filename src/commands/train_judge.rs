@@ -4,7 +4,6 @@
 //! `log.jsonl`) only once training is complete.
 
 use std::process::ExitCode;
-use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use policies::judge::{JudgeFile, JudgeMetrics, Label, write_judge};
@@ -92,8 +91,8 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
             },
         }),
     };
-    let deadline = a.max_minutes.map(|m| Instant::now() + Duration::from_secs_f64(m.max(0.0) * 60.0));
-    let mut out_of_time = || deadline.is_some_and(|d| Instant::now() >= d);
+    let clock = harness::driver::Clock::start(a.max_minutes);
+    let mut out_of_time = || clock.out_of_time();
     let pb = progress::bar(a.steps, "judge", quiet);
     let device = world_model::device::selected()?;
     let outcome = train_judge(

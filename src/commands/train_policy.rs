@@ -225,7 +225,7 @@ fn warn_outside(data: &Normalisation, ck: &Normalisation) {
 
 #[cfg(test)]
 mod tests {
-    use policies::pretrain::{augment_frame, augment_point, augment_pose};
+    use policies::symmetry::{augment_frame, augment_point, augment_pose};
     use scenarios::pusht::render::Rasterizer;
     use scenarios::pusht::{Pose2, PushTConfig, PushTState};
 

@@ -8,13 +8,12 @@
 //! Batches are a pure function of (seed, step), so a resumed run draws exactly the
 //! batches an uninterrupted one would have.
 
-use std::io::Write;
 use std::path::Path;
-use std::time::Instant;
 
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::Device;
+use harness::driver::{Clock, Driver};
 use harness::seed::derive;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -149,10 +148,6 @@ where
     Ok((c.model, c.train))
 }
 
-pub(crate) fn io(path: &Path) -> impl FnOnce(std::io::Error) -> WorldModelError + '_ {
-    move |source| WorldModelError::Io { path: path.to_path_buf(), source }
-}
-
 pub(crate) fn ckpt(path: &Path, e: impl std::fmt::Display) -> WorldModelError {
     WorldModelError::Checkpoint { path: path.to_path_buf(), message: e.to_string() }
 }
@@ -248,8 +243,7 @@ pub fn train_autoencoder(
     if resume {
         model = model.try_load_file(&model_path).map_err(|e| ckpt(&model_path, e))?;
         optim = optim.load(&optim_path).map_err(|e| ckpt(&optim_path, e))?;
-        let text = std::fs::read_to_string(&state_path).map_err(|e| ckpt(&state_path, e))?;
-        state = serde_json::from_str(&text).map_err(|e| ckpt(&state_path, e))?;
+        state = harness::driver::read_state(&state_path).map_err(|e| ckpt(&e.path, e.message))?;
     }
     let train_idx = data.frame_indices(Split::Train);
     let held = data.frame_indices(Split::HeldOut);
@@ -261,12 +255,9 @@ pub fn train_autoencoder(
     }
     let stride = (held.len() / cfg.eval_frames.max(1)).max(1);
     let eval_idx: Vec<usize> = held.iter().step_by(stride).take(cfg.eval_frames).copied().collect();
-    let log_path = out.join("train_log.jsonl");
-    let mut log =
-        harness::runfile::open_log(&log_path, "step", state.step).map_err(|e| ckpt(&e.path, e.message))?;
-    let started = Instant::now();
-    let base_elapsed = state.elapsed_s;
-    let deadline = max_minutes.map(|m| m * 60.0);
+    let clock = Clock::start(max_minutes);
+    let mut driver = Driver::start(&out.join("train_log.jsonl"), "step", state.step, state.elapsed_s, clock)
+        .map_err(|e| ckpt(&e.path, e.message))?;
     let mut last_psnr = None;
     let save = |model: &Autoencoder,
                 optim: &burn::optim::ModuleOptimizer,
@@ -274,11 +265,10 @@ pub fn train_autoencoder(
      -> Result<(), WorldModelError> {
         model.clone().save_file(&model_path).map_err(|e| ckpt(&model_path, e))?;
         optim.save(&optim_path).map_err(|e| ckpt(&optim_path, e))?;
-        harness::runfile::write_atomic(&state_path, &serde_json::to_string(state).unwrap_or_default())
-            .map_err(|e| ckpt(&e.path, e.message))
+        harness::driver::write_state(&state_path, state).map_err(|e| ckpt(&e.path, e.message))
     };
     while state.step < cfg.steps {
-        if deadline.is_some_and(|d| started.elapsed().as_secs_f64() >= d) || harness::stop::requested() {
+        if driver.should_stop() {
             break;
         }
         let step = state.step;
@@ -310,7 +300,7 @@ pub fn train_autoencoder(
         let grads = GradientsParams::from_grads(loss.backward(), &model);
         model = optim.step(lr, model, grads);
         state.step += 1;
-        state.elapsed_s = base_elapsed + started.elapsed().as_secs_f64();
+        state.elapsed_s = driver.elapsed_s();
         if state.step.is_multiple_of(cfg.eval_every) || state.step == cfg.steps {
             let (p, mse, _) = evaluate(&model, data, &eval_idx, &device);
             last_psnr = Some(p);
@@ -323,7 +313,7 @@ pub fn train_autoencoder(
             );
         }
         let line = json!({"step": state.step, "loss": loss_value, "lr": lr, "psnr": last_psnr, "elapsed_s": state.elapsed_s});
-        writeln!(log, "{line}").map_err(io(&log_path))?;
+        driver.log(&line).map_err(|e| ckpt(&e.path, e.message))?;
         if state.step.is_multiple_of(cfg.checkpoint_every) {
             save(&model, &optim, &state)?;
         }

@@ -12,13 +12,12 @@
 //! Output folder: `config.json` (model + training config), `model.bpk`, `ema.bpk`,
 //! `optimizer.bpk`, `state.json`, `train_log.jsonl`.
 
-use std::io::Write;
 use std::path::Path;
-use std::time::Instant;
 
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Distribution, Tensor, TensorData};
+use harness::driver::{Clock, Driver};
 use harness::rng::Rng;
 use harness::seed::{derive, splitmix64};
 use serde::{Deserialize, Serialize};
@@ -32,7 +31,7 @@ use crate::latents::{Latents, Window, window, window_starts};
 use crate::model::{Objective, Prediction, WorldModel, WorldModelConfig, alpha_bar};
 use crate::motion::MotionWeighting;
 use crate::optim::{Ema, clip_global_norm, warmup_lr};
-use crate::train_ae::{Configs, RunOptions, State, ckpt, io, run_configs};
+use crate::train_ae::{Configs, RunOptions, State, ckpt, run_configs};
 use crate::unet::UNet;
 
 /// Training hyper-parameters.
@@ -276,8 +275,7 @@ pub fn train_world_model(
         unet = unet.try_load_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;
         ema.module = model_cfg.unet.init(&inner).try_load_file(&paths[1]).map_err(|e| ckpt(&paths[1], e))?;
         optim = optim.load(&paths[2]).map_err(|e| ckpt(&paths[2], e))?;
-        let text = std::fs::read_to_string(&paths[3]).map_err(|e| ckpt(&paths[3], e))?;
-        state = serde_json::from_str(&text).map_err(|e| ckpt(&paths[3], e))?;
+        state = harness::driver::read_state(&paths[3]).map_err(|e| ckpt(&e.path, e.message))?;
     }
     // Noise continues from a seed of (seed, step), so a resumed run draws fresh noise.
     device.seed(derive(cfg.seed, &[u64::MAX, state.step]));
@@ -285,21 +283,17 @@ pub fn train_world_model(
         unet.clone().save_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;
         ema.clone().save_file(&paths[1]).map_err(|e| ckpt(&paths[1], e))?;
         optim.save(&paths[2]).map_err(|e| ckpt(&paths[2], e))?;
-        harness::runfile::write_atomic(&paths[3], &serde_json::to_string(state).unwrap_or_default())
-            .map_err(|e| ckpt(&e.path, e.message))
+        harness::driver::write_state(&paths[3], state).map_err(|e| ckpt(&e.path, e.message))
     };
-    let log_path = out.join("train_log.jsonl");
-    let mut log =
-        harness::runfile::open_log(&log_path, "step", state.step).map_err(|e| ckpt(&e.path, e.message))?;
-    let started = Instant::now();
-    let base_elapsed = state.elapsed_s;
-    let deadline = run.max_minutes.map(|m| m * 60.0);
+    let clock = Clock::start(run.max_minutes);
+    let mut driver = Driver::start(&out.join("train_log.jsonl"), "step", state.step, state.elapsed_s, clock)
+        .map_err(|e| ckpt(&e.path, e.message))?;
     let eval_model =
         |ema: &UNet| WorldModel::from_parts(model_cfg.clone(), codec.clone(), ema.clone(), &inner);
     let mut last_eval = None;
     let (c, s) = (model_cfg.latents.channels, model_cfg.latents.size);
     while state.step < cfg.steps {
-        if deadline.is_some_and(|d| started.elapsed().as_secs_f64() >= d) || harness::stop::requested() {
+        if driver.should_stop() {
             break;
         }
         let step = state.step;
@@ -383,7 +377,7 @@ pub fn train_world_model(
         unet = optim.step(lr, unet, grads);
         ema.update(&unet);
         state.step += 1;
-        state.elapsed_s = base_elapsed + started.elapsed().as_secs_f64();
+        state.elapsed_s = driver.elapsed_s();
         if state.step.is_multiple_of(cfg.eval_every) || state.step == cfg.steps {
             let mse = evaluate(&eval_model(&ema.module), &mut latents, codec, &eval_windows);
             if !mse.is_finite() {
@@ -403,7 +397,7 @@ pub fn train_world_model(
         }
         let line = json!({"step": state.step, "loss": loss_value, "loss_r": loss_r, "grad_norm": grad_norm,
             "lr": lr, "eval_mse": last_eval, "elapsed_s": state.elapsed_s});
-        writeln!(log, "{line}").map_err(io(&log_path))?;
+        driver.log(&line).map_err(|e| ckpt(&e.path, e.message))?;
         if state.step.is_multiple_of(cfg.checkpoint_every) {
             save(&unet, &ema.module, &optim, &state)?;
         }

@@ -1,0 +1,174 @@
+//! The loop skeleton every resumable trainer shares (autoencoder, world model,
+//! policy encoder pre-training, policy): when to stop, how long the run has
+//! trained over all its sessions, its JSON-lines log, and its small state file.
+//!
+//! A trainer keeps its model, optimiser and step counter, and asks the [`Driver`]
+//! the rest, so that every trainer stops, logs and checkpoints the same way:
+//! - it stops before a step once the session's deadline (`--max-minutes`,
+//!   [`Clock`]) has passed or Ctrl-C was pressed ([`crate::stop`]), saving a
+//!   checkpoint that `--resume` continues from;
+//! - `elapsed_s` counts the training seconds of earlier sessions (from the
+//!   checkpoint's state) plus this one's;
+//! - the log resumes at the checkpoint ([`crate::runfile::open_log`] drops the
+//!   lines a killed session wrote after it);
+//! - the state file (`state.json` and the like) is written atomically
+//!   ([`crate::runfile::write_atomic`]), so a killed run leaves the old state or
+//!   the new one.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use crate::runfile::{RunFileError, open_log, write_atomic};
+
+/// A session's start and its deadline.
+#[derive(Clone, Copy, Debug)]
+pub struct Clock {
+    started: Instant,
+    deadline: Option<Instant>,
+}
+
+impl Clock {
+    /// A clock started now, out of time after `max_minutes` (never if `None`;
+    /// at once if not positive).
+    pub fn start(max_minutes: Option<f64>) -> Self {
+        let started = Instant::now();
+        let deadline = max_minutes.map(|m| started + Duration::from_secs_f64(m.max(0.0) * 60.0));
+        Self { started, deadline }
+    }
+
+    /// The deadline, if any.
+    pub fn deadline(&self) -> Option<Instant> {
+        self.deadline
+    }
+
+    /// Whether the deadline has passed.
+    pub fn out_of_time(&self) -> bool {
+        self.deadline.is_some_and(|d| Instant::now() >= d)
+    }
+
+    /// Seconds since the clock started.
+    pub fn seconds(&self) -> f64 {
+        self.started.elapsed().as_secs_f64()
+    }
+}
+
+/// One session of a training loop: its clock, the seconds trained before it,
+/// and its log.
+pub struct Driver {
+    clock: Clock,
+    before_s: f64,
+    log: std::fs::File,
+    log_path: PathBuf,
+}
+
+impl Driver {
+    /// Starts a session that resumes at `step` of a run that had trained
+    /// `elapsed_s` seconds (0 and 0 for a fresh run), logging to `log` whose
+    /// lines count steps in `key` (lines after `step` are dropped).
+    ///
+    /// # Errors
+    /// [`RunFileError`] naming the log when it cannot be read, rewritten or opened.
+    pub fn start(
+        log: &Path,
+        key: &str,
+        step: u64,
+        elapsed_s: f64,
+        clock: Clock,
+    ) -> Result<Self, RunFileError> {
+        Ok(Self { clock, before_s: elapsed_s, log: open_log(log, key, step)?, log_path: log.to_path_buf() })
+    }
+
+    /// Whether to stop before the next step: the deadline has passed or a stop
+    /// (Ctrl-C, SIGTERM) was requested.
+    pub fn should_stop(&self) -> bool {
+        self.clock.out_of_time() || crate::stop::requested()
+    }
+
+    /// Training seconds of the run: earlier sessions' plus this one's so far.
+    pub fn elapsed_s(&self) -> f64 {
+        self.before_s + self.clock.seconds()
+    }
+
+    /// Appends one line to the log.
+    ///
+    /// # Errors
+    /// [`RunFileError`] naming the log when it cannot be written.
+    pub fn log(&mut self, line: &serde_json::Value) -> Result<(), RunFileError> {
+        writeln!(self.log, "{line}")
+            .map_err(|e| RunFileError { path: self.log_path.clone(), message: e.to_string() })
+    }
+}
+
+/// Reads a run's state file.
+///
+/// # Errors
+/// [`RunFileError`] naming `path` when it cannot be read or does not parse as `S`.
+pub fn read_state<S: DeserializeOwned>(path: &Path) -> Result<S, RunFileError> {
+    let err = |m: String| RunFileError { path: path.to_path_buf(), message: m };
+    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    serde_json::from_str(&text).map_err(|e| err(e.to_string()))
+}
+
+/// Writes a run's state file atomically.
+///
+/// # Errors
+/// [`RunFileError`] naming `path` when it cannot be written.
+pub fn write_state<S: Serialize>(path: &Path, state: &S) -> Result<(), RunFileError> {
+    let text = serde_json::to_string(state)
+        .map_err(|e| RunFileError { path: path.to_path_buf(), message: e.to_string() })?;
+    write_atomic(path, &text)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde::Deserialize;
+
+    #[derive(Debug, PartialEq, Serialize, Deserialize)]
+    struct State {
+        step: u64,
+        elapsed_s: f64,
+    }
+
+    #[test]
+    fn a_clock_without_time_is_out_of_it_and_one_without_a_limit_never_is() {
+        assert!(Clock::start(Some(0.0)).out_of_time());
+        assert!(Clock::start(Some(-1.0)).out_of_time(), "a negative limit is no time at all");
+        assert!(!Clock::start(Some(60.0)).out_of_time());
+        let free = Clock::start(None);
+        assert!(!free.out_of_time() && free.deadline().is_none());
+    }
+
+    #[test]
+    fn a_resumed_session_counts_the_earlier_seconds_and_logs_after_the_checkpoint() {
+        let dir = tempfile::tempdir().unwrap();
+        let log = dir.path().join("log.jsonl");
+        std::fs::write(&log, "{\"step\":1}\n{\"step\":2}\n{\"step\":3}\n").unwrap();
+        // Checkpointed at step 2 after 10 s of training; the line of step 3 is dropped.
+        let mut d = Driver::start(&log, "step", 2, 10.0, Clock::start(None)).unwrap();
+        assert!(d.elapsed_s() >= 10.0 && d.elapsed_s() < 70.0, "{}", d.elapsed_s());
+        assert!(!d.should_stop());
+        d.log(&serde_json::json!({"step": 3, "loss": 0.5})).unwrap();
+        let text = std::fs::read_to_string(&log).unwrap();
+        assert_eq!(text, "{\"step\":1}\n{\"step\":2}\n{\"loss\":0.5,\"step\":3}\n");
+        let out_of_time = Driver::start(&log, "step", 3, 0.0, Clock::start(Some(0.0))).unwrap();
+        assert!(out_of_time.should_stop());
+    }
+
+    #[test]
+    fn state_files_round_trip_and_name_the_file_on_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("state.json");
+        write_state(&path, &State { step: 4, elapsed_s: 1.5 }).unwrap();
+        assert_eq!(read_state::<State>(&path).unwrap(), State { step: 4, elapsed_s: 1.5 });
+        std::fs::write(&path, "{\"step\":4}").unwrap();
+        let e = read_state::<State>(&path).unwrap_err();
+        assert!(e.path == path && e.message.contains("elapsed_s"), "{e}");
+        let missing = dir.path().join("none.json");
+        assert_eq!(read_state::<State>(&missing).unwrap_err().path, missing);
+    }
+}
