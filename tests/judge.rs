@@ -18,6 +18,9 @@ pub fn check(dir: &Path, data: &Path, wm: &Path, set: &Path) {
     // frames) is held out, and its reading is stored with the provenance.
     assert_eq!((file["label"].as_str(), file["threshold"].as_f64()), (Some("coverage"), Some(0.95)));
     assert_eq!(file["heldout"]["frames"], 68);
+    // ...and read whole: one held-out episode, with a count of the episodes read right.
+    assert_eq!(file["heldout"]["episodes"]["episodes"], 1);
+    assert!(stdout.contains("whole episodes: ") && stdout.contains(" of 1 read right"), "{stdout}");
     assert!(file["heldout"]["mean_abs_error"].as_f64().unwrap().is_finite());
     assert_eq!(file["provenance"]["data"]["episodes"], 10);
     assert_eq!(file["provenance"]["train"]["steps"], 3);

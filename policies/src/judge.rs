@@ -90,6 +90,42 @@ pub struct JudgeMetrics {
     pub recall: Option<f64>,
     /// Of the frames the judge puts above the threshold, the fraction truly above it.
     pub precision: Option<f64>,
+    /// Whole held-out episodes read as `rank` reads an imagined one (absent in judges
+    /// written before it was measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub episodes: Option<EpisodeReading>,
+}
+
+/// How a judge reads whole episodes: an episode succeeds when any of its frames is
+/// above the threshold, by the judge's reading and by the exact label.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EpisodeReading {
+    /// Episodes judged.
+    pub episodes: usize,
+    /// Episodes that truly succeed.
+    pub successes: usize,
+    /// Episodes the judge reads right (success or not).
+    pub agree: usize,
+    /// Failed episodes the judge calls successes.
+    pub false_successes: usize,
+    /// Successful episodes the judge calls failures.
+    pub missed_successes: usize,
+}
+
+impl EpisodeReading {
+    /// Counts `(judged success, true success)` pairs, one per episode.
+    pub fn of(pairs: impl IntoIterator<Item = (bool, bool)>) -> Self {
+        let mut r = Self::default();
+        for (said, truth) in pairs {
+            r.episodes += 1;
+            r.successes += usize::from(truth);
+            r.agree += usize::from(said == truth);
+            r.false_successes += usize::from(said && !truth);
+            r.missed_successes += usize::from(!said && truth);
+        }
+        r
+    }
 }
 
 /// `judge.json`.

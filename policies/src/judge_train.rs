@@ -3,7 +3,10 @@
 //!
 //! Every 10th episode (index % 10 == 9) is held out; the judge's reading of those
 //! frames ([`JudgeMetrics`]: mean absolute error, accuracy, recall and precision at
-//! the success threshold) is logged while training and stored in `judge.json`.
+//! the success threshold) is logged while training and stored in `judge.json`. The
+//! last evaluation also reads each held-out episode whole, as `rank` reads an
+//! imagined one ([`EpisodeReading`]): a judge may misplace the frame where success
+//! begins and still call every episode right, or the reverse.
 //! Successes are rare in most datasets (a frame above coverage 0.95, a lifted
 //! cube), so by default half of each batch is drawn from the frames above the
 //! threshold. The loss is binary cross-entropy against the label, which for
@@ -30,7 +33,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::diffusion::frames_to_tensor;
 use crate::dir::PolicyLoadError;
-use crate::judge::{JudgeFile, JudgeMetrics, JudgeNet, Label, LearnedJudge};
+use crate::judge::{EpisodeReading, JudgeFile, JudgeMetrics, JudgeNet, Label, LearnedJudge};
 use crate::symmetry::augment_frame;
 
 /// Linear warm-up steps of the learning rate.
@@ -138,6 +141,24 @@ pub fn evaluate(judge: &LearnedJudge, data: &JudgeData, steps: &[usize], thresho
     metrics(&est, &pick.iter().map(|&i| f64::from(data.labels[i])).collect::<Vec<_>>(), threshold)
 }
 
+/// The judge's reading of every frame of the held-out episodes (`held`: their
+/// step ranges), episode by episode: [`EpisodeReading`].
+pub fn read_episodes(
+    judge: &LearnedJudge,
+    data: &JudgeData,
+    held: &[std::ops::Range<usize>],
+    threshold: f64,
+) -> EpisodeReading {
+    EpisodeReading::of(held.iter().map(|r| {
+        let steps: Vec<usize> = r.clone().collect();
+        let said = steps.chunks(64).any(|part| {
+            let frames: Vec<&[u8]> = part.iter().map(|&i| data.frame(i)).collect();
+            judge.score_frames(&frames).into_iter().any(|v| v > threshold)
+        });
+        (said, steps.iter().any(|&i| f64::from(data.labels[i]) > threshold))
+    }))
+}
+
 /// [`JudgeMetrics`] of estimates against labels.
 pub fn metrics(est: &[f64], labels: &[f64], threshold: f64) -> JudgeMetrics {
     let n = est.len().min(labels.len());
@@ -158,6 +179,7 @@ pub fn metrics(est: &[f64], labels: &[f64], threshold: f64) -> JudgeMetrics {
         accuracy: frac(right, n).unwrap_or(0.0),
         recall: frac(tp, pos),
         precision: frac(tp, said),
+        episodes: None,
     }
 }
 
@@ -204,6 +226,15 @@ pub fn train_judge(
     let eval = |net: &JudgeNet| {
         evaluate(&LearnedJudge::new(judge.clone(), net.valid(), inner), data, &held, threshold)
     };
+    let held_episodes: Vec<std::ops::Range<usize>> =
+        data.episodes.iter().enumerate().filter(|(e, _)| e % 10 == 9).map(|(_, r)| r.clone()).collect();
+    // The last evaluation also reads the held-out episodes whole.
+    let last_eval = |net: &JudgeNet| {
+        let judge = LearnedJudge::new(judge.clone(), net.valid(), inner);
+        let mut m = evaluate(&judge, data, &held, threshold);
+        m.episodes = Some(read_episodes(&judge, data, &held_episodes, threshold));
+        m
+    };
     let mut lv = f64::NAN;
     for step in 0..cfg.steps {
         if harness::stop::requested() {
@@ -214,7 +245,7 @@ pub fn train_judge(
                 return Ok(None);
             }
             tracing::warn!(step, of = cfg.steps, "out of time: the judge ends at this step");
-            let m = eval(&net);
+            let m = last_eval(&net);
             let line = serde_json::json!({"step": step, "loss": lv, "heldout": m, "out_of_time": true});
             writeln!(logf, "{line}").map_err(|e| PolicyLoadError::new(log, e.to_string()))?;
             return Ok(Some((net.valid(), m, step)));
@@ -243,7 +274,7 @@ pub fn train_judge(
         on_step(step + 1, lv);
         let last = step + 1 == cfg.steps;
         if (step + 1).is_multiple_of(cfg.eval_every.max(1)) || last {
-            let m = eval(&net);
+            let m = if last { last_eval(&net) } else { eval(&net) };
             let line = serde_json::json!({"step": step + 1, "loss": lv, "heldout": m});
             writeln!(logf, "{line}").map_err(|e| PolicyLoadError::new(log, e.to_string()))?;
             if last {
@@ -314,6 +345,10 @@ mod tests {
         let out = train_judge(&data, dir.path(), &judge, &cfg, &log, &mut clock, &device, &mut |_, _| {});
         let (_, m, steps) = out.unwrap().expect("the judge trained so far");
         assert_eq!((steps, m.frames), (3, 2));
+        // The held-out episode (labels 0, 1) is read whole: it succeeds.
+        let e = m.episodes.expect("the last evaluation reads whole episodes");
+        assert_eq!((e.episodes, e.successes), (1, 1));
+        assert_eq!(e.agree + e.missed_successes, 1);
         // One log line, the evaluation where training ended (step 3).
         let text = std::fs::read_to_string(&log).unwrap();
         let line: serde_json::Value = serde_json::from_str(text.trim()).unwrap();
@@ -321,6 +356,16 @@ mod tests {
         // Out of time before the first step: nothing trained, nothing returned.
         let out = train_judge(&data, dir.path(), &judge, &cfg, &log, &mut || true, &device, &mut |_, _| {});
         assert!(out.unwrap().is_none());
+    }
+
+    #[test]
+    fn episodes_succeed_when_any_frame_is_above_the_threshold() {
+        // (judged, true) per episode: (T, T) agree, (T, F) false success, (F, T) missed,
+        // (F, F) agree: 4 episodes, 2 successes, 2 agree, 1 false, 1 missed.
+        let r = EpisodeReading::of([(true, true), (true, false), (false, true), (false, false)]);
+        let want =
+            EpisodeReading { episodes: 4, successes: 2, agree: 2, false_successes: 1, missed_successes: 1 };
+        assert_eq!(r, want);
     }
 
     #[test]

@@ -126,8 +126,14 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     write_judge(staged.dir(), &net, &file)?;
     staged.commit()?;
     let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));
+    let whole = heldout.episodes.map_or(String::new(), |e| {
+        format!(
+            "; whole episodes: {} of {} read right ({} succeed; {} false successes, {} missed)",
+            e.agree, e.episodes, e.successes, e.false_successes, e.missed_successes
+        )
+    });
     println!(
-        "judge of {}: held-out {} frames ({} above {threshold}): mean abs error {:.4}, accuracy {}, recall {}, precision {} -> {}",
+        "judge of {}: held-out {} frames ({} above {threshold}): mean abs error {:.4}, accuracy {}, recall {}, precision {}{whole} -> {}",
         label.array(),
         heldout.frames,
         heldout.positives,
