@@ -134,6 +134,16 @@ fn policy_stopped_during_encoder_pretraining_resumes() {
     assert!(stdout.contains("step 1/1") && stdout.contains("epoch-0001"), "{stdout}");
     let state = read_json(&out.join(".train/encoder_state.json"));
     assert_eq!(state["step"], 2);
+    // Each session is recorded: the first ended at step 0 (out of time), the second at 1.
+    let sessions = std::fs::read_to_string(out.join(".train/sessions.jsonl")).unwrap();
+    let steps: Vec<(u64, u64)> = sessions
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .map(|v| (v["from_step"].as_u64().unwrap(), v["to_step"].as_u64().unwrap()))
+        .collect();
+    assert_eq!(steps, vec![(0, 0), (0, 1)]);
+    assert!(sessions.lines().nth(1).unwrap().contains("--resume"), "{sessions}");
+    assert!(!out.join(".train/session_open.json").exists());
     let file = read_json(&out.join("epoch-0001/policy.json"));
     assert_eq!(file["provenance"]["encoder_pretraining"]["steps"], 2, "{file}");
     // Checkpoints come from the weights' moving average (on by default), kept with the state.

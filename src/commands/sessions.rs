@@ -22,7 +22,7 @@ use crate::output::{read_json, write_json};
 const OPEN_SESSION: &str = "session_open.json";
 
 /// `step` and `elapsed_s` of the checkpoint in `out` (`state.json`), zeros if none.
-fn checkpoint(out: &Path) -> (u64, f64) {
+pub(super) fn read_checkpoint(out: &Path) -> (u64, f64) {
     let state = std::fs::read_to_string(out.join("state.json"))
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
@@ -32,7 +32,7 @@ fn checkpoint(out: &Path) -> (u64, f64) {
 
 /// The step of the checkpoint in `out`, 0 if none.
 pub(super) fn read_step(out: &Path) -> u64 {
-    checkpoint(out).0
+    read_checkpoint(out).0
 }
 
 /// Marks the start of a session that will train `out` from step `from`: first
@@ -55,7 +55,7 @@ fn recover_interrupted(out: &Path) -> Result<()> {
         return Ok(());
     }
     let mut line = read_json(&path)?;
-    let (step, elapsed_s) = checkpoint(out);
+    let (step, elapsed_s) = read_checkpoint(out);
     line["to_step"] = json!(step);
     line["elapsed_s_total"] = json!(elapsed_s);
     line["ended"] = json!(

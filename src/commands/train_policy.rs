@@ -12,6 +12,7 @@ use policies::train::{Phase, PolicyRun, PolicyTrainConfig, RunConfigs, train_pol
 use serde_json::json;
 
 use super::git_commit;
+use super::sessions::{open_session, read_checkpoint, read_step, record_session};
 use super::train::{dataset_origin, dataset_task, fixed_fields, prepare_out, refuse_contradicting_flags};
 use crate::cli::TrainPolicyArgs;
 use crate::progress;
@@ -106,6 +107,11 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
                 .with_context(|| format!("--encoder-from: copying {}", src.display()))?;
         }
     }
+    // Its sessions (command, commit, first and last step) in `.train/sessions.jsonl`,
+    // as for the other trainers.
+    let train_dir = a.out.join(".train");
+    let from_step = if a.session.resume { read_step(&train_dir) } else { 0 };
+    open_session(&train_dir, &args.join(" "), from_step)?;
     let pb = progress::bar(1, "policy", quiet);
     let run = PolicyRun {
         resume: a.session.resume,
@@ -122,6 +128,8 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         });
     })?;
     pb.finish_and_clear();
+    let (_, elapsed_s) = read_checkpoint(&train_dir);
+    record_session(&train_dir, &args.join(" "), from_step, outcome.step, elapsed_s)?;
     for ck in &outcome.saved {
         println!("saved {}", ck.display());
     }
