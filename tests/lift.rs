@@ -1,7 +1,7 @@
 //! `simulate` and `collect` on robomimic Lift and Can: the experts succeed, outputs are
 //! byte-identical for any `--jobs`, and bad input is refused by name.
 
-use crate::util::{evalharness, expect_code, read_json, run, tree_bytes};
+use crate::util::{evalharness, expect_code, read_json, run, s, tree_bytes};
 
 fn simulate(out: &std::path::Path, policy: &str, jobs: &str) -> std::process::Output {
     run(&[
@@ -137,10 +137,13 @@ fn bad_lift_input_is_refused_by_name() {
     let res = run(&["simulate", "--scenario", "lift", "--policy", "teleop", "--out", o]);
     let (_, stderr) = expect_code(&res, 2);
     assert!(stderr.contains("expert, miss, drop, push, hesitate, random"), "{stderr}");
-    // rank needs a judge of imagined Lift frames (there is no hand-written one), and says so.
-    let res = run(&["rank", "--scenario", "lift", "--policies", o, "--out", o]);
+    // rank names every missing input at once (here the policies and the world model; the
+    // judge too while none is shipped, which the Can test below checks).
+    let nowhere = dir.path().join("no_world_model");
+    let res = run(&["rank", "--scenario", "lift", "--policies", o, "--world-model", s(&nowhere), "--out", o]);
     let (_, stderr) = expect_code(&res, 2);
-    assert!(stderr.contains("no hand-written judge") && stderr.contains("--judge"), "{stderr}");
+    assert!(stderr.contains("missing inputs:") && stderr.contains("policies: "), "{stderr}");
+    assert!(stderr.contains("world model: ") && stderr.contains("no_world_model"), "{stderr}");
     assert!(!out.exists(), "nothing written on refusal");
 }
 
