@@ -109,6 +109,31 @@ fn collect_writes_a_lift_dataset_identical_for_any_jobs() {
 }
 
 #[test]
+fn collect_no_early_stop_keeps_the_episode_going_after_success() {
+    let dir = tempfile::tempdir().unwrap();
+    let collect = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let args =
+            ["collect", "--scenario", "lift", "--mix", "expert=1", "--episodes", "1", "--max-steps", "80"];
+        expect_code(&run(&[&args[..], extra, &["--out", s(&out)]].concat()), 0);
+        let (stdout, _) = expect_code(&run(&["dataset", "info", s(&out), "--json"]), 0);
+        serde_json::from_str::<serde_json::Value>(&stdout).unwrap()
+    };
+    // The expert lifts the cube in about 55 steps: the episode ends there by default,
+    // and runs to the 80-step limit with the flag, still a success.
+    let stopped = collect("stop.zarr", &[]);
+    let steps = stopped["steps"].as_u64().unwrap();
+    assert!((40..80).contains(&steps), "{stopped}");
+    let kept = collect("kept.zarr", &["--no-early-stop"]);
+    assert_eq!(kept["steps"], 80, "{kept}");
+    assert_eq!(kept["score"]["success_rate"], 1.0, "{kept}");
+    // Push-T episodes have no such switch.
+    let res = run(&["collect", "--no-early-stop", "--episodes", "1", "--out", s(&dir.path().join("p"))]);
+    let (_, stderr) = expect_code(&res, 2);
+    assert!(stderr.contains("--no-early-stop applies to Lift and Can"), "{stderr}");
+}
+
+#[test]
 fn bad_lift_input_is_refused_by_name() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("x");

@@ -140,6 +140,9 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
             }
             scenarios::Scenario::PushT(cfg) => *cfg,
         };
+    if args.no_early_stop {
+        bail!("--no-early-stop applies to Lift and Can; Push-T episodes run to their step limit or success");
+    }
     let mix_text = args.mix.as_deref().unwrap_or(PUSHT_MIX);
     let mix = parse_mix(mix_text)?;
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };

@@ -81,7 +81,7 @@ pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<Exit
     let mut writer = ReplayWriter::create(&args.out, spec, c.force)?;
     let pb = progress::bar(c.episodes, &format!("collect {name}"), quiet);
     let mut episodes = Vec::new();
-    let runner = ArmRun { task, perturbation, max_steps, stop_at_success: true, jobs: c.jobs };
+    let runner = ArmRun { task, perturbation, max_steps, stop_at_success: !args.no_early_stop, jobs: c.jobs };
     runner.run(
         &work,
         |_| Some(IMAGE_SIZE),
