@@ -31,14 +31,6 @@ pub enum WorldModelError {
         /// The run's output folder.
         path: PathBuf,
     },
-    /// Plain I/O.
-    #[error("{path}: {source}")]
-    Io {
-        /// The path.
-        path: PathBuf,
-        /// The error.
-        source: std::io::Error,
-    },
 }
 
 /// Why a network cannot be run by the direct kernels (a layer they do not support).
