@@ -90,9 +90,14 @@ impl JudgeData {
     pub fn split(&self) -> (Vec<usize>, Vec<usize>) {
         let mut sets = (Vec::new(), Vec::new());
         for (e, r) in self.episodes.iter().enumerate() {
-            if e % 10 == 9 { sets.1.extend(r.clone()) } else { sets.0.extend(r.clone()) }
+            if held_out(e) { sets.1.extend(r.clone()) } else { sets.0.extend(r.clone()) }
         }
         sets
+    }
+
+    /// Step ranges of the held-out episodes.
+    pub fn held_out_episodes(&self) -> Vec<std::ops::Range<usize>> {
+        self.episodes.iter().enumerate().filter(|&(e, _)| held_out(e)).map(|(_, r)| r.clone()).collect()
     }
 }
 
@@ -226,8 +231,7 @@ pub fn train_judge(
     let eval = |net: &JudgeNet| {
         evaluate(&LearnedJudge::new(judge.clone(), net.valid(), inner), data, &held, threshold)
     };
-    let held_episodes: Vec<std::ops::Range<usize>> =
-        data.episodes.iter().enumerate().filter(|(e, _)| e % 10 == 9).map(|(_, r)| r.clone()).collect();
+    let held_episodes = data.held_out_episodes();
     // The last evaluation also reads the held-out episodes whole.
     let last_eval = |net: &JudgeNet| {
         let judge = LearnedJudge::new(judge.clone(), net.valid(), inner);
@@ -235,20 +239,17 @@ pub fn train_judge(
         m.episodes = Some(read_episodes(&judge, data, &held_episodes, threshold));
         m
     };
-    let mut lv = f64::NAN;
+    let mut log_line = |line: serde_json::Value| {
+        writeln!(logf, "{line}").map_err(|e| PolicyLoadError::new(log, e.to_string()))
+    };
+    let (mut lv, mut done) = (f64::NAN, 0);
     for step in 0..cfg.steps {
         if harness::stop::requested() {
             return Ok(None);
         }
         if out_of_time() {
-            if step == 0 {
-                return Ok(None);
-            }
             tracing::warn!(step, of = cfg.steps, "out of time: the judge ends at this step");
-            let m = last_eval(&net);
-            let line = serde_json::json!({"step": step, "loss": lv, "heldout": m, "out_of_time": true});
-            writeln!(logf, "{line}").map_err(|e| PolicyLoadError::new(log, e.to_string()))?;
-            return Ok(Some((net.valid(), m, step)));
+            break;
         }
         let mut rng = Rng::new(derive(cfg.seed, &[step]));
         let idx: Vec<(usize, u8)> = (0..cfg.batch)
@@ -271,18 +272,28 @@ pub fn train_judge(
         let grads = GradientsParams::from_grads(loss.backward(), &net);
         let lr = cfg.lr * ((step + 1) as f64 / WARMUP as f64).min(1.0);
         net = optim.step(lr, net, grads);
-        on_step(step + 1, lv);
-        let last = step + 1 == cfg.steps;
-        if (step + 1).is_multiple_of(cfg.eval_every.max(1)) || last {
-            let m = if last { last_eval(&net) } else { eval(&net) };
-            let line = serde_json::json!({"step": step + 1, "loss": lv, "heldout": m});
-            writeln!(logf, "{line}").map_err(|e| PolicyLoadError::new(log, e.to_string()))?;
-            if last {
-                return Ok(Some((net.valid(), m, cfg.steps)));
-            }
+        done = step + 1;
+        on_step(done, lv);
+        if done.is_multiple_of(cfg.eval_every.max(1)) && done < cfg.steps {
+            log_line(serde_json::json!({"step": done, "loss": lv, "heldout": eval(&net)}))?;
         }
     }
-    Ok(None)
+    if done == 0 {
+        return Ok(None);
+    }
+    // The last evaluation, where training ended (its last step, or out of time).
+    let m = last_eval(&net);
+    let mut line = serde_json::json!({"step": done, "loss": lv, "heldout": m});
+    if done < cfg.steps {
+        line["out_of_time"] = serde_json::json!(true);
+    }
+    log_line(line)?;
+    Ok(Some((net.valid(), m, done)))
+}
+
+/// Whether episode `e` is held out: every 10th.
+fn held_out(e: usize) -> bool {
+    e % 10 == 9
 }
 
 #[cfg(test)]
