@@ -124,7 +124,12 @@ fn episodes_jsonl_reader_survives_damaged_rows() {
         std::fs::write(&path, bytes).unwrap();
         let _ = read_rows::<EpisodeRow>(&path);
         let _ = resume_rows(&path, |r: &[EpisodeRow]| {
-            whole_batches(r, &batches, crate::rank::resume::rank_key, &crate::rank::resume::RANK_KINDS)
+            whole_batches(
+                r,
+                &batches,
+                crate::commands::rank::resume::rank_key,
+                &crate::commands::rank::resume::RANK_KINDS,
+            )
         });
     });
 }

@@ -9,10 +9,8 @@ mod commands;
 #[cfg(test)]
 mod fuzz;
 mod output;
-mod plan;
 mod policy_kinds;
 mod progress;
-mod rank;
 mod scenario;
 
 use std::io::IsTerminal;

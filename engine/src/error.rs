@@ -39,6 +39,40 @@ pub enum EngineError {
         /// The task.
         task: String,
     },
+    /// A policy returned chunks shorter than a plan imagines or executes.
+    #[error("policy {policy} returned fewer than {need} actions per proposal")]
+    ShortChunk {
+        /// The policy.
+        policy: String,
+        /// Actions needed per proposal.
+        need: usize,
+    },
+    /// A task whose episodes have no planning cost or cannot be copied.
+    #[error(
+        "task {task} cannot be planned in: its episodes have no planning cost or cannot copy their simulator state"
+    )]
+    CannotPlan {
+        /// The task.
+        task: String,
+    },
+    /// The simulator diverged while trying a proposal on a copy of an episode.
+    #[error("imagining a proposal of episode {seed}")]
+    Imagining {
+        /// The episode seed.
+        seed: u64,
+        /// The simulator's error.
+        source: TaskError,
+    },
+    /// The world model generated non-finite latents for a plan's proposals.
+    #[error("imagining proposals of policy {policy} at decision {decision}")]
+    PlanWorldModel {
+        /// The proposing policy.
+        policy: String,
+        /// The decision's index in its episodes.
+        decision: u64,
+        /// Which generated frames diverged.
+        source: RolloutError,
+    },
     /// A batch of a policy that had already failed.
     #[error("policy {policy}: skipped after an earlier failure")]
     Skipped {

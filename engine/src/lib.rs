@@ -10,7 +10,9 @@
 //! - [`sim`]: the simulator branch (real frames, exact scores);
 //! - [`imagined`]: the world-model branch (imagined frames, judged scores);
 //! - [`schedule`]: all policies' batches on worker threads, load-balanced, handed
-//!   on in batch order, with the same rows for any worker count.
+//!   on in batch order, with the same rows for any worker count;
+//! - [`plan`]: GPC-RANK, a policy's proposals imagined and the best executed, in
+//!   lockstep batches of its own (`evalharness plan`).
 //!
 //! Both branches draw the policy's sampling noise from clones of the same
 //! per-episode stream, so they are matched pairs. All episodes of a batch advance
@@ -21,6 +23,7 @@
 mod decide;
 mod error;
 pub mod imagined;
+pub mod plan;
 pub mod schedule;
 pub mod sim;
 pub mod start;

@@ -156,6 +156,14 @@ pub trait Imagination: Send + Sync {
     fn proprio(&self) -> Vec<f32>;
 }
 
+/// What a planner minimises on a frame of the policy's view, lower being better
+/// (Push-T: the mean distance of the block's pixels from the goal T).
+pub trait PlanCost: Send + Sync {
+    /// The frame's cost; `None` where the frame shows too little to judge (no
+    /// block, a wrong size).
+    fn cost(&self, frame: &[u8]) -> Option<f64>;
+}
+
 /// One episode of a task's reference simulator.
 pub trait Env: Send {
     /// The episode seed it was reset to.
@@ -182,6 +190,22 @@ pub trait Env: Send {
     fn judge(&self) -> Option<Box<dyn Judge>>;
     /// The world-model adaptor of this episode; call right after reset.
     fn imagination(&self, view: ModelView) -> Box<dyn Imagination>;
+    /// The current frame in the world model's `view` (the planner's world model
+    /// imagines from the last real frames). By default the adaptor's first frame at
+    /// the current state.
+    fn model_frame(&self, view: ModelView) -> Vec<u8> {
+        self.imagination(view).first_frame().to_vec()
+    }
+    /// A copy of this episode at its current true state, on which `plan`'s simulator
+    /// planner tries a proposal; `None` for a task that cannot copy one.
+    fn fork(&self) -> Option<Box<dyn Env>> {
+        None
+    }
+    /// The planners' cost of this episode's frames, from its public conditions (the
+    /// goal); `None` for a task without one, which `plan` then refuses.
+    fn plan_cost(&self) -> Option<Box<dyn PlanCost>> {
+        None
+    }
 }
 
 /// A task: the scenario, its declarations and its seeded episodes.

@@ -199,6 +199,18 @@ impl PushTEnv {
         self.physics.set_state(state);
     }
 
+    /// A copy at the current state, goal, seed and step, on a simulation of its own
+    /// (for planners that imagine with the simulator). Velocities of the block are
+    /// not carried over: it is damped to quasi-static motion (see [`physics`](self::physics)).
+    pub fn fork(&self) -> Self {
+        let mut copy = Self::new(self.model.clone(), &self.cfg);
+        copy.set_state(&self.state());
+        copy.set_goal(self.goal);
+        copy.seed = self.seed;
+        copy.step = self.step;
+        copy
+    }
+
     /// Overwrites the goal (for planners that act on an estimated scene).
     pub fn set_goal(&mut self, goal: Pose2) {
         self.goal = goal;

@@ -63,6 +63,12 @@ impl GoalDistance {
     }
 }
 
+impl harness::task::PlanCost for GoalDistance {
+    fn cost(&self, frame: &[u8]) -> Option<f64> {
+        GoalDistance::cost(self, frame)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

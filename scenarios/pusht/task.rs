@@ -16,11 +16,13 @@ use std::sync::Arc;
 use harness::judge::Judge;
 use harness::policy::Policy;
 use harness::task::{
-    ActionKind, ActionSpec, Env, Imagination, ModelView, ObservationSpec, ScoreKind, Seen, Task, TaskError,
+    ActionKind, ActionSpec, Env, Imagination, ModelView, ObservationSpec, PlanCost, ScoreKind, Seen, Task,
+    TaskError,
 };
 use mujoco_rs::prelude::MjModel;
 
 use super::frame_score::FrameScorer;
+use super::plan_cost::GoalDistance;
 use super::render::Rasterizer;
 use super::scripted::ScriptedPolicy;
 use super::{PushTConfig, PushTEnv, PushTPhysics};
@@ -168,6 +170,22 @@ impl Env for PushTEpisode {
             ModelView::GoalFree => (self.raster.render_without_goal(&st), Some(self.scorer())),
         };
         Box::new(PushTImagination { first, goal_free, last: st.agent.map(|v| v as f32) })
+    }
+
+    fn model_frame(&self, view: ModelView) -> Vec<u8> {
+        let st = self.env.state();
+        match view {
+            ModelView::Observation => self.raster.render(&st, &self.env.goal()),
+            ModelView::GoalFree => self.raster.render_without_goal(&st),
+        }
+    }
+
+    fn fork(&self) -> Option<Box<dyn Env>> {
+        Some(Box::new(PushTEpisode { env: self.env.fork(), raster: self.raster.clone() }))
+    }
+
+    fn plan_cost(&self) -> Option<Box<dyn PlanCost>> {
+        Some(Box::new(GoalDistance::new(self.env.config(), &self.env.goal(), self.raster.size())))
     }
 }
 

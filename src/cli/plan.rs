@@ -17,13 +17,12 @@ pub enum Planner {
     Simulator,
 }
 
-impl Planner {
-    /// The name used in files and tables.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::None => "none",
-            Self::WorldModel => "world-model",
-            Self::Simulator => "simulator",
+impl From<Planner> for engine::plan::Planner {
+    fn from(p: Planner) -> Self {
+        match p {
+            Planner::None => Self::None,
+            Planner::WorldModel => Self::WorldModel,
+            Planner::Simulator => Self::Simulator,
         }
     }
 }

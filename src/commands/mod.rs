@@ -1,4 +1,4 @@
-//! One module per subcommand; [`run`] dispatches.
+//! One module per subcommand (`rank` and `plan`, the largest, are folders); [`run`] dispatches.
 
 pub(crate) mod agreement;
 mod collect;
@@ -9,6 +9,8 @@ mod dataset_merge;
 mod episodes;
 mod export_policies;
 mod goal_free;
+pub(crate) mod plan;
+pub(crate) mod rank;
 mod scripted;
 mod sessions;
 mod simulate;
@@ -59,12 +61,12 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
             }
         }
         Command::Agreement(a) => agreement::run(a),
-        Command::Rank(a) => crate::rank::run(a, cli.quiet),
-        Command::Plan(a) => crate::plan::run(a, cli.quiet),
-        Command::Merge(a) => crate::rank::merge::run(&a.shards, &a.out, a.force, a.no_report),
-        Command::Tasks(a) => crate::rank::report::tasks_table(&a.runs, a.tex.as_deref()),
+        Command::Rank(a) => crate::commands::rank::run(a, cli.quiet),
+        Command::Plan(a) => crate::commands::plan::run(a, cli.quiet),
+        Command::Merge(a) => crate::commands::rank::merge::run(&a.shards, &a.out, a.force, a.no_report),
+        Command::Tasks(a) => crate::commands::rank::report::tasks_table(&a.runs, a.tex.as_deref()),
         Command::Report(a) => {
-            let html = crate::rank::report::write_report(&a.out)?;
+            let html = crate::commands::rank::report::write_report(&a.out)?;
             println!("{}", html.display());
             Ok(ExitCode::SUCCESS)
         }

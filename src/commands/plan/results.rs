@@ -9,8 +9,7 @@ use anyhow::{Context, Result};
 use harness::metrics::bootstrap::{mean_ci, wilson};
 use serde_json::{Value, json};
 
-use super::state::PlanRow;
-use crate::cli::Planner;
+use engine::plan::{PlanRow, Planner};
 
 fn sorted(rows: &[PlanRow], planner: Planner) -> Vec<&PlanRow> {
     let mut v: Vec<&PlanRow> = rows.iter().filter(|r| r.planner == planner.name()).collect();

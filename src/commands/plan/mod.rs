@@ -1,6 +1,7 @@
-//! `evalharness plan`: GPC-RANK (DriftWorld spec §11) on Push-T. A diffusion
-//! policy proposes several action chunks per decision; a planner imagines each and
-//! executes the best in MuJoCo. Three planners run on the same seeds: `none` (the
+//! `evalharness plan`: GPC-RANK (DriftWorld spec §11), run by [`engine::plan`] on
+//! any task with a planning cost (Push-T). A diffusion policy proposes several
+//! action chunks per decision; a planner imagines each and executes the best in
+//! the simulator. Three planners run on the same seeds: `none` (the
 //! policy alone), `world-model` (GPC-RANK) and `simulator` (the same ranking with
 //! perfect imagination), so the run measures what planning in the world model
 //! gains over the policy and how much of the simulator's gain it keeps.
@@ -13,10 +14,7 @@
 //! seeds (per decision: the real frame; the world model's and the simulator's last
 //! frame of the proposal picked).
 
-mod episodes;
-mod imagine;
 mod results;
-mod state;
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -26,25 +24,23 @@ use anyhow::{Context, Result, bail};
 use harness::policy::Policy;
 use policies::diffusion::DiffusionPolicy;
 use policies::dir::{checkpoint_name, diffusion_config, diffusion_weights, read_policy_file};
-use scenarios::pusht::PushTPhysics;
 use serde_json::json;
 
-use crate::cli::{PlanArgs, Planner};
+use crate::cli::PlanArgs;
 use crate::output::write_json;
 use crate::progress;
 use engine::Timing;
-use episodes::run_batch;
-use state::{Ctx, PlanRow, plan_key};
+use engine::plan::{PlanCtx, PlanRow, Planner, plan_key, run_batch};
 
 /// Loads the proposing policy, returning chunks of max(imagine, execute) actions (it
 /// still predicts its whole horizon; only the slice it returns is longer), with the
 /// resolved `--imagine` and `--execute`.
 fn load_proposer(
     a: &PlanArgs,
-    image_size: usize,
-    world: f32,
+    task: &dyn harness::task::Task,
     device: &burn::tensor::Device,
 ) -> Result<(DiffusionPolicy, usize, usize)> {
+    let image_size = task.observation_spec().image_size;
     let dir = &a.policy;
     // The kind first: other kinds' policy.json has other fields.
     let kind = crate::output::read_json(&dir.join("policy.json"))
@@ -83,7 +79,8 @@ fn load_proposer(
     let net = diffusion_weights(dir, &cfg, device)?;
     cfg.action_horizon = imagine.max(execute);
     let name = checkpoint_name(dir);
-    let bounds = (vec![0.0; 2], vec![world; 2]); // Push-T's world, as `PushTTask` declares it
+    let spec = task.action_spec();
+    let bounds = (spec.low, spec.high);
     Ok((DiffusionPolicy::new(name, cfg, file.normalisation, bounds, net, device), imagine, execute))
 }
 
@@ -99,33 +96,36 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     if !(a.margin.is_finite() && a.margin >= 0.0) {
         bail!("--margin {}: must be a number >= 0", a.margin);
     }
-    let mut planners = a.planners.clone();
+    let mut planners: Vec<Planner> = a.planners.iter().map(|&p| p.into()).collect();
     planners.sort();
     planners.dedup();
     if planners.is_empty() {
         bail!("--planners: name at least one of none, world-model, simulator");
     }
-    let cfg = crate::scenario::load_pusht(&a.scenario)?;
-    let model = PushTPhysics::compile(&cfg)?;
+    let task = crate::scenario::load_task(&a.scenario)?;
+    let size = task.observation_spec().image_size;
+    // Refused before anything is loaded or written: the task must be one to plan in.
+    let probe = task.reset(seeds[0]).with_context(|| format!("resetting seed {}", seeds[0]))?;
+    if probe.plan_cost().is_none() || probe.fork().is_none() {
+        return Err(engine::EngineError::CannotPlan { task: task.name().to_string() }.into());
+    }
     let device = world_model::device::selected()?;
     let wm = if planners.contains(&Planner::WorldModel) {
-        let wm = crate::rank::load_world_model(&a.world_model, a.alpha, &device)?;
-        if wm.image_size() != cfg.render.size as usize {
+        let wm = crate::commands::rank::load_world_model(&a.world_model, a.alpha, &device)?;
+        if wm.image_size() != size {
             bail!(
-                "world model {} generates {1}x{1} frames, the scenario renders {2}x{2}",
+                "world model {} generates {1}x{1} frames, the scenario renders {size}x{size}",
                 a.world_model.display(),
                 wm.image_size(),
-                cfg.render.size
             );
         }
         Some(wm)
     } else {
         None
     };
-    let (policy, imagine, execute) =
-        load_proposer(a, cfg.render.size as usize, cfg.world.size as f32, &device)?;
+    let (policy, imagine, execute) = load_proposer(a, task.as_ref(), &device)?;
     // Every input is checked; only now is the output folder touched.
-    let inputs = crate::rank::model_inputs(
+    let inputs = crate::commands::rank::model_inputs(
         wm.as_ref().map(|w| (a.world_model.as_path(), w)),
         std::slice::from_ref(&a.policy),
     )?;
@@ -133,7 +133,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     if wm.is_some() {
         apart.push(("--world-model", &a.world_model));
     }
-    let (out_dir, jsonl) = crate::rank::prepare_run(&a.out, apart, &inputs, a.resume, a.force)?;
+    let (out_dir, jsonl) = crate::commands::rank::prepare_run(&a.out, apart, &inputs, a.resume, a.force)?;
     let config = json!({
         "command": std::env::args().collect::<Vec<_>>().join(" "),
         "scenario": a.scenario, "policy": a.policy,
@@ -147,16 +147,15 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         "fingerprints": inputs.iter().map(|(k, _, f)| (k.clone(), json!(f))).collect::<serde_json::Map<_, _>>(),
     });
     if a.resume {
-        crate::rank::resume::check_config(&a.out.join("config.json"), &config)?;
+        crate::commands::rank::resume::check_config(&a.out.join("config.json"), &config)?;
     }
     write_json(&a.out.join("config.json"), &config)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.jobs.max(1))
         .build()
         .context("starting worker threads")?;
-    let ctx = Ctx {
-        cfg: &cfg,
-        model: &model,
+    let ctx = PlanCtx {
+        task: task.as_ref(),
         policy: &policy,
         wm: wm.as_ref(),
         proposals: a.proposals,
@@ -193,7 +192,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
             timing.add(&out.timing);
             for (seed, rec) in &out.records {
                 let png = filmstrips.join(format!("{}_seed{seed}.png", planner.name()));
-                results::write_strip(&png, rec, ctx.cfg.render.size as usize)?;
+                results::write_strip(&png, rec, size)?;
             }
             rows.extend(out.rows);
             pb.inc(batch.len() as u64);

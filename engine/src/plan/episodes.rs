@@ -1,35 +1,34 @@
-//! A batch of planned episodes in MuJoCo, advanced in lockstep.
+//! A batch of planned episodes in the task's simulator, advanced in lockstep.
 //!
 //! Every decision (DriftWorld spec §11, GPC-RANK): the policy samples `K`
 //! proposals from the real observation (each with its own noise stream, derived
 //! from (master seed, policy, episode seed, decision, proposal), so proposal 0 is
 //! the same draw under every planner, before the spread); they are spread about their mean; the
-//! planner scores each one's last imagined frame with [`GoalDistance`] and the
-//! lowest cost is executed for `execute` actions in MuJoCo. The `none` planner
+//! planner scores each one's last imagined frame with the episode's [`PlanCost`] and the
+//! lowest cost is executed for `execute` actions in the simulator. The `none` planner
 //! takes proposal 0 without imagining. The world-model planner imagines from the
 //! last real frames (the first frame repeated at an episode's start, as `rank`)
 //! in one-pass chunks; the simulator planner steps a copy of the true state
-//! through each proposal and renders its last frame. When the world model plans,
-//! the simulator also scores the same proposals, so each decision records whether
-//! the two picked the same one and what the world model's pick cost in truth.
+//! ([`Env::fork`]) through each proposal and renders its last frame. When the world
+//! model plans, the simulator also scores the same proposals, so each decision
+//! records whether the two picked the same one and what the world model's pick cost
+//! in truth.
+//!
+//! [`PlanCost`]: harness::task::PlanCost
+//! [`Env::fork`]: harness::task::Env::fork
 
 use std::time::Instant;
 
-use anyhow::{Result, anyhow, bail};
 use harness::policy::{ActionChunk, Observation};
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
+use harness::task::{ModelView, Seen};
 use rayon::prelude::*;
-use scenarios::pusht::PushTEnv;
-use scenarios::pusht::frame_score::FrameScorer;
-use scenarios::pusht::plan_cost::GoalDistance;
-use scenarios::pusht::render::Rasterizer;
 
 use super::imagine::{self, Decision, Imagined};
-use super::state::{BatchOut, Ctx, Live, PlanRow};
-use crate::cli::Planner;
-use engine::{Timing, obs_of, push};
-use harness::task::Seen;
+use super::state::{Live, PlanCtx, PlanOut, PlanRow, Planner};
+use crate::EngineError;
+use crate::start::{Timing, obs_of, push};
 
 /// Index of the lowest cost (the first on ties; proposals without a cost are never
 /// picked unless none has one, and then the first is).
@@ -55,15 +54,16 @@ pub fn pick_with_margin(costs: &[Option<f64>], margin: f64) -> usize {
 }
 
 /// `a ← mean + s·(a − mean)` over each episode's `k` consecutive proposals, per step and
-/// coordinate, clamped to the world `[0, hi]`.
-pub fn spread(chunks: &mut [ActionChunk], k: usize, s: f32, hi: f32) {
+/// coordinate `d`, clamped to the action bounds `[low[d], high[d]]`.
+pub fn spread(chunks: &mut [ActionChunk], k: usize, s: f32, low: &[f32], high: &[f32]) {
     for group in chunks.chunks_mut(k) {
         let len = group.iter().map(Vec::len).min().unwrap_or(0);
         for t in 0..len {
-            for d in 0..2 {
+            let dims = group.iter().map(|c| c[t].len()).min().unwrap_or(0).min(low.len()).min(high.len());
+            for d in 0..dims {
                 let mean = group.iter().map(|c| c[t][d]).sum::<f32>() / group.len() as f32;
                 for c in group.iter_mut() {
-                    c[t][d] = (mean + s * (c[t][d] - mean)).clamp(0.0, hi);
+                    c[t][d] = (mean + s * (c[t][d] - mean)).clamp(low[d], high[d]);
                 }
             }
         }
@@ -73,39 +73,39 @@ pub fn spread(chunks: &mut [ActionChunk], k: usize, s: f32, hi: f32) {
 /// Runs the episodes `seeds` under `planner`.
 ///
 /// # Errors
-/// A policy error, a diverging simulation (real or imagined), or non-finite latents,
-/// naming the seed or the policy.
-pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut> {
-    let raster = Rasterizer::new(ctx.cfg);
-    let size = raster.size();
+/// A task that cannot be planned in, a policy error, a diverging simulation (real or
+/// imagined), or non-finite latents, naming the seed or the policy.
+pub fn run_batch(ctx: &PlanCtx, planner: Planner, seeds: &[u64]) -> Result<PlanOut, EngineError> {
+    let size = ctx.task.observation_spec().image_size;
+    let (kind, spec) = (ctx.task.score_kind(), ctx.task.action_spec());
     let o = ctx.policy.obs_horizon().max(1);
     let name = ctx.policy.name().to_string();
     let wm = if planner == Planner::WorldModel { ctx.wm } else { None };
-    let goal_free = wm.is_some_and(|w| w.cfg.is_goal_free());
+    let view =
+        if wm.is_some_and(|w| w.cfg.is_goal_free()) { ModelView::GoalFree } else { ModelView::Observation };
     let wm_k = wm.map_or(0, |w| w.cfg.unet.history);
-    let thr = ctx.cfg.task.success_coverage;
+    let thr = kind.threshold();
     let mut live = Vec::with_capacity(seeds.len());
     for &seed in seeds {
-        let mut env = PushTEnv::new(ctx.model.clone(), ctx.cfg);
-        env.reset(seed)?;
-        let (st, goal) = (env.state(), env.goal());
-        let first = raster.render(&st, &goal);
-        let wm_first = if goal_free { raster.render_without_goal(&st) } else { first.clone() };
-        let pos = st.agent.map(|v| v as f32);
-        let cov = env.score().coverage;
+        let env = ctx.task.reset(seed)?;
+        let cannot = || EngineError::CannotPlan { task: ctx.task.name().to_string() };
+        let cost = env.plan_cost().ok_or_else(cannot)?;
+        let first = env.observe();
+        let wm_first = if wm.is_some() { env.model_frame(view) } else { first.frame.clone() };
+        let raw = env.score();
         live.push(Live {
-            seen: (0..o).map(|_| Seen { frame: first.clone(), proprio: pos.to_vec() }).collect(),
+            seen: (0..o).map(|_| first.clone()).collect(),
             wm_hist: (0..wm_k).map(|_| wm_first.clone()).collect(),
             wm_first,
-            scorer: FrameScorer::new(ctx.cfg, &goal, size),
-            cost: GoalDistance::new(ctx.cfg, &goal, size),
+            imagination: env.imagination(view),
+            cost,
             row: PlanRow {
                 planner: planner.name().to_string(),
                 seed,
-                score: (cov / thr).clamp(0.0, 1.0),
-                max_coverage: cov,
-                final_coverage: cov,
-                success: cov > thr,
+                score: kind.reward(raw),
+                max_coverage: raw,
+                final_coverage: raw,
+                success: raw > thr,
                 steps: 0,
                 decisions: 0,
                 replaced: 0,
@@ -135,13 +135,13 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
             })
             .map(|(seed, j)| Rng::new(derive(ctx.master_seed, &[fnv1a(&name), seed, decision, j])))
             .collect();
-        let mut chunks = ctx.policy.act(&obs, &mut rngs).map_err(|e| anyhow!(e))?;
+        let mut chunks = ctx.policy.act(&obs, &mut rngs)?;
         let need = ctx.imagine.max(ctx.execute);
         if chunks.len() != obs.len() || chunks.iter().any(|c| c.len() < need) {
-            bail!("policy {name} returned fewer than {need} actions per proposal");
+            return Err(EngineError::ShortChunk { policy: name, need });
         }
         if k > 1 {
-            spread(&mut chunks, k, ctx.spread, ctx.cfg.world.size as f32);
+            spread(&mut chunks, k, ctx.spread, &spec.low, &spec.high);
         }
         timing.policy_s += tp.elapsed().as_secs_f64();
         let d = Decision { live: &live, active: &active, chunks: &chunks, k, index: decision };
@@ -149,7 +149,7 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
             None
         } else {
             let ts = Instant::now();
-            let c = imagine::in_simulator(ctx, &d, &raster)?;
+            let c = imagine::in_simulator(ctx, &d)?;
             timing.sim_s += ts.elapsed().as_secs_f64();
             Some(c)
         };
@@ -195,23 +195,23 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
                 rec.push([real, get(wm_out.as_ref()), get(sim_costs.as_ref())]);
             }
         }
-        // Execute the picks in MuJoCo.
+        // Execute the picks in the simulator.
         let ts = Instant::now();
         let e = ctx.execute.min(ctx.max_steps - steps);
         let mut pos_of = vec![None; live.len()];
         for (p, &i) in active.iter().enumerate() {
             pos_of[i] = Some(p);
         }
-        let results: Vec<Result<()>> = ctx.pool.install(|| {
+        let results: Vec<Result<(), EngineError>> = ctx.pool.install(|| {
             live.par_iter_mut()
                 .zip(pos_of.par_iter())
                 .map(|(l, p)| match p {
-                    Some(p) => execute(l, &chunks[p * k + picks[*p]][..e], &raster, o, wm_k, goal_free, thr),
+                    Some(p) => execute(l, &chunks[p * k + picks[*p]][..e], o, (wm_k, view), kind),
                     None => Ok(()),
                 })
                 .collect()
         });
-        results.into_iter().collect::<Result<Vec<()>>>()?;
+        results.into_iter().collect::<Result<Vec<()>, _>>()?;
         for (p, &i) in active.iter().enumerate() {
             let row = &mut live[i].row;
             row.decisions += 1;
@@ -223,38 +223,38 @@ pub fn run_batch(ctx: &Ctx, planner: Planner, seeds: &[u64]) -> Result<BatchOut>
         active.retain(|&i| !live[i].row.success);
     }
     let records = live.iter_mut().filter_map(|l| Some((l.row.seed, l.record.take()?))).collect();
-    Ok(BatchOut { rows: live.into_iter().map(|l| l.row).collect(), timing, records })
+    Ok(PlanOut { rows: live.into_iter().map(|l| l.row).collect(), timing, records })
 }
 
-/// Executes `actions` in the real environment, updating the score and the histories.
+/// Executes `actions` in the real environment, updating the score and the histories
+/// (the policy's, and the world model's `keep_wm` frames in its `view`).
 fn execute(
     l: &mut Live,
     actions: &[Vec<f32>],
-    raster: &Rasterizer,
     o: usize,
-    keep_wm: usize,
-    goal_free: bool,
-    thr: f64,
-) -> Result<()> {
+    (keep_wm, view): (usize, ModelView),
+    kind: harness::task::ScoreKind,
+) -> Result<(), EngineError> {
     let n = actions.len();
     // Only the frames the histories keep are rendered.
     let keep = o.max(keep_wm);
+    let thr = kind.threshold();
     for (j, a) in actions.iter().enumerate() {
-        let sc = l.env.step([f64::from(a[0]), f64::from(a[1])])?;
+        let raw = l.env.step(a)?;
         let r = &mut l.row;
-        r.score = r.score.max((sc.coverage / thr).clamp(0.0, 1.0));
-        r.max_coverage = r.max_coverage.max(sc.coverage);
-        r.final_coverage = sc.coverage;
-        r.success |= sc.coverage > thr;
+        r.score = r.score.max(kind.reward(raw));
+        r.max_coverage = r.max_coverage.max(raw);
+        r.final_coverage = raw;
+        r.success |= raw > thr;
         r.steps += 1;
         if j + keep >= n {
-            let (st, goal) = (l.env.state(), l.env.goal());
-            let frame = raster.render(&st, &goal);
+            let seen: Seen = l.env.observe();
             if keep_wm > 0 {
-                let wm_frame = if goal_free { raster.render_without_goal(&st) } else { frame.clone() };
+                let wm_frame =
+                    if view == ModelView::GoalFree { l.env.model_frame(view) } else { seen.frame.clone() };
                 push(&mut l.wm_hist, wm_frame, keep_wm);
             }
-            push(&mut l.seen, Seen { frame, proprio: st.agent.map(|v| v as f32).to_vec() }, o);
+            push(&mut l.seen, seen, o);
         }
     }
     Ok(())
@@ -262,7 +262,74 @@ fn execute(
 
 #[cfg(test)]
 mod tests {
+    use harness::policy::{Policy, PolicyError};
+
     use super::*;
+
+    /// Proposes 8 targets near the centre, each from its own noise stream.
+    struct Wander;
+
+    impl Policy for Wander {
+        fn name(&self) -> &str {
+            "wander"
+        }
+        fn obs_horizon(&self) -> usize {
+            2
+        }
+        fn action_horizon(&self) -> usize {
+            8
+        }
+        fn act(&self, obs: &[Observation], rngs: &mut [Rng]) -> Result<Vec<ActionChunk>, PolicyError> {
+            Ok(obs
+                .iter()
+                .zip(rngs)
+                .map(|(_, r)| (0..8).map(|_| vec![256.0 + 60.0 * r.normal() as f32, 256.0]).collect())
+                .collect())
+        }
+    }
+
+    fn plan(planner: Planner, threads: usize) -> PlanOut {
+        let task = scenarios::load_task("pusht").unwrap();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let ctx = PlanCtx {
+            task: task.as_ref(),
+            policy: &Wander,
+            wm: None,
+            proposals: 3,
+            imagine: 8,
+            execute: 4,
+            spread: 1.0,
+            margin: 0.0,
+            master_seed: 5,
+            max_steps: 10,
+            pool: &pool,
+            record: &[11],
+        };
+        run_batch(&ctx, planner, &[11, 12]).unwrap()
+    }
+
+    #[test]
+    fn the_simulator_planner_runs_every_decision_alike_on_any_thread_count() {
+        let one = plan(Planner::Simulator, 1);
+        // 10 steps at 4 per decision: decisions of 4, 4 and 2 actions.
+        for r in &one.rows {
+            assert_eq!((r.steps, r.decisions, r.planner.as_str()), (10, 3, "simulator"), "{r:?}");
+            assert!(r.agreed.is_none() && r.regret.is_none(), "only the world model's picks are checked");
+        }
+        // Three proposals differ, so some decision executes another than the first.
+        assert!(one.rows.iter().any(|r| r.replaced > 0), "{:?}", one.rows);
+        // Seed 11 is recorded: per decision, the real frame and the simulator's outcome.
+        assert_eq!(one.records.len(), 1);
+        let (seed, rec) = &one.records[0];
+        assert_eq!((*seed, rec.len()), (11, 3));
+        assert!(rec.iter().all(|[real, wm, sim]| !real.is_empty() && wm.is_empty() && !sim.is_empty()));
+        let two = plan(Planner::Simulator, 2);
+        assert_eq!(one.rows, two.rows, "two threads give the rows one does");
+        assert_eq!(one.records, two.records);
+        // The policy alone executes proposal 0 and never imagines.
+        let none = plan(Planner::None, 1);
+        assert!(none.rows.iter().all(|r| r.replaced == 0 && r.decisions == 3), "{:?}", none.rows);
+    }
 
     #[test]
     fn pick_takes_the_first_lowest_cost_and_skips_missing_ones() {
@@ -290,7 +357,7 @@ mod tests {
         // episode 1's at 500 and 510 (mean 505) to 495 and 515, clamped to 512.
         let one = |x: f32, y: f32| vec![vec![x, y]];
         let mut c = vec![one(10.0, 1.0), one(20.0, 1.0), one(500.0, 7.0), one(510.0, 7.0)];
-        spread(&mut c, 2, 2.0, 512.0);
+        spread(&mut c, 2, 2.0, &[0.0, 0.0], &[512.0, 512.0]);
         assert_eq!(c, vec![one(5.0, 1.0), one(25.0, 1.0), one(495.0, 7.0), one(512.0, 7.0)]);
     }
 }

@@ -1,83 +1,89 @@
 //! Imagining a decision's proposals: in the world model (batched, one-pass
-//! chunks, from the last real frames) or in MuJoCo (a copy of the true state per
-//! proposal). Both return one cost per proposal ([`GoalDistance`] of the last
-//! imagined frame; `None` where that frame shows no block), in the decision's
-//! episode-major proposal order.
+//! chunks, from the last real frames) or in the simulator (a copy of the true state
+//! per proposal). Both return one cost per proposal (the episode's [`PlanCost`] of
+//! the last imagined frame; `None` where that frame shows too little), in the
+//! decision's episode-major proposal order.
 //!
-//! [`GoalDistance`]: scenarios::pusht::plan_cost::GoalDistance
+//! [`PlanCost`]: harness::task::PlanCost
 
-use anyhow::{Result, anyhow};
 use burn::tensor::Tensor;
 use harness::policy::ActionChunk;
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
+use harness::task::{Env, PlanCost};
 use rayon::prelude::*;
-use scenarios::pusht::PushTEnv;
-use scenarios::pusht::render::Rasterizer;
-use world_model::data::tensor_to_frames;
+use world_model::data::{frames_to_tensor, tensor_to_frames};
 use world_model::model::WorldModel;
 use world_model::rollout::Rollout;
 
-use super::state::{Ctx, Live};
+use super::state::{Live, PlanCtx};
+use crate::EngineError;
 
-/// Each proposal's cost and last imagined frame (with the goal), in proposal order.
-pub struct Imagined {
-    pub costs: Vec<Option<f64>>,
-    pub frames: Vec<Vec<u8>>,
+/// Each proposal's cost and last imagined frame (in the policy's view), in proposal order.
+pub(super) struct Imagined {
+    pub(super) costs: Vec<Option<f64>>,
+    pub(super) frames: Vec<Vec<u8>>,
 }
 
 /// One decision of a batch: who is active and what they proposed.
-pub struct Decision<'a> {
-    pub live: &'a [Live],
+pub(super) struct Decision<'a> {
+    pub(super) live: &'a [Live],
     /// Indices into `live`, in proposal order.
-    pub active: &'a [usize],
+    pub(super) active: &'a [usize],
     /// `active.len() * k` proposals, episode-major.
-    pub chunks: &'a [ActionChunk],
+    pub(super) chunks: &'a [ActionChunk],
     /// Proposals per episode.
-    pub k: usize,
+    pub(super) k: usize,
     /// The decision's index in its episodes (0 first).
-    pub index: u64,
+    pub(super) index: u64,
 }
 
-/// Each proposal's first `ctx.imagine` actions stepped in MuJoCo from its episode's
-/// current state (velocities of the block are not carried over: the Push-T block is
-/// damped to quasi-static motion, see `scenarios::pusht::physics`).
+/// Each proposal's first `ctx.imagine` actions stepped in a copy of its episode
+/// ([`Env::fork`], made here in proposal order) from the current state.
 ///
 /// # Errors
-/// A diverging imagined simulation, naming the episode seed.
-pub fn in_simulator(ctx: &Ctx, d: &Decision, raster: &Rasterizer) -> Result<Imagined> {
-    // The episode of each proposal, in proposal order.
-    let owner: Vec<usize> = d.active.iter().flat_map(|&i| std::iter::repeat_n(i, d.k)).collect();
+/// A task that cannot copy its episodes, or a diverging imagined simulation, naming
+/// the episode seed.
+pub(super) fn in_simulator(ctx: &PlanCtx, d: &Decision) -> Result<Imagined, EngineError> {
+    let mut copies: Vec<(Box<dyn Env>, &dyn PlanCost)> = Vec::with_capacity(d.active.len() * d.k);
+    for &i in d.active {
+        let l = &d.live[i];
+        for _ in 0..d.k {
+            let copy =
+                l.env.fork().ok_or_else(|| EngineError::CannotPlan { task: ctx.task.name().to_string() })?;
+            copies.push((copy, l.cost.as_ref()));
+        }
+    }
+    let (chunks, n) = (d.chunks, ctx.imagine);
     let out: Vec<(Option<f64>, Vec<u8>)> = ctx.pool.install(|| {
-        owner
-            .par_iter()
+        copies
+            .into_par_iter()
             .enumerate()
-            .map(|(q, &i)| {
-                let l = &d.live[i];
-                let mut env = PushTEnv::new(ctx.model.clone(), ctx.cfg);
-                env.set_state(&l.env.state());
-                env.set_goal(l.env.goal());
-                for a in &d.chunks[q][..ctx.imagine] {
-                    env.step([f64::from(a[0]), f64::from(a[1])]).map_err(|e| {
-                        anyhow::anyhow!("imagining a proposal of episode {}: {e}", l.row.seed)
-                    })?;
+            .map(|(q, (mut env, cost))| {
+                for a in &chunks[q][..n] {
+                    env.step(a).map_err(|source| EngineError::Imagining { seed: env.seed(), source })?;
                 }
-                let frame = raster.render(&env.state(), &env.goal());
-                Ok((l.cost.cost(&frame), frame))
+                let frame = env.observe().frame;
+                Ok((cost.cost(&frame), frame))
             })
-            .collect::<Result<_>>()
+            .collect::<Result<_, EngineError>>()
     })?;
     let (costs, frames) = out.into_iter().unzip();
     Ok(Imagined { costs, frames })
 }
 
 /// Each proposal's first `ctx.imagine` actions rolled out in the world model from its
-/// episode's last real frames; the last imagined frame is decoded (the goal drawn
-/// back for a goal-free model) and scored.
+/// episode's last real frames; the last imagined frame is decoded (turned into the
+/// policy's view: the goal drawn back for a goal-free model) and scored.
 ///
 /// # Errors
 /// Non-finite latents, naming the policy and the decision.
-pub fn in_world_model(ctx: &Ctx, wm: &WorldModel, d: &Decision, size: usize) -> Result<Imagined> {
+pub(super) fn in_world_model(
+    ctx: &PlanCtx,
+    wm: &WorldModel,
+    d: &Decision,
+    size: usize,
+) -> Result<Imagined, EngineError> {
     let device = wm.device().clone();
     let (hist, f_max) = (wm.cfg.unet.history, wm.cfg.future);
     let (a, k) = (d.active.len(), d.k);
@@ -90,7 +96,7 @@ pub fn in_world_model(ctx: &Ctx, wm: &WorldModel, d: &Decision, size: usize) -> 
         .flat_map(|&i| d.live[i].wm_hist.iter().chain(std::iter::once(&d.live[i].wm_first)))
         .map(Vec::as_slice)
         .collect();
-    let z = wm.encode(policies::diffusion::frames_to_tensor(&frames, size, &device)); // [a (K+1), C, s, s]
+    let z = wm.encode(frames_to_tensor(&frames, size, &device)); // [a (K+1), C, s, s]
     let [_, c, ls, _] = z.dims();
     let z = z.reshape([a, hist + 1, c, ls, ls]);
     // Every proposal of an episode starts from the same latents: [a, k, ...] -> [b, ...].
@@ -112,22 +118,20 @@ pub fn in_world_model(ctx: &Ctx, wm: &WorldModel, d: &Decision, size: usize) -> 
     let mut last = None;
     while roll.generated() < ctx.imagine {
         let (done, f) = (roll.generated(), f_max.min(ctx.imagine - roll.generated()));
-        let pred = roll
-            .step(wm, f, |q, j| d.chunks[q][done + j].as_slice(), &mut rngs)
-            .map_err(|e| anyhow!("imagining proposals of policy {name} at decision {}: {e}", d.index))?; // [b, f, C, s, s]
+        let pred =
+            roll.step(wm, f, |q, j| d.chunks[q][done + j].as_slice(), &mut rngs).map_err(|source| {
+                EngineError::PlanWorldModel { policy: name.to_string(), decision: d.index, source }
+            })?; // [b, f, C, s, s]
         last = Some(pred.narrow(1, f - 1, 1).reshape([b, c, ls, ls]));
     }
     let Some(last) = last else { return Ok(Imagined { costs: vec![None; b], frames: vec![Vec::new(); b] }) };
     let mut frames = tensor_to_frames(wm.decode(last));
-    let goal_free = wm.cfg.is_goal_free();
     let costs = frames
         .iter_mut()
         .enumerate()
         .map(|(q, fr)| {
             let l = &d.live[d.active[q / k]];
-            if goal_free {
-                l.scorer.draw_goal(fr);
-            }
+            l.imagination.to_observation(fr);
             l.cost.cost(fr)
         })
         .collect();
