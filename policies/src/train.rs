@@ -149,6 +149,8 @@ pub struct PolicyOutcome {
     pub saved: Vec<PathBuf>,
     /// Mean loss of the last 50 steps.
     pub loss: f64,
+    /// Training seconds over all sessions, as the state file records them.
+    pub elapsed_s: f64,
 }
 
 /// Trains (or resumes) a diffusion policy into `out` on `inner` (its autodiff
@@ -246,7 +248,13 @@ pub fn train_policy(
         let Some(probe) = probe else {
             // Stopped during pre-training: the run's own state is what `--resume` looks for.
             save_state(&net, &ema, &optim, &state)?;
-            return Ok(PolicyOutcome { step: state.step, total, saved: Vec::new(), loss: f64::NAN });
+            return Ok(PolicyOutcome {
+                step: state.step,
+                total,
+                saved: Vec::new(),
+                loss: f64::NAN,
+                elapsed_s: state.elapsed_s,
+            });
         };
         provenance["encoder_pretraining"] = json!({"steps": ps.step, "heldout_pose_error": ps.heldout});
         if let Some(columns) = &ps.heldout_columns {
@@ -369,7 +377,7 @@ pub fn train_policy(
     }
     save_state(&net, &ema, &optim, &state)?;
     let loss = recent.iter().sum::<f64>() / recent.len().max(1) as f64;
-    Ok(PolicyOutcome { step: state.step, total, saved, loss })
+    Ok(PolicyOutcome { step: state.step, total, saved, loss, elapsed_s: state.elapsed_s })
 }
 
 /// The weights of the checkpoint a run starts from, which must have the run's

@@ -22,7 +22,7 @@ use crate::output::{read_json, write_json};
 const OPEN_SESSION: &str = "session_open.json";
 
 /// `step` and `elapsed_s` of the checkpoint in `out` (`state.json`), zeros if none.
-pub(super) fn read_checkpoint(out: &Path) -> (u64, f64) {
+fn read_checkpoint(out: &Path) -> (u64, f64) {
     let state = std::fs::read_to_string(out.join("state.json"))
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())

@@ -12,7 +12,7 @@ use policies::train::{Phase, PolicyRun, PolicyTrainConfig, RunConfigs, train_pol
 use serde_json::json;
 
 use super::git_commit;
-use super::sessions::{open_session, read_checkpoint, read_step, record_session};
+use super::sessions::{open_session, read_step, record_session};
 use super::train::{dataset_origin, dataset_task, fixed_fields, prepare_out, refuse_contradicting_flags};
 use crate::cli::TrainPolicyArgs;
 use crate::progress;
@@ -128,8 +128,7 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         });
     })?;
     pb.finish_and_clear();
-    let (_, elapsed_s) = read_checkpoint(&train_dir);
-    record_session(&train_dir, &args.join(" "), from_step, outcome.step, elapsed_s)?;
+    record_session(&train_dir, &args.join(" "), from_step, outcome.step, outcome.elapsed_s)?;
     for ck in &outcome.saved {
         println!("saved {}", ck.display());
     }
