@@ -65,6 +65,32 @@ fn the_lift_pipeline_collects_trains_every_model_and_ranks() {
     let summary = read_json(&sim.join("summary.json"));
     assert_eq!(summary["policies"][0]["mujoco"]["episodes"], 1, "{summary}");
 
+    // `collect --policy` writes the policies' rollouts in the Lift layout: 2 checkpoints ×
+    // 1 episode × 3 steps (nothing lifts in 3 steps), which the trainers read as Lift data.
+    let col = dir.join("rollouts.zarr");
+    let args = ["collect", "--scenario", "lift", "--policy", s(&pol), "--episodes", "1", "--max-steps", "3"];
+    let (stdout, _) = expect_code(&run(&[&args[..], &["--out", s(&col)]].concat()), 0);
+    assert!(stdout.contains("lift dataset: 2 episodes of 2 checkpoint(s), 6 steps"), "{stdout}");
+    let (info, _) = expect_code(&run(&["dataset", "info", s(&col), "--json"]), 0);
+    let info: serde_json::Value = serde_json::from_str(&info).unwrap();
+    assert_eq!((info["steps"].as_u64(), info["action_dim"].as_u64()), (Some(6), Some(7)), "{info}");
+    assert_eq!(info["image"], serde_json::json!([96, 96, 3]), "{info}");
+    assert_eq!(info["state_dim"], 23, "{info}");
+    assert_eq!(info["score_source"], "data/success", "{info}");
+    assert_eq!(info["behaviours"]["epoch-0002"]["episodes"], 1, "{info}");
+    let attrs = read_json(&col.join(".zattrs"));
+    assert_eq!(attrs["evalharness"]["scenario"], "lift", "{attrs}");
+    assert_eq!(attrs["evalharness"]["checkpoints"][1]["name"], "epoch-0002", "{attrs}");
+
+    // `plan` needs a planning cost and copies of the simulator: Lift has neither yet, and
+    // is refused by name before anything is written.
+    let planned = dir.join("plan");
+    let args =
+        ["plan", "--scenario", "lift", "--policy", s(&epoch2), "--episodes", "1", "--out", s(&planned)];
+    let (_, err) = expect_code(&run(&args), 2);
+    assert!(err.contains("task lift cannot be planned in"), "{err}");
+    assert!(!planned.exists());
+
     // rank the two epochs with this model and judge: both branches run every episode.
     let out = dir.join("rank");
     let args = ["rank", "--scenario", "lift", "--world-model", s(&wm), "--judge", s(&judge)];

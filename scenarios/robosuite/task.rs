@@ -86,6 +86,11 @@ impl<T: ArmEngine> RobosuiteTask<T> {
     pub fn new(sim: T) -> Self {
         Self { sim }
     }
+
+    /// The task's simulator (its scripted behaviours, state columns and config).
+    pub fn sim(&self) -> &T {
+        &self.sim
+    }
 }
 
 impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {

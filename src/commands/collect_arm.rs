@@ -19,7 +19,7 @@ use std::process::ExitCode;
 use anyhow::{Result, bail};
 use harness::replay::{EpisodeArrays, ReplaySpec, ReplayWriter};
 use scenarios::robosuite::rollout::{ArmTask, Episode, Perturbation};
-use serde_json::json;
+use serde_json::{Value, json};
 
 use super::collect::{draw, parse_mix_with};
 use super::simulate_arm::{ArmRun, behaviour};
@@ -56,6 +56,39 @@ fn episode_arrays<I, B>(ep: &Episode<I, B>) -> EpisodeArrays {
     arrays
 }
 
+/// The robosuite layout: `size`² frames, 7-D actions, `columns` state columns, `data/success`.
+pub(super) fn replay_spec(size: usize, columns: usize) -> ReplaySpec {
+    ReplaySpec { image_hw: [size, size], action_dim: 7, state_dim: columns, extras: vec!["success".into()] }
+}
+
+/// A robosuite dataset's attributes: the task, how the episodes were made (`source`:
+/// the scripted mix and perturbation, or `--policy`'s checkpoints), the step limit
+/// and one entry per episode.
+pub(super) fn dataset_attrs<T: ArmTask>(
+    task: &T,
+    seed_start: u64,
+    source: Value,
+    max_steps: usize,
+    episodes: Vec<Value>,
+) -> Value {
+    let mut e = json!({
+        "version": env!("CARGO_PKG_VERSION"),
+        "scenario": task.name(),
+        "scenario_config": task.config_json(),
+        "state_columns": task.state_columns(),
+        "action": "robomimic OSC_POSE: delta position (x0.05 m), delta axis-angle (x0.5 rad), gripper (+1 close)",
+        "success": "data/success: 1 while the task's success check holds, after each action",
+        "image": "agentview, upright",
+        "seed_start": seed_start,
+    });
+    if let (Some(map), Value::Object(src)) = (e.as_object_mut(), source) {
+        map.extend(src);
+        map.insert("max_steps".into(), max_steps.into());
+        map.insert("episodes".into(), Value::Array(episodes));
+    }
+    json!({ "evalharness": e })
+}
+
 /// Runs the command.
 pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
@@ -72,12 +105,7 @@ pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<Exit
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };
     let work: Vec<(u64, T::Behaviour)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, draw(&mix, seed))).collect();
-    let spec = ReplaySpec {
-        image_hw: [IMAGE_SIZE, IMAGE_SIZE],
-        action_dim: 7,
-        state_dim: task.state_columns().len(),
-        extras: vec!["success".into()],
-    };
+    let spec = replay_spec(IMAGE_SIZE, task.state_columns().len());
     let mut writer = ReplayWriter::create(&args.out, spec, c.force)?;
     let pb = progress::bar(c.episodes, &format!("collect {name}"), quiet);
     let mut episodes = Vec::new();
@@ -100,21 +128,8 @@ pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<Exit
     pb.finish_and_clear();
     let n = episodes.len();
     let steps: u64 = episodes.iter().filter_map(|e| e["steps"].as_u64()).sum();
-    let attrs = json!({ "evalharness": {
-        "version": env!("CARGO_PKG_VERSION"),
-        "scenario": name,
-        "scenario_config": task.config_json(),
-        "state_columns": task.state_columns(),
-        "action": "robomimic OSC_POSE: delta position (x0.05 m), delta axis-angle (x0.5 rad), gripper (+1 close)",
-        "success": "data/success: 1 while the task's success check holds, after each action",
-        "image": "agentview, upright",
-        "seed_start": c.seed_start,
-        "mix": mix_text,
-        "noise": c.noise,
-        "lag": c.lag,
-        "max_steps": max_steps,
-        "episodes": episodes,
-    }});
+    let source = json!({"mix": mix_text, "noise": c.noise, "lag": c.lag});
+    let attrs = dataset_attrs(task, c.seed_start, source, max_steps, episodes);
     let path = writer.finish(&attrs)?;
     println!("{name} dataset: {n} episodes, {steps} steps -> {}", path.display());
     Ok(ExitCode::SUCCESS)
