@@ -59,11 +59,13 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
     }
 }
 
+/// Appends one episode (of the named checkpoint); returns its (score, per-episode attribute).
+type WriteEpisode<'a> = Box<dyn FnMut(&mut ReplayWriter, &Trajectory, &str) -> Result<(f64, Value)> + 'a>;
+
 /// What every checkpoint's rollouts are written through.
 struct Sink<'a> {
     writer: ReplayWriter,
-    /// Appends one episode; returns its (score, per-episode attribute).
-    write: Box<dyn FnMut(&mut ReplayWriter, &Trajectory, &str) -> Result<(f64, Value)> + 'a>,
+    write: WriteEpisode<'a>,
 }
 
 /// The checkpoints under `dir`, each run on the seeds in the simulator with episodes
