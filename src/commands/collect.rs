@@ -108,7 +108,7 @@ pub(super) fn dataset_attrs(
     max_steps: impl Into<Value>,
     episodes: Vec<Value>,
 ) -> Value {
-    let mut e = json!({
+    let e = json!({
         "version": env!("CARGO_PKG_VERSION"),
         "scenario": "pusht",
         "scenario_config": cfg,
@@ -117,6 +117,17 @@ pub(super) fn dataset_attrs(
         "coverage": "data/coverage: coverage after each action",
         "seed_start": seed_start,
     });
+    with_source(e, source, max_steps, episodes)
+}
+
+/// A dataset's attributes from its task's own (`e`): how the episodes were made
+/// (`source`'s entries), the step limit and one entry per episode, under `evalharness`.
+pub(super) fn with_source(
+    mut e: Value,
+    source: Value,
+    max_steps: impl Into<Value>,
+    episodes: Vec<Value>,
+) -> Value {
     if let (Some(map), Value::Object(src)) = (e.as_object_mut(), source) {
         map.extend(src);
         map.insert("max_steps".into(), max_steps.into());

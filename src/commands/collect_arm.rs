@@ -71,7 +71,7 @@ pub(super) fn dataset_attrs<T: ArmTask>(
     max_steps: usize,
     episodes: Vec<Value>,
 ) -> Value {
-    let mut e = json!({
+    let e = json!({
         "version": env!("CARGO_PKG_VERSION"),
         "scenario": task.name(),
         "scenario_config": task.config_json(),
@@ -81,12 +81,7 @@ pub(super) fn dataset_attrs<T: ArmTask>(
         "image": "agentview, upright",
         "seed_start": seed_start,
     });
-    if let (Some(map), Value::Object(src)) = (e.as_object_mut(), source) {
-        map.extend(src);
-        map.insert("max_steps".into(), max_steps.into());
-        map.insert("episodes".into(), Value::Array(episodes));
-    }
-    json!({ "evalharness": e })
+    super::collect::with_source(e, source, max_steps, episodes)
 }
 
 /// Runs the command.
