@@ -123,7 +123,8 @@ pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<Exit
     pb.finish_and_clear();
     let n = episodes.len();
     let steps: u64 = episodes.iter().filter_map(|e| e["steps"].as_u64()).sum();
-    let source = json!({"mix": mix_text, "noise": c.noise, "lag": c.lag});
+    let source =
+        json!({"mix": mix_text, "noise": c.noise, "lag": c.lag, "no_early_stop": args.no_early_stop});
     let attrs = dataset_attrs(task, c.seed_start, source, max_steps, episodes);
     let path = writer.finish(&attrs)?;
     println!("{name} dataset: {n} episodes, {steps} steps -> {}", path.display());

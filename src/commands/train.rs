@@ -50,21 +50,27 @@ fn origin_of(e: &serde_json::Value, episodes: Option<u64>) -> serde_json::Value 
         });
     }
     let episodes = episodes.unwrap_or_else(|| e["episodes"].as_array().map_or(0, |l| l.len() as u64));
+    // Push-T is the default scenario; Lift and Can datasets name theirs.
+    let scenario = match e["scenario"].as_str() {
+        Some(name) if name != "pusht" => format!(" --scenario {name}"),
+        _ => String::new(),
+    };
     if let Some(policy) = e["policy"].as_str() {
         // `collect --policy`: `--episodes` counts per checkpoint.
         let per = episodes / e["checkpoints"].as_array().map_or(1, |c| c.len().max(1) as u64);
         return json!({
             "command": format!(
-                "evalharness collect --policy {policy} --episodes {per} --seed-start {} --max-steps {}",
+                "evalharness collect{scenario} --policy {policy} --episodes {per} --seed-start {} --max-steps {}",
                 e["seed_start"], e["max_steps"]
             ),
             "checkpoints": e["checkpoints"],
             "evalharness_version": e["version"],
         });
     }
+    let run_on = if e["no_early_stop"] == true { " --no-early-stop" } else { "" };
     json!({
         "command": format!(
-            "evalharness collect --episodes {episodes} --seed-start {} --mix {} --noise {} --lag {} --max-steps {}",
+            "evalharness collect{scenario} --episodes {episodes} --seed-start {} --mix {} --noise {} --lag {} --max-steps {}{run_on}",
             e["seed_start"], e["mix"].as_str().unwrap_or("?"), e["noise"], e["lag"], e["max_steps"]
         ),
         "evalharness_version": e["version"],
@@ -293,5 +299,19 @@ mod tests {
         );
         assert_eq!(o["checkpoints"][1]["name"], "b");
         assert!(origin_of(&serde_json::Value::Null, None).is_null());
+        // Regression: a Lift dataset's command lacked `--scenario lift` and `--no-early-stop`,
+        // so it regenerated Push-T data.
+        let lift = json!({"scenario": "lift", "seed_start": 5, "mix": "expert=1", "noise": 0.0, "lag": 0,
+                          "max_steps": 150, "no_early_stop": true, "episodes": [{}], "version": "0.1.0"});
+        assert_eq!(
+            origin_of(&lift, None)["command"],
+            "evalharness collect --scenario lift --episodes 1 --seed-start 5 --mix expert=1 --noise 0.0 --lag 0 --max-steps 150 --no-early-stop"
+        );
+        let lift_pol = json!({"scenario": "lift", "seed_start": 7, "policy": "p", "checkpoints": [{}],
+                              "max_steps": 9, "episodes": [{}], "version": "0.1.0"});
+        assert_eq!(
+            origin_of(&lift_pol, None)["command"],
+            "evalharness collect --scenario lift --policy p --episodes 1 --seed-start 7 --max-steps 9"
+        );
     }
 }
