@@ -1,4 +1,4 @@
-//! The trained checkpoints the project ships under `checkpoints/pusht/`: each
+//! The trained checkpoints the project ships under `checkpoints/<task>/`: each
 //! autoencoder and world model says where it came from (the developers' guide asks
 //! for command, seed, commit, data and final metrics), and a world model's
 //! autoencoder path leads to a shipped autoencoder.
@@ -7,12 +7,14 @@ use std::path::{Path, PathBuf};
 
 use crate::util::read_json;
 
-/// The shipped autoencoder and world-model folders.
+/// The shipped autoencoder and world-model folders of every task.
 fn shipped_models() -> Vec<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/pusht");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
     let mut dirs: Vec<PathBuf> = std::fs::read_dir(&root)
-        .expect("checkpoints/pusht is shipped")
+        .expect("checkpoints/ is shipped")
         .map(|e| e.expect("entry").path())
+        .filter(|p| p.is_dir())
+        .flat_map(|task| std::fs::read_dir(task).expect("a task folder").map(|e| e.expect("entry").path()))
         .filter(|p| {
             p.file_name()
                 .and_then(|n| n.to_str())
@@ -26,10 +28,12 @@ fn shipped_models() -> Vec<PathBuf> {
 #[test]
 fn shipped_models_carry_provenance_and_find_their_autoencoder() {
     let dirs = shipped_models();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
     let names: Vec<String> =
-        dirs.iter().map(|d| d.file_name().unwrap().to_string_lossy().into_owned()).collect();
-    for want in ["autoencoder", "world_model", "world_model_diffusion", "world_model_mse", "world_model_sf"] {
-        assert!(names.iter().any(|n| n == want), "checkpoints/pusht/{want} missing from {names:?}");
+        dirs.iter().map(|d| d.strip_prefix(&root).unwrap().to_string_lossy().into_owned()).collect();
+    let pusht = ["autoencoder", "world_model", "world_model_diffusion", "world_model_mse", "world_model_sf"];
+    for want in pusht.map(|m| format!("pusht/{m}")).into_iter().chain(["lift/autoencoder".to_string()]) {
+        assert!(names.contains(&want), "checkpoints/{want} missing from {names:?}");
     }
     for dir in &dirs {
         let prov = read_json(&dir.join("provenance.json"));
