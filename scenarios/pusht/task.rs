@@ -164,12 +164,9 @@ impl Env for PushTEpisode {
     }
 
     fn imagination(&self, view: ModelView) -> Box<dyn Imagination> {
-        let st = self.env.state();
-        let (first, goal_free) = match view {
-            ModelView::Observation => (self.raster.render(&st, &self.env.goal()), None),
-            ModelView::GoalFree => (self.raster.render_without_goal(&st), Some(self.scorer())),
-        };
-        Box::new(PushTImagination { first, goal_free, last: st.agent.map(|v| v as f32) })
+        let goal_free = (view == ModelView::GoalFree).then(|| self.scorer());
+        let last = self.env.state().agent.map(|v| v as f32);
+        Box::new(PushTImagination { first: self.model_frame(view), goal_free, last })
     }
 
     fn model_frame(&self, view: ModelView) -> Vec<u8> {

@@ -26,8 +26,7 @@ use harness::task::Task;
 use policies::dir::checkpoint_dirs;
 use scenarios::pusht::rollout::{Episode, StepRow};
 use scenarios::pusht::{Pose2, PushTConfig, PushTTask};
-use scenarios::robosuite::rollout::ArmTask;
-use scenarios::robosuite::task::RobosuiteTask;
+use scenarios::robosuite::task::{ArmEngine, RobosuiteTask};
 use serde_json::{Value, json};
 
 use super::collect::{dataset_attrs, episode_arrays, episode_attr, replay_spec};
@@ -50,32 +49,28 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
         scenarios::Scenario::PushT(cfg) => pusht(args, dir, *cfg, quiet),
         scenarios::Scenario::Lift(cfg) => {
             let task = RobosuiteTask::new(scenarios::lift::LiftSim::new(cfg).context("setting up Lift")?);
-            arm_task(args, dir, task.sim(), &task, quiet)
+            arm_task(args, dir, &task, quiet)
         }
         scenarios::Scenario::Can(cfg) => {
             let task = RobosuiteTask::new(scenarios::can::CanSim::new(cfg).context("setting up Can")?);
-            arm_task(args, dir, task.sim(), &task, quiet)
+            arm_task(args, dir, &task, quiet)
         }
     }
 }
 
 /// Appends one episode (of the named checkpoint); returns its (score, per-episode attribute).
-type WriteEpisode<'a> = Box<dyn FnMut(&mut ReplayWriter, &Trajectory, &str) -> Result<(f64, Value)> + 'a>;
+type WriteEpisode<'a> = dyn FnMut(&Trajectory, &str) -> Result<(f64, Value)> + 'a;
 
-/// What every checkpoint's rollouts are written through.
-struct Sink<'a> {
-    writer: ReplayWriter,
-    write: WriteEpisode<'a>,
-}
-
-/// The checkpoints under `dir`, each run on the seeds in the simulator with episodes
-/// written to `sink` as their batch ends. Returns the episodes' and the checkpoints' attributes.
+/// The checkpoints under `dir`, each run on the seeds in the simulator, each episode
+/// handed to `write` (with its checkpoint's name) as its batch ends; `write` appends it
+/// and returns its (score, per-episode attribute). Returns the episodes' and the
+/// checkpoints' attributes.
 fn roll_out(
     args: &CollectArgs,
     dir: &Path,
     task: &dyn Task,
     max_steps: usize,
-    sink: &mut Sink,
+    write: &mut WriteEpisode<'_>,
     quiet: bool,
 ) -> Result<(Vec<Value>, Vec<Value>)> {
     let c = &args.common;
@@ -101,8 +96,7 @@ fn roll_out(
                 .install(|| sim_branch(policy.as_ref(), start, &setup, &mut timing))
                 .with_context(|| format!("policy {name}"))?;
             for t in &out.episodes {
-                let (s, attr) = (sink.write)(&mut sink.writer, t, &name)
-                    .with_context(|| format!("policy {name}, seed {}", t.seed))?;
+                let (s, attr) = write(t, &name).with_context(|| format!("policy {name}, seed {}", t.seed))?;
                 score += s;
                 episodes.push(attr);
             }
@@ -131,20 +125,17 @@ fn pusht(args: &CollectArgs, dir: &Path, cfg: PushTConfig, quiet: bool) -> Resul
     let task = PushTTask::new(cfg.clone())?;
     let max_steps = step_limit(args, cfg.task.max_steps as usize)?;
     crate::output::check_apart(&args.out, &[("--policy", dir)])?;
-    let writer = ReplayWriter::create(&args.out, replay_spec(cfg.render.size as usize), c.force)?;
-    let mut sink = Sink {
-        writer,
-        write: Box::new(|w, t, name| {
-            let ep = episode(t)?;
-            w.append(&episode_arrays(&ep))?;
-            Ok((ep.score, episode_attr(&ep, name)))
-        }),
+    let mut writer = ReplayWriter::create(&args.out, replay_spec(cfg.render.size as usize), c.force)?;
+    let mut write = |t: &Trajectory, name: &str| {
+        let ep = episode(t)?;
+        writer.append(&episode_arrays(&ep))?;
+        Ok((ep.score, episode_attr(&ep, name)))
     };
-    let (episodes, checkpoints) = roll_out(args, dir, &task, max_steps, &mut sink, quiet)?;
+    let (episodes, checkpoints) = roll_out(args, dir, &task, max_steps, &mut write, quiet)?;
     let (n, steps) = (episodes.len(), total_steps(&episodes));
     let source = json!({"policy": dir, "checkpoints": checkpoints, "noise": 0.0, "lag": 0});
     let attrs = dataset_attrs(&cfg, c.seed_start, source, max_steps, episodes);
-    let path = sink.writer.finish(&attrs)?;
+    let path = writer.finish(&attrs)?;
     println!(
         "pusht dataset: {n} episodes of {} checkpoint(s), {steps} steps -> {}",
         checkpoints.len(),
@@ -154,34 +145,31 @@ fn pusht(args: &CollectArgs, dir: &Path, cfg: PushTConfig, quiet: bool) -> Resul
 }
 
 /// Lift and Can: the robosuite layout of `collect --scenario lift|can`.
-fn arm_task<T: ArmTask>(
+fn arm_task<T: ArmEngine + 'static>(
     args: &CollectArgs,
     dir: &Path,
-    arm: &T,
-    task: &dyn Task,
+    task: &RobosuiteTask<T>,
     quiet: bool,
 ) -> Result<ExitCode> {
     let c = &args.common;
+    let arm = task.sim();
     let max_steps = step_limit(args, arm.max_steps())?;
     crate::output::check_apart(&args.out, &[("--policy", dir)])?;
     let size = task.observation_spec().image_size;
     let columns = arm.state_columns().len();
     let spec = super::collect_arm::replay_spec(size, columns);
     let threshold = task.score_kind().threshold();
-    let mut sink = Sink {
-        writer: ReplayWriter::create(&args.out, spec, c.force)?,
-        write: Box::new(move |w, t, name| {
-            w.append(&arm_arrays(t, size, columns, threshold)?)?;
-            let attr =
-                json!({"seed": t.seed, "behaviour": name, "steps": t.actions.len(), "success": t.success});
-            Ok((t.score, attr))
-        }),
+    let mut writer = ReplayWriter::create(&args.out, spec, c.force)?;
+    let mut write = |t: &Trajectory, name: &str| {
+        writer.append(&arm_arrays(t, size, columns, threshold)?)?;
+        let attr = json!({"seed": t.seed, "behaviour": name, "steps": t.actions.len(), "success": t.success});
+        Ok((t.score, attr))
     };
-    let (episodes, checkpoints) = roll_out(args, dir, task, max_steps, &mut sink, quiet)?;
+    let (episodes, checkpoints) = roll_out(args, dir, task, max_steps, &mut write, quiet)?;
     let (n, steps) = (episodes.len(), total_steps(&episodes));
     let source = json!({"policy": dir, "checkpoints": checkpoints});
     let attrs = super::collect_arm::dataset_attrs(arm, c.seed_start, source, max_steps, episodes);
-    let path = sink.writer.finish(&attrs)?;
+    let path = writer.finish(&attrs)?;
     println!(
         "{} dataset: {n} episodes of {} checkpoint(s), {steps} steps -> {}",
         arm.name(),

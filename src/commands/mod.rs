@@ -61,12 +61,12 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
             }
         }
         Command::Agreement(a) => agreement::run(a),
-        Command::Rank(a) => crate::commands::rank::run(a, cli.quiet),
-        Command::Plan(a) => crate::commands::plan::run(a, cli.quiet),
-        Command::Merge(a) => crate::commands::rank::merge::run(&a.shards, &a.out, a.force, a.no_report),
-        Command::Tasks(a) => crate::commands::rank::report::tasks_table(&a.runs, a.tex.as_deref()),
+        Command::Rank(a) => rank::run(a, cli.quiet),
+        Command::Plan(a) => plan::run(a, cli.quiet),
+        Command::Merge(a) => rank::merge::run(&a.shards, &a.out, a.force, a.no_report),
+        Command::Tasks(a) => rank::report::tasks_table(&a.runs, a.tex.as_deref()),
         Command::Report(a) => {
-            let html = crate::commands::rank::report::write_report(&a.out)?;
+            let html = rank::report::write_report(&a.out)?;
             println!("{}", html.display());
             Ok(ExitCode::SUCCESS)
         }
