@@ -5,9 +5,11 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand};
 
 mod choices;
+mod judge;
 mod plan;
 mod train;
 pub use choices::*;
+pub use judge::*;
 pub use plan::*;
 pub use train::*;
 
@@ -83,6 +85,10 @@ pub enum Command {
     /// Write scripted-policy checkpoints: the expert acting from frames, with action
     /// noise and lag, one per combination — a graded policy set without training.
     Scripted(ScriptedArgs),
+    /// Read a dataset's whole episodes with a learned judge as `rank` reads imagined
+    /// ones (the frames the policy sees, k in a row), for several persistence values k;
+    /// with `--out`, a copy of the judge with the k that reads most episodes right.
+    ReadJudge(ReadJudgeArgs),
     /// Copy diffusion-policy checkpoints (e.g. chosen epochs of a training run) into a
     /// policy set, optionally with other inference settings; weights are copied as they are.
     ExportPolicies(ExportPoliciesArgs),
@@ -250,6 +256,11 @@ pub struct RankArgs {
     /// without a judge of its own (Lift, Can): checkpoints/<task>/judge].
     #[arg(long)]
     pub judge: Option<PathBuf>,
+    /// The learned judge's persistence rule: success counts only once k judged frames
+    /// in a row show it (the frames the policy sees, the last 2 of every chunk)
+    /// [default: the judge's `persist_frames`].
+    #[arg(long, value_name = "K")]
+    pub judge_persist: Option<usize>,
     /// Action-accentuation strength α, for a world model trained with
     /// `--accentuation` (default: its configured α).
     #[arg(long)]

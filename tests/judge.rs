@@ -20,7 +20,12 @@ pub fn check(dir: &Path, data: &Path, wm: &Path, set: &Path) {
     assert_eq!(file["heldout"]["frames"], 68);
     // ...and read whole: one held-out episode, with a count of the episodes read right.
     assert_eq!(file["heldout"]["episodes"]["episodes"], 1);
-    assert!(stdout.contains("whole episodes: ") && stdout.contains(" of 1 read right"), "{stdout}");
+    assert!(stdout.contains("whole episodes (success held for 1 judged frame(s)): "), "{stdout}");
+    assert!(stdout.contains(" of 1 read right"), "{stdout}");
+    // The reading is rank's: the first frame and the last 2 of every 8 steps, 1 in a row.
+    let reading = &file["heldout"]["episodes"]["reading"];
+    assert_eq!((reading["chunk"].as_u64(), reading["seen"].as_u64()), (Some(8), Some(2)), "{file}");
+    assert_eq!(file["persist_frames"], 1);
     assert!(file["heldout"]["mean_abs_error"].as_f64().unwrap().is_finite());
     assert_eq!(file["provenance"]["data"]["episodes"], 10);
     assert_eq!(file["provenance"]["train"]["steps"], 3);

@@ -108,6 +108,39 @@ fn the_lift_pipeline_collects_trains_every_model_and_ranks() {
     assert!(md.contains("| lift | 2 × 2 |") && md.contains("| 100000–100001 |"), "{md}");
     assert!(std::fs::read_to_string(&tex).unwrap().contains("lift & 2 & 2 &"));
 
+    // read-judge reads the dataset's episodes as rank reads imagined ones, for each k.
+    let (stdout, _) =
+        expect_code(&run(&["read-judge", "--judge", s(&judge), "--data", s(&data), "--persist", "1,2"]), 0);
+    assert!(
+        stdout.contains("| 1 | ") && stdout.contains("| 2 | ") && stdout.contains("of 10 (0 succeed)"),
+        "{stdout}"
+    );
+    // The red-cube rule: nothing lifts in 12 steps, so every episode is read right at every
+    // k, and the smallest k wins the tie; its folder holds the rule and no weights.
+    let rule = dir.join("rule");
+    let read =
+        ["read-judge", "--rule", "lift-red", "--data", s(&data), "--persist", "3,1", "--out", s(&rule)];
+    let (stdout, _) = expect_code(&run(&read), 0);
+    assert!(stdout.contains("| 3 | 10 of 10 (0 succeed) | 0 | 0 |"), "{stdout}");
+    assert!(stdout.contains("most episodes read right: k = 1"), "{stdout}");
+    let file = read_json(&rule.join("judge.json"));
+    assert_eq!((file["kind"].as_str(), file["persist_frames"].as_u64()), (Some("colour_height"), Some(1)));
+    assert_eq!(file["rule"]["success_row"], 40, "{file}");
+    assert_eq!(file["provenance"]["persistence"]["report"]["best"], 1, "{file}");
+    assert!(!rule.join("model.bpk").exists());
+    // rank scores the imagined frames with the rule, its persistence set from outside.
+    let out = dir.join("rank_rule");
+    let ruled =
+        ["rank", "--scenario", "lift", "--world-model", s(&wm), "--judge", s(&rule), "--judge-persist", "2"];
+    let tiny = ["--episodes", "1", "--max-steps", "4", "--no-report", "--policies", s(&pol)];
+    expect_code(&run(&[&ruled[..], &tiny[..], &["--out", s(&out)]].concat()), 0);
+    let config = read_json(&out.join("config.json"));
+    assert_eq!(config["judge"]["persist_frames"], 2, "{config}");
+    // Push-T judges its own frames: a persistence without a judge folder is refused.
+    let pusht = ["rank", "--policies", "checkpoints/pusht/policies/epoch-0001", "--judge-persist", "2"];
+    let (_, err) = expect_code(&run(&[&pusht[..], &["--out", s(&dir.join("rank_p"))]].concat()), 2);
+    assert!(err.contains("--judge-persist"), "{err}");
+
     // A Push-T policy is refused by name (2-D actions) and reported; nothing is ranked (exit 1).
     let out = dir.join("rank_pusht");
     let more = ["--policies", "checkpoints/pusht/policies/epoch-0001", "--episodes", "1", "--max-steps", "4"];

@@ -55,6 +55,7 @@ pub fn wm_branch(
         .map(|j| j.as_deref().ok_or_else(|| EngineError::NoJudge { task: s.task.name().to_string() }))
         .collect::<Result<_, _>>()?;
     for ((t, judge), f) in track.iter_mut().zip(&judges).zip(&start.first) {
+        t.persist(judge.persist());
         t.add(judge.score(&f.frame), &kind);
         t.scene = judge.scene(&f.frame);
     }

@@ -7,7 +7,7 @@
 
 use std::collections::VecDeque;
 
-use harness::judge::{Judge, Replaced, SceneCheck};
+use harness::judge::{Judge, Replaced, SceneCheck, Sustained};
 use harness::policy::{Observation, Policy};
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
@@ -214,13 +214,28 @@ pub(crate) struct Track {
     pub(crate) trace: Vec<f64>,
     /// Scene checks of the last frame the policy saw.
     pub(crate) scene: Option<SceneCheck>,
+    /// The judge's persistence rule (imagined branch, k > 1): scores and the best
+    /// reward count a value only once it held for k judged frames in a row.
+    pub(crate) sustained: Option<Sustained>,
 }
 
 impl Track {
+    /// Persistence `k` for a judged episode (`k <= 1`: every value counts alone).
+    pub(crate) fn persist(&mut self, k: usize) {
+        self.sustained = (k > 1).then(|| Sustained::new(k));
+    }
+
     pub(crate) fn add(&mut self, raw: f64, kind: &ScoreKind) {
-        self.best_reward = self.best_reward.max(kind.reward(raw));
-        self.max_raw = self.max_raw.max(raw);
         self.last_raw = raw;
+        let held = match &mut self.sustained {
+            None => raw,
+            Some(s) => match s.push(raw) {
+                Some(v) => v,
+                None => return,
+            },
+        };
+        self.best_reward = self.best_reward.max(kind.reward(held));
+        self.max_raw = self.max_raw.max(held);
     }
 
     pub(crate) fn end_chunk(&mut self) {
@@ -276,6 +291,25 @@ mod tests {
         track.iter_mut().for_each(Track::end_chunk);
         assert_eq!(track[1].trace, vec![1.0, 1.0]);
         assert_eq!(track[0].trace, vec![0.526316, 0.526316]);
+    }
+
+    #[test]
+    fn a_persistent_judge_needs_k_successes_in_a_row() {
+        let kind = ScoreKind::Success;
+        // k = 2 over 0.9, 0.1, 0.9, 0.1: no two frames in a row above 0.5, so no success,
+        // and the highest held value is min(0.9, 0.1) = 0.1; the last raw value is 0.1.
+        let mut t = Track::default();
+        t.persist(2);
+        [0.9, 0.1, 0.9, 0.1].into_iter().for_each(|r| t.add(r, &kind));
+        assert_eq!((t.best_reward, t.max_raw, t.last_raw), (0.0, 0.1, 0.1));
+        // Then 0.8, 0.7: held min(0.8, 0.7) = 0.7 > 0.5, a success.
+        [0.8, 0.7].into_iter().for_each(|r| t.add(r, &kind));
+        assert_eq!((t.best_reward, t.max_raw), (1.0, 0.7));
+        // k = 1 counts the first 0.9 alone.
+        let mut t = Track::default();
+        t.persist(1);
+        t.add(0.9, &kind);
+        assert_eq!((t.best_reward, t.max_raw), (1.0, 0.9));
     }
 
     #[test]

@@ -12,6 +12,12 @@
 //! A judge may also check that a frame still shows the scene ([`SceneCheck`]): a
 //! long autoregressive rollout can lose it, and a judge then still reads a score
 //! from a blob.
+//!
+//! A judge may ask for persistence ([`Judge::persist`]): a success must show on k
+//! judged frames in a row before the episode counts it. Its score at a frame is
+//! the lowest of the last k judged frames, so one frame a judge misreads (a
+//! flicker of the world model, a cube the fingers hide) cannot end an imagined
+//! episode as a success. With k = 1 (the default) every frame counts alone.
 
 /// Health checks of one frame: is the scene still there? (Not a score.)
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,6 +41,35 @@ pub trait Judge: Send + Sync {
         let _ = frame;
         None
     }
+    /// Judged frames in a row the score must hold before it counts (at least 1).
+    fn persist(&self) -> usize {
+        1
+    }
+}
+
+/// The episode's score so far under persistence `k`: each judged frame's raw value
+/// becomes the lowest of the last `k` (none until `k` frames were judged).
+#[derive(Clone, Debug, Default)]
+pub struct Sustained {
+    k: usize,
+    last: std::collections::VecDeque<f64>,
+}
+
+impl Sustained {
+    /// Persistence `k` (0 is read as 1).
+    pub fn new(k: usize) -> Self {
+        Self { k: k.max(1), last: std::collections::VecDeque::new() }
+    }
+
+    /// Adds one judged frame's raw value; returns the value held over the last `k`
+    /// frames, or `None` while fewer than `k` were judged.
+    pub fn push(&mut self, raw: f64) -> Option<f64> {
+        self.last.push_back(raw);
+        while self.last.len() > self.k {
+            self.last.pop_front();
+        }
+        (self.last.len() == self.k).then(|| self.last.iter().copied().fold(f64::INFINITY, f64::min))
+    }
 }
 
 /// A judge whose scores come from one judge (e.g. a learned one, shared by every
@@ -54,6 +89,9 @@ impl Judge for Replaced {
     }
     fn scene(&self, frame: &[u8]) -> Option<SceneCheck> {
         self.checks.as_ref().and_then(|c| c.scene(frame))
+    }
+    fn persist(&self) -> usize {
+        self.scorer.persist()
     }
 }
 
@@ -88,5 +126,29 @@ mod tests {
         // Without the task's judge there are no scene checks.
         let j = Replaced { scorer: std::sync::Arc::new(Mean), checks: None };
         assert_eq!((j.score(&[255]), j.scene(&[255])), (1.0, None));
+        // Persistence comes from the scorer.
+        assert_eq!(j.persist(), 1);
+        struct Three;
+        impl Judge for Three {
+            fn score(&self, _: &[u8]) -> f64 {
+                0.0
+            }
+            fn persist(&self) -> usize {
+                3
+            }
+        }
+        let j = Replaced { scorer: std::sync::Arc::new(Three), checks: Some(Box::new(Checks)) };
+        assert_eq!((j.persist(), j.score(&[0])), (3, 0.0));
+    }
+
+    #[test]
+    fn a_sustained_score_is_the_lowest_of_the_last_k_frames() {
+        // k = 2 over 0.9, 0.2, 0.8, 0.7: none yet, min(0.9, 0.2), min(0.2, 0.8), min(0.8, 0.7).
+        let mut s = Sustained::new(2);
+        let got: Vec<Option<f64>> = [0.9, 0.2, 0.8, 0.7].into_iter().map(|r| s.push(r)).collect();
+        assert_eq!(got, vec![None, Some(0.2), Some(0.2), Some(0.7)]);
+        // k = 0 is read as 1: every frame counts alone.
+        let mut s = Sustained::new(0);
+        assert_eq!((s.push(0.4), s.push(0.1)), (Some(0.4), Some(0.1)));
     }
 }

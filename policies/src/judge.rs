@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::cpu_encoder::CpuEncoder;
 use crate::diffusion::{frames_to_tensor, frames_to_vec};
 use crate::dir::{PolicyLoadError, load_weights, save_f16};
+use crate::judge_rule::ColourHeight;
 use crate::net::{NetConfig, ObsEncoder};
 
 /// The judge's network: frame encoder and a one-logit head.
@@ -96,11 +97,15 @@ pub struct JudgeMetrics {
     pub episodes: Option<EpisodeReading>,
 }
 
-/// How a judge reads whole episodes: an episode succeeds when any of its frames is
-/// above the threshold, by the judge's reading and by the exact label.
+/// How a judge reads whole episodes, by its reading ([`crate::judge_read`]: the
+/// frames `rank` judges, k in a row) and by the exact label (at any step).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EpisodeReading {
+    /// The frames judged and the persistence (absent in judges that read every frame
+    /// alone, written before the rule existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reading: Option<crate::judge_read::Reading>,
     /// Episodes judged.
     pub episodes: usize,
     /// Episodes that truly succeed.
@@ -132,14 +137,23 @@ impl EpisodeReading {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct JudgeFile {
-    /// Always `"learned"`.
+    /// `"learned"` (a network in `model.bpk`) or `"colour_height"` (the hand-written
+    /// [`ColourHeight`] rule in `rule`, no weights).
     pub kind: String,
     /// The encoder's configuration (image size, width, feature size; the rest unused).
+    /// A rule's folder uses only its image size.
     pub net: NetConfig,
+    /// The hand-written rule of a `"colour_height"` judge.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rule: Option<ColourHeight>,
     /// What it estimates.
     pub label: Label,
     /// The raw value above which an episode succeeds (0.95 coverage, 0.5 success).
     pub threshold: f64,
+    /// Judged frames in a row that must show success before an imagined episode
+    /// counts it ([`Judge::persist`]; 1 in judges written before the rule existed).
+    #[serde(default = "one_frame")]
+    pub persist_frames: usize,
     /// Training steps done.
     pub steps: u64,
     /// Its reading of the held-out episodes' frames.
@@ -148,48 +162,72 @@ pub struct JudgeFile {
     pub provenance: serde_json::Value,
 }
 
-/// Writes a judge folder (`judge.json` + `model.bpk`), each file atomically.
+fn one_frame() -> usize {
+    1
+}
+
+/// Writes a judge folder (`judge.json`, and `model.bpk` for a network), each file
+/// atomically.
 ///
 /// # Errors
 /// [`PolicyLoadError`] naming the file that could not be written.
-pub fn write_judge(dir: &Path, net: &JudgeNet, file: &JudgeFile) -> Result<(), PolicyLoadError> {
+pub fn write_judge(dir: &Path, net: Option<&JudgeNet>, file: &JudgeFile) -> Result<(), PolicyLoadError> {
     std::fs::create_dir_all(dir).map_err(|e| PolicyLoadError::new(dir, e.to_string()))?;
-    let weights = dir.join("model.bpk");
-    let tmp = dir.join(".model.bpk.tmp");
-    save_f16(net, &tmp).map_err(|e| PolicyLoadError::new(&weights, e))?;
-    std::fs::rename(&tmp, &weights).map_err(|e| PolicyLoadError::new(&weights, e.to_string()))?;
+    if let Some(net) = net {
+        let weights = dir.join("model.bpk");
+        let tmp = dir.join(".model.bpk.tmp");
+        save_f16(net, &tmp).map_err(|e| PolicyLoadError::new(&weights, e))?;
+        std::fs::rename(&tmp, &weights).map_err(|e| PolicyLoadError::new(&weights, e.to_string()))?;
+    }
     let text = serde_json::to_string_pretty(file).unwrap_or_default() + "\n";
     harness::runfile::write_atomic(&dir.join("judge.json"), &text)
         .map_err(|e| PolicyLoadError::new(&e.path, e.message))
 }
 
-/// A trained judge, for inference.
-pub struct LearnedJudge {
+/// A judge folder, for inference: a trained network or a hand-written rule.
+pub struct FrameJudge {
     /// Its `judge.json`.
     pub file: JudgeFile,
-    net: JudgeNet,
+    /// The network (none for a rule).
+    net: Option<JudgeNet>,
     /// The encoder on direct CPU kernels (Flex device), with the head's weights.
     cpu: Option<(CpuEncoder, Vec<f32>, f32)>,
     device: Device,
 }
 
-impl LearnedJudge {
+impl FrameJudge {
     /// Loads a judge folder.
     ///
     /// # Errors
     /// [`PolicyLoadError`] naming the folder for a missing or invalid `judge.json`,
-    /// or weights that are missing, truncated or do not match it.
+    /// a rule without its parameters or of another frame size, or weights that are
+    /// missing, truncated or do not match it.
     pub fn load(dir: &Path, device: &Device) -> Result<Self, PolicyLoadError> {
         let err = |m: String| PolicyLoadError::new(dir, m);
         let path = dir.join("judge.json");
         let text = std::fs::read_to_string(&path).map_err(|e| err(format!("judge.json: {e}")))?;
         let file: JudgeFile = serde_json::from_str(&text).map_err(|e| err(format!("judge.json: {e}")))?;
-        if file.kind != "learned" {
-            return Err(err(format!("judge.json: kind \"{}\", expected \"learned\"", file.kind)));
+        match (file.kind.as_str(), file.rule) {
+            ("learned", _) => {
+                let net = load_weights(JudgeNet::new(&file.net, device), &dir.join("model.bpk"))
+                    .map_err(|e| err(format!("model.bpk: {e}")))?;
+                Ok(Self::new(file, net, device))
+            }
+            ("colour_height", Some(r)) if r.image_size == file.net.image_size => Ok(Self::rule(file)),
+            ("colour_height", Some(r)) => Err(err(format!(
+                "judge.json: rule.image_size {} differs from net.image_size {}",
+                r.image_size, file.net.image_size
+            ))),
+            ("colour_height", None) => Err(err("judge.json: kind \"colour_height\" without a rule".into())),
+            (k, _) => {
+                Err(err(format!("judge.json: kind \"{k}\", expected \"learned\" or \"colour_height\"")))
+            }
         }
-        let net = load_weights(JudgeNet::new(&file.net, device), &dir.join("model.bpk"))
-            .map_err(|e| err(format!("model.bpk: {e}")))?;
-        Ok(Self::new(file, net, device))
+    }
+
+    /// A hand-written rule's judge (`file.rule`; no network).
+    pub fn rule(file: JudgeFile) -> Self {
+        Self { file, net: None, cpu: None, device: Device::flex() }
     }
 
     /// Wraps trained weights.
@@ -207,7 +245,12 @@ impl LearnedJudge {
                 Some((enc, w, b))
             })
             .flatten();
-        Self { file, net, cpu, device: device.clone() }
+        Self { file, net: Some(net), cpu, device: device.clone() }
+    }
+
+    /// Its network (inference device); none for a rule.
+    pub fn net(&self) -> Option<&JudgeNet> {
+        self.net.as_ref()
     }
 
     /// The frame side it reads.
@@ -218,14 +261,16 @@ impl LearnedJudge {
     /// Estimates for `frames` (each `s x s x 3` bytes), in [0, 1].
     pub fn score_frames(&self, frames: &[&[u8]]) -> Vec<f64> {
         let s = self.image_size();
+        let (Some(net), None) = (&self.net, self.file.rule) else {
+            return frames.iter().map(|f| self.file.rule.map_or(f64::NAN, |r| r.score(f))).collect();
+        };
         let logits: Vec<f32> = match &self.cpu {
             Some((enc, w, b)) => {
                 let feat = enc.forward(&frames_to_vec(frames, s), frames.len(), s); // [n, f]
                 let f = w.len();
                 feat.chunks(f).map(|x| x.iter().zip(w).map(|(a, c)| a * c).sum::<f32>() + b).collect()
             }
-            None => self
-                .net
+            None => net
                 .forward(frames_to_tensor(frames, s, &self.device))
                 .into_data()
                 .convert::<f32>()
@@ -236,7 +281,7 @@ impl LearnedJudge {
     }
 }
 
-impl Judge for LearnedJudge {
+impl Judge for FrameJudge {
     fn score(&self, frame: &[u8]) -> f64 {
         let s = self.image_size();
         if frame.len() != s * s * 3 {
@@ -245,6 +290,9 @@ impl Judge for LearnedJudge {
             return f64::NAN;
         }
         self.score_frames(&[frame])[0]
+    }
+    fn persist(&self) -> usize {
+        self.file.persist_frames.max(1)
     }
 }
 
@@ -257,7 +305,9 @@ mod tests {
             kind: "learned".into(),
             net,
             label: Label::Coverage,
+            rule: None,
             threshold: 0.95,
+            persist_frames: 1,
             steps: 0,
             heldout: JudgeMetrics::default(),
             provenance: serde_json::Value::Null,
@@ -281,7 +331,7 @@ mod tests {
             .into_iter()
             .map(|z| 1.0 / (1.0 + (-f64::from(z)).exp()))
             .collect();
-        let judge = LearnedJudge::new(file(cfg.clone()), net.clone(), &device);
+        let judge = FrameJudge::new(file(cfg.clone()), net.clone(), &device);
         assert!(judge.cpu.is_some());
         let cpu = judge.score_frames(&refs);
         for (a, b) in cpu.iter().zip(&burn) {
@@ -292,13 +342,30 @@ mod tests {
         assert!(judge.score(&[0u8; 12]).is_nan());
         // Saved in f16 and loaded back: the same estimates to f16 rounding.
         let dir = std::env::temp_dir().join(format!("evalharness-judge-{}", std::process::id()));
-        write_judge(&dir, &net, &file(cfg)).unwrap();
-        let back = LearnedJudge::load(&dir, &device).unwrap();
+        write_judge(&dir, Some(&net), &file(cfg)).unwrap();
+        let back = FrameJudge::load(&dir, &device).unwrap();
         for (a, b) in back.score_frames(&refs).iter().zip(&cpu) {
             assert!((a - b).abs() < 1e-2, "{a} vs {b}");
         }
+        // A rule's folder: no weights; a rule of another frame size, or none, is refused.
+        let rule = crate::judge_rule::ColourHeight::lift_red();
+        let mut f = JudgeFile { kind: "colour_height".into(), rule: Some(rule), ..file(NetConfig::new()) };
+        let rdir = dir.join("rule");
+        write_judge(&rdir, None, &f).unwrap();
+        assert!(!rdir.join("model.bpk").exists());
+        let back = FrameJudge::load(&rdir, &device).unwrap();
+        // A 96 x 96 white frame has no red pixels: 0.
+        assert_eq!((back.score(&[255u8; 96 * 96 * 3]), back.net().is_none()), (0.0, true));
+        f.net = NetConfig::new().with_image_size(64);
+        write_judge(&rdir, None, &f).unwrap();
+        let e = FrameJudge::load(&rdir, &device).err().unwrap().to_string();
+        assert!(e.contains("rule.image_size 96 differs from net.image_size 64"), "{e}");
+        f.rule = None;
+        write_judge(&rdir, None, &f).unwrap();
+        let e = FrameJudge::load(&rdir, &device).err().unwrap().to_string();
+        assert!(e.contains("without a rule"), "{e}");
         std::fs::write(dir.join("model.bpk"), b"truncated").unwrap();
-        let e = LearnedJudge::load(&dir, &device).err().unwrap().to_string();
+        let e = FrameJudge::load(&dir, &device).err().unwrap().to_string();
         assert!(e.contains("model.bpk") && e.contains("evalharness-judge"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }

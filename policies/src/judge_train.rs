@@ -5,7 +5,8 @@
 //! frames ([`JudgeMetrics`]: mean absolute error, accuracy, recall and precision at
 //! the success threshold) is logged while training and stored in `judge.json`. The
 //! last evaluation also reads each held-out episode whole, as `rank` reads an
-//! imagined one ([`EpisodeReading`]): a judge may misplace the frame where success
+//! imagined one ([`EpisodeReading`], [`crate::judge_read`]: the frames the policy
+//! sees, `persist_frames` in a row): a judge may misplace the frame where success
 //! begins and still call every episode right, or the reverse.
 //! Successes are rare in most datasets (a frame above coverage 0.95, a lifted
 //! cube), so by default half of each batch is drawn from the frames above the
@@ -33,7 +34,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::diffusion::frames_to_tensor;
 use crate::dir::PolicyLoadError;
-use crate::judge::{EpisodeReading, JudgeFile, JudgeMetrics, JudgeNet, Label, LearnedJudge};
+use crate::judge::{EpisodeReading, FrameJudge, JudgeFile, JudgeMetrics, JudgeNet, Label};
+use crate::judge_read::{Reading, judge_episodes, read_judged};
 use crate::symmetry::augment_frame;
 
 /// Linear warm-up steps of the learning rate.
@@ -132,7 +134,7 @@ pub fn bce_with_logits(logits: Tensor<2>, targets: Tensor<2>) -> Tensor<1> {
 }
 
 /// The judge's reading of `steps` (up to [`EVAL_FRAMES`], evenly spaced).
-pub fn evaluate(judge: &LearnedJudge, data: &JudgeData, steps: &[usize], threshold: f64) -> JudgeMetrics {
+pub fn evaluate(judge: &FrameJudge, data: &JudgeData, steps: &[usize], threshold: f64) -> JudgeMetrics {
     let pick: Vec<usize> = if steps.len() <= EVAL_FRAMES {
         steps.to_vec()
     } else {
@@ -144,24 +146,6 @@ pub fn evaluate(judge: &LearnedJudge, data: &JudgeData, steps: &[usize], thresho
         est.extend(judge.score_frames(&frames));
     }
     metrics(&est, &pick.iter().map(|&i| f64::from(data.labels[i])).collect::<Vec<_>>(), threshold)
-}
-
-/// The judge's reading of every frame of the held-out episodes (`held`: their
-/// step ranges), episode by episode: [`EpisodeReading`].
-pub fn read_episodes(
-    judge: &LearnedJudge,
-    data: &JudgeData,
-    held: &[std::ops::Range<usize>],
-    threshold: f64,
-) -> EpisodeReading {
-    EpisodeReading::of(held.iter().map(|r| {
-        let steps: Vec<usize> = r.clone().collect();
-        let said = steps.chunks(64).any(|part| {
-            let frames: Vec<&[u8]> = part.iter().map(|&i| data.frame(i)).collect();
-            judge.score_frames(&frames).into_iter().any(|v| v > threshold)
-        });
-        (said, steps.iter().any(|&i| f64::from(data.labels[i]) > threshold))
-    }))
 }
 
 /// [`JudgeMetrics`] of estimates against labels.
@@ -229,14 +213,19 @@ pub fn train_judge(
     let mut logf = std::fs::File::create(log).map_err(|e| PolicyLoadError::new(log, e.to_string()))?;
     let s = data.size;
     let eval = |net: &JudgeNet| {
-        evaluate(&LearnedJudge::new(judge.clone(), net.valid(), inner), data, &held, threshold)
+        evaluate(&FrameJudge::new(judge.clone(), net.valid(), inner), data, &held, threshold)
     };
     let held_episodes = data.held_out_episodes();
     // The last evaluation also reads the held-out episodes whole.
     let last_eval = |net: &JudgeNet| {
-        let judge = LearnedJudge::new(judge.clone(), net.valid(), inner);
+        let judge = FrameJudge::new(judge.clone(), net.valid(), inner);
         let mut m = evaluate(&judge, data, &held, threshold);
-        m.episodes = Some(read_episodes(&judge, data, &held_episodes, threshold));
+        let reading = Reading::rank(judge.file.persist_frames);
+        let judged = judge_episodes(&judge, data, &held_episodes, &reading, threshold);
+        m.episodes = Some(EpisodeReading {
+            reading: Some(reading),
+            ..read_judged(&judged, reading.persist, threshold)
+        });
         m
     };
     let mut log_line = |line: serde_json::Value| {
@@ -331,7 +320,9 @@ mod tests {
             kind: "learned".into(),
             net,
             label: Label::Success,
+            rule: None,
             threshold: 0.5,
+            persist_frames: 1,
             steps: 10,
             heldout: JudgeMetrics::default(),
             provenance: serde_json::Value::Null,
@@ -374,8 +365,14 @@ mod tests {
         // (judged, true) per episode: (T, T) agree, (T, F) false success, (F, T) missed,
         // (F, F) agree: 4 episodes, 2 successes, 2 agree, 1 false, 1 missed.
         let r = EpisodeReading::of([(true, true), (true, false), (false, true), (false, false)]);
-        let want =
-            EpisodeReading { episodes: 4, successes: 2, agree: 2, false_successes: 1, missed_successes: 1 };
+        let want = EpisodeReading {
+            reading: None,
+            episodes: 4,
+            successes: 2,
+            agree: 2,
+            false_successes: 1,
+            missed_successes: 1,
+        };
         assert_eq!(r, want);
     }
 

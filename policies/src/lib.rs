@@ -19,6 +19,8 @@ pub mod data;
 pub mod diffusion;
 pub mod dir;
 pub mod judge;
+pub mod judge_read;
+pub mod judge_rule;
 pub mod judge_train;
 pub mod net;
 pub mod pretrain;

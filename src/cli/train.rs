@@ -58,6 +58,10 @@ pub struct TrainJudgeArgs {
     /// Use at most this many episodes (the first ones).
     #[arg(long)]
     pub episodes: Option<usize>,
+    /// Judged frames in a row that must show success before an imagined episode counts
+    /// it (`judge.json`'s `persist_frames`; `read-judge --out` chooses it on data).
+    #[arg(long, default_value_t = 1)]
+    pub persist: usize,
     /// Draw batches uniformly instead of half from frames above the threshold.
     #[arg(long)]
     pub no_balance: bool,

@@ -38,16 +38,29 @@ impl DatasetScene {
     /// An unreadable dataset or state array.
     pub fn load(path: &Path) -> Result<Result<Self, String>> {
         let r = ReplayReader::open(path)?;
-        let Ok(cfg) =
-            serde_json::from_value::<PushTConfig>(r.attrs["evalharness"]["scenario_config"].clone())
-        else {
-            return Ok(Err("the dataset records no evalharness scenario".into()));
+        let cfg = match Self::from_attrs(&r.attrs) {
+            Ok(cfg) => cfg,
+            Err(why) => return Ok(Err(why)),
         };
         let dim = r.state.row_len();
         if dim < 8 {
             return Ok(Err(format!("data/state has {dim} columns, not the 8 with the goal")));
         }
         Ok(Ok(Self { cfg, state: r.state.read_f64()?, dim }))
+    }
+
+    /// The Push-T scenario a dataset's attributes record, or why there is none: no
+    /// evalharness scenario at all, or another task's (whose scenes are not re-rendered).
+    fn from_attrs(attrs: &serde_json::Value) -> Result<PushTConfig, String> {
+        let eh = &attrs["evalharness"];
+        match eh["scenario"].as_str() {
+            Some(name) if name != "pusht" => {
+                return Err(format!("the dataset's scenario is {name}; only Push-T scenes are re-rendered"));
+            }
+            _ => {}
+        }
+        serde_json::from_value::<PushTConfig>(eh["scenario_config"].clone())
+            .map_err(|_| "the dataset records no evalharness scenario".to_string())
     }
 
     /// State rows.
@@ -104,6 +117,19 @@ mod tests {
 
     use super::*;
     use crate::cli::{Cli, Command};
+
+    /// Regression: a Lift dataset was said to record no evalharness scenario.
+    #[test]
+    fn another_tasks_dataset_is_named_by_its_scenario() {
+        let lift = serde_json::json!({"evalharness": {"scenario": "lift", "scenario_config": {}}});
+        let why = DatasetScene::from_attrs(&lift).unwrap_err();
+        assert_eq!(why, "the dataset's scenario is lift; only Push-T scenes are re-rendered");
+        let none = serde_json::json!({});
+        assert_eq!(
+            DatasetScene::from_attrs(&none).unwrap_err(),
+            "the dataset records no evalharness scenario"
+        );
+    }
 
     #[test]
     fn stripped_frames_are_the_scenes_without_their_goal() {

@@ -11,6 +11,7 @@ mod export_policies;
 mod goal_free;
 pub(crate) mod plan;
 pub(crate) mod rank;
+mod read_judge;
 mod scripted;
 mod sessions;
 mod simulate;
@@ -74,5 +75,6 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Wm(WmCommand::Export(a)) => wm_export::run(a),
         Command::Scripted(a) => scripted::run(a),
         Command::ExportPolicies(a) => export_policies::run(a),
+        Command::ReadJudge(a) => read_judge::run(a),
     }
 }

@@ -34,8 +34,8 @@ fn label_of(a: &TrainJudgeArgs) -> Result<Label> {
 
 /// `evalharness train judge`.
 pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
-    if a.steps == 0 || a.batch == 0 || a.eval_every == 0 {
-        bail!("--steps, --batch and --eval-every must be positive");
+    if a.steps == 0 || a.batch == 0 || a.eval_every == 0 || a.persist == 0 {
+        bail!("--steps, --batch, --eval-every and --persist must be positive");
     }
     if !(a.lr.is_finite() && a.lr > 0.0) {
         bail!("--lr {}: must be a positive number", a.lr);
@@ -72,8 +72,10 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     let mut file = JudgeFile {
         kind: "learned".into(),
         net,
+        rule: None,
         label,
         threshold,
+        persist_frames: a.persist,
         steps: a.steps,
         heldout: JudgeMetrics::default(),
         provenance: json!({
@@ -123,13 +125,13 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
             a.steps
         ));
     }
-    write_judge(staged.dir(), &net, &file)?;
+    write_judge(staged.dir(), Some(&net), &file)?;
     staged.commit()?;
     let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));
     let whole = heldout.episodes.map_or(String::new(), |e| {
         format!(
-            "; whole episodes: {} of {} read right ({} succeed; {} false successes, {} missed)",
-            e.agree, e.episodes, e.successes, e.false_successes, e.missed_successes
+            "; whole episodes (success held for {} judged frame(s)): {} of {} read right ({} succeed; {} false successes, {} missed)",
+            a.persist, e.agree, e.episodes, e.successes, e.false_successes, e.missed_successes
         )
     });
     println!(

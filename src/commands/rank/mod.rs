@@ -25,7 +25,7 @@ use engine::schedule::{self, Batch};
 use engine::{EngineError, Setup};
 use harness::task::{ScoreKind, Task};
 use policies::dir::{checkpoint_dirs, checkpoint_name};
-use policies::judge::{Label, LearnedJudge};
+use policies::judge::{FrameJudge, Label};
 
 use crate::policy_kinds::{expectations, load_any};
 use harness::results::{FailedPolicy, RankResults, RunTiming};
@@ -67,7 +67,15 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     }
     let device = world_model::device::selected()?;
     let wm = load_world_model(&r.world_model, a.alpha, &device)?;
-    let judge = r.judge.as_deref().map(|d| load_judge(d, task.as_ref(), &device)).transpose()?;
+    let mut judge = r.judge.as_deref().map(|d| load_judge(d, task.as_ref(), &device)).transpose()?;
+    match (a.judge_persist, judge.as_mut()) {
+        (Some(0), _) => bail!("--judge-persist 0: must be at least 1 frame"),
+        (Some(k), Some(j)) => j.file.persist_frames = k,
+        (Some(_), None) => bail!(
+            "--judge-persist: there is no learned judge to apply it to (the task judges its own frames)"
+        ),
+        (None, _) => {}
+    }
     let dirs = checkpoint_dirs(&r.policies)?;
     let mut inputs = model_inputs(Some((&r.world_model, &wm)), &dirs)?;
     if let Some(d) = &r.judge {
@@ -87,7 +95,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     });
     if let (Some(dir), Some(j)) = (&r.judge, &judge) {
         config["judge"] = json!({"path": dir, "label": j.file.label, "threshold": j.file.threshold,
-            "heldout": j.file.heldout});
+            "persist_frames": j.file.persist_frames, "heldout": j.file.heldout});
     }
     if a.resume {
         resume::check_config(&a.out.join("config.json"), &config)?;
@@ -218,8 +226,8 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
 ///
 /// # Errors
 /// An unloadable judge, or one of another frame size or score kind, naming its folder.
-fn load_judge(dir: &Path, task: &dyn Task, device: &burn::tensor::Device) -> Result<LearnedJudge> {
-    let j = LearnedJudge::load(dir, device)?;
+fn load_judge(dir: &Path, task: &dyn Task, device: &burn::tensor::Device) -> Result<FrameJudge> {
+    let j = FrameJudge::load(dir, device)?;
     let size = task.observation_spec().image_size;
     if j.image_size() != size {
         bail!(

@@ -1,0 +1,147 @@
+//! Reading whole recorded episodes with a judge, the way `rank` reads an imagined
+//! one, so that a judge's rule can be chosen on real episodes whose exact success
+//! is known.
+//!
+//! `rank` judges only the frames the policy sees: the first, then the last `seen`
+//! of every executed chunk of `chunk` steps ([`Reading::judged`]). An episode
+//! succeeds once the judge's score holds above the threshold for `persist` judged
+//! frames in a row ([`harness::judge::Sustained`], the engine's own rule). The
+//! exact truth is the dataset's label at any step, judged or not, as the
+//! simulator branch scores it.
+
+use harness::judge::Sustained;
+use serde::{Deserialize, Serialize};
+
+use crate::judge::JudgeMetrics;
+use crate::judge::{EpisodeReading, FrameJudge};
+use crate::judge_train::{JudgeData, metrics};
+
+/// Which frames of an episode are judged, and how many in a row must show success.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Reading {
+    /// Actions executed per policy decision (the shipped policies: 8).
+    pub chunk: usize,
+    /// Frames the policy sees at the end of each chunk (its observation horizon, 2).
+    pub seen: usize,
+    /// Judged frames in a row that must show success.
+    pub persist: usize,
+}
+
+impl Reading {
+    /// `rank`'s reading with the shipped policies' chunk (8) and horizon (2).
+    pub fn rank(persist: usize) -> Self {
+        Self { chunk: 8, seen: 2, persist: persist.max(1) }
+    }
+
+    /// Whether the frame at time `t` (the observation before action `t`) is judged:
+    /// the first, and the observations after each chunk's last `seen` actions,
+    /// i.e. `t % chunk` in {0} ∪ [chunk − seen + 1, chunk). Every frame when
+    /// `chunk` is 0 or `seen` ≥ `chunk`.
+    pub fn judged(&self, t: usize) -> bool {
+        if self.chunk == 0 || self.seen >= self.chunk {
+            return true;
+        }
+        let r = t % self.chunk;
+        r == 0 || r > self.chunk - self.seen
+    }
+}
+
+/// One episode's judged frames: the judge's estimates and the exact labels there,
+/// and whether the episode truly succeeds at any step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct JudgedEpisode {
+    /// The judge's estimate of each judged frame, in time order.
+    pub estimates: Vec<f64>,
+    /// The exact label of each judged frame.
+    pub labels: Vec<f64>,
+    /// The exact label is above the threshold at some step.
+    pub success: bool,
+}
+
+/// Scores the judged frames of `episodes` (step ranges of `data`).
+pub fn judge_episodes(
+    judge: &FrameJudge,
+    data: &JudgeData,
+    episodes: &[std::ops::Range<usize>],
+    reading: &Reading,
+    threshold: f64,
+) -> Vec<JudgedEpisode> {
+    episodes
+        .iter()
+        .map(|r| {
+            let steps: Vec<usize> = r.clone().filter(|&i| reading.judged(i - r.start)).collect();
+            let mut estimates = Vec::with_capacity(steps.len());
+            for part in steps.chunks(64) {
+                let frames: Vec<&[u8]> = part.iter().map(|&i| data.frame(i)).collect();
+                estimates.extend(judge.score_frames(&frames));
+            }
+            JudgedEpisode {
+                estimates,
+                labels: steps.iter().map(|&i| f64::from(data.labels[i])).collect(),
+                success: r.clone().any(|i| f64::from(data.labels[i]) > threshold),
+            }
+        })
+        .collect()
+}
+
+/// Reads judged episodes with persistence `persist`: an episode succeeds once its
+/// estimate holds above `threshold` for `persist` judged frames in a row.
+pub fn read_judged(episodes: &[JudgedEpisode], persist: usize, threshold: f64) -> EpisodeReading {
+    EpisodeReading::of(episodes.iter().map(|e| {
+        let mut held = Sustained::new(persist);
+        let said = e.estimates.iter().any(|&v| held.push(v).is_some_and(|h| h > threshold));
+        (said, e.success)
+    }))
+}
+
+/// Frame metrics over every judged frame of `episodes`.
+pub fn judged_frame_metrics(episodes: &[JudgedEpisode], threshold: f64) -> JudgeMetrics {
+    let est: Vec<f64> = episodes.iter().flat_map(|e| e.estimates.iter().copied()).collect();
+    let labels: Vec<f64> = episodes.iter().flat_map(|e| e.labels.iter().copied()).collect();
+    metrics(&est, &labels, threshold)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rank_judges_the_first_frame_and_each_chunks_last_two() {
+        // chunk 8, seen 2: t % 8 in {0, 7}, so 0, 7, 8, 15, 16 of 0..17.
+        let r = Reading::rank(1);
+        let t: Vec<usize> = (0..17).filter(|&t| r.judged(t)).collect();
+        assert_eq!(t, vec![0, 7, 8, 15, 16]);
+        // seen 1: only the chunk boundaries; seen >= chunk: every frame.
+        let one = Reading { chunk: 4, seen: 1, persist: 1 };
+        assert_eq!((0..9).filter(|&t| one.judged(t)).collect::<Vec<_>>(), vec![0, 4, 8]);
+        let all = Reading { chunk: 2, seen: 2, persist: 1 };
+        assert!((0..5).all(|t| all.judged(t)));
+        assert_eq!(Reading::rank(0).persist, 1);
+    }
+
+    #[test]
+    fn persistence_turns_a_flicker_into_a_failure() {
+        let ep = |estimates: Vec<f64>, success| JudgedEpisode {
+            labels: vec![0.0; estimates.len()],
+            estimates,
+            success,
+        };
+        // A failure with one frame at 0.9, a success held for 3 frames, a success the
+        // judge sees only once.
+        let eps = vec![
+            ep(vec![0.1, 0.9, 0.1, 0.2], false),
+            ep(vec![0.1, 0.8, 0.9, 0.7], true),
+            ep(vec![0.1, 0.2, 0.6, 0.1], true),
+        ];
+        // k = 1: all three called successes: 2 agree, 1 false success, none missed.
+        let r = read_judged(&eps, 1, 0.5);
+        assert_eq!((r.agree, r.false_successes, r.missed_successes), (2, 1, 0));
+        // k = 2: the flicker and the single frame drop out: 2 agree, 0 false, 1 missed.
+        let r = read_judged(&eps, 2, 0.5);
+        assert_eq!((r.agree, r.false_successes, r.missed_successes), (2, 0, 1));
+        // k = 4: nothing holds for 4 frames: the failure agrees, both successes missed.
+        let r = read_judged(&eps, 4, 0.5);
+        assert_eq!((r.agree, r.missed_successes), (1, 2));
+    }
+}
