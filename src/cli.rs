@@ -63,7 +63,8 @@ pub enum Command {
     /// Train models.
     #[command(subcommand)]
     Train(TrainCommand),
-    /// Agreement metrics (Pearson, Spearman, Kendall τ_b, inversions, MMRV, regret@1, CIs)
+    /// Agreement metrics (Pearson, Spearman, Kendall τ_b, inversions, MMRV, regret@1, mean
+    /// absolute error, CIs)
     /// between predicted and actual policy scores in a CSV; JSON on stdout.
     Agreement(AgreementArgs),
     /// Join `rank --shard i/n` outputs into what one unsharded run writes.

@@ -61,3 +61,33 @@ fn shipped_models_carry_provenance_and_find_their_autoencoder() {
         );
     }
 }
+
+/// Every shipped judge folder names how it was made and how its persistence was chosen,
+/// and a learned one has its weights.
+#[test]
+fn shipped_judges_carry_provenance_and_their_persistence() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
+    let judges: Vec<PathBuf> = std::fs::read_dir(&root)
+        .expect("checkpoints/ is shipped")
+        .map(|e| e.expect("entry").path().join("judge"))
+        .filter(|p| p.is_dir())
+        .collect();
+    assert!(judges.iter().any(|j| j.ends_with("lift/judge")), "{judges:?}");
+    for dir in &judges {
+        let file = read_json(&dir.join("judge.json"));
+        let k = file["persist_frames"].as_u64().unwrap_or(0);
+        assert!(k >= 1, "{}: persist_frames {k}", dir.display());
+        let chosen = &file["provenance"]["persistence"];
+        assert_eq!(chosen["report"]["best"].as_u64(), Some(k), "{}: {chosen}", dir.display());
+        assert!(chosen["command"].as_str().is_some_and(|c| c.contains("read-judge")), "{}", dir.display());
+        if file["kind"] == "learned" {
+            assert!(dir.join("model.bpk").is_file(), "{}: no model.bpk", dir.display());
+            let cmd = file["provenance"]["command"].as_str().unwrap_or_default();
+            assert!(
+                cmd.contains("train judge") && !file["provenance"]["seed"].is_null(),
+                "{}",
+                dir.display()
+            );
+        }
+    }
+}

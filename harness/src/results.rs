@@ -202,6 +202,10 @@ pub struct AgreementSummary {
     pub mmrv: Option<f64>,
     /// True score lost by picking the world model's best.
     pub regret_at_1: Option<f64>,
+    /// Mean over policies of |world model's score − simulator's| (absent in results
+    /// written before it was reported).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_abs_error: Option<f64>,
     /// Bootstrap 95% intervals of the metrics.
     pub ci95: Option<AgreementCi>,
 }
@@ -326,6 +330,7 @@ impl Agreement {
                 .collect(),
             mmrv: ranked.then_some(self.mmrv),
             regret_at_1: ranked.then_some(self.regret_at_1),
+            mean_abs_error: (!names.is_empty()).then_some(self.mean_abs_error),
             ci95: ci.cloned(),
         }
     }

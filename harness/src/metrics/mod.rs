@@ -146,6 +146,15 @@ pub fn regret_at_1(pred: &[f64], actual: &[f64]) -> f64 {
     actual[..n].iter().copied().fold(f64::NEG_INFINITY, f64::max) - actual[best_pred]
 }
 
+/// Mean absolute difference of paired scores (0 for none).
+pub fn mean_abs_error(pred: &[f64], actual: &[f64]) -> f64 {
+    let n = pred.len().min(actual.len());
+    if n == 0 {
+        return 0.0;
+    }
+    pred.iter().zip(actual).map(|(p, a)| (p - a).abs()).sum::<f64>() / n as f64
+}
+
 /// All agreement metrics of one set of policy scores.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Agreement {
@@ -161,6 +170,9 @@ pub struct Agreement {
     pub mmrv: f64,
     /// Regret@1 (lower is better).
     pub regret_at_1: f64,
+    /// Mean over policies of |predicted − actual| (lower is better): how well the
+    /// world model predicts each policy's absolute score, not just its order.
+    pub mean_abs_error: f64,
 }
 
 /// Computes every agreement metric; `pred` and `actual` are per-policy scores.
@@ -172,6 +184,7 @@ pub fn agreement(pred: &[f64], actual: &[f64]) -> Agreement {
         rank_inversions: rank_inversions(pred, actual),
         mmrv: mmrv(pred, actual),
         regret_at_1: regret_at_1(pred, actual),
+        mean_abs_error: mean_abs_error(pred, actual),
     }
 }
 

@@ -60,6 +60,16 @@ fn mmrv_hand_computed_and_asymmetric() {
 }
 
 #[test]
+fn mean_abs_error_hand_computed() {
+    // |0.1 - 0.8| + |0.9 - 0.6| + |0.5 - 0.7| = 0.7 + 0.3 + 0.2 = 1.2, over 3 policies: 0.4.
+    assert!((mean_abs_error(&[0.1, 0.9, 0.5], &[0.8, 0.6, 0.7]) - 0.4).abs() < 1e-12);
+    assert_eq!(mean_abs_error(&[], &[]), 0.0);
+    // One policy has an error even though it has no ranking: |0.3 - 0.5| = 0.2.
+    let j = agreement(&[0.3], &[0.5]).to_json(&["a"], None);
+    assert!((j["mean_abs_error"].as_f64().unwrap() - 0.2).abs() < 1e-12, "{j}");
+}
+
+#[test]
 fn regret_hand_computed() {
     // The predictor picks policy 1 (0.9); its true score 0.6 is 0.2 below the best 0.8.
     assert!((regret_at_1(&[0.1, 0.9, 0.5], &[0.8, 0.6, 0.7]) - 0.2).abs() < 1e-12);

@@ -145,13 +145,14 @@ pub(super) fn print(res: &RankResults, out: &Path) {
     let ag = &res.agreement;
     let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.3}"));
     println!(
-        "Pearson {}  Spearman {}  Kendall tau_b {}  inversions {}  MMRV {}  regret@1 {}",
+        "Pearson {}  Spearman {}  Kendall tau_b {}  inversions {}  MMRV {}  regret@1 {}  MAE {}",
         f(ag.pearson),
         f(ag.spearman),
         f(ag.kendall_tau_b),
         ag.rank_inversions.map_or("n/a".to_string(), |k| k.to_string()),
         f(ag.mmrv),
-        f(ag.regret_at_1)
+        f(ag.regret_at_1),
+        f(ag.mean_abs_error)
     );
     println!("results: {}", out.join("results.json").display());
 }
