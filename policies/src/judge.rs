@@ -261,7 +261,8 @@ impl FrameJudge {
     /// Estimates for `frames` (each `s x s x 3` bytes), in [0, 1].
     pub fn score_frames(&self, frames: &[&[u8]]) -> Vec<f64> {
         let s = self.image_size();
-        let (Some(net), None) = (&self.net, self.file.rule) else {
+        // A rule's folder has no network (`load` checks that it has the rule).
+        let Some(net) = &self.net else {
             return frames.iter().map(|f| self.file.rule.map_or(f64::NAN, |r| r.score(f))).collect();
         };
         let logits: Vec<f32> = match &self.cpu {

@@ -12,9 +12,13 @@
 use harness::judge::Sustained;
 use serde::{Deserialize, Serialize};
 
-use crate::judge::JudgeMetrics;
-use crate::judge::{EpisodeReading, FrameJudge};
+use crate::judge::{EpisodeReading, FrameJudge, JudgeMetrics};
 use crate::judge_train::{JudgeData, metrics};
+
+/// Actions the shipped policies execute per decision: `rank` judges at this period.
+pub const RANK_CHUNK: usize = 8;
+/// Frames the shipped policies see at the end of each chunk (their observation horizon).
+pub const RANK_SEEN: usize = 2;
 
 /// Which frames of an episode are judged, and how many in a row must show success.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -31,7 +35,7 @@ pub struct Reading {
 impl Reading {
     /// `rank`'s reading with the shipped policies' chunk (8) and horizon (2).
     pub fn rank(persist: usize) -> Self {
-        Self { chunk: 8, seen: 2, persist: persist.max(1) }
+        Self { chunk: RANK_CHUNK, seen: RANK_SEEN, persist: persist.max(1) }
     }
 
     /// Whether the frame at time `t` (the observation before action `t`) is judged:

@@ -65,16 +65,18 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     if !missing.is_empty() {
         bail!("--scenario {}: missing inputs:\n  {}", a.scenario, missing.join("\n  "));
     }
+    match (a.judge_persist, &r.judge) {
+        (Some(0), _) => bail!("--judge-persist 0: must be at least 1 frame"),
+        (Some(_), None) => {
+            bail!("--judge-persist: there is no judge folder to apply it to (the task judges its own frames)")
+        }
+        _ => {}
+    }
     let device = world_model::device::selected()?;
     let wm = load_world_model(&r.world_model, a.alpha, &device)?;
     let mut judge = r.judge.as_deref().map(|d| load_judge(d, task.as_ref(), &device)).transpose()?;
-    match (a.judge_persist, judge.as_mut()) {
-        (Some(0), _) => bail!("--judge-persist 0: must be at least 1 frame"),
-        (Some(k), Some(j)) => j.file.persist_frames = k,
-        (Some(_), None) => bail!(
-            "--judge-persist: there is no learned judge to apply it to (the task judges its own frames)"
-        ),
-        (None, _) => {}
+    if let (Some(k), Some(j)) = (a.judge_persist, judge.as_mut()) {
+        j.file.persist_frames = k;
     }
     let dirs = checkpoint_dirs(&r.policies)?;
     let mut inputs = model_inputs(Some((&r.world_model, &wm)), &dirs)?;
