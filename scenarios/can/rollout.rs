@@ -5,6 +5,7 @@ use super::sim::{CanEpisode, CanInit, CanSim, STATE_COLUMNS};
 use crate::error::ScenarioError;
 use crate::robosuite::episode::ArmEpisode;
 use crate::robosuite::rollout::{ArmTask, Episode, Perturbation, RandomActions, RunLimits, TaskEpisode, run};
+use crate::robosuite::wander::Wander;
 
 /// The scripted Can behaviours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -23,11 +24,14 @@ pub enum CanBehaviour {
     Hesitate,
     /// Uniform random actions in [−1, 1]⁷, a fresh one every 5 steps.
     Random,
+    /// The expert with a smooth random drift on its arm actions and lapses in which
+    /// the drift alone drives the arm ([`Wander`]).
+    Explore,
 }
 
 impl CanBehaviour {
     /// Every behaviour, by name.
-    pub const ALL: [(&'static str, CanBehaviour); 7] = [
+    pub const ALL: [(&'static str, CanBehaviour); 8] = [
         ("expert", Self::Expert),
         ("miss", Self::Miss),
         ("drop", Self::Drop),
@@ -35,6 +39,7 @@ impl CanBehaviour {
         ("push", Self::Push),
         ("hesitate", Self::Hesitate),
         ("random", Self::Random),
+        ("explore", Self::Explore),
     ];
 
     fn flaws(self) -> CanFlaws {
@@ -44,7 +49,7 @@ impl CanBehaviour {
             Self::WrongBin => CanFlaws { wrong_bin: true, ..CanFlaws::default() },
             Self::Push => CanFlaws { push: true, ..CanFlaws::default() },
             Self::Hesitate => CanFlaws { hesitate: 15, ..CanFlaws::default() },
-            Self::Expert | Self::Random => CanFlaws::default(),
+            Self::Expert | Self::Random | Self::Explore => CanFlaws::default(),
         }
     }
 }
@@ -124,7 +129,12 @@ impl ArmTask for CanSim {
             let target = [x[0] + inset, if flaws.wrong_bin { y[1] - inset } else { y[0] + inset }];
             let bin_z = self.config().bin2_pos[2];
             let mut expert = CanExpert::new(target, flaws);
-            run(&mut ep, |e| expert.act(e.arm(), bin_z), perturbation, name, limits)?
+            if behaviour == CanBehaviour::Explore {
+                let mut wander = Wander::new("can", seed);
+                run(&mut ep, |e| wander.apply(expert.act(e.arm(), bin_z)), perturbation, name, limits)?
+            } else {
+                run(&mut ep, |e| expert.act(e.arm(), bin_z), perturbation, name, limits)?
+            }
         };
         Ok(Episode::new(seed, init, behaviour, r))
     }

@@ -5,6 +5,7 @@ use super::sim::{LiftEpisode, LiftInit, LiftSim, STATE_COLUMNS};
 use crate::error::ScenarioError;
 use crate::robosuite::episode::ArmEpisode;
 use crate::robosuite::rollout::{ArmTask, Episode, Perturbation, RandomActions, RunLimits, TaskEpisode, run};
+use crate::robosuite::wander::Wander;
 
 /// The scripted Lift behaviours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -22,17 +23,22 @@ pub enum LiftBehaviour {
     Hesitate,
     /// Uniform random actions in [−1, 1]⁷, a fresh one every 5 steps.
     Random,
+    /// The expert with a smooth random drift on its arm actions and lapses in which
+    /// the drift alone drives the arm ([`Wander`]): twists, wandering and stray
+    /// gripper commands near the cube, as failing learned policies show.
+    Explore,
 }
 
 impl LiftBehaviour {
     /// Every behaviour, by name.
-    pub const ALL: [(&'static str, LiftBehaviour); 6] = [
+    pub const ALL: [(&'static str, LiftBehaviour); 7] = [
         ("expert", Self::Expert),
         ("miss", Self::Miss),
         ("drop", Self::Drop),
         ("push", Self::Push),
         ("hesitate", Self::Hesitate),
         ("random", Self::Random),
+        ("explore", Self::Explore),
     ];
 
     /// Parses a name.
@@ -51,7 +57,7 @@ impl LiftBehaviour {
             Self::Drop => LiftFlaws { drop_height: 0.015, ..LiftFlaws::default() },
             Self::Push => LiftFlaws { push: true, ..LiftFlaws::default() },
             Self::Hesitate => LiftFlaws { hesitate: 15, ..LiftFlaws::default() },
-            Self::Expert | Self::Random => LiftFlaws::default(),
+            Self::Expert | Self::Random | Self::Explore => LiftFlaws::default(),
         }
     }
 }
@@ -93,6 +99,10 @@ impl ArmTask for LiftSim {
         let r = if behaviour == LiftBehaviour::Random {
             let mut random = RandomActions::new("lift", seed);
             run(&mut ep, |_| random.action(), perturbation, behaviour.name(), limits)?
+        } else if behaviour == LiftBehaviour::Explore {
+            let mut expert = LiftExpert::new(behaviour.flaws());
+            let mut wander = Wander::new("lift", seed);
+            run(&mut ep, |e| wander.apply(expert.act(e)), perturbation, behaviour.name(), limits)?
         } else {
             let mut expert = LiftExpert::new(behaviour.flaws());
             run(&mut ep, |e| expert.act(e), perturbation, behaviour.name(), limits)?

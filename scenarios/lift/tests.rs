@@ -107,3 +107,20 @@ fn a_non_finite_action_names_the_seed_and_step() {
     let e = ep.step(&[f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]).unwrap_err().to_string();
     assert!(e.contains("seed 5") && e.contains("step 1"), "{e}");
 }
+
+#[test]
+fn exploring_is_seeded_and_turns_the_wrist_further_than_the_expert() {
+    let s = sim();
+    let limits = RunLimits { max_steps: 60, stop_at_success: false, frame_size: None };
+    let ep = |b| s.episode(4, b, Perturbation::default(), limits).unwrap();
+    let (a, b, expert) = (ep(LiftBehaviour::Explore), ep(LiftBehaviour::Explore), ep(LiftBehaviour::Expert));
+    let actions = |e: &LiftEpisodeRecord| e.rows.iter().map(|r| r.action).collect::<Vec<_>>();
+    assert_eq!(actions(&a), actions(&b), "a pure function of the seed");
+    // The summed rotation commands (entries 3-5) over the episode: the drift's
+    // lapses and offsets turn the wrist more than the expert's servo does.
+    let turn = |e: &LiftEpisodeRecord| {
+        e.rows.iter().map(|r| r.action[3..6].iter().map(|v| v.abs()).sum::<f64>()).sum::<f64>()
+    };
+    assert!(turn(&a) > 2.0 * turn(&expert), "explore {} against expert {}", turn(&a), turn(&expert));
+    assert_eq!(LiftBehaviour::parse("explore"), Some(LiftBehaviour::Explore));
+}

@@ -1,6 +1,6 @@
 //! What robosuite's manipulation scenes share: the asset folder, the scene
 //! composer (Panda, mount, gripper, arenas), the OSC_POSE arm controller, the
-//! scripted-episode runner, and the engine's [`Task`](harness::task::Task)
+//! scripted-episode runner, the exploration drift ([`wander`]), and the engine's [`Task`](harness::task::Task)
 //! implementation ([`task`]).
 //!
 //! Lift and Can (`crate::lift`, `crate::can`) build on it. Everything follows
@@ -14,6 +14,7 @@ pub mod osc;
 pub mod rollout;
 pub mod scene;
 pub mod task;
+pub mod wander;
 
 #[cfg(test)]
 mod tests;
