@@ -456,8 +456,9 @@ pub struct CollectArgs {
     /// Push-T: expert, explore, decoy (default expert=0.8,explore=0.2). Lift:
     /// expert, miss, drop, push, hesitate, random, explore (default
     /// expert=0.5,miss=0.1,drop=0.1,push=0.1,hesitate=0.1,random=0.1). Can: also
-    /// wrong-bin. Lift's and Can's `explore` is the expert with a smooth random
-    /// drift and lapses: the twists and wandering of failing learned policies.
+    /// wrong-bin. Lift's and Can's `explore` (never in the default mix) is the
+    /// expert with a smooth random drift and lapses: the twists and wandering of
+    /// failing learned policies.
     #[arg(long)]
     pub mix: Option<String>,
     /// Instead of `--mix`: record the closed-loop MuJoCo rollouts of a policy

@@ -238,7 +238,8 @@ fn collect_writes_a_can_dataset_with_its_default_mix() {
     let attrs = read_json(&out.join(".zattrs"));
     let e = &attrs["evalharness"];
     assert_eq!(e["scenario"], "can");
-    // Half expert, the other half spread over the six flawed behaviours: 0.5 / 6 each.
+    // Half expert, the other half spread over the six flawed behaviours: 0.5 / 6 each
+    // (`explore` is opt-in: adding it once changed this default, and this caught it).
     let sixth = 0.5 / 6.0;
     let want = format!(
         "expert=0.5,miss={sixth},drop={sixth},wrong-bin={sixth},push={sixth},hesitate={sixth},random={sixth}"
