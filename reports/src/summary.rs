@@ -73,6 +73,8 @@ pub struct Summary {
     pub mmrv: Option<Est>,
     /// Regret@1.
     pub regret: Option<Est>,
+    /// Mean absolute error of the imagined scores against MuJoCo's, over policies.
+    pub mae: Option<f64>,
     /// Scenario name.
     pub scenario: String,
     /// World-model folder.
@@ -108,6 +110,7 @@ impl Summary {
             inversions: est(ag.rank_inversions.map(|k| k as f64), ci(|c| c.rank_inversions)),
             mmrv: est(ag.mmrv, ci(|c| c.mmrv)),
             regret: est(ag.regret_at_1, ci(|c| c.regret_at_1)),
+            mae: ag.mean_abs_error,
             scenario: r.scenario.clone(),
             world_model: r.world_model.display().to_string(),
             episodes: r.episodes as u64,

@@ -1,5 +1,6 @@
 //! The paper's table of tasks: one row per `rank` run (task, policies, episodes,
-//! Pearson, Spearman, inversions, MMRV), side by side, as DriftWorld's Table 1 lays
+//! Pearson, Spearman, inversions, MMRV; the Markdown table also the mean absolute
+//! error of the scores), side by side, as DriftWorld's Table 1 lays
 //! out Push-T, Lift and Can. Written as booktabs LaTeX and as a Markdown table.
 
 use crate::summary::{Est, Summary};
@@ -60,13 +61,13 @@ pub fn latex_tasks(rows: &[TaskRow]) -> String {
 /// The rows as a Markdown table, with each run's seeds and wall time.
 pub fn markdown_tasks(rows: &[TaskRow]) -> String {
     let mut t = String::from(
-        "| task | policies × episodes | Pearson [95% CI] | Spearman | inversions | MMRV | seeds | minutes |\n\
-         |---|---|---|---|---|---|---|---|\n",
+        "| task | policies × episodes | Pearson [95% CI] | Spearman | inversions | MMRV | MAE | seeds | minutes |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let s = &r.summary;
         t.push_str(&format!(
-            "| {} | {} × {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} × {} | {} | {} | {} | {} | {} | {} | {} |\n",
             s.scenario,
             s.policies.len(),
             s.episodes,
@@ -74,6 +75,7 @@ pub fn markdown_tasks(rows: &[TaskRow]) -> String {
             cell(s.spearman.map(|e| Est { ci: None, ..e }), 3, false),
             cell(s.inversions.map(|e| Est { ci: None, ..e }), 0, false),
             cell(s.mmrv.map(|e| Est { ci: None, ..e }), 3, false),
+            s.mae.map_or("n/a".to_string(), |m| format!("{m:.3}")),
             seeds(s),
             r.minutes.map_or("n/a".to_string(), |m| format!("{m:.1}"))
         ));
@@ -91,15 +93,17 @@ mod tests {
         let res = fixture(serde_json::json!({
             "scenario": "lift", "episodes": 50, "seed_start": 2100000,
             "agreement": {"pearson": 0.9916, "spearman": 1.0, "rank_inversions": 1, "mmrv": 0.004,
+                "mean_abs_error": 0.189,
                 "ci95": {"pearson": [0.95, 0.999], "spearman": null, "kendall_tau_b": null,
                     "rank_inversions": [0.0, 3.0], "mmrv": null, "regret_at_1": null, "replicates": 10}},
         }));
         let rows = [TaskRow { summary: Summary::from_results(&res), minutes: Some(12.34) }];
         let md = markdown_tasks(&rows);
-        // 50 episodes from 2,100,000: the last seed is 2,100,049; 12.34 minutes prints 12.3.
+        // 50 episodes from 2,100,000: the last seed is 2,100,049; 12.34 minutes prints 12.3;
+        // the mean absolute error 0.189 prints as it is.
         assert!(
             md.contains(
-                "| lift | 0 × 50 | 0.992 [0.95, 1.00] | 1.000 | 1 | 0.004 | 2100000–2100049 | 12.3 |"
+                "| lift | 0 × 50 | 0.992 [0.95, 1.00] | 1.000 | 1 | 0.004 | 0.189 | 2100000–2100049 | 12.3 |"
             ),
             "{md}"
         );
