@@ -129,12 +129,12 @@ impl ArmTask for CanSim {
             let target = [x[0] + inset, if flaws.wrong_bin { y[1] - inset } else { y[0] + inset }];
             let bin_z = self.config().bin2_pos[2];
             let mut expert = CanExpert::new(target, flaws);
-            if behaviour == CanBehaviour::Explore {
-                let mut wander = Wander::new("can", seed);
-                run(&mut ep, |e| wander.apply(expert.act(e.arm(), bin_z)), perturbation, name, limits)?
-            } else {
-                run(&mut ep, |e| expert.act(e.arm(), bin_z), perturbation, name, limits)?
-            }
+            let mut wander = (behaviour == CanBehaviour::Explore).then(|| Wander::new("can", seed));
+            let act = |e: &CanEpisode| {
+                let a = expert.act(e.arm(), bin_z);
+                wander.as_mut().map_or(a, |w| w.apply(a))
+            };
+            run(&mut ep, act, perturbation, name, limits)?
         };
         Ok(Episode::new(seed, init, behaviour, r))
     }

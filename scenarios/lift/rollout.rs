@@ -99,13 +99,14 @@ impl ArmTask for LiftSim {
         let r = if behaviour == LiftBehaviour::Random {
             let mut random = RandomActions::new("lift", seed);
             run(&mut ep, |_| random.action(), perturbation, behaviour.name(), limits)?
-        } else if behaviour == LiftBehaviour::Explore {
-            let mut expert = LiftExpert::new(behaviour.flaws());
-            let mut wander = Wander::new("lift", seed);
-            run(&mut ep, |e| wander.apply(expert.act(e)), perturbation, behaviour.name(), limits)?
         } else {
             let mut expert = LiftExpert::new(behaviour.flaws());
-            run(&mut ep, |e| expert.act(e), perturbation, behaviour.name(), limits)?
+            let mut wander = (behaviour == LiftBehaviour::Explore).then(|| Wander::new("lift", seed));
+            let act = |e: &LiftEpisode| {
+                let a = expert.act(e);
+                wander.as_mut().map_or(a, |w| w.apply(a))
+            };
+            run(&mut ep, act, perturbation, behaviour.name(), limits)?
         };
         Ok(Episode::new(seed, init, behaviour, r))
     }
