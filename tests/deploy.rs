@@ -1,7 +1,8 @@
-//! The cluster scripts under `deploy/`: the Slurm array script's body, run here for every
-//! array index with Slurm's variables set, and the dependent merge script give exactly what
-//! one unsharded `rank` writes. No Slurm controller is needed: the scripts only read
-//! `SLURM_ARRAY_TASK_ID`, `SLURM_ARRAY_TASK_COUNT` and `SLURM_CPUS_PER_TASK`.
+//! The run scripts users copy: the cluster scripts under `deploy/` (the Slurm array script's
+//! body, run here for every array index with Slurm's variables set, and the dependent merge
+//! script give exactly what one unsharded `rank` writes; no Slurm controller is needed, as
+//! the scripts only read `SLURM_ARRAY_TASK_ID`, `SLURM_ARRAY_TASK_COUNT` and
+//! `SLURM_CPUS_PER_TASK`), and CI's correlation job, `scripts/correlation.sh`, on one task.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -74,4 +75,72 @@ fn slurm_array_and_merge_equal_one_unsharded_run() {
     // 2 policies x 4 seeds x 2 branches.
     assert_eq!(std::fs::read_to_string(merged.join("episodes.jsonl")).unwrap().lines().count(), 16);
     assert_eq!(results(&merged), results(&single));
+}
+
+/// Runs `scripts/correlation.sh` with bash, the binary under test and `vars`.
+fn correlation(vars: &[(&str, &str)]) -> Output {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/correlation.sh");
+    let mut c = Command::new("bash");
+    c.arg(path).env_remove("RUST_LOG").env("NO_COLOR", "1");
+    c.env("EVALHARNESS", env!("CARGO_BIN_EXE_evalharness"));
+    for k in [
+        "SCENARIO",
+        "POLICIES",
+        "WORLD_MODEL",
+        "JUDGE",
+        "EPISODES",
+        "MAX_STEPS",
+        "MIN_PEARSON",
+        "MAX_INVERSIONS",
+    ] {
+        c.env_remove(k);
+    }
+    for (k, v) in vars {
+        c.env(k, v);
+    }
+    c.output().expect("bash runs")
+}
+
+#[test]
+fn correlation_job_reports_one_task_and_never_an_earlier_runs_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/pusht");
+    let set = tmp.path().join("policies");
+    for name in ["epoch-0001", "epoch-0045"] {
+        crate::util::copy_dir(&root.join("policies").join(name), &set.join(name));
+    }
+    let out = tmp.path().join("ci");
+    let mut vars = vec![
+        ("OUT", s(&out)),
+        ("POLICIES", s(&set)),
+        ("EPISODES", "2"),
+        ("MAX_STEPS", "8"),
+        ("MIN_PEARSON", "-1"),
+        ("MAX_INVERSIONS", "1"),
+    ];
+    // In 8 steps neither policy scores in MuJoCo, so Pearson is undefined and the gate fails:
+    // exit 1, with the report and the table written all the same.
+    let (stdout, err) = expect_code(&correlation(&vars), 1);
+    assert!(err.contains("gate failed: Pearson is undefined"), "{err}");
+    let report = out.join("pusht/report.html");
+    assert!(report.is_file(), "no report: {stdout}");
+    assert!(stdout.contains(&format!("correlation report (pusht): {}", report.display())), "{stdout}");
+    // The task table names the run: 2 policies x 2 episodes on the default seeds.
+    let table = std::fs::read_to_string(out.join("tasks.md")).unwrap();
+    assert!(table.contains("| pusht | 2 × 2 |") && table.contains("100000–100001"), "{table}");
+    assert!(out.join("tasks.tex").is_file());
+
+    // A run that fails with an error exits 2 and does not report the files the run before it
+    // left in the same folder as its own.
+    std::fs::remove_file(out.join("tasks.md")).unwrap();
+    let missing = tmp.path().join("no_world_model");
+    vars.push(("WORLD_MODEL", s(&missing)));
+    let (stdout, _) = expect_code(&correlation(&vars), 2);
+    assert!(!stdout.contains("correlation report") && !stdout.contains("task table"), "{stdout}");
+    assert!(!out.join("tasks.md").exists());
+
+    // A binary that is not there is named.
+    let (_, err) =
+        expect_code(&correlation(&[("EVALHARNESS", "/nonexistent/evalharness"), ("OUT", s(&out))]), 2);
+    assert!(err.contains("EVALHARNESS=/nonexistent/evalharness"), "{err}");
 }

@@ -19,7 +19,11 @@ fn cell(e: Option<Est>, digits: usize, tex: bool) -> String {
     match e {
         None => "n/a".to_string(),
         Some(e) => match (e.ci, tex) {
-            (Some([a, b]), true) => format!("{:.digits$} {{\\scriptsize [{a:.2}, {b:.2}]}}", e.value),
+            // A count (digits 0) has whole-number bounds; others at most 2 decimals.
+            (Some([a, b]), true) => {
+                let c = digits.min(2);
+                format!("{:.digits$} {{\\scriptsize [{a:.c$}, {b:.c$}]}}", e.value)
+            }
             (Some([a, b]), false) => format!("{:.digits$} [{a:.2}, {b:.2}]", e.value),
             (None, _) => format!("{:.digits$}", e.value),
         },
@@ -108,6 +112,11 @@ mod tests {
             "{md}"
         );
         let tex = latex_tasks(&rows);
-        assert!(tex.contains("lift & 0 & 50 & 0.992 {\\scriptsize [0.95, 1.00]} & 1.000 & 1 {\\scriptsize [0.00, 3.00]} & 0.004"), "{tex}");
+        assert!(
+            tex.contains(
+                "lift & 0 & 50 & 0.992 {\\scriptsize [0.95, 1.00]} & 1.000 & 1 {\\scriptsize [0, 3]} & 0.004"
+            ),
+            "{tex}"
+        );
     }
 }
