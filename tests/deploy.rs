@@ -124,6 +124,8 @@ fn correlation_job_reports_one_task_and_never_an_earlier_runs_files() {
     assert!(err.contains("gate failed: Pearson is undefined"), "{err}");
     let report = out.join("pusht/report.html");
     assert!(report.is_file(), "no report: {stdout}");
+    // rank's own last line names the report; the job's line repeats it per task.
+    assert!(stdout.contains(&format!("report: {}\n", report.display())), "{stdout}");
     assert!(stdout.contains(&format!("correlation report (pusht): {}", report.display())), "{stdout}");
     // The task table names the run: 2 policies x 2 episodes on the default seeds.
     let table = std::fs::read_to_string(out.join("tasks.md")).unwrap();

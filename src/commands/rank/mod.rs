@@ -209,17 +209,17 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     // The results are complete (the report can be made again from them with
     // `evalharness report`): a run this one replaced can go.
     out_dir.finish(true)?;
+    let mut html = None;
     if !a.no_report {
         if shards == 1 {
             rollouts(a, &dirs, &rows, &failed_names, &setup, &wm, &pool)?;
         }
-        let html = report::write_report(&a.out)?;
-        tracing::info!(report = %html.display(), "report written");
+        html = Some(report::write_report(&a.out)?);
     }
     if let Some((text, true)) = scene::scene_note(&res.policies) {
         tracing::warn!("{text}");
     }
-    summary::print(&res, &a.out);
+    summary::print(&res, &a.out, html.as_deref());
     summary::gates(a.min_pearson, a.max_inversions, &res)
 }
 

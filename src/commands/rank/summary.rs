@@ -98,8 +98,9 @@ fn write_csv(path: &Path, sorted: &[&EpisodeRow]) -> Result<()> {
     w.flush().with_context(|| format!("writing {}", path.display()))
 }
 
-/// The per-policy table and the agreement line (stdout carries results only).
-pub(super) fn print(res: &RankResults, out: &Path) {
+/// The per-policy table, the agreement line and where the results (and the report,
+/// when one was written) are (stdout carries results only).
+pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
     let or_nan = |v: Option<f64>| v.unwrap_or(f64::NAN);
     let scene = res.policies.iter().any(|p| p.world_model.block_area.is_some() || p.sim.block_area.is_some());
     if scene {
@@ -155,4 +156,7 @@ pub(super) fn print(res: &RankResults, out: &Path) {
         f(ag.mean_abs_error)
     );
     println!("results: {}", out.join("results.json").display());
+    if let Some(html) = report {
+        println!("report: {}", html.display());
+    }
 }
