@@ -470,7 +470,8 @@ pub struct CollectArgs {
     /// Lift and Can: keep stepping after the first success, up to the step limit (by
     /// default an episode ends at its first success), so that success lasts in the
     /// data: frames for a judge of success, and for a world model that must show it.
-    #[arg(long, conflicts_with = "policy")]
+    /// Also with `--policy`.
+    #[arg(long)]
     pub no_early_stop: bool,
     /// Output zarr folder (diffusion_policy / GPC replay-buffer layout).
     #[arg(long)]

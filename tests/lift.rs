@@ -1,6 +1,8 @@
 //! `simulate` and `collect` on robomimic Lift and Can: the experts succeed, outputs are
 //! byte-identical for any `--jobs`, and bad input is refused by name.
 
+use std::path::Path;
+
 use crate::util::{evalharness, expect_code, read_json, run, s, tree_bytes};
 
 fn simulate(out: &std::path::Path, policy: &str, jobs: &str) -> std::process::Output {
@@ -130,6 +132,37 @@ fn collect_no_early_stop_keeps_the_episode_going_after_success() {
     // Push-T episodes have no such switch.
     let res = run(&["collect", "--no-early-stop", "--episodes", "1", "--out", s(&dir.path().join("p"))]);
     let (_, stderr) = expect_code(&res, 2);
+    assert!(stderr.contains("--no-early-stop applies to Lift and Can"), "{stderr}");
+}
+
+#[test]
+fn collect_policy_no_early_stop_keeps_a_policys_episode_going_after_success() {
+    let dir = tempfile::tempdir().unwrap();
+    let policy = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/lift/policies/epoch-0060");
+    let collect = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let args = ["collect", "--scenario", "lift", "--policy", s(&policy), "--episodes", "1"];
+        let seeds = ["--seed-start", "2000000", "--max-steps", "80"];
+        expect_code(&run(&[&args[..], &seeds, extra, &["--out", s(&out)]].concat()), 0);
+        let (stdout, _) = expect_code(&run(&["dataset", "info", s(&out), "--json"]), 0);
+        let attrs = read_json(&out.join(".zattrs"));
+        (serde_json::from_str::<serde_json::Value>(&stdout).unwrap(), attrs)
+    };
+    // The shipped epoch 60 lifts the cube in about 57 steps: by default its episode ends with
+    // the action chunk that lifted it; with the flag it runs to the 80-step limit, a success.
+    let (stopped, attrs) = collect("stop.zarr", &[]);
+    let steps = stopped["steps"].as_u64().unwrap();
+    assert!((40..80).contains(&steps), "{stopped}");
+    assert_eq!(stopped["score"]["success_rate"], 1.0, "{stopped}");
+    assert_eq!(attrs["evalharness"]["no_early_stop"], false, "{attrs}");
+    let (kept, attrs) = collect("kept.zarr", &["--no-early-stop"]);
+    assert_eq!(kept["steps"], 80, "{kept}");
+    assert_eq!(kept["score"]["success_rate"], 1.0, "{kept}");
+    assert_eq!(attrs["evalharness"]["no_early_stop"], true, "{attrs}");
+    // Push-T has no such switch, with a policy either.
+    let pusht = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/pusht/policies/epoch-0001");
+    let args = ["collect", "--policy", s(&pusht), "--no-early-stop", "--episodes", "1"];
+    let (_, stderr) = expect_code(&run(&[&args[..], &["--out", s(&dir.path().join("p"))]].concat()), 2);
     assert!(stderr.contains("--no-early-stop applies to Lift and Can"), "{stderr}");
 }
 

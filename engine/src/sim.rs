@@ -43,7 +43,7 @@ pub fn sim_branch(
 ) -> Result<BranchOut, EngineError> {
     let Begin { name, n, size, kind, o, mut hist, mut rngs, mut track, mut rec } = start.begin(policy, s);
     let mut judge_err = vec![(0.0f64, 0usize); n];
-    let trajectories = start.trajectories;
+    let (trajectories, run_on) = (start.trajectories, start.run_on);
     let mut traj: Vec<Trajectory> = vec![Trajectory::default(); n];
     for (((t, env), judge), f) in track.iter_mut().zip(&start.envs).zip(&start.judges).zip(&start.first) {
         t.add(env.score(), &kind);
@@ -110,7 +110,9 @@ pub fn sim_branch(
         track.iter_mut().for_each(Track::end_chunk);
         timing.sim_s += ts.elapsed().as_secs_f64();
         steps += len;
-        active = still_active(&active, &track);
+        if !run_on {
+            active = still_active(&active, &track);
+        }
     }
     let rows = (0..n)
         .map(|i| {

@@ -70,6 +70,9 @@ pub struct Start {
     /// Simulator branch only: keep every step's observation, state, action and raw
     /// score (`collect --policy`).
     pub trajectories: bool,
+    /// Simulator branch only: keep stepping after success, up to the step limit
+    /// (`collect --policy --no-early-stop`, so that success lasts in the data).
+    pub run_on: bool,
 }
 
 /// One recorded simulator episode, step by step.
@@ -133,6 +136,7 @@ impl Start {
             seeds: seeds.to_vec(),
             record: false,
             trajectories: false,
+            run_on: false,
             envs,
         })
     }

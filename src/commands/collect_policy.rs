@@ -9,7 +9,8 @@
 //!
 //! Each checkpoint runs `--episodes` episodes from `--seed-start`, exactly as the
 //! simulator branch of `rank` (and `simulate --policy`) runs it: the same
-//! per-episode noise streams (master seed 0), action horizon and end at success.
+//! per-episode noise streams (master seed 0), action horizon and end at success
+//! (Lift and Can with `--no-early-stop`: at the step limit, so that success lasts).
 //! So the dataset is a pure function of the arguments, whatever `--jobs` is.
 //!
 //! Push-T episodes are written in Push-T's layout ([`super::collect`]); Lift and
@@ -92,6 +93,7 @@ fn roll_out(
         for batch in seeds.chunks(BATCH) {
             let mut start = Start::new(&name, batch, &setup)?;
             start.trajectories = true;
+            start.run_on = args.no_early_stop;
             let out = pool
                 .install(|| sim_branch(policy.as_ref(), start, &setup, &mut timing))
                 .with_context(|| format!("policy {name}"))?;
@@ -122,6 +124,9 @@ fn step_limit(args: &CollectArgs, default: usize) -> Result<usize> {
 /// Push-T: the dataset layout of `collect`'s scripted behaviours.
 fn pusht(args: &CollectArgs, dir: &Path, cfg: PushTConfig, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
+    if args.no_early_stop {
+        bail!("--no-early-stop applies to Lift and Can; Push-T episodes run to their step limit or success");
+    }
     let task = PushTTask::new(cfg.clone())?;
     let max_steps = step_limit(args, cfg.task.max_steps as usize)?;
     crate::output::check_apart(&args.out, &[("--policy", dir)])?;
@@ -167,7 +172,7 @@ fn arm_task<T: ArmEngine + 'static>(
     };
     let (episodes, checkpoints) = roll_out(args, dir, task, max_steps, &mut write, quiet)?;
     let (n, steps) = (episodes.len(), total_steps(&episodes));
-    let source = json!({"policy": dir, "checkpoints": checkpoints});
+    let source = json!({"policy": dir, "checkpoints": checkpoints, "no_early_stop": args.no_early_stop});
     let attrs = super::collect_arm::dataset_attrs(arm, c.seed_start, source, max_steps, episodes);
     let path = writer.finish(&attrs)?;
     println!(

@@ -55,19 +55,19 @@ fn origin_of(e: &serde_json::Value, episodes: Option<u64>) -> serde_json::Value 
         Some(name) if name != "pusht" => format!(" --scenario {name}"),
         _ => String::new(),
     };
+    let run_on = if e["no_early_stop"] == true { " --no-early-stop" } else { "" };
     if let Some(policy) = e["policy"].as_str() {
         // `collect --policy`: `--episodes` counts per checkpoint.
         let per = episodes / e["checkpoints"].as_array().map_or(1, |c| c.len().max(1) as u64);
         return json!({
             "command": format!(
-                "evalharness collect{scenario} --policy {policy} --episodes {per} --seed-start {} --max-steps {}",
+                "evalharness collect{scenario} --policy {policy} --episodes {per} --seed-start {} --max-steps {}{run_on}",
                 e["seed_start"], e["max_steps"]
             ),
             "checkpoints": e["checkpoints"],
             "evalharness_version": e["version"],
         });
     }
-    let run_on = if e["no_early_stop"] == true { " --no-early-stop" } else { "" };
     json!({
         "command": format!(
             "evalharness collect{scenario} --episodes {episodes} --seed-start {} --mix {} --noise {} --lag {} --max-steps {}{run_on}",
