@@ -9,11 +9,31 @@ use std::process::{Command, Output};
 
 use crate::util::{expect_code, results, run, s};
 
-/// Runs `deploy/slurm/<script>` with bash, the binary under test and `vars`.
-fn slurm(script: &str, vars: &[(&str, &str)], args: &[&str]) -> Output {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/slurm").join(script);
+/// Variables the scripts read, cleared first so that the caller's shell cannot leak into a run.
+const SCRIPT_VARS: [&str; 12] = [
+    "OUT",
+    "SHARDS",
+    "SCENARIO",
+    "POLICIES",
+    "WORLD_MODEL",
+    "JUDGE",
+    "EPISODES",
+    "MAX_STEPS",
+    "MIN_PEARSON",
+    "MAX_INVERSIONS",
+    "SLURM_ARRAY_TASK_ID",
+    "SLURM_ARRAY_TASK_COUNT",
+];
+
+/// Runs the script at `path` (from the repository root) with bash, the binary under test
+/// and `vars`.
+fn script(path: &str, vars: &[(&str, &str)], args: &[&str]) -> Output {
     let mut c = Command::new("bash");
-    c.arg(path).args(args).env_remove("RUST_LOG").env("NO_COLOR", "1");
+    c.arg(Path::new(env!("CARGO_MANIFEST_DIR")).join(path)).args(args);
+    c.env_remove("RUST_LOG").env("NO_COLOR", "1");
+    for k in SCRIPT_VARS {
+        c.env_remove(k);
+    }
     c.env("EVALHARNESS", env!("CARGO_BIN_EXE_evalharness"));
     for (k, v) in vars {
         c.env(k, v);
@@ -21,16 +41,27 @@ fn slurm(script: &str, vars: &[(&str, &str)], args: &[&str]) -> Output {
     c.output().expect("bash runs")
 }
 
+/// Runs `deploy/slurm/<name>`.
+fn slurm(name: &str, vars: &[(&str, &str)], args: &[&str]) -> Output {
+    script(&format!("deploy/slurm/{name}"), vars, args)
+}
+
+/// Copies of two shipped Push-T policies of different strength, in `dir/policies`.
+fn two_policies(dir: &Path) -> std::path::PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/pusht/policies");
+    let set = dir.join("policies");
+    for name in ["epoch-0001", "epoch-0045"] {
+        crate::util::copy_dir(&root.join(name), &set.join(name));
+    }
+    set
+}
+
 #[test]
 fn slurm_array_and_merge_equal_one_unsharded_run() {
     let tmp = tempfile::tempdir().unwrap();
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/pusht");
     // Two shipped policies of different strength, so the run has a correlation to merge.
-    let set = tmp.path().join("policies");
-    for name in ["epoch-0001", "epoch-0045"] {
-        crate::util::copy_dir(&root.join("policies").join(name), &set.join(name));
-    }
-    let wm = root.join("world_model");
+    let set = two_policies(tmp.path());
+    let wm = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/pusht/world_model");
     let tiny = ["--episodes", "4", "--max-steps", "8", "--batch", "1", "--bootstrap", "20"];
 
     // One machine.
@@ -77,38 +108,15 @@ fn slurm_array_and_merge_equal_one_unsharded_run() {
     assert_eq!(results(&merged), results(&single));
 }
 
-/// Runs `scripts/correlation.sh` with bash, the binary under test and `vars`.
+/// Runs CI's correlation job, `scripts/correlation.sh`.
 fn correlation(vars: &[(&str, &str)]) -> Output {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/correlation.sh");
-    let mut c = Command::new("bash");
-    c.arg(path).env_remove("RUST_LOG").env("NO_COLOR", "1");
-    c.env("EVALHARNESS", env!("CARGO_BIN_EXE_evalharness"));
-    for k in [
-        "SCENARIO",
-        "POLICIES",
-        "WORLD_MODEL",
-        "JUDGE",
-        "EPISODES",
-        "MAX_STEPS",
-        "MIN_PEARSON",
-        "MAX_INVERSIONS",
-    ] {
-        c.env_remove(k);
-    }
-    for (k, v) in vars {
-        c.env(k, v);
-    }
-    c.output().expect("bash runs")
+    script("scripts/correlation.sh", vars, &[])
 }
 
 #[test]
 fn correlation_job_reports_one_task_and_never_an_earlier_runs_files() {
     let tmp = tempfile::tempdir().unwrap();
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/pusht");
-    let set = tmp.path().join("policies");
-    for name in ["epoch-0001", "epoch-0045"] {
-        crate::util::copy_dir(&root.join("policies").join(name), &set.join(name));
-    }
+    let set = two_policies(tmp.path());
     let out = tmp.path().join("ci");
     let mut vars = vec![
         ("OUT", s(&out)),
