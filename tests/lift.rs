@@ -195,6 +195,15 @@ fn bad_lift_input_is_refused_by_name() {
     let res = run(&["simulate", "--scenario", "lift", "--policy", "teleop", "--out", o]);
     let (_, stderr) = expect_code(&res, 2);
     assert!(stderr.contains("expert, miss, drop, push, hesitate, random"), "{stderr}");
+    // Regression: a checkpoint folder that does not exist (yet) was called an unknown
+    // behaviour; it is named as a missing folder.
+    let missing = dir.path().join("run/epoch-0020");
+    let res = run(&["simulate", "--scenario", "can", "--policy", s(&missing), "--out", o]);
+    let (_, stderr) = expect_code(&res, 2);
+    assert!(
+        stderr.contains(&format!("--policy {}: no such checkpoint folder", missing.display())),
+        "{stderr}"
+    );
     // rank names every missing input at once (here the policies and the world model; the
     // judge too while none is shipped, which the Can test below checks).
     let nowhere = dir.path().join("no_world_model");

@@ -7,7 +7,7 @@
 use std::io::{BufWriter, Write};
 use std::process::ExitCode;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use serde_json::json;
 
 use super::episodes::{BehaviourKind, FrameSpec, Perturbation, Runner};
@@ -33,8 +33,16 @@ fn side_by_side_difference(frames: &[Vec<u8>], size: usize) -> f64 {
 
 /// Runs the command.
 pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
-    if std::path::Path::new(&args.policy).is_dir() {
+    let path = std::path::Path::new(&args.policy);
+    if path.is_dir() {
         return super::simulate_policy::run(args, quiet);
+    }
+    // Behaviour names have no path separator: one that does meant a checkpoint folder.
+    if args.policy.contains(std::path::MAIN_SEPARATOR) {
+        bail!(
+            "--policy {}: no such checkpoint folder (a folder, or a built-in behaviour's name)",
+            path.display()
+        );
     }
     let c = &args.common;
     let cfg =
