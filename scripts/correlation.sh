@@ -37,6 +37,11 @@ case $out in /*) where=$out ;; *) where=$(pwd)/$out ;; esac
 status=0
 runs=()
 
+# The CI size and gates of a shipped task: episodes, batch, min Pearson, max inversions.
+ci_size() {
+    case $1 in lift) echo "20 20 0.4 12" ;; *) echo "30 10 0.8 3" ;; esac
+}
+
 # rank_task TASK EPISODES BATCH MIN_PEARSON MAX_INVERSIONS [extra rank flags...]
 rank_task() {
     local task=$1 episodes=$2 batch=$3 min=$4 max=$5
@@ -62,13 +67,14 @@ if [ -n "${SCENARIO:-}${POLICIES:-}${WORLD_MODEL:-}${JUDGE:-}" ]; then
     [ -n "${JUDGE:-}" ] && extra+=(--judge "$JUDGE")
     [ -n "${MAX_STEPS:-}" ] && extra+=(--max-steps "$MAX_STEPS")
     task=${SCENARIO:-pusht}
-    # The shipped task's CI size (episodes, batch) and gates, unless set.
-    case $task in lift) size=(20 20 0.4 12) ;; *) size=(30 10 0.8 3) ;; esac
-    rank_task "$task" "${EPISODES:-${size[0]}}" "${size[1]}" "${MIN_PEARSON:-${size[2]}}" "${MAX_INVERSIONS:-${size[3]}}" \
+    read -r episodes batch min max <<<"$(ci_size "$task")"
+    rank_task "$task" "${EPISODES:-$episodes}" "$batch" "${MIN_PEARSON:-$min}" "${MAX_INVERSIONS:-$max}" \
         ${extra[@]+"${extra[@]}"}
 else
-    rank_task pusht 30 10 0.8 3
-    rank_task lift 20 20 0.4 12
+    for task in pusht lift; do
+        read -r episodes batch min max <<<"$(ci_size "$task")"
+        rank_task "$task" "$episodes" "$batch" "$min" "$max"
+    done
 fi
 
 if [ "${#runs[@]}" -gt 0 ]; then

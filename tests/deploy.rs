@@ -10,7 +10,7 @@ use std::process::{Command, Output};
 use crate::util::{expect_code, results, run, s};
 
 /// Variables the scripts read, cleared first so that the caller's shell cannot leak into a run.
-const SCRIPT_VARS: [&str; 12] = [
+const SCRIPT_VARS: [&str; 13] = [
     "OUT",
     "SHARDS",
     "SCENARIO",
@@ -23,6 +23,7 @@ const SCRIPT_VARS: [&str; 12] = [
     "MAX_INVERSIONS",
     "SLURM_ARRAY_TASK_ID",
     "SLURM_ARRAY_TASK_COUNT",
+    "SLURM_CPUS_PER_TASK",
 ];
 
 /// Runs the script at `path` (from the repository root) with bash, the binary under test

@@ -136,6 +136,18 @@ pub(super) fn with_source(
     json!({ "evalharness": e })
 }
 
+/// `--no-early-stop` on Push-T (`collect`, `collect --policy`, `simulate`): refused, since
+/// its episodes end at success or the step limit as gym-pusht's do.
+///
+/// # Errors
+/// When the flag is set.
+pub(super) fn refuse_run_on_for_pusht(no_early_stop: bool) -> Result<()> {
+    if no_early_stop {
+        bail!("--no-early-stop applies to Lift and Can; Push-T episodes run to their step limit or success");
+    }
+    Ok(())
+}
+
 /// Runs the command for the scripted behaviours (`--policy` runs [`super::collect_policy`]).
 pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
@@ -151,9 +163,7 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
             }
             scenarios::Scenario::PushT(cfg) => *cfg,
         };
-    if args.no_early_stop {
-        bail!("--no-early-stop applies to Lift and Can; Push-T episodes run to their step limit or success");
-    }
+    refuse_run_on_for_pusht(args.no_early_stop)?;
     let mix_text = args.mix.as_deref().unwrap_or(PUSHT_MIX);
     let mix = parse_mix(mix_text)?;
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };

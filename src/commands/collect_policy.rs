@@ -124,9 +124,7 @@ fn step_limit(args: &CollectArgs, default: usize) -> Result<usize> {
 /// Push-T: the dataset layout of `collect`'s scripted behaviours.
 fn pusht(args: &CollectArgs, dir: &Path, cfg: PushTConfig, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
-    if args.no_early_stop {
-        bail!("--no-early-stop applies to Lift and Can; Push-T episodes run to their step limit or success");
-    }
+    super::collect::refuse_run_on_for_pusht(args.no_early_stop)?;
     let task = PushTTask::new(cfg.clone())?;
     let max_steps = step_limit(args, cfg.task.max_steps as usize)?;
     crate::output::check_apart(&args.out, &[("--policy", dir)])?;

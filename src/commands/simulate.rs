@@ -57,11 +57,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
             }
             scenarios::Scenario::PushT(cfg) => *cfg,
         };
-    if args.no_early_stop {
-        anyhow::bail!(
-            "--no-early-stop applies to Lift and Can; Push-T episodes run to their step limit or success"
-        );
-    }
+    super::collect::refuse_run_on_for_pusht(args.no_early_stop)?;
     let kind = BehaviourKind::parse(&args.policy)?;
     if !(16..=1024).contains(&args.gif_size) {
         anyhow::bail!("--gif-size must be in 16..=1024, got {}", args.gif_size);

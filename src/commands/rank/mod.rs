@@ -209,13 +209,14 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     // The results are complete (the report can be made again from them with
     // `evalharness report`): a run this one replaced can go.
     out_dir.finish(true)?;
-    let mut html = None;
-    if !a.no_report {
+    let html = if a.no_report {
+        None
+    } else {
         if shards == 1 {
             rollouts(a, &dirs, &rows, &failed_names, &setup, &wm, &pool)?;
         }
-        html = Some(report::write_report(&a.out)?);
-    }
+        Some(report::write_report(&a.out)?)
+    };
     if let Some((text, true)) = scene::scene_note(&res.policies) {
         tracing::warn!("{text}");
     }
