@@ -2,51 +2,31 @@
 //! actions, a learned judge of success, diffusion policies that read the commanded
 //! pose, and `rank` on all three.
 
-use crate::util::{expect_code, read_json, run, s};
+use crate::util::{TinyArm, expect_code, read_json, run, s, tiny_arm_models};
 
 #[test]
 fn the_lift_pipeline_collects_trains_every_model_and_ranks() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     // 10 short episodes (every 10th is held out): no behaviour lifts the cube in 12 steps.
-    let data = dir.join("lift.zarr");
-    let collect =
-        ["collect", "--scenario", "lift", "--episodes", "10", "--seed-start", "0", "--max-steps", "12"];
-    expect_code(&run(&[&collect[..], &["--out", s(&data)]].concat()), 0);
-    let ae = dir.join("ae");
-    let args = ["train", "autoencoder", "--data", s(&data), "--out", s(&ae), "--steps", "1", "--batch", "2"];
-    expect_code(&run(&args), 0);
-    let wm = dir.join("wm");
-    let train = ["train", "world-model", "--data", s(&data), "--autoencoder", s(&ae), "--out", s(&wm)];
-    let tiny =
-        ["--steps", "1", "--base-channels", "16", "--contexts", "2", "--samples", "2", "--eval-every", "1"];
-    expect_code(&run(&[&train[..], &tiny[..]].concat()), 0);
+    let TinyArm { data, wm, judge, pol, judge_stdout } = tiny_arm_models(dir, "lift");
     // The model reads the task's 7 actions, each in robomimic's [-1, 1].
     let model = &read_json(&wm.join("config.json"))["model"];
     assert_eq!(model["unet"]["action_dim"], 7, "{model}");
     assert_eq!(model["actions"]["low"], serde_json::json!(vec![-1.0; 7]), "{model}");
     assert_eq!(model["actions"]["high"], serde_json::json!(vec![1.0; 7]), "{model}");
     // Action maps draw Push-T's 2-D targets: refused for Lift.
-    let maps = dir.join("wm_maps");
-    let args = [&train[..6], &["--out", s(&maps), "--action-maps"], &tiny[..]].concat();
-    let (_, err) = expect_code(&run(&args), 2);
+    let (ae, maps) = (dir.join("ae"), dir.join("wm_maps"));
+    let args = ["train", "world-model", "--data", s(&data), "--autoencoder", s(&ae), "--out", s(&maps)];
+    let (_, err) = expect_code(&run(&[&args[..], &["--steps", "1", "--action-maps"]].concat()), 2);
     assert!(err.contains("--action-maps"), "{err}");
     // A judge learns data/success (the label it finds), success above 0.5.
-    let judge = dir.join("judge");
-    let args = ["train", "judge", "--data", s(&data), "--out", s(&judge), "--steps", "2", "--batch", "4"];
-    let tiny = ["--encoder-width", "8", "--feature-dim", "8"];
-    let (stdout, _) = expect_code(&run(&[&args[..], &tiny[..]].concat()), 0);
-    assert!(stdout.contains("judge of success: held-out 12 frames (0 above 0.5)"), "{stdout}");
+    assert!(judge_stdout.contains("judge of success: held-out 12 frames (0 above 0.5)"), "{judge_stdout}");
     assert_eq!(read_json(&judge.join("judge.json"))["threshold"], 0.5);
 
     // Policies: 7-D actions and the 7-entry commanded pose, whose range starts at the
     // open gripper (−1) and nothing commanded (0); the encoder is pre-trained on the
     // object's, end effector's and fingers' positions.
-    let pol = dir.join("pol");
-    let args =
-        ["train", "policy", "--data", s(&data), "--out", s(&pol), "--epochs", "2", "--behaviour", "all"];
-    let tiny = ["--batch", "8", "--encoder-steps", "2", "--down-dims", "8,16", "--encoder-width", "8"];
-    expect_code(&run(&[&args[..], &tiny[..]].concat()), 0);
     let file = read_json(&pol.join("epoch-0002").join("policy.json"));
     assert_eq!(file["config"]["net"]["action_dim"], 7, "{file}");
     let proprio = &file["normalisation"]["agent_pos"];

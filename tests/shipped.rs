@@ -91,3 +91,32 @@ fn shipped_judges_carry_provenance_and_their_persistence() {
         }
     }
 }
+
+/// Every shipped policy set says how it was chosen (README.md), and each checkpoint names the
+/// training command, commit, seed and data it came from and the export that copied it.
+#[test]
+fn shipped_policy_sets_carry_their_choice_and_provenance() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
+    let sets: Vec<PathBuf> = std::fs::read_dir(&root)
+        .expect("checkpoints/ is shipped")
+        .map(|e| e.expect("entry").path().join("policies"))
+        .filter(|p| p.is_dir())
+        .collect();
+    for want in ["pusht", "lift", "can"] {
+        assert!(sets.iter().any(|s| s.ends_with(format!("{want}/policies"))), "{want}: {sets:?}");
+    }
+    for set in &sets {
+        assert!(set.join("README.md").is_file(), "{}: no README.md", set.display());
+        let checkpoints: Vec<PathBuf> =
+            std::fs::read_dir(set).unwrap().map(|e| e.unwrap().path()).filter(|p| p.is_dir()).collect();
+        assert!(checkpoints.len() >= 7, "{}: {} checkpoints", set.display(), checkpoints.len());
+        for c in &checkpoints {
+            let prov = &read_json(&c.join("policy.json"))["provenance"];
+            for key in ["command", "commit", "seed", "data", "exported"] {
+                assert!(!prov[key].is_null(), "{}: provenance has no \"{key}\"", c.display());
+            }
+            assert!(prov["command"].as_str().unwrap().contains("train policy"), "{}", c.display());
+            assert!(c.join("model.bpk").is_file(), "{}: no model.bpk", c.display());
+        }
+    }
+}

@@ -1,6 +1,7 @@
 //! Integration tests: drive the real `evalharness` binary on tiny inputs.
 
 mod agreement;
+mod can_models;
 mod dataset;
 mod deploy;
 mod docs;

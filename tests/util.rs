@@ -90,3 +90,44 @@ pub fn scenario_variant(dir: &Path, name: &str, from: &str, to: &str) -> std::pa
     std::fs::write(&path, shipped.replace(from, to)).expect("writable temp dir");
     path
 }
+
+/// The tiny models of a robosuite task that its pipeline tests rank with.
+pub struct TinyArm {
+    /// 10 episodes of the task's default mix, 12 steps each.
+    pub data: std::path::PathBuf,
+    /// A world model of one training step, in the latents of `dir/ae`.
+    pub wm: std::path::PathBuf,
+    /// A judge of success of two training steps.
+    pub judge: std::path::PathBuf,
+    /// A folder of two policy checkpoints (`epoch-0001`, `epoch-0002`).
+    pub pol: std::path::PathBuf,
+    /// What `train judge` printed.
+    pub judge_stdout: String,
+}
+
+/// Collects 10 × 12 steps of `scenario` under `dir` and trains every model on them
+/// at tiny settings, each command expected to succeed.
+pub fn tiny_arm_models(dir: &Path, scenario: &str) -> TinyArm {
+    let data = dir.join(format!("{scenario}.zarr"));
+    let collect =
+        ["collect", "--scenario", scenario, "--episodes", "10", "--seed-start", "0", "--max-steps", "12"];
+    expect_code(&run(&[&collect[..], &["--out", s(&data)]].concat()), 0);
+    let ae = dir.join("ae");
+    let args = ["train", "autoencoder", "--data", s(&data), "--out", s(&ae), "--steps", "1", "--batch", "2"];
+    expect_code(&run(&args), 0);
+    let wm = dir.join("wm");
+    let train = ["train", "world-model", "--data", s(&data), "--autoencoder", s(&ae), "--out", s(&wm)];
+    let tiny =
+        ["--steps", "1", "--base-channels", "16", "--contexts", "2", "--samples", "2", "--eval-every", "1"];
+    expect_code(&run(&[&train[..], &tiny[..]].concat()), 0);
+    let judge = dir.join("judge");
+    let args = ["train", "judge", "--data", s(&data), "--out", s(&judge), "--steps", "2", "--batch", "4"];
+    let tiny = ["--encoder-width", "8", "--feature-dim", "8"];
+    let (judge_stdout, _) = expect_code(&run(&[&args[..], &tiny[..]].concat()), 0);
+    let pol = dir.join("pol");
+    let args =
+        ["train", "policy", "--data", s(&data), "--out", s(&pol), "--epochs", "2", "--behaviour", "all"];
+    let tiny = ["--batch", "8", "--encoder-steps", "2", "--down-dims", "8,16", "--encoder-width", "8"];
+    expect_code(&run(&[&args[..], &tiny[..]].concat()), 0);
+    TinyArm { data, wm, judge, pol, judge_stdout }
+}

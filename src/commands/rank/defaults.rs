@@ -160,12 +160,15 @@ mod tests {
     }
 
     #[test]
-    fn the_shipped_lift_defaults_are_fifty_episodes_of_150_steps() {
-        let task = scenarios::load_task("lift").expect("robosuite assets (scripts/setup.sh)");
+    fn the_shipped_lift_and_can_defaults_are_fifty_episodes_cut_short() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
-        let r = resolve(&args(&["--scenario", "lift"]), task.as_ref(), &root).unwrap();
-        // checkpoints/lift/rank.toml: the paper's 50 seeds per policy, episodes cut at 150
-        // steps instead of robomimic's 400.
-        assert_eq!((r.episodes, r.max_steps, r.policies), (50, 150, root.join("lift/policies")));
+        // checkpoints/<task>/rank.toml: the paper's 50 seeds per policy, episodes cut at 150
+        // (Lift) and 250 (Can) steps instead of robomimic's 400.
+        for (name, steps) in [("lift", 150), ("can", 250)] {
+            let task = scenarios::load_task(name).expect("robosuite assets (scripts/setup.sh)");
+            let r = resolve(&args(&["--scenario", name]), task.as_ref(), &root).unwrap();
+            let want = (50, steps, root.join(name).join("policies"));
+            assert_eq!((r.episodes, r.max_steps, r.policies), want, "{name}");
+        }
     }
 }

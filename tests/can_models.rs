@@ -1,0 +1,48 @@
+//! The Can pipeline on tiny settings, as a user runs it: collect, every model
+//! trained on the data, `collect --policy` for post-training rollouts, `rank
+//! --scenario can` with the models, and the table of tasks over the run.
+
+use crate::util::{TinyArm, expect_code, read_json, run, s, tiny_arm_models};
+
+#[test]
+fn the_can_pipeline_collects_trains_every_model_and_ranks() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    // 10 episodes of 12 steps: nothing reaches the target bin that fast.
+    let TinyArm { data, wm, judge, pol, judge_stdout } = tiny_arm_models(dir, "can");
+    let attrs = read_json(&data.join(".zattrs"));
+    assert_eq!(attrs["evalharness"]["scenario"], "can", "{attrs}");
+    assert!(judge_stdout.contains("(0 above 0.5)"), "{judge_stdout}");
+    // The world model reads Can's 7-D OSC_POSE actions.
+    assert_eq!(read_json(&wm.join("config.json"))["model"]["unet"]["action_dim"], 7);
+
+    // Rollouts of the checkpoints, run on past the step limit's successes, in Can's layout.
+    let col = dir.join("rollouts.zarr");
+    let args = ["collect", "--scenario", "can", "--policy", s(&pol), "--episodes", "1", "--max-steps", "3"];
+    let more = ["--no-early-stop", "--out", s(&col)];
+    let (stdout, _) = expect_code(&run(&[&args[..], &more[..]].concat()), 0);
+    assert!(stdout.contains("can dataset: 2 episodes of 2 checkpoint(s), 6 steps"), "{stdout}");
+    let attrs = read_json(&col.join(".zattrs"));
+    assert_eq!(attrs["evalharness"]["no_early_stop"], true, "{attrs}");
+
+    // rank both epochs in both branches: 2 policies × 2 episodes of 4 steps.
+    let out = dir.join("rank");
+    let args = ["rank", "--scenario", "can", "--world-model", s(&wm), "--judge", s(&judge)];
+    let more = ["--episodes", "2", "--max-steps", "4", "--no-report", "--policies", s(&pol)];
+    let (stdout, _) = expect_code(&run(&[&args[..], &more[..], &["--out", s(&out)]].concat()), 0);
+    assert!(stdout.contains("MuJoCo success"), "{stdout}");
+    let res = read_json(&out.join("results.json"));
+    assert_eq!(res["policies"].as_array().map(Vec::len), Some(2), "{res}");
+    assert_eq!(res["failed_policies"].as_array().map(Vec::len), Some(0), "{res}");
+    // Nothing reaches the target bin in 4 MuJoCo steps; the imagined branch, read by the
+    // judge, gives a rate over both episodes.
+    for p in res["policies"].as_array().into_iter().flatten() {
+        assert_eq!(p["sim"]["success_rate"].as_f64(), Some(0.0), "{p}");
+        let imagined = p["world_model"]["success_rate"].as_f64().unwrap_or(-1.0);
+        assert!([0.0, 0.5, 1.0].contains(&imagined), "{p}");
+    }
+    assert_eq!(res["scenario"], "can", "{res}");
+    // The table of tasks reads the run: Can, 2 policies × 2 episodes from seed 100000.
+    let (md, _) = expect_code(&run(&["tasks", s(&out)]), 0);
+    assert!(md.contains("| can | 2 × 2 |") && md.contains("| 100000–100001 |"), "{md}");
+}
