@@ -251,10 +251,14 @@ fn the_can_expert_places_the_can_and_any_jobs_gives_the_same_bytes() {
     let first: serde_json::Value = serde_json::from_str(lines.lines().next().unwrap()).unwrap();
     let y = first["state"][1].as_f64().unwrap();
     assert!((-0.41..=-0.09).contains(&y), "{y}");
-    // rank needs a judge of imagined Can frames, and says so.
-    let res = run(&["rank", "--scenario", "can", "--policies", one.to_str().unwrap(), "--out", "unused"]);
+    // rank needs a world model of Can; without one it names the missing input (the shipped
+    // Can judge is found).
+    let nowhere = dir.path().join("no_world_model");
+    let args = ["rank", "--scenario", "can", "--policies", s(&one), "--world-model", s(&nowhere)];
+    let res = run(&[&args[..], &["--out", "unused"]].concat());
     let (_, stderr) = expect_code(&res, 2);
-    assert!(stderr.contains("no hand-written judge") && stderr.contains("--judge"), "{stderr}");
+    assert!(stderr.contains("world model: ") && stderr.contains("no_world_model"), "{stderr}");
+    assert!(!stderr.contains("judge: "), "{stderr}");
 }
 
 #[test]
