@@ -62,17 +62,26 @@ fn shipped_models_carry_provenance_and_find_their_autoencoder() {
     }
 }
 
+/// `checkpoints/<task>/<name>` of every task that ships that folder.
+fn every_tasks(name: &str) -> Vec<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(&root)
+        .expect("checkpoints/ is shipped")
+        .map(|e| e.expect("entry").path().join(name))
+        .filter(|p| p.is_dir())
+        .collect();
+    dirs.sort();
+    dirs
+}
+
 /// Every shipped judge folder names how it was made and how its persistence was chosen,
 /// and a learned one has its weights.
 #[test]
 fn shipped_judges_carry_provenance_and_their_persistence() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
-    let judges: Vec<PathBuf> = std::fs::read_dir(&root)
-        .expect("checkpoints/ is shipped")
-        .map(|e| e.expect("entry").path().join("judge"))
-        .filter(|p| p.is_dir())
-        .collect();
-    assert!(judges.iter().any(|j| j.ends_with("lift/judge")), "{judges:?}");
+    let judges = every_tasks("judge");
+    for want in ["lift", "can"] {
+        assert!(judges.iter().any(|j| j.ends_with(format!("{want}/judge"))), "{want}: {judges:?}");
+    }
     for dir in &judges {
         let file = read_json(&dir.join("judge.json"));
         let k = file["persist_frames"].as_u64().unwrap_or(0);
@@ -96,12 +105,7 @@ fn shipped_judges_carry_provenance_and_their_persistence() {
 /// training command, commit, seed and data it came from and the export that copied it.
 #[test]
 fn shipped_policy_sets_carry_their_choice_and_provenance() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
-    let sets: Vec<PathBuf> = std::fs::read_dir(&root)
-        .expect("checkpoints/ is shipped")
-        .map(|e| e.expect("entry").path().join("policies"))
-        .filter(|p| p.is_dir())
-        .collect();
+    let sets = every_tasks("policies");
     for want in ["pusht", "lift", "can"] {
         assert!(sets.iter().any(|s| s.ends_with(format!("{want}/policies"))), "{want}: {sets:?}");
     }
