@@ -9,7 +9,7 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     // 10 episodes of 12 steps: nothing reaches the target bin that fast.
-    let TinyArm { data, wm, judge, pol, judge_stdout } = tiny_arm_models(dir, "can");
+    let TinyArm { data, wm, judge, pol, judge_stdout, .. } = tiny_arm_models(dir, "can");
     let attrs = read_json(&data.join(".zattrs"));
     assert_eq!(attrs["evalharness"]["scenario"], "can", "{attrs}");
     assert!(judge_stdout.contains("(0 above 0.5)"), "{judge_stdout}");

@@ -204,8 +204,8 @@ fn bad_lift_input_is_refused_by_name() {
         stderr.contains(&format!("--policy {}: no such checkpoint folder", missing.display())),
         "{stderr}"
     );
-    // rank names every missing input at once (here the policies and the world model; the
-    // judge too while none is shipped, which the Can test below checks).
+    // rank names every missing input at once (here the policies and the world model; a
+    // missing judge is named too, as the rank defaults' unit test checks).
     let nowhere = dir.path().join("no_world_model");
     let res = run(&["rank", "--scenario", "lift", "--policies", o, "--world-model", s(&nowhere), "--out", o]);
     let (_, stderr) = expect_code(&res, 2);

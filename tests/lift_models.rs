@@ -9,14 +9,14 @@ fn the_lift_pipeline_collects_trains_every_model_and_ranks() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     // 10 short episodes (every 10th is held out): no behaviour lifts the cube in 12 steps.
-    let TinyArm { data, wm, judge, pol, judge_stdout } = tiny_arm_models(dir, "lift");
+    let TinyArm { data, ae, wm, judge, pol, judge_stdout } = tiny_arm_models(dir, "lift");
     // The model reads the task's 7 actions, each in robomimic's [-1, 1].
     let model = &read_json(&wm.join("config.json"))["model"];
     assert_eq!(model["unet"]["action_dim"], 7, "{model}");
     assert_eq!(model["actions"]["low"], serde_json::json!(vec![-1.0; 7]), "{model}");
     assert_eq!(model["actions"]["high"], serde_json::json!(vec![1.0; 7]), "{model}");
     // Action maps draw Push-T's 2-D targets: refused for Lift.
-    let (ae, maps) = (dir.join("ae"), dir.join("wm_maps"));
+    let maps = dir.join("wm_maps");
     let args = ["train", "world-model", "--data", s(&data), "--autoencoder", s(&ae), "--out", s(&maps)];
     let (_, err) = expect_code(&run(&[&args[..], &["--steps", "1", "--action-maps"]].concat()), 2);
     assert!(err.contains("--action-maps"), "{err}");

@@ -7,22 +7,23 @@ use std::path::{Path, PathBuf};
 
 use crate::util::read_json;
 
-/// The shipped autoencoder and world-model folders of every task.
-fn shipped_models() -> Vec<PathBuf> {
+/// The folders under every task's `checkpoints/<task>/` whose name `keep` accepts, sorted.
+fn shipped(keep: impl Fn(&str) -> bool) -> Vec<PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
     let mut dirs: Vec<PathBuf> = std::fs::read_dir(&root)
         .expect("checkpoints/ is shipped")
         .map(|e| e.expect("entry").path())
         .filter(|p| p.is_dir())
         .flat_map(|task| std::fs::read_dir(task).expect("a task folder").map(|e| e.expect("entry").path()))
-        .filter(|p| {
-            p.file_name()
-                .and_then(|n| n.to_str())
-                .is_some_and(|n| n == "autoencoder" || n.starts_with("world_model"))
-        })
+        .filter(|p| p.file_name().and_then(|n| n.to_str()).is_some_and(&keep))
         .collect();
     dirs.sort();
     dirs
+}
+
+/// The shipped autoencoder and world-model folders of every task.
+fn shipped_models() -> Vec<PathBuf> {
+    shipped(|n| n == "autoencoder" || n.starts_with("world_model"))
 }
 
 #[test]
@@ -62,23 +63,11 @@ fn shipped_models_carry_provenance_and_find_their_autoencoder() {
     }
 }
 
-/// `checkpoints/<task>/<name>` of every task that ships that folder.
-fn every_tasks(name: &str) -> Vec<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
-    let mut dirs: Vec<PathBuf> = std::fs::read_dir(&root)
-        .expect("checkpoints/ is shipped")
-        .map(|e| e.expect("entry").path().join(name))
-        .filter(|p| p.is_dir())
-        .collect();
-    dirs.sort();
-    dirs
-}
-
 /// Every shipped judge folder names how it was made and how its persistence was chosen,
 /// and a learned one has its weights.
 #[test]
 fn shipped_judges_carry_provenance_and_their_persistence() {
-    let judges = every_tasks("judge");
+    let judges = shipped(|n| n == "judge");
     for want in ["lift", "can"] {
         assert!(judges.iter().any(|j| j.ends_with(format!("{want}/judge"))), "{want}: {judges:?}");
     }
@@ -102,10 +91,11 @@ fn shipped_judges_carry_provenance_and_their_persistence() {
 }
 
 /// Every shipped policy set says how it was chosen (README.md), and each checkpoint names the
-/// training command, commit, seed and data it came from and the export that copied it.
+/// training command, commit, seed and data it came from, the export that copied it, and its
+/// measured MuJoCo score (`provenance.json`).
 #[test]
 fn shipped_policy_sets_carry_their_choice_and_provenance() {
-    let sets = every_tasks("policies");
+    let sets = shipped(|n| n == "policies");
     for want in ["pusht", "lift", "can"] {
         assert!(sets.iter().any(|s| s.ends_with(format!("{want}/policies"))), "{want}: {sets:?}");
     }
@@ -121,6 +111,10 @@ fn shipped_policy_sets_carry_their_choice_and_provenance() {
             }
             assert!(prov["command"].as_str().unwrap().contains("train policy"), "{}", c.display());
             assert!(c.join("model.bpk").is_file(), "{}: no model.bpk", c.display());
+            // The MuJoCo measurement of the set, by `simulate --record-scores`.
+            let score = &read_json(&c.join("provenance.json"))["mujoco_score"];
+            let how = score["measured_with"].as_str().unwrap_or_default();
+            assert!(how.contains("--record-scores") && score["success_rate"].is_number(), "{}", c.display());
         }
     }
 }

@@ -95,7 +95,9 @@ pub fn scenario_variant(dir: &Path, name: &str, from: &str, to: &str) -> std::pa
 pub struct TinyArm {
     /// 10 episodes of the task's default mix, 12 steps each.
     pub data: std::path::PathBuf,
-    /// A world model of one training step, in the latents of `dir/ae`.
+    /// An autoencoder of one training step.
+    pub ae: std::path::PathBuf,
+    /// A world model of one training step, in the latents of `ae`.
     pub wm: std::path::PathBuf,
     /// A judge of success of two training steps.
     pub judge: std::path::PathBuf,
@@ -129,5 +131,5 @@ pub fn tiny_arm_models(dir: &Path, scenario: &str) -> TinyArm {
         ["train", "policy", "--data", s(&data), "--out", s(&pol), "--epochs", "2", "--behaviour", "all"];
     let tiny = ["--batch", "8", "--encoder-steps", "2", "--down-dims", "8,16", "--encoder-width", "8"];
     expect_code(&run(&[&args[..], &tiny[..]].concat()), 0);
-    TinyArm { data, wm, judge, pol, judge_stdout }
+    TinyArm { data, ae, wm, judge, pol, judge_stdout }
 }
