@@ -33,7 +33,8 @@ fn shipped_models_carry_provenance_and_find_their_autoencoder() {
     let names: Vec<String> =
         dirs.iter().map(|d| d.strip_prefix(&root).unwrap().to_string_lossy().into_owned()).collect();
     let pusht = ["autoencoder", "world_model", "world_model_diffusion", "world_model_mse", "world_model_sf"];
-    for want in pusht.map(|m| format!("pusht/{m}")).into_iter().chain(["lift/autoencoder".to_string()]) {
+    let arms = ["lift/autoencoder", "lift/world_model", "can/autoencoder", "can/world_model"];
+    for want in pusht.map(|m| format!("pusht/{m}")).into_iter().chain(arms.map(String::from)) {
         assert!(names.contains(&want), "checkpoints/{want} missing from {names:?}");
     }
     for dir in &dirs {

@@ -160,7 +160,7 @@ mod tests {
     }
 
     #[test]
-    fn the_shipped_lift_and_can_defaults_are_fifty_episodes_cut_short() {
+    fn the_shipped_lift_and_can_defaults_are_fifty_episodes_cut_short_with_every_input() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
         // checkpoints/<task>/rank.toml: the paper's 50 seeds per policy, episodes cut at 150
         // (Lift) and 250 (Can) steps instead of robomimic's 400.
@@ -168,7 +168,9 @@ mod tests {
             let task = scenarios::load_task(name).expect("robosuite assets (scripts/setup.sh)");
             let r = resolve(&args(&["--scenario", name]), task.as_ref(), &root).unwrap();
             let want = (50, steps, root.join(name).join("policies"));
-            assert_eq!((r.episodes, r.max_steps, r.policies), want, "{name}");
+            assert_eq!((r.episodes, r.max_steps, r.policies.clone()), want, "{name}");
+            // Every input `rank --scenario NAME` needs is shipped: policies, world model, judge.
+            assert_eq!(r.missing(name), Vec::<String>::new(), "{name}");
         }
     }
 }
