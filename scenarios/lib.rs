@@ -101,19 +101,37 @@ fn file_names(path: &std::path::Path) -> Result<Option<String>, ScenarioError> {
         .and_then(|t| t.get("name").and_then(|n| n.as_str().map(str::to_string))))
 }
 
-/// Routes MuJoCo's warnings and messages to the `log` crate (and so to the
-/// program's `tracing` subscriber) instead of MuJoCo's default: printing to the
-/// console and appending to `MUJOCO_LOG.TXT` in the working directory.
+/// Prepares the process for MuJoCo; call it once at the start of `main`, before
+/// any other thread exists.
 ///
-/// Call once at the start of `main`, before any thread uses MuJoCo.
-pub fn route_mujoco_logs() {
+/// - Routes MuJoCo's warnings and messages to the `log` crate (and so to the
+///   program's `tracing` subscriber) instead of MuJoCo's default: printing to the
+///   console and appending to `MUJOCO_LOG.TXT` in the working directory.
+/// - Sets `LP_NUM_THREADS=0` unless the environment sets it: Mesa's software
+///   renderer (llvmpipe, what MuJoCo's offscreen renderer runs on without a GPU)
+///   then rasterises in the rendering thread instead of in helper threads of its
+///   own. With its helper threads, Mesa 22.3's llvmpipe crashed three times in 18
+///   hours of rendering runs on one of this project's machines, each a segmentation fault
+///   while it searched a scene's list of referenced resources
+///   (`lp_scene_is_resource_referenced`) that its rasteriser threads were
+///   changing (BENCHMARKS.md, 2026-11-27, "the Can headline"). The frames are the
+///   same bytes either way, and each worker of `rank` and `simulate` already
+///   renders on its own core.
+pub fn init_mujoco() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
+        let set_lp_threads = std::env::var_os("LP_NUM_THREADS").is_none();
         // SAFETY: called from `main` before any other thread exists, so no thread
-        // uses MuJoCo while the handler is replaced (mujoco-rs's requirement).
+        // uses MuJoCo while its message handler is replaced (mujoco-rs's
+        // requirement), and no thread reads the environment while it is changed
+        // (`set_var`'s requirement); Mesa reads the variable later, when the first
+        // renderer opens its EGL display.
         #[allow(unsafe_code)]
         unsafe {
-            mujoco_rs::prelude::install_logging_hook()
+            mujoco_rs::prelude::install_logging_hook();
+            if set_lp_threads {
+                std::env::set_var("LP_NUM_THREADS", "0");
+            }
         };
     });
 }

@@ -3,7 +3,7 @@
 # runs it for users: gated `rank` runs with their full reports, then the table of tasks.
 #
 # By default it ranks the shipped checkpoints of each task that ships them, each into
-# $OUT/<task> (OUT defaults to ci-report), about 7 minutes on two cores with the test build:
+# $OUT/<task> (OUT defaults to ci-report), about 15 minutes on two cores with the test build:
 # - Push-T: 7 policies × 30 episodes of the full 300 steps (the default run has 100), gated at
 #   Pearson 0.8 and 3 inversions. On three seed ranges no model was chosen on, this size came
 #   within 0.1 of the full run's Pearson (BENCHMARKS.md, "Current numbers"). About 3 minutes.
@@ -11,11 +11,14 @@
 #   Pearson 0.4 and 12 inversions of 36 pairs (a random order has 18 on average). On three
 #   sizing ranges it read Pearson 0.70, 0.56 and 0.79 (5, 8 and 3 inversions), against the
 #   50-episode headline's 0.77 and 4. About 4 minutes.
+# - Can: 9 policies × 20 episodes of 250 steps (the default run has 50), gated at Pearson 0.3
+#   and 13 inversions of 36. On two sizing ranges it read Pearson 0.45 and 0.77 (9 and 2
+#   inversions), against the 50-episode headline's 0.71 and 7. About 7 minutes.
 # Then `evalharness tasks` writes the side-by-side table ($OUT/tasks.md, $OUT/tasks.tex).
 #
 # To rank your own checkpoints instead, set SCENARIO (default pusht) and any of POLICIES,
 # WORLD_MODEL, JUDGE, EPISODES, MAX_STEPS, MIN_PEARSON and MAX_INVERSIONS: the job then runs
-# that one task into $OUT/<scenario>, with the size and gates above for pusht and lift unless
+# that one task into $OUT/<scenario>, with the size and gates above for pusht, lift and can unless
 # set.
 #
 # It runs $EVALHARNESS if set, else the release binary when there is one (scripts/setup.sh
@@ -39,7 +42,7 @@ runs=()
 
 # The CI size and gates of a shipped task: episodes, batch, min Pearson, max inversions.
 ci_size() {
-    case $1 in lift) echo "20 20 0.4 12" ;; *) echo "30 10 0.8 3" ;; esac
+    case $1 in lift) echo "20 20 0.4 12" ;; can) echo "20 20 0.3 13" ;; *) echo "30 10 0.8 3" ;; esac
 }
 
 # rank_task TASK EPISODES BATCH MIN_PEARSON MAX_INVERSIONS [extra rank flags...]
@@ -49,8 +52,16 @@ rank_task() {
     local name rc=0
     name=$(basename "$task" .toml)
     local dir="$out/$name"
-    "$bin" rank --scenario "$task" --episodes "$episodes" --batch "$batch" --bootstrap 1000 \
-        --min-pearson "$min" --max-inversions "$max" --out "$dir" --force "$@" || rc=$?
+    local run=("$bin" rank --scenario "$task" --episodes "$episodes" --batch "$batch" --bootstrap 1000
+        --min-pearson "$min" --max-inversions "$max" --out "$dir")
+    "${run[@]}" --force "$@" || rc=$?
+    # Killed by a signal (exit 128 + n; a crash inside the system's GL driver, say): the
+    # finished batches are saved, so one `--resume` completes the same run.
+    if [ "$rc" -ge 128 ]; then
+        echo "correlation.sh: rank $name ended with exit $rc; resuming it once" >&2
+        rc=0
+        "${run[@]}" --resume "$@" || rc=$?
+    fi
     [ "$rc" -gt "$status" ] && status=$rc
     # A run that ended in an error (2) may have left an earlier run's files: not reported.
     if [ "$rc" -le 1 ] && [ -f "$dir/results.json" ]; then
@@ -71,7 +82,7 @@ if [ -n "${SCENARIO:-}${POLICIES:-}${WORLD_MODEL:-}${JUDGE:-}" ]; then
     rank_task "$task" "${EPISODES:-$episodes}" "$batch" "${MIN_PEARSON:-$min}" "${MAX_INVERSIONS:-$max}" \
         ${extra[@]+"${extra[@]}"}
 else
-    for task in pusht lift; do
+    for task in pusht lift can; do
         read -r episodes batch min max <<<"$(ci_size "$task")"
         rank_task "$task" "$episodes" "$batch" "$min" "$max"
     done

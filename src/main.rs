@@ -21,7 +21,7 @@ use clap::Parser;
 fn main() -> ExitCode {
     let args = cli::Cli::parse();
     init_logging(args.verbose, args.quiet);
-    scenarios::route_mujoco_logs();
+    scenarios::init_mujoco();
     // `evalharness dataset info X | head -1`: once the reader is gone, `println!`
     // panics on the broken pipe. Like ripgrep, exit quietly (0) instead: no panic
     // message, and the unwinding still runs every guard's clean-up.

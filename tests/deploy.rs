@@ -114,19 +114,25 @@ fn correlation(vars: &[(&str, &str)]) -> Output {
     script("scripts/correlation.sh", vars, &[])
 }
 
+/// The job on `set` into `out`: 2 episodes of 8 steps per policy, gated at Pearson −1 and
+/// 1 inversion.
+fn tiny_job<'a>(out: &'a Path, set: &'a Path) -> Vec<(&'static str, &'a str)> {
+    vec![
+        ("OUT", s(out)),
+        ("POLICIES", s(set)),
+        ("EPISODES", "2"),
+        ("MAX_STEPS", "8"),
+        ("MIN_PEARSON", "-1"),
+        ("MAX_INVERSIONS", "1"),
+    ]
+}
+
 #[test]
 fn correlation_job_reports_one_task_and_never_an_earlier_runs_files() {
     let tmp = tempfile::tempdir().unwrap();
     let set = two_policies(tmp.path());
     let out = tmp.path().join("ci");
-    let mut vars = vec![
-        ("OUT", s(&out)),
-        ("POLICIES", s(&set)),
-        ("EPISODES", "2"),
-        ("MAX_STEPS", "8"),
-        ("MIN_PEARSON", "-1"),
-        ("MAX_INVERSIONS", "1"),
-    ];
+    let mut vars = tiny_job(&out, &set);
     // In 8 steps neither policy scores in MuJoCo, so Pearson is undefined and the gate fails:
     // exit 1, with the report and the table written all the same.
     let (stdout, err) = expect_code(&correlation(&vars), 1);
@@ -154,4 +160,32 @@ fn correlation_job_reports_one_task_and_never_an_earlier_runs_files() {
     let (_, err) =
         expect_code(&correlation(&[("EVALHARNESS", "/nonexistent/evalharness"), ("OUT", s(&out))]), 2);
     assert!(err.contains("EVALHARNESS=/nonexistent/evalharness"), "{err}");
+}
+
+#[test]
+fn correlation_job_resumes_a_rank_that_a_signal_killed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let set = two_policies(tmp.path());
+    let out = tmp.path().join("ci");
+    // A binary that dies of SIGSEGV after its first run (as a crash inside Mesa's renderer
+    // killed `rank` on 2026-11-27), then behaves: the job must resume that run once.
+    let mark = tmp.path().join("crashed");
+    let wrapper = tmp.path().join("crashing-evalharness");
+    let body = format!(
+        "#!/bin/sh\nif [ ! -e '{mark}' ]; then touch '{mark}'; '{real}' \"$@\"; kill -SEGV $$; fi\n\
+         exec '{real}' \"$@\"\n",
+        mark = mark.display(),
+        real = env!("CARGO_BIN_EXE_evalharness"),
+    );
+    std::fs::write(&wrapper, body).unwrap();
+    std::fs::set_permissions(&wrapper, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let mut vars = tiny_job(&out, &set);
+    vars.push(("EVALHARNESS", s(&wrapper)));
+    // 128 + 11 (SIGSEGV); the resumed run ends as a straight one does (the undefined Pearson
+    // of 8 steps fails the gate: exit 1) and is reported.
+    let (stdout, err) = expect_code(&correlation(&vars), 1);
+    assert!(mark.exists());
+    assert!(err.contains("rank pusht ended with exit 139; resuming it once"), "{err}");
+    assert!(stdout.contains("correlation report (pusht)"), "{stdout}");
+    assert_eq!(std::fs::read_to_string(out.join("pusht/episodes.jsonl")).unwrap().lines().count(), 8);
 }
