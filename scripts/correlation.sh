@@ -3,7 +3,7 @@
 # runs it for users: gated `rank` runs with their full reports, then the table of tasks.
 #
 # By default it ranks the shipped checkpoints of each task that ships them, each into
-# $OUT/<task> (OUT defaults to ci-report), about 15 minutes on two cores with the test build:
+# $OUT/<task> (OUT defaults to ci-report), about 16 minutes on two cores with the test build:
 # - Push-T: 7 policies × 30 episodes of the full 300 steps (the default run has 100), gated at
 #   Pearson 0.8 and 3 inversions. On three seed ranges no model was chosen on, this size came
 #   within 0.1 of the full run's Pearson (BENCHMARKS.md, "Current numbers"). About 3 minutes.
