@@ -240,6 +240,12 @@ pub struct WmEvalArgs {
     /// configured α).
     #[arg(long)]
     pub alpha: Option<f32>,
+    /// A learned judge (from `train judge`): read the whole-episode videos for success
+    /// as `rank` reads imagined episodes, with the recorded actions replayed and no
+    /// policy in the loop, grouped by the dataset's behaviour (on `collect --policy`
+    /// rollouts, the checkpoint), against the dataset's exact success.
+    #[arg(long)]
+    pub judge: Option<PathBuf>,
 }
 
 /// `evalharness rank`.
@@ -444,6 +450,12 @@ pub struct SimulateArgs {
     /// default an episode ends at its first success, as robomimic's rollouts do).
     #[arg(long)]
     pub no_early_stop: bool,
+    /// With a policy checkpoint: the policy sees every real frame as this world
+    /// model's autoencoder renders it (encoded and decoded, no dynamics), while
+    /// MuJoCo scores exactly. How much of a policy's imagined behaviour is the codec's
+    /// blur, apart from the world model's dynamics.
+    #[arg(long, value_name = "WORLD_MODEL")]
+    pub observe_through: Option<PathBuf>,
 }
 
 /// `evalharness collect`.

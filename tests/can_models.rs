@@ -25,6 +25,54 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
     let attrs = read_json(&col.join(".zattrs"));
     assert_eq!(attrs["evalharness"]["no_early_stop"], true, "{attrs}");
 
+    // The open-loop success check on rollouts long enough for a 64-frame video: each
+    // checkpoint's episode replayed in the world model, read by the judge, grouped by
+    // checkpoint against the dataset's exact success.
+    let long = dir.join("rollouts-long.zarr");
+    let args = ["collect", "--scenario", "can", "--policy", s(&pol), "--episodes", "1", "--max-steps", "66"];
+    expect_code(&run(&[&args[..], &["--no-early-stop", "--out", s(&long)]].concat()), 0);
+    let ev = dir.join("eval");
+    let args =
+        ["wm", "eval", "--world-model", s(&wm), "--data", s(&long), "--all-episodes", "--judge", s(&judge)];
+    let few = ["--episodes", "1", "--full-episodes"];
+    let code = run(&[&args[..], &few[..], &["0", "--out", s(&ev)]].concat());
+    let (_, stderr) = expect_code(&code, 2);
+    assert!(stderr.contains("--judge reads whole-episode videos"), "{stderr}");
+    let (stdout, _) = expect_code(&run(&[&args[..], &few[..], &["2", "--out", s(&ev)]].concat()), 0);
+    assert!(stdout.contains("open-loop success, by behaviour"), "{stdout}");
+    let eval = read_json(&ev.join("eval.json"));
+    let row = &eval["open_loop_success"][0];
+    let episodes = read_json(&long.join(".zattrs"))["evalharness"]["episodes"].clone();
+    let groups = row["groups"].as_array().cloned().unwrap_or_default();
+    assert_eq!(groups.len(), 2, "{row}");
+    for (g, ep) in groups.iter().zip(episodes.as_array().into_iter().flatten()) {
+        assert_eq!(g["group"], ep["behaviour"], "{row}");
+        assert_eq!(g["episodes"], 1, "{row}");
+        let exact = if ep["success"] == true { 1.0 } else { 0.0 };
+        assert_eq!(g["exact"].as_f64(), Some(exact), "{row} {ep}");
+        for key in ["judged_real", "imagined"] {
+            assert!([Some(0.0), Some(1.0)].contains(&g[key].as_f64()), "{row}");
+        }
+    }
+    assert_eq!(row["all"]["episodes"], 2, "{row}");
+
+    // MuJoCo with the policy seeing its frames through the world model's autoencoder:
+    // scored exactly, and the run says what the policy saw.
+    let obs = dir.join("observed");
+    let args = ["simulate", "--scenario", "can", "--policy", s(&pol), "--episodes", "1", "--max-steps", "4"];
+    let (stdout, _) =
+        expect_code(&run(&[&args[..], &["--observe-through", s(&wm), "--out", s(&obs)]].concat()), 0);
+    assert_eq!(stdout.matches("success 0.0%").count(), 2, "{stdout}");
+    let summary = read_json(&obs.join("summary.json"));
+    assert_eq!(summary["observe_through"], s(&wm), "{summary}");
+    let o2 = dir.join("o2");
+    let refused = [&args[..], &["--observe-through", s(&wm), "--record-scores", "--out", s(&o2)]];
+    let (_, stderr) = expect_code(&run(&refused.concat()), 2);
+    assert!(stderr.contains("cannot be given with --observe-through"), "{stderr}");
+    let builtin = ["simulate", "--scenario", "can", "--policy", "expert", "--observe-through", s(&wm)];
+    let (_, stderr) = expect_code(&run(&[&builtin[..], &["--out", s(&dir.join("o3"))]].concat()), 2);
+    assert!(stderr.contains("is a built-in behaviour"), "{stderr}");
+
     // rank both epochs in both branches: 2 policies × 2 episodes of 4 steps.
     let out = dir.join("rank");
     let args = ["rank", "--scenario", "can", "--world-model", s(&wm), "--judge", s(&judge)];

@@ -6,7 +6,7 @@ use std::path::Path;
 use serde_json::json;
 
 use crate::train::tiny_dataset;
-use crate::util::{copy_dir, expect_code, read_json, run};
+use crate::util::{copy_dir, evalharness, expect_code, read_json, run};
 
 #[test]
 fn world_model_loss_variants_train_and_warm_start() {
@@ -214,12 +214,16 @@ fn world_model_loss_variants_train_and_warm_start() {
         2,
     );
     assert!(err.contains("--decoder-channels") && err.contains("four multiples of 8"), "{err}");
+    // Given relative to the working directory (`ae_narrow`), the replacement is recorded
+    // relative to the exported folder, as the config's path (it was recorded as given).
     let swapped = dir.path().join("ship").join("wm_narrow");
-    let args = ["wm", "export", "--from", diff.to_str().unwrap(), "--autoencoder", n];
-    expect_code(&run(&[&args[..], &["--out", swapped.to_str().unwrap()]].concat()), 0);
+    let args = ["wm", "export", "--from", diff.to_str().unwrap(), "--autoencoder", "ae_narrow"];
+    let code =
+        evalharness().current_dir(dir.path()).args(args).args(["--out", swapped.to_str().unwrap()]).output();
+    expect_code(&code.expect("evalharness runs"), 0);
     let cfg = read_json(&swapped.join("config.json"));
     assert_eq!(cfg["model"]["autoencoder"], "../../ae_narrow");
-    assert_eq!(read_json(&swapped.join("provenance.json"))["autoencoder_replaced"]["now"], n);
+    assert_eq!(read_json(&swapped.join("provenance.json"))["autoencoder_replaced"]["now"], "../../ae_narrow");
     let ev = dir.path().join("eval_narrow");
     let args = ["wm", "eval", "--world-model", swapped.to_str().unwrap(), "--data", long.to_str().unwrap()];
     let few = ["--episodes", "1", "--full-episodes", "0", "--out", ev.to_str().unwrap()];

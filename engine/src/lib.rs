@@ -33,4 +33,4 @@ mod tests;
 pub use error::EngineError;
 pub use imagined::wm_branch;
 pub use sim::sim_branch;
-pub use start::{BranchOut, Setup, Start, Timing, Trajectory, obs_of, push};
+pub use start::{BranchOut, Observe, Setup, Start, Timing, Trajectory, obs_of, push};

@@ -4,7 +4,9 @@
 //! scored exactly from the simulator's state. The judge of imagined frames also
 //! reads the frames the policy sees here, and its mean absolute error against
 //! the exact score goes into the row (`scorer_abs_error`): how far to trust the
-//! imagined branch's scores. Episodes step on rayon.
+//! imagined branch's scores. With [`Start::observe`] the policy sees each real frame
+//! rewritten (an autoencoder's rendering of it), while scores and the judge keep the
+//! real frames. Episodes step on rayon.
 
 use std::time::Instant;
 
@@ -15,7 +17,7 @@ use rayon::prelude::*;
 
 use crate::EngineError;
 use crate::decide::{decide, record_chunk};
-use crate::start::{Begin, BranchOut, Setup, Start, Timing, Track, Trajectory, push, still_active};
+use crate::start::{Begin, BranchOut, Observe, Setup, Start, Timing, Track, Trajectory, push, still_active};
 
 /// What one simulator episode returns per chunk.
 #[derive(Default)]
@@ -29,6 +31,16 @@ struct ChunkOut {
     /// With [`Start::trajectories`]: each step's observation frame and state before
     /// the action, and the action.
     steps: Vec<(Vec<u8>, Vec<f64>, Vec<f32>)>,
+}
+
+/// Rewrites the frames of `seen` in one call of `f` ([`Start::observe`]).
+fn observe<'a>(f: &Observe, seen: impl Iterator<Item = &'a mut Seen>) {
+    let mut seen: Vec<&mut Seen> = seen.collect();
+    let mut frames: Vec<Vec<u8>> = seen.iter_mut().map(|s| std::mem::take(&mut s.frame)).collect();
+    f(&mut frames);
+    for (s, frame) in seen.into_iter().zip(frames) {
+        s.frame = frame;
+    }
 }
 
 /// The simulator branch of one batch.
@@ -48,6 +60,9 @@ pub fn sim_branch(
     for (((t, env), judge), f) in track.iter_mut().zip(&start.envs).zip(&start.judges).zip(&start.first) {
         t.add(env.score(), &kind);
         t.scene = judge.as_ref().and_then(|j| j.scene(&f.frame));
+    }
+    if let Some(f) = &start.observe {
+        observe(f, hist.iter_mut().flat_map(|h| h.iter_mut()));
     }
     let mut steps = 0;
     let mut active: Vec<usize> = (0..n).collect();
@@ -87,9 +102,10 @@ pub fn sim_branch(
                 Some(run())
             })
             .collect();
+        let mut seen: Vec<(usize, Vec<Seen>)> = Vec::with_capacity(active.len());
         for (i, r) in results.into_iter().enumerate() {
             let Some(r) = r else { continue };
-            let out = r?;
+            let mut out = r?;
             out.raw.iter().for_each(|&v| track[i].add(v, &kind));
             track[i].steps += len;
             judge_err[i].0 += out.err;
@@ -97,7 +113,7 @@ pub fn sim_branch(
             if let Some(f) = out.seen.last() {
                 track[i].scene = start.judges[i].as_ref().and_then(|j| j.scene(&f.frame));
             }
-            out.seen.into_iter().for_each(|f| push(&mut hist[i], f, o));
+            seen.push((i, std::mem::take(&mut out.seen)));
             let t = &mut traj[i];
             for ((frame, state, action), raw) in out.steps.into_iter().zip(out.raw) {
                 t.frames.push(frame);
@@ -105,6 +121,12 @@ pub fn sim_branch(
                 t.actions.push(action);
                 t.raw.push(raw);
             }
+        }
+        if let Some(f) = &start.observe {
+            observe(f, seen.iter_mut().flat_map(|(_, s)| s.iter_mut()));
+        }
+        for (i, frames) in seen {
+            frames.into_iter().for_each(|f| push(&mut hist[i], f, o));
         }
         record_chunk(&mut rec, &hist);
         track.iter_mut().for_each(Track::end_chunk);

@@ -73,7 +73,15 @@ pub struct Start {
     /// Simulator branch only: keep stepping after success, up to the step limit
     /// (`collect --policy --no-early-stop`, so that success lasts in the data).
     pub run_on: bool,
+    /// Simulator branch only: rewrites every frame before the policy sees it, the first
+    /// ones included (`simulate --observe-through`: a world model's autoencoder
+    /// rendering of the real frame), so that a policy's behaviour on rendered frames is
+    /// measured with exact scores. The judge and the scene checks read the real frames.
+    pub observe: Option<Observe>,
 }
+
+/// Rewrites a batch of HWC frames in place ([`Start::observe`]).
+pub type Observe = std::sync::Arc<dyn Fn(&mut [Vec<u8>]) + Send + Sync>;
 
 /// One recorded simulator episode, step by step.
 #[derive(Clone, Debug, Default)]
@@ -137,6 +145,7 @@ impl Start {
             record: false,
             trajectories: false,
             run_on: false,
+            observe: None,
             envs,
         })
     }

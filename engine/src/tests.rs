@@ -239,3 +239,52 @@ fn robomimic_lift_runs_through_the_simulator_branch_with_a_given_judge() {
     // The end effector rose: column 9 of the state is its height.
     assert!(t.states[3][9] > t.states[0][9], "{} -> {}", t.states[0][9], t.states[3][9]);
 }
+
+/// Commands the goal when the frame shows the agent anywhere but at 0, else 0.
+struct GoIfSeen;
+
+impl Policy for GoIfSeen {
+    fn name(&self) -> &str {
+        "go-if-seen"
+    }
+    fn obs_horizon(&self) -> usize {
+        1
+    }
+    fn action_horizon(&self) -> usize {
+        2
+    }
+    fn act(&self, obs: &[Observation], _: &mut [Rng]) -> Result<Vec<ActionChunk>, PolicyError> {
+        let target = |o: &Observation| if o.frames[0][0] > 0 { GOAL as f32 } else { 0.0 };
+        Ok(obs.iter().map(|o| vec![vec![target(o)]; 2]).collect())
+    }
+}
+
+#[test]
+fn the_policy_sees_the_rewritten_frames_and_the_scores_stay_exact() {
+    let setup = Setup { task: &Reach, master_seed: 0, max_steps: 4, judge: None };
+    // Seed 2 starts at 6 (frame byte 150): seen as is, the policy commands 7 and the agent
+    // reaches 6.5, then 6.75: success at step 2.
+    let start = Start::new("go-if-seen", &[2], &setup).unwrap();
+    let out = sim_branch(&GoIfSeen, start, &setup, &mut Timing::default()).unwrap();
+    assert_eq!((out.rows[0].steps, out.rows[0].success), (2, true));
+    // Every frame blanked before the policy sees it, the first one included: it commands
+    // 0 throughout, 6 → 3 → 1.5 → 0.75 → 0.375, never within 0.5 of 7 in 4 steps. The hook
+    // sees the first frame and the last frame of each of the 2 chunks: 3 frames.
+    let seen = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let counter = seen.clone();
+    let mut start = Start::new("go-if-seen", &[2], &setup).unwrap();
+    start.trajectories = true;
+    start.observe = Some(std::sync::Arc::new(move |frames: &mut [Vec<u8>]| {
+        counter.fetch_add(frames.len(), std::sync::atomic::Ordering::SeqCst);
+        frames.iter_mut().for_each(|f| f.fill(0));
+    }));
+    let out = sim_branch(&GoIfSeen, start, &setup, &mut Timing::default()).unwrap();
+    let r = &out.rows[0];
+    assert_eq!((r.steps, r.success), (4, false));
+    assert_eq!(out.episodes[0].states, vec![vec![6.0], vec![3.0], vec![1.5], vec![0.75]]);
+    assert_eq!(seen.load(std::sync::atomic::Ordering::SeqCst), 3);
+    // The judge read the real frames (x × 25), which it reads exactly.
+    assert_eq!(r.scorer_abs_error, Some(0.0));
+    // The recorded trajectory keeps the real frames (6 × 25 = 150 first).
+    assert_eq!(out.episodes[0].frames[0][0], 150);
+}

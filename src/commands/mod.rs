@@ -24,6 +24,7 @@ mod train_wm;
 mod wm_eval;
 mod wm_eval_motion;
 mod wm_eval_score;
+mod wm_eval_success;
 pub mod wm_eval_windows;
 mod wm_export;
 

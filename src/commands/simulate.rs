@@ -37,6 +37,13 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     if path.is_dir() {
         return super::simulate_policy::run(args, quiet);
     }
+    if let Some(wm) = &args.observe_through {
+        bail!(
+            "--observe-through {}: only a policy checkpoint sees frames; --policy {} is a built-in behaviour",
+            wm.display(),
+            args.policy
+        );
+    }
     // Behaviour names have no path separator: one that does meant a checkpoint folder.
     if args.policy.contains(std::path::MAIN_SEPARATOR) {
         bail!(

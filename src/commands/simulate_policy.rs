@@ -5,10 +5,14 @@
 use std::process::ExitCode;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
-use engine::{Setup, Start, Timing, sim_branch};
+use std::sync::Arc;
+
+use anyhow::{Context, Result, bail};
+use engine::{Observe, Setup, Start, Timing, sim_branch};
 use policies::dir::checkpoint_dirs;
 use serde_json::{Value, json};
+use world_model::data::{frames_to_tensor, tensor_to_frames};
+use world_model::model::WorldModel;
 
 use super::git_commit;
 use crate::cli::SimulateArgs;
@@ -29,6 +33,15 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let setup = Setup { task: task.as_ref(), master_seed: 0, max_steps, judge: None };
     let device = world_model::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
+    let observe = match &args.observe_through {
+        Some(wm) => Some(through_autoencoder(wm, task.observation_spec().image_size)?),
+        None => None,
+    };
+    if args.record_scores && observe.is_some() {
+        bail!(
+            "--record-scores records MuJoCo scores on real frames; it cannot be given with --observe-through"
+        );
+    }
     let out = Staged::new(&args.out, c.force)?;
     let expect = expectations(task.as_ref());
     let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();
@@ -46,7 +59,8 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
             let mut timing = Timing::default();
             let mut rows = Vec::new();
             for batch in seeds.chunks(100) {
-                let start = Start::new(policy.name(), batch, &setup)?;
+                let mut start = Start::new(policy.name(), batch, &setup)?;
+                start.observe.clone_from(&observe);
                 rows.extend(pool.install(|| sim_branch(policy.as_ref(), start, &setup, &mut timing))?.rows);
                 pb.inc(batch.len() as u64);
             }
@@ -80,11 +94,35 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
         &out.file("summary.json"),
         &json!({"scenario": c.scenario, "policies_dir": dir, "seed_start": c.seed_start, "episodes": c.episodes,
                 "max_steps": max_steps, "score": task.score_kind().describe(),
+                "observe_through": args.observe_through.as_ref().map(|p| p.display().to_string()),
                 "policies": summary}),
     )?;
     let o = out.commit()?;
     println!("-> {}", o.display());
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
+}
+
+/// The hook that shows the policy each frame as the world model at `dir` encodes and
+/// decodes it (no dynamics).
+fn through_autoencoder(dir: &std::path::Path, size: usize) -> Result<Observe> {
+    let device = world_model::device::selected()?;
+    let wm =
+        WorldModel::load(dir, &device).with_context(|| format!("--observe-through {}", dir.display()))?;
+    let side = wm.image_size();
+    if side != size {
+        bail!(
+            "--observe-through {}: the model renders {side}x{side} frames, the task's are {size}x{size}",
+            dir.display()
+        );
+    }
+    Ok(Arc::new(move |frames: &mut [Vec<u8>]| {
+        let refs: Vec<&[u8]> = frames.iter().map(Vec::as_slice).collect();
+        let z = wm.encode(frames_to_tensor(&refs, size, wm.device())); // [b, C, s, s]
+        let rendered = tensor_to_frames(wm.decode(z)); // b frames of size x size x 3
+        for (f, r) in frames.iter_mut().zip(rendered) {
+            *f = r;
+        }
+    }))
 }
 
 /// Writes `provenance.json` into a checkpoint: its training provenance plus the measured score.

@@ -15,6 +15,7 @@ use super::goal_free;
 use super::goal_free::DatasetScene;
 use super::wm_eval_motion;
 use super::wm_eval_score::Scoring;
+use super::wm_eval_success::{self, SuccessCheck};
 use super::wm_eval_windows;
 use crate::cli::Windows;
 use crate::cli::WmEvalArgs;
@@ -119,6 +120,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
     }
     let mut apart: Vec<(&str, &std::path::Path)> = vec![("--data", &a.data)];
     apart.extend(a.world_models.iter().map(|m| ("--world-model", m.as_path())));
+    apart.extend(a.judge.iter().map(|j| ("--judge", j.as_path())));
     crate::output::check_apart(&a.out, &apart)?;
     let staged = Staged::new(&a.out, a.force)?;
     // The dataset's scenario and state rows, read once: for the goal-free view, the
@@ -129,9 +131,20 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         Ok(scene) => Ok(Scoring::new(scene, 96)),
         Err(why) => Err(why.clone()),
     };
-    if let Err(why) = &scoring {
+    if let Err(why) = &scoring
+        && a.judge.is_none()
+    {
         tracing::warn!("no open-loop score check: {why}");
     }
+    let success = match &a.judge {
+        Some(_) if full.is_empty() => {
+            bail!("--judge reads whole-episode videos: give --full-episodes of at least 1")
+        }
+        Some(dir) => Some(SuccessCheck::load(dir, &a.data, &data)?),
+        None => None,
+    };
+    let episode_whole: HashMap<usize, usize> = full_windows.iter().map(|w| (w.start, w.episode)).collect();
+    let mut successes = Vec::new();
     // Goal-free models read the scenes re-rendered without the goal, and each of their
     // frames gets its episode's goal drawn back before any comparison or scoring.
     let goal_free = if models.iter().any(|(_, wm)| wm.cfg.is_goal_free()) {
@@ -172,6 +185,11 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             rows.push(row);
             if let Ok(sc) = &scoring {
                 scores.push(sc.row(name, &videos));
+            }
+            if let Some(check) = &success {
+                let row = check.row(name, &data, &videos, k, |start| episode_whole[&start]);
+                wm_eval_success::print(&row);
+                successes.push(row);
             }
             full_videos = videos;
         }
@@ -239,6 +257,11 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             "ssim_by_block_motion": by_motion,
             "open_loop_scores": scores,
             "open_loop_scores_note": scoring.as_ref().err().cloned().unwrap_or_else(|| SCORE_NOTE.into()),
+            "open_loop_success": successes,
+            "open_loop_success_note": match &a.judge {
+                Some(dir) => format!("{} (judge {})", wm_eval_success::SUCCESS_NOTE, dir.display()),
+                None => "not measured: no --judge".to_string(),
+            },
             "data": a.data,
             "episodes_from": if a.all_episodes { "all episodes (--all-episodes)" } else { "held-out episodes (index % 10 == 9)" },
             "windows_64": if a.starts.is_empty() { json!(a.windows) } else { json!("given (--start)") },

@@ -91,17 +91,21 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
         let target = match &a.autoencoder {
             Some(other) => {
                 check_same_encoder(&trained_on, other, &device)?;
-                provenance["autoencoder_replaced"] = json!({
-                    "trained_on": trained_on.display().to_string(),
-                    "now": other.display().to_string(),
-                    "now_provenance": read_json(&other.join("provenance.json")).ok(),
-                });
                 other.clone()
             }
-            None => trained_on,
+            None => trained_on.clone(),
         };
         // The staging folder is the output's sibling, so paths relative to it hold.
         let moved = relative_to(&staged.file(""), &target)?.display().to_string();
+        if let Some(other) = &a.autoencoder {
+            // Relative to the exported folder, as the config's path: the path as given
+            // depends on the directory the command ran in (it is in "exported"'s command).
+            provenance["autoencoder_replaced"] = json!({
+                "trained_on": trained_on.display().to_string(),
+                "now": moved,
+                "now_provenance": read_json(&other.join("provenance.json")).ok(),
+            });
+        }
         config["model"]["autoencoder"] = json!(moved);
         if provenance.get("autoencoder").is_some() {
             provenance["autoencoder"] = json!(moved);
