@@ -110,13 +110,13 @@ fn file_names(path: &std::path::Path) -> Result<Option<String>, ScenarioError> {
 /// - Sets `LP_NUM_THREADS=0` unless the environment sets it: Mesa's software
 ///   renderer (llvmpipe, what MuJoCo's offscreen renderer runs on without a GPU)
 ///   then rasterises in the rendering thread instead of in helper threads of its
-///   own. With its helper threads, Mesa 22.3's llvmpipe crashed three times in 18
-///   hours of rendering runs on one of this project's machines, each a segmentation fault
-///   while it searched a scene's list of referenced resources
-///   (`lp_scene_is_resource_referenced`) that its rasteriser threads were
-///   changing (BENCHMARKS.md, 2026-11-27, "the Can headline"). The frames are the
-///   same bytes either way, and each worker of `rank` and `simulate` already
-///   renders on its own core.
+///   own. Mesa 22.3's llvmpipe crashed three times in 18 hours of rendering runs on
+///   one of this project's machines, each a segmentation fault while it searched a
+///   scene's list of referenced resources (`lp_scene_is_resource_referenced`; BENCHMARKS.md,
+///   2026-11-27, "the Can headline"). Without helper threads it crashed once more, so
+///   the race is (also) between two workers' GL contexts: the robosuite renderer now
+///   lets one thread render at a time (`robosuite::episode`'s render lock), and this
+///   setting stays as a second guard. The frames are the same bytes either way.
 pub fn init_mujoco() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {

@@ -213,9 +213,24 @@ thread_local! {
     static RENDERER: RefCell<Option<(usize, ManuallyDrop<MjRenderer>)>> = const { RefCell::new(None) };
 }
 
+/// Held while any thread builds, uses or drops its GL context: one thread renders at a
+/// time. Mesa's llvmpipe (22.3, Debian's) crashed in `lp_scene_is_resource_referenced`
+/// about once in six hours of two-worker runs, with `LP_NUM_THREADS=0` as well, so the
+/// race is between the contexts of two application threads on llvmpipe's shared
+/// screen, not only with llvmpipe's own rasteriser threads. Physics still steps in
+/// parallel; only the render and its read-back wait (2 of every 8 steps in `rank`).
+static RENDER_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// [`RENDER_LOCK`], held even if another thread panicked while holding it (the lock
+/// guards no data, only Mesa's calls).
+fn render_lock() -> std::sync::MutexGuard<'static, ()> {
+    RENDER_LOCK.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// Drops this thread's agentview renderer, if it has one. Call it on every
 /// thread that rendered, before the thread or the process ends.
 pub fn release_renderer() {
+    let _gl = render_lock();
     RENDERER.with(|cell| {
         if let Some((_, r)) = cell.borrow_mut().take() {
             drop(ManuallyDrop::into_inner(r));
@@ -230,6 +245,7 @@ pub fn release_renderer() {
 fn render_agentview(data: &mut MjData<Arc<MjModel>>, size: usize) -> Result<Vec<u8>, ScenarioError> {
     let err = |e: &dyn std::fmt::Display| ScenarioError::Render { message: e.to_string() };
     let cam = data.model().camera("agentview").map(|c| c.id).ok_or_else(|| err(&"no camera 'agentview'"))?;
+    let _gl = render_lock();
     RENDERER.with(|cell| {
         let mut slot = cell.borrow_mut();
         if slot.as_ref().is_none_or(|(s, _)| *s != size) {
