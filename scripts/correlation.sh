@@ -12,8 +12,10 @@
 #   sizing ranges it read Pearson 0.70, 0.56 and 0.79 (5, 8 and 3 inversions), against the
 #   50-episode headline's 0.77 and 4. About 4 minutes.
 # - Can: 9 policies × 20 episodes of 250 steps (the default run has 50), gated at Pearson 0.3
-#   and 13 inversions of 36. On two sizing ranges it read Pearson 0.45 and 0.77 (9 and 2
-#   inversions), against the 50-episode headline's 0.71 and 7. About 7 minutes.
+#   and 13 inversions of 36. Sized with the Can world model shipped before the present one: on
+#   two sizing ranges it read Pearson 0.45 and 0.77 (9 and 2 inversions), against that model's
+#   50-episode headline of 0.71 and 7. With the present model this part read 0.65 with 6
+#   inversions (its headline: 0.74 and 7). About 8–10 minutes.
 # Then `evalharness tasks` writes the side-by-side table ($OUT/tasks.md, $OUT/tasks.tex).
 #
 # To rank your own checkpoints instead, set SCENARIO (default pusht) and any of POLICIES,

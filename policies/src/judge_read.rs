@@ -89,14 +89,18 @@ pub fn judge_episodes(
         .collect()
 }
 
-/// Reads judged episodes with persistence `persist`: an episode succeeds once its
-/// estimate holds above `threshold` for `persist` judged frames in a row.
+/// Whether an episode whose judged frames have `estimates` (in time order) succeeds:
+/// once the estimate holds above `threshold` for `persist` judged frames in a row.
+pub fn held_success(estimates: impl IntoIterator<Item = f64>, persist: usize, threshold: f64) -> bool {
+    let mut held = Sustained::new(persist);
+    estimates.into_iter().any(|v| held.push(v).is_some_and(|h| h > threshold))
+}
+
+/// Reads judged episodes with persistence `persist` ([`held_success`]).
 pub fn read_judged(episodes: &[JudgedEpisode], persist: usize, threshold: f64) -> EpisodeReading {
-    EpisodeReading::of(episodes.iter().map(|e| {
-        let mut held = Sustained::new(persist);
-        let said = e.estimates.iter().any(|&v| held.push(v).is_some_and(|h| h > threshold));
-        (said, e.success)
-    }))
+    EpisodeReading::of(
+        episodes.iter().map(|e| (held_success(e.estimates.iter().copied(), persist, threshold), e.success)),
+    )
 }
 
 /// Frame metrics over every judged frame of `episodes`.

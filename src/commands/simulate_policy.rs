@@ -34,7 +34,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let device = world_model::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
     let observe = match &args.observe_through {
-        Some(wm) => Some(through_autoencoder(wm, task.observation_spec().image_size)?),
+        Some(wm) => Some(through_autoencoder(wm, task.observation_spec().image_size, &device)?),
         None => None,
     };
     if args.record_scores && observe.is_some() {
@@ -102,12 +102,10 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
-/// The hook that shows the policy each frame as the world model at `dir` encodes and
-/// decodes it (no dynamics).
-fn through_autoencoder(dir: &std::path::Path, size: usize) -> Result<Observe> {
-    let device = world_model::device::selected()?;
-    let wm =
-        WorldModel::load(dir, &device).with_context(|| format!("--observe-through {}", dir.display()))?;
+/// The hook that shows the policy each frame as the world model at `dir` (loaded on
+/// `device`) encodes and decodes it (no dynamics).
+fn through_autoencoder(dir: &std::path::Path, size: usize, device: &burn::tensor::Device) -> Result<Observe> {
+    let wm = WorldModel::load(dir, device).with_context(|| format!("--observe-through {}", dir.display()))?;
     let side = wm.image_size();
     if side != size {
         bail!(

@@ -143,7 +143,9 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         Some(dir) => Some(SuccessCheck::load(dir, &a.data, &data)?),
         None => None,
     };
-    let episode_whole: HashMap<usize, usize> = full_windows.iter().map(|w| (w.start, w.episode)).collect();
+    // Each video's episode, by its first context step (windows of one episode share it).
+    let episode_of: HashMap<usize, usize> =
+        short_windows.iter().chain(&full_windows).map(|w| (w.start, w.episode)).collect();
     let mut successes = Vec::new();
     // Goal-free models read the scenes re-rendered without the goal, and each of their
     // frames gets its episode's goal drawn back before any comparison or scoring.
@@ -187,7 +189,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
                 scores.push(sc.row(name, &videos));
             }
             if let Some(check) = &success {
-                let row = check.row(name, &data, &videos, k, |start| episode_whole[&start]);
+                let row = check.row(name, &data, &videos, k, |start| episode_of[&start]);
                 wm_eval_success::print(&row);
                 successes.push(row);
             }
@@ -230,8 +232,6 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         }
     }
     // SSIM intervals by episode: resample episodes, since windows of one episode overlap.
-    let episode_of: HashMap<usize, usize> =
-        short_windows.iter().chain(&full_windows).map(|w| (w.start, w.episode)).collect();
     for row in &mut rows {
         let mut by_episode: HashMap<usize, Vec<f64>> = HashMap::new();
         for v in &row.per_video {

@@ -18,10 +18,9 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Result, bail};
-use harness::judge::Sustained;
 use harness::replay::ReplayReader;
 use policies::judge::FrameJudge;
-use policies::judge_read::Reading;
+use policies::judge_read::{Reading, held_success};
 use serde::{Deserialize, Serialize};
 use world_model::data::EpisodeData;
 use world_model::eval::Video;
@@ -127,9 +126,7 @@ impl SuccessCheck {
     fn reads_success(&self, frames: &[&[u8]]) -> bool {
         let picked: Vec<&[u8]> =
             frames.iter().enumerate().filter(|(t, _)| self.reading.judged(*t)).map(|(_, f)| *f).collect();
-        let threshold = self.judge.file.threshold;
-        let mut held = Sustained::new(self.reading.persist);
-        self.judge.score_frames(&picked).into_iter().any(|v| held.push(v).is_some_and(|h| h > threshold))
+        held_success(self.judge.score_frames(&picked), self.reading.persist, self.judge.file.threshold)
     }
 
     /// Reads `videos` (whole episodes; `episode_of(start)` names each one's episode) for
