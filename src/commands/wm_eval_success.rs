@@ -60,6 +60,10 @@ pub struct Rates {
     /// Episodes that fail (exactly, else as the judge reads the real frames) and are
     /// imagined succeeding.
     pub false_successes: usize,
+    /// Of `false_successes`, the exact failures whose real frames the judge reads as
+    /// succeeding too: the judge's misreading, which no world model could avoid. The
+    /// rest are the model's. Always 0 without exact labels.
+    pub false_successes_judge_misreads: usize,
     /// Episodes that succeed and are imagined failing.
     pub missed_successes: usize,
 }
@@ -168,6 +172,10 @@ fn rates(group: &str, outcomes: &[&Outcome]) -> Rates {
         judged_real: rate(&|o| o.real),
         imagined: rate(&|o| o.imagined),
         false_successes: outcomes.iter().filter(|o| !truth(o) && o.imagined).count(),
+        false_successes_judge_misreads: outcomes
+            .iter()
+            .filter(|o| o.exact == Some(false) && o.real && o.imagined)
+            .count(),
         missed_successes: outcomes.iter().filter(|o| truth(o) && !o.imagined).count(),
     }
 }
@@ -194,8 +202,15 @@ pub fn print(row: &SuccessRow) {
     let line = |r: &Rates| {
         let exact = r.exact.map_or_else(|| "n/a".to_string(), |e| format!("{e:.2}"));
         format!(
-            "{:<16} {:>4} episodes  exact {exact}  judged real {:.2}  imagined {:.2}  false successes {}  missed {}",
-            r.group, r.episodes, r.judged_real, r.imagined, r.false_successes, r.missed_successes
+            "{:<16} {:>4} episodes  exact {exact}  judged real {:.2}  imagined {:.2}  false successes {} \
+             (the judge misreads the real frames in {})  missed {}",
+            r.group,
+            r.episodes,
+            r.judged_real,
+            r.imagined,
+            r.false_successes,
+            r.false_successes_judge_misreads,
+            r.missed_successes
         )
     };
     let r = row.pearson.map_or_else(|| "n/a".to_string(), |p| format!("{p:.3}"));
@@ -218,14 +233,15 @@ mod tests {
         // Group a: 4 episodes, exact (T, F, F, F); the judge reads the real frames
         // (T, T, F, F) and the imagined ones (T, T, T, F). Exact rate 1/4 = 0.25,
         // judged real 2/4 = 0.5, imagined 3/4 = 0.75; false successes: the 2 exact
-        // failures imagined succeeding (episodes 2, 3); missed: none.
+        // failures imagined succeeding (episodes 2, 3), of which episode 2's real frames
+        // the judge reads as succeeding too (1 misread); missed: none.
         let a = [o("a", Some(true), true, true), o("a", Some(false), true, true)];
         let a = [&a[..], &[o("a", Some(false), false, true), o("a", Some(false), false, false)]].concat();
         let row = summarise("m", &a);
         assert_eq!(row.groups.len(), 1);
         let g = &row.groups[0];
         assert_eq!((g.exact, g.judged_real, g.imagined), (Some(0.25), 0.5, 0.75));
-        assert_eq!((g.false_successes, g.missed_successes), (2, 0));
+        assert_eq!((g.false_successes, g.false_successes_judge_misreads, g.missed_successes), (2, 1, 0));
         assert_eq!(row.all, Rates { group: "all".into(), ..g.clone() });
         assert_eq!(row.pearson, None, "one group has no correlation");
     }
@@ -237,6 +253,11 @@ mod tests {
         let g = &row.groups[0];
         assert_eq!((g.exact, g.judged_real, g.imagined), (None, 0.5, 0.0));
         assert_eq!((g.false_successes, g.missed_successes), (0, 1));
+        // A judged-real success imagined succeeding is no false success, and without
+        // exact labels nothing is counted as the judge's misreading.
+        let row = summarise("m", &[o("x", None, true, true), o("x", None, false, true)]);
+        let g = &row.groups[0];
+        assert_eq!((g.false_successes, g.false_successes_judge_misreads), (1, 0));
     }
 
     #[test]
