@@ -88,7 +88,14 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
         assert_eq!(p["sim"]["success_rate"].as_f64(), Some(0.0), "{p}");
         let imagined = p["world_model"]["success_rate"].as_f64().unwrap_or(-1.0);
         assert!([0.0, 0.5, 1.0].contains(&imagined), "{p}");
+        // Seed by seed: with no MuJoCo success, each imagined success is an imagined-only
+        // seed (2 episodes × the imagined rate) and the other seeds fail in both.
+        let paired = &p["paired_success"];
+        let count = |k: &str| paired[k].as_f64().unwrap_or(-1.0);
+        assert_eq!((count("both"), count("sim_only")), (0.0, 0.0), "{p}");
+        assert_eq!((count("imagined_only"), count("neither")), (2.0 * imagined, 2.0 - 2.0 * imagined), "{p}");
     }
+    assert!(stdout.contains("imagined only"), "{stdout}");
     assert_eq!(res["scenario"], "can", "{res}");
     // The table of tasks reads the run: Can, 2 policies × 2 episodes from seed 100000.
     let (md, _) = expect_code(&run(&["tasks", s(&out)]), 0);

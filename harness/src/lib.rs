@@ -8,6 +8,7 @@
 //!   and checked seed ranges;
 //! - [`fingerprint`]: content hashes of model folders, checked on resume;
 //! - [`metrics`]: agreement metrics between predicted and true policy scores, with CIs;
+//! - [`paired_success`]: each policy's seeds counted by success in both branches;
 //! - [`results`]: the typed rows and `results.json` of a ranking run, shared by the
 //!   commands that write them and the reports that read them;
 //! - [`rows`]: `episodes.jsonl` (append, read, resume at whole batches), and
@@ -24,6 +25,7 @@ pub mod fingerprint;
 pub mod image;
 pub mod judge;
 pub mod metrics;
+pub mod paired_success;
 pub mod policy;
 pub mod replay;
 pub mod results;

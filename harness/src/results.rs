@@ -14,6 +14,8 @@ use serde::{Deserialize, Serialize};
 use crate::judge::SceneCheck;
 use crate::metrics::Agreement;
 use crate::metrics::bootstrap::AgreementCi;
+use crate::metrics::ceiling::NoiseCeiling;
+pub use crate::paired_success::PairedSuccess;
 
 /// Which branch an episode ran in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
@@ -179,6 +181,10 @@ pub struct PolicyResult {
     pub world_model: BranchStats,
     /// Mean frame-scorer error on the MuJoCo branch's real frames.
     pub frame_scorer_mean_abs_error: f64,
+    /// Success of each seed's two episodes side by side (absent in results written
+    /// before it was reported).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub paired_success: Option<PairedSuccess>,
 }
 
 /// How well the world model's scores agree with MuJoCo's across policies. Every
@@ -208,6 +214,10 @@ pub struct AgreementSummary {
     pub mean_abs_error: Option<f64>,
     /// Bootstrap 95% intervals of the metrics.
     pub ci95: Option<AgreementCi>,
+    /// How well two independent MuJoCo runs of this size would agree: the best a world
+    /// model can reach here (absent in results written before it, and below 2 policies).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_ceiling: Option<NoiseCeiling>,
 }
 
 /// A policy left out of the ranking, with why.
@@ -332,6 +342,7 @@ impl Agreement {
             regret_at_1: ranked.then_some(self.regret_at_1),
             mean_abs_error: (!names.is_empty()).then_some(self.mean_abs_error),
             ci95: ci.cloned(),
+            noise_ceiling: None,
         }
     }
 

@@ -9,7 +9,8 @@ use std::collections::BTreeMap;
 
 use crate::metrics::agreement;
 use crate::metrics::bootstrap::{agreement_ci, mean_ci, wilson};
-use crate::results::{AgreementSummary, Branch, BranchStats, EpisodeRow, PolicyResult};
+use crate::metrics::ceiling::noise_ceiling;
+use crate::results::{AgreementSummary, Branch, BranchStats, EpisodeRow, PairedSuccess, PolicyResult};
 
 /// Mean, bootstrap CI, success rate and Wilson CI of one branch of one policy.
 pub fn branch_stats(rows: &[&EpisodeRow], bootstrap: usize, seed: u64) -> BranchStats {
@@ -63,6 +64,7 @@ pub fn summarise(
             sim: branch_stats(&sim, bootstrap, seed),
             world_model: branch_stats(&wm, bootstrap, seed),
             frame_scorer_mean_abs_error: errs.iter().sum::<f64>() / errs.len().max(1) as f64,
+            paired_success: Some(PairedSuccess::count(eps.iter().map(|e| (e[0].success, e[1].success)))),
         });
         pairs.push((wm.iter().map(|r| r.score).collect(), sim.iter().map(|r| r.score).collect()));
         names.push(p.as_str());
@@ -73,7 +75,10 @@ pub fn summarise(
     let m = agreement(&pred, &act);
     let ci = (pairs.len() >= 2 && pairs.iter().all(|(w, _)| w.len() >= 2))
         .then(|| agreement_ci(&pairs, bootstrap, seed));
-    (out, m.summary(&names, ci.as_ref()))
+    let mut summary = m.summary(&names, ci.as_ref());
+    let sims: Vec<Vec<f64>> = pairs.into_iter().map(|(_, s)| s).collect();
+    summary.noise_ceiling = noise_ceiling(&sims, bootstrap, seed);
+    (out, summary)
 }
 
 #[cfg(test)]
@@ -114,6 +119,40 @@ mod tests {
         assert_eq!(summarise(&rev, &["a".into(), "b".into()], 200, 0), s);
         // No episode succeeded: no steps to success.
         assert_eq!(s.0[0].sim.steps_to_success, None);
+        // The noise ceiling resamples the MuJoCo episodes: a (0.2, 0.4) and b (0.8, 1.0)
+        // never overlap (a's means lie in [0.2, 0.4], b's in [0.8, 1.0]), so two
+        // resampled runs always order them alike: no inversion.
+        let ceiling = s.1.noise_ceiling.as_ref().unwrap();
+        assert_eq!((ceiling.rank_inversions, ceiling.replicates), (0.0, 200));
+    }
+
+    #[test]
+    fn paired_success_counts_each_seed_in_both_branches() {
+        // Success at 0.5. Seeds 1–5, (MuJoCo, imagined) success: 1 (T, T), 2 (F, T),
+        // 3 (F, T), 4 (T, F), 5 (F, F); seed 6 has no imagined episode and is left out.
+        // So both 1, imagined only 2, MuJoCo only 1, neither 1; agreement (1 + 1) / 5 = 0.4.
+        let ep = |seed, b, s: f64| EpisodeRow::new("a", seed, b, s, s, s, 0.5, 10);
+        let (sim, wm) = (Branch::Sim, Branch::WorldModel);
+        let rows = vec![
+            ep(1, sim, 1.0),
+            ep(1, wm, 1.0),
+            ep(2, sim, 0.0),
+            ep(2, wm, 1.0),
+            ep(3, wm, 1.0),
+            ep(3, sim, 0.0),
+            ep(4, sim, 1.0),
+            ep(4, wm, 0.0),
+            ep(5, sim, 0.0),
+            ep(5, wm, 0.0),
+            ep(6, sim, 1.0),
+        ];
+        let (p, _) = summarise(&rows, &["a".into()], 10, 0);
+        let c = p[0].paired_success.unwrap();
+        assert_eq!(c, PairedSuccess { both: 1, imagined_only: 2, sim_only: 1, neither: 1 });
+        assert!((c.agreement() - 0.4).abs() < 1e-12);
+        // The success rates alone: MuJoCo 2/5 = 0.4, imagined 3/5 = 0.6.
+        assert!((p[0].sim.success_rate - 0.4).abs() < 1e-12);
+        assert!((p[0].world_model.success_rate - 0.6).abs() < 1e-12);
     }
 
     #[test]

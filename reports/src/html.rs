@@ -89,6 +89,14 @@ pub fn report_html(s: &Summary, x: &Extras) -> String {
         ));
     }
     h.push_str("</div>\n");
+    if let Some(c) = &s.ceiling {
+        let r = c.pearson.map_or("n/a".to_string(), |r| format!("{r:.3}"));
+        let ci = c.pearson_ci95.map_or(String::new(), |[lo, hi]| format!(" [{lo:.3}, {hi:.3}]"));
+        h.push_str(&format!(
+            "<p class=\"sub\">Noise ceiling: two MuJoCo runs of this size (resampled from this one) agree at Pearson {r}{ci}, {:.1} inversions, mean absolute error {:.3}: the most a world model can reach with this many episodes.</p>\n",
+            c.rank_inversions, c.mean_abs_error
+        ));
+    }
     if !s.failed.is_empty() {
         h.push_str("<h2>Failed policies</h2><ul>");
         for (p, e) in &s.failed {
@@ -96,10 +104,17 @@ pub fn report_html(s: &Summary, x: &Extras) -> String {
         }
         h.push_str("</ul>\n");
     }
-    h.push_str("<h2>Scores per policy</h2><table><thead><tr><th>Policy</th><th>MuJoCo score</th><th>World-model score</th><th>MuJoCo success</th><th>World-model success</th><th>Episodes</th></tr></thead><tbody>\n");
+    h.push_str("<h2>Scores per policy</h2><table><thead><tr><th>Policy</th><th>MuJoCo score</th><th>World-model score</th><th>MuJoCo success</th><th>World-model success</th><th title=\"Seeds that succeed in both branches / only imagined / only in MuJoCo / in neither, and Cohen's kappa of the two outcomes over the seeds (0: the imagined outcome of a seed says nothing of the real one)\">Same seed: both · imagined only · MuJoCo only · neither (κ)</th><th>Episodes</th></tr></thead><tbody>\n");
     for p in &s.policies {
+        let paired = p.paired.map_or_else(
+            || "n/a".to_string(),
+            |c| {
+                let kappa = c.kappa().map_or_else(|| "n/a".to_string(), |k| format!("{k:.2}"));
+                format!("{} · {} · {} · {} (κ {kappa})", c.both, c.imagined_only, c.sim_only, c.neither)
+            },
+        );
         h.push_str(&format!(
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{paired}</td><td>{}</td></tr>\n",
             esc(&p.name),
             est(Some(p.sim.mean)),
             est(Some(p.world_model.mean)),
@@ -177,5 +192,26 @@ mod tests {
         let html = report_html(&s, &Extras::default());
         assert!(html.contains("&lt;wm&gt;") && html.contains("a&lt;b"));
         assert!(!html.contains("http://") && !html.contains("https://") && !html.contains("src=\"/"));
+        assert!(!html.contains("Noise ceiling"), "a run without one shows none");
+    }
+
+    #[test]
+    fn the_policy_table_counts_seeds_and_the_page_states_the_noise_ceiling() {
+        let r = serde_json::json!({
+            "scenario": "can", "world_model": "wm", "episodes": 4, "seed_start": 0,
+            "policies": [{"name": "a", "sim": {"mean": 0.5, "ci95": null, "success_rate": 0.5},
+                "world_model": {"mean": 0.75, "ci95": null, "success_rate": 0.75},
+                "paired_success": {"both": 2, "imagined_only": 1, "sim_only": 0, "neither": 1}}],
+            "agreement": {"noise_ceiling": {"pearson": 0.9612, "pearson_ci95": [0.9, 0.99],
+                "rank_inversions": 1.25, "mean_abs_error": 0.0613, "replicates": 100}},
+        });
+        let html = report_html(&Summary::from_results(&crate::summary::fixture(r)), &Extras::default());
+        // κ: MuJoCo rate 2/4, imagined 3/4; chance 1/2·3/4 + 1/2·1/4 = 1/2; observed 3/4;
+        // κ = (3/4 − 1/2) / (1 − 1/2) = 0.5.
+        assert!(html.contains("<td>2 · 1 · 0 · 1 (κ 0.50)</td>"), "{html}");
+        assert!(
+            html.contains("agree at Pearson 0.961 [0.900, 0.990], 1.2 inversions, mean absolute error 0.061"),
+            "{html}"
+        );
     }
 }

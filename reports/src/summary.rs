@@ -3,7 +3,8 @@
 //! Plain data, so that the plots, tables and HTML never touch JSON paths.
 
 use harness::metrics::bootstrap::AgreementCi;
-use harness::results::{BranchStats, RankResults};
+use harness::metrics::ceiling::NoiseCeiling;
+use harness::results::{BranchStats, PairedSuccess, RankResults};
 
 /// An estimate with an optional 95% interval.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -54,6 +55,8 @@ pub struct PolicyScores {
     pub world_model: BranchScores,
     /// Episodes per branch.
     pub episodes: u64,
+    /// Seeds counted by success in both branches (none in results written before it).
+    pub paired: Option<PairedSuccess>,
 }
 
 /// Everything the report shows.
@@ -75,6 +78,8 @@ pub struct Summary {
     pub regret: Option<Est>,
     /// Mean absolute error of the imagined scores against MuJoCo's, over policies.
     pub mae: Option<f64>,
+    /// How well two resampled MuJoCo runs of this size agree (none in older results).
+    pub ceiling: Option<NoiseCeiling>,
     /// Scenario name.
     pub scenario: String,
     /// World-model folder.
@@ -102,6 +107,7 @@ impl Summary {
                     sim: BranchScores::from(&p.sim),
                     world_model: BranchScores::from(&p.world_model),
                     episodes: p.sim.episodes as u64,
+                    paired: p.paired_success,
                 })
                 .collect(),
             pearson: est(ag.pearson, ci(|c| c.pearson)),
@@ -111,6 +117,7 @@ impl Summary {
             mmrv: est(ag.mmrv, ci(|c| c.mmrv)),
             regret: est(ag.regret_at_1, ci(|c| c.regret_at_1)),
             mae: ag.mean_abs_error,
+            ceiling: ag.noise_ceiling.clone(),
             scenario: r.scenario.clone(),
             world_model: r.world_model.display().to_string(),
             episodes: r.episodes as u64,

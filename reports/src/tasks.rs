@@ -1,6 +1,6 @@
 //! The paper's table of tasks: one row per `rank` run (task, policies, episodes,
-//! Pearson, Spearman, inversions, MMRV; the Markdown table also the mean absolute
-//! error of the scores), side by side, as DriftWorld's Table 1 lays
+//! Pearson, Spearman, inversions, MMRV; the Markdown table also the noise ceiling
+//! and the mean absolute error of the scores), side by side, as DriftWorld's Table 1 lays
 //! out Push-T, Lift and Can. Written as booktabs LaTeX and as a Markdown table.
 
 use crate::summary::{Est, Summary};
@@ -65,13 +65,17 @@ pub fn latex_tasks(rows: &[TaskRow]) -> String {
 /// The rows as a Markdown table, with each run's seeds and wall time.
 pub fn markdown_tasks(rows: &[TaskRow]) -> String {
     let mut t = String::from(
-        "| task | policies × episodes | Pearson [95% CI] | Spearman | inversions | MMRV | MAE | seeds | minutes |\n\
-         |---|---|---|---|---|---|---|---|---|\n",
+        "| task | policies × episodes | Pearson [95% CI] | noise ceiling: Pearson / inversions / MAE | Spearman | inversions | MMRV | MAE | seeds | minutes |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let s = &r.summary;
+        let ceiling = s.ceiling.as_ref().map_or("n/a".to_string(), |c| {
+            let r = c.pearson.map_or("n/a".to_string(), |r| format!("{r:.3}"));
+            format!("{r} / {:.1} / {:.3}", c.rank_inversions, c.mean_abs_error)
+        });
         t.push_str(&format!(
-            "| {} | {} × {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} × {} | {} | {ceiling} | {} | {} | {} | {} | {} | {} |\n",
             s.scenario,
             s.policies.len(),
             s.episodes,
@@ -104,13 +108,25 @@ mod tests {
         let rows = [TaskRow { summary: Summary::from_results(&res), minutes: Some(12.34) }];
         let md = markdown_tasks(&rows);
         // 50 episodes from 2,100,000: the last seed is 2,100,049; 12.34 minutes prints 12.3;
-        // the mean absolute error 0.189 prints as it is.
+        // the mean absolute error 0.189 prints as it is; a run without a noise ceiling
+        // (written before it was reported) says n/a there.
         assert!(
             md.contains(
-                "| lift | 0 × 50 | 0.992 [0.95, 1.00] | 1.000 | 1 | 0.004 | 0.189 | 2100000–2100049 | 12.3 |"
+                "| lift | 0 × 50 | 0.992 [0.95, 1.00] | n/a | 1.000 | 1 | 0.004 | 0.189 | 2100000–2100049 | 12.3 |"
             ),
             "{md}"
         );
+        let mut with = res.clone();
+        with.agreement.noise_ceiling = Some(harness::metrics::ceiling::NoiseCeiling {
+            pearson: Some(0.97398),
+            pearson_ci95: Some([0.9, 0.99]),
+            rank_inversions: 1.91,
+            mean_abs_error: 0.05802,
+            replicates: 2000,
+        });
+        let md = markdown_tasks(&[TaskRow { summary: Summary::from_results(&with), minutes: None }]);
+        // 0.97398 → 0.974, 1.91 → 1.9, 0.05802 → 0.058.
+        assert!(md.contains("| 0.992 [0.95, 1.00] | 0.974 / 1.9 / 0.058 | 1.000 |"), "{md}");
         let tex = latex_tasks(&rows);
         assert!(
             tex.contains(

@@ -48,10 +48,11 @@ pub fn percentile(v: &mut [f64], q: f64) -> Option<f64> {
 }
 
 /// A seeded stream of uniform indices.
-struct Stream(u64);
+pub(crate) struct Stream(pub(crate) u64);
 
 impl Stream {
-    fn below(&mut self, n: usize) -> usize {
+    /// The next index in `0..n`.
+    pub(crate) fn below(&mut self, n: usize) -> usize {
         self.0 = splitmix64(self.0);
         ((self.0 >> 11) as f64 / (1u64 << 53) as f64 * n as f64) as usize
     }

@@ -7,6 +7,7 @@
 //! are `None`, never a silent 0.
 
 pub mod bootstrap;
+pub mod ceiling;
 
 use serde::Serialize;
 

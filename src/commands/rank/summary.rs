@@ -110,10 +110,18 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
         );
     } else {
         // A task without scene checks (robomimic's, scored by success alone): the success
-        // rates with their Wilson 95% intervals, and the mean steps to success.
+        // rates with their Wilson 95% intervals, the mean steps to success, and the seeds
+        // that succeed in one branch only.
         println!(
-            "{:<16} {:>22} {:>22} {:>14} {:>14}",
-            "policy", "MuJoCo success", "world model success", "MuJoCo steps", "wm steps"
+            "{:<16} {:>22} {:>22} {:>14} {:>14} {:>14} {:>12} {:>6}",
+            "policy",
+            "MuJoCo success",
+            "world model success",
+            "MuJoCo steps",
+            "wm steps",
+            "imagined only",
+            "MuJoCo only",
+            "kappa"
         );
     }
     for p in &res.policies {
@@ -133,13 +141,21 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
                 format!("{:.2} [{:.2}, {:.2}]", b.success_rate, b.success_ci95[0], b.success_ci95[1])
             };
             let steps = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.1}"));
+            let only = |k: fn(&harness::results::PairedSuccess) -> usize| {
+                p.paired_success.as_ref().map_or("-".to_string(), |c| k(c).to_string())
+            };
+            let kappa =
+                p.paired_success.and_then(|c| c.kappa()).map_or("-".to_string(), |k| format!("{k:.2}"));
             println!(
-                "{:<16} {:>22} {:>22} {:>14} {:>14}",
+                "{:<16} {:>22} {:>22} {:>14} {:>14} {:>14} {:>12} {:>6}",
                 p.name,
                 rate(&p.sim),
                 rate(wm),
                 steps(p.sim.steps_to_success),
-                steps(wm.steps_to_success)
+                steps(wm.steps_to_success),
+                only(|c| c.imagined_only),
+                only(|c| c.sim_only),
+                kappa
             );
         }
     }
@@ -155,6 +171,15 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
         f(ag.regret_at_1),
         f(ag.mean_abs_error)
     );
+    if let Some(c) = &ag.noise_ceiling {
+        let ci = c.pearson_ci95.map_or(String::new(), |[lo, hi]| format!(" [{lo:.3}, {hi:.3}]"));
+        println!(
+            "noise ceiling (two resampled MuJoCo runs of this size agree at): Pearson {}{ci}  inversions {:.1}  MAE {:.3}",
+            f(c.pearson),
+            c.rank_inversions,
+            c.mean_abs_error
+        );
+    }
     println!("results: {}", out.join("results.json").display());
     if let Some(html) = report {
         println!("report: {}", html.display());
