@@ -96,6 +96,18 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
         assert_eq!((count("imagined_only"), count("neither")), (2.0 * imagined, 2.0 - 2.0 * imagined), "{p}");
     }
     assert!(stdout.contains("imagined only"), "{stdout}");
+    // No MuJoCo episode succeeds, so every resampled MuJoCo run reads 0 for both policies:
+    // the noise ceiling's Pearson is undefined, with no inversion and no error.
+    let ceiling = &res["agreement"]["noise_ceiling"];
+    assert!(ceiling["pearson"].is_null(), "{ceiling}");
+    assert_eq!(
+        (ceiling["rank_inversions"].as_f64(), ceiling["mean_abs_error"].as_f64()),
+        (Some(0.0), Some(0.0))
+    );
+    assert!(
+        stdout.contains("noise ceiling (two resampled MuJoCo runs of this size agree at): Pearson n/a"),
+        "{stdout}"
+    );
     assert_eq!(res["scenario"], "can", "{res}");
     // The table of tasks reads the run: Can, 2 policies × 2 episodes from seed 100000.
     let (md, _) = expect_code(&run(&["tasks", s(&out)]), 0);
