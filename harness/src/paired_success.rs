@@ -52,12 +52,15 @@ impl PairedSuccess {
     /// independent of the real one (it then knows the policy's rate at best, not the
     /// episode). None when chance agreement is already certain (every seed succeeds,
     /// or every seed fails, in both branches), or without seeds.
+    ///
+    /// Computed from the counts in the 2 × 2 form κ = 2(ad − bc) / ((a+b)(b+d) + (a+c)(c+d))
+    /// (a both, b MuJoCo only, c imagined only, d neither), which equals (observed −
+    /// chance) / (1 − chance) and is exactly 0 when one branch never (or always)
+    /// succeeds, with no rounding residue to print as −0.00.
     pub fn kappa(&self) -> Option<f64> {
-        let n = self.seeds() as f64;
-        let sim = (self.both + self.sim_only) as f64 / n;
-        let wm = (self.both + self.imagined_only) as f64 / n;
-        let chance = sim * wm + (1.0 - sim) * (1.0 - wm);
-        (n > 0.0 && 1.0 - chance > 1e-12).then(|| (self.agreement() - chance) / (1.0 - chance))
+        let [a, b, c, d] = [self.both, self.sim_only, self.imagined_only, self.neither].map(|v| v as f64);
+        let denominator = (a + b) * (b + d) + (a + c) * (c + d);
+        (denominator > 0.0).then(|| 2.0 * (a * d - b * c) / denominator)
     }
 }
 
@@ -88,6 +91,9 @@ mod tests {
         // observed 2/4 = chance 1/2·1/2 + 1/2·1/2 = 1/2, so κ = 0.
         let independent = PairedSuccess { both: 1, imagined_only: 1, sim_only: 1, neither: 1 };
         assert!(independent.kappa().unwrap().abs() < 1e-12);
+        // MuJoCo never succeeds (a = b = 0): κ is exactly 0, not a rounding residue.
+        let never = PairedSuccess { both: 0, imagined_only: 14, sim_only: 0, neither: 6 };
+        assert_eq!(never.kappa().map(f64::to_bits), Some(0.0_f64.to_bits()));
         // Every seed succeeds in both branches: chance agreement is 1, κ undefined.
         assert_eq!(PairedSuccess { both: 4, ..Default::default() }.kappa(), None);
         assert_eq!(PairedSuccess::default().kappa(), None);
