@@ -456,6 +456,18 @@ pub struct SimulateArgs {
     /// blur, apart from the world model's dynamics.
     #[arg(long, value_name = "WORLD_MODEL")]
     pub observe_through: Option<PathBuf>,
+    /// With a policy checkpoint: run each episode three ways from the same state — the
+    /// policy in MuJoCo, the policy in this world model (as `rank` imagines it), and the
+    /// imagined episode's actions replayed in MuJoCo — so that an imagined success
+    /// whose actions also succeed in MuJoCo (the imagined frames made the policy act
+    /// better) is told apart from one whose actions fail there (the imagined dynamics
+    /// forgave them). Writes replay.json and replay.jsonl.
+    #[arg(long, value_name = "WORLD_MODEL", conflicts_with_all = ["observe_through", "record_scores"])]
+    pub replay_imagined: Option<PathBuf>,
+    /// With --replay-imagined: the learned judge of imagined frames [default, for a task
+    /// without a judge of its own (Lift, Can): checkpoints/<task>/judge].
+    #[arg(long, requires = "replay_imagined")]
+    pub judge: Option<PathBuf>,
 }
 
 /// `evalharness collect`.

@@ -73,6 +73,30 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
     let (_, stderr) = expect_code(&run(&[&builtin[..], &["--out", s(&dir.join("o3"))]].concat()), 2);
     assert!(stderr.contains("is a built-in behaviour"), "{stderr}");
 
+    // The imagined episodes' actions replayed in MuJoCo: in 4 steps nothing reaches the
+    // bin in MuJoCo, whether the policy acts or its imagined actions are replayed, so
+    // every imagined success (if any) is one whose actions fail there.
+    let rep = dir.join("replay");
+    let args = ["simulate", "--scenario", "can", "--policy", s(&pol), "--episodes", "2", "--max-steps", "4"];
+    let more = ["--replay-imagined", s(&wm), "--judge", s(&judge), "--out", s(&rep)];
+    let (stdout, _) = expect_code(&run(&[&args[..], &more[..]].concat()), 0);
+    assert!(stdout.contains("imagined actions in MuJoCo 0.00"), "{stdout}");
+    let replay = read_json(&rep.join("replay.json"));
+    for p in replay["policies"].as_array().into_iter().flatten() {
+        assert_eq!(
+            (p["episodes"].as_u64(), p["mujoco"].as_f64(), p["imagined_success_holds"].as_u64()),
+            (Some(2), Some(0.0), Some(0)),
+            "{p}"
+        );
+        let imagined = p["imagined"].as_f64().unwrap_or(-1.0);
+        assert_eq!(p["imagined_success_fails"].as_f64(), Some(2.0 * imagined), "{p}");
+    }
+    let lines = std::fs::read_to_string(rep.join("replay.jsonl")).unwrap_or_default();
+    assert_eq!(lines.lines().count(), 4, "2 policies × 2 replayed episodes: {lines}");
+    let builtin = ["simulate", "--scenario", "can", "--policy", "expert", "--replay-imagined", s(&wm)];
+    let (_, stderr) = expect_code(&run(&[&builtin[..], &["--out", s(&dir.join("r2"))]].concat()), 2);
+    assert!(stderr.contains("only a policy checkpoint acts on imagined frames"), "{stderr}");
+
     // rank both epochs in both branches: 2 policies × 2 episodes of 4 steps.
     let out = dir.join("rank");
     let args = ["rank", "--scenario", "can", "--world-model", s(&wm), "--judge", s(&judge)];

@@ -26,7 +26,7 @@ use world_model::rollout::Rollout;
 
 use crate::EngineError;
 use crate::decide::{decide, record_chunk};
-use crate::start::{Begin, BranchOut, Setup, Start, Timing, Track, push, still_active};
+use crate::start::{Begin, BranchOut, Setup, Start, Timing, Track, Trajectory, push, still_active};
 use harness::policy::Policy;
 
 /// The world-model branch of one batch. `start` is borrowed: its episodes are
@@ -73,8 +73,15 @@ pub fn wm_branch(
     timing.world_model_s += tw.elapsed().as_secs_f64();
     let mut steps = 0;
     let mut active: Vec<usize> = (0..n).collect();
+    // With `start.trajectories`: each episode's executed actions.
+    let mut executed: Vec<Vec<Vec<f32>>> = vec![Vec::new(); n];
     while steps < s.max_steps && !active.is_empty() {
         let (chunks, len) = decide(policy, &hist, &active, size, &mut rngs, s.max_steps - steps, timing)?;
+        if start.trajectories {
+            for (&i, chunk) in active.iter().zip(&chunks) {
+                executed[i].extend(chunk[..len].iter().cloned());
+            }
+        }
         let tw = Instant::now();
         let a = active.len();
         let mut sub: Vec<Rng> = active.iter().map(|&i| gen_rngs[i].clone()).collect();
@@ -135,12 +142,31 @@ pub fn wm_branch(
         active = next;
         timing.world_model_s += tw.elapsed().as_secs_f64();
     }
-    let rows = (0..n)
+    let rows: Vec<_> = (0..n)
         .map(|i| {
             track[i]
                 .row(&name, start.seeds[i], Branch::WorldModel, &kind)
                 .with_poses(None, start.goals[i].unwrap_or_default())
         })
         .collect();
-    Ok(BranchOut { rows, frames: rec, episodes: Vec::new() })
+    // The imagined episodes' actions, for replaying them in the simulator (no frames,
+    // states or raw scores: nothing here is exact).
+    let episodes = if start.trajectories {
+        executed
+            .into_iter()
+            .zip(&rows)
+            .enumerate()
+            .map(|(i, (actions, row))| Trajectory {
+                seed: start.seeds[i],
+                actions,
+                goal: start.goals[i],
+                score: row.score,
+                success: row.success,
+                ..Trajectory::default()
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    Ok(BranchOut { rows, frames: rec, episodes })
 }

@@ -9,6 +9,7 @@
 //!   what a branch returns;
 //! - [`sim`]: the simulator branch (real frames, exact scores);
 //! - [`imagined`]: the world-model branch (imagined frames, judged scores);
+//! - [`replay`]: one episode's recorded actions stepped in the simulator;
 //! - [`schedule`]: all policies' batches on worker threads, load-balanced, handed
 //!   on in batch order, with the same rows for any worker count;
 //! - [`plan`]: GPC-RANK, a policy's proposals imagined and the best executed, in
@@ -24,6 +25,7 @@ mod decide;
 mod error;
 pub mod imagined;
 pub mod plan;
+pub mod replay;
 pub mod schedule;
 pub mod sim;
 pub mod start;
@@ -32,5 +34,6 @@ mod tests;
 
 pub use error::EngineError;
 pub use imagined::wm_branch;
+pub use replay::{Replay, replay_in_sim};
 pub use sim::sim_branch;
 pub use start::{BranchOut, Observe, Setup, Start, Timing, Trajectory, obs_of, push};

@@ -67,8 +67,9 @@ pub struct Start {
     pub(crate) seeds: Vec<u64>,
     /// Keep the last frame of every action chunk (for filmstrips and GIFs).
     pub record: bool,
-    /// Simulator branch only: keep every step's observation, state, action and raw
-    /// score (`collect --policy`).
+    /// Keep every episode's trajectory: in the simulator branch every step's
+    /// observation, state, action and raw score (`collect --policy`); in the
+    /// world-model branch the executed actions only (`simulate --replay-imagined`).
     pub trajectories: bool,
     /// Simulator branch only: keep stepping after success, up to the step limit
     /// (`collect --policy --no-early-stop`, so that success lasts in the data).
@@ -83,7 +84,8 @@ pub struct Start {
 /// Rewrites a batch of HWC frames in place ([`Start::observe`]).
 pub type Observe = std::sync::Arc<dyn Fn(&mut [Vec<u8>]) + Send + Sync>;
 
-/// One recorded simulator episode, step by step.
+/// One recorded episode, step by step (from the world-model branch: its seed, actions,
+/// score and success only).
 #[derive(Clone, Debug, Default)]
 pub struct Trajectory {
     /// Episode seed.
@@ -111,7 +113,8 @@ pub struct BranchOut {
     pub rows: Vec<EpisodeRow>,
     /// Recorded frames per episode (empty unless recording).
     pub frames: Vec<Vec<Vec<u8>>>,
-    /// Whole episodes (empty unless [`Start::trajectories`]; the simulator branch only).
+    /// Whole episodes (empty unless [`Start::trajectories`]; from the world-model
+    /// branch, the seeds, actions, scores and successes only).
     pub episodes: Vec<Trajectory>,
 }
 

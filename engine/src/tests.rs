@@ -16,7 +16,7 @@ use world_model::codec::FrameCodec;
 use world_model::model::{WorldModel, WorldModelConfig};
 use world_model::unet::UNetConfig;
 
-use crate::{Setup, Start, Timing, sim_branch};
+use crate::{Setup, Start, Timing, replay_in_sim, sim_branch};
 
 /// An agent on a line moves halfway to its commanded target each step; it succeeds
 /// within 0.5 of the goal at 7. The frame's first byte shows the position × 25.
@@ -147,6 +147,29 @@ fn a_success_scored_task_runs_through_the_simulator_branch() {
 }
 
 #[test]
+fn recorded_actions_replayed_in_the_simulator_give_the_recorded_rows() {
+    let setup = Setup { task: &Reach, master_seed: 0, max_steps: 10, judge: None };
+    let mut start = Start::new("to-goal", &[0, 2, 1], &setup).unwrap();
+    start.trajectories = true;
+    let out = sim_branch(&ToGoal, start, &setup, &mut Timing::default()).unwrap();
+    for (t, row) in out.episodes.iter().zip(&out.rows) {
+        let r = replay_in_sim("to-goal", (1, 2), t.seed, t.actions.clone(), &setup, &mut Timing::default())
+            .unwrap();
+        assert_eq!((r.seed, r.steps, r.success, r.score), (row.seed, row.steps, row.success, row.score));
+    }
+    // Seed 1 starts at 3: 5, 6, 6.5 (not < 0.5 from 7), 6.75: success at step 4.
+    assert_eq!((out.rows[2].steps, out.rows[2].success), (4, true));
+    // Other actions from the same state: seed 2 starts at 6 and is sent to 0 (3, 1.5):
+    // a failure after the 2 replayed steps.
+    let r = replay_in_sim("to-goal", (1, 2), 2, vec![vec![0.0]; 2], &setup, &mut Timing::default()).unwrap();
+    assert_eq!((r.steps, r.success), (2, false));
+    // Seed 0's actions cut after 2 steps (3.5, 5.25) fail too.
+    let r = replay_in_sim("to-goal", (1, 2), 0, vec![vec![7.0]; 2], &setup, &mut Timing::default()).unwrap();
+    assert_eq!((r.steps, r.success), (2, false));
+    assert!(replay_in_sim("to-goal", (1, 2), 0, Vec::new(), &setup, &mut Timing::default()).is_err());
+}
+
+#[test]
 fn episodes_that_never_succeed_run_to_the_step_limit() {
     // Seed 1 starts at 3 and is commanded to the goal; with max_steps 2 it reaches 5 then 6:
     // never within 0.5, so the row is a failure after exactly 2 steps.
@@ -226,6 +249,14 @@ fn robomimic_lift_runs_through_the_simulator_branch_with_a_given_judge() {
     for r in &imagined.rows {
         assert_eq!((r.branch, r.steps, r.success), (Branch::WorldModel, 4, false));
     }
+    // The imagined episode's executed actions (Up's, two chunks of 2), and nothing exact.
+    let e = &imagined.episodes[0];
+    assert_eq!((e.seed, e.success, e.actions.len()), (0, false, 4));
+    assert_eq!(e.actions[3], vec![0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0]);
+    assert!(e.frames.is_empty() && e.states.is_empty() && e.raw.is_empty());
+    // Replayed in MuJoCo they step as the policy's own rollout below does: 4 steps, no lift.
+    let replayed = replay_in_sim("up", (1, 2), 0, e.actions.clone(), &setup, &mut Timing::default()).unwrap();
+    assert_eq!((replayed.steps, replayed.success, replayed.score), (4, false, 0.0));
     let out = sim_branch(&Up, start, &setup, &mut Timing::default()).unwrap();
     // Four steps of moving up with an open gripper never lift the cube.
     for r in &out.rows {

@@ -17,6 +17,7 @@ mod sessions;
 mod simulate;
 mod simulate_arm;
 mod simulate_policy;
+mod simulate_replay;
 mod train;
 mod train_judge;
 mod train_policy;

@@ -35,7 +35,17 @@ fn side_by_side_difference(frames: &[Vec<u8>], size: usize) -> f64 {
 pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let path = std::path::Path::new(&args.policy);
     if path.is_dir() {
+        if let Some(wm) = &args.replay_imagined {
+            return super::simulate_replay::run(args, wm, quiet);
+        }
         return super::simulate_policy::run(args, quiet);
+    }
+    if let Some(wm) = &args.replay_imagined {
+        bail!(
+            "--replay-imagined {}: only a policy checkpoint acts on imagined frames; --policy {} is not a checkpoint folder",
+            wm.display(),
+            args.policy
+        );
     }
     if let Some(wm) = &args.observe_through {
         bail!(

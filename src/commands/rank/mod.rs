@@ -229,7 +229,7 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
 ///
 /// # Errors
 /// An unloadable judge, or one of another frame size or score kind, naming its folder.
-fn load_judge(dir: &Path, task: &dyn Task, device: &burn::tensor::Device) -> Result<FrameJudge> {
+pub(crate) fn load_judge(dir: &Path, task: &dyn Task, device: &burn::tensor::Device) -> Result<FrameJudge> {
     let j = FrameJudge::load(dir, device)?;
     let size = task.observation_spec().image_size;
     if j.image_size() != size {

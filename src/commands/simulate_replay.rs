@@ -1,0 +1,181 @@
+//! `simulate --policy DIR --replay-imagined WORLD_MODEL`: every episode three ways
+//! from the same initial state — the policy in MuJoCo, the policy in the world model
+//! (as `rank` imagines it, read by the same judge), and the imagined episode's own
+//! actions replayed in MuJoCo.
+//!
+//! Why: when the world model imagines a policy succeeding more often than MuJoCo
+//! sees it, either the imagined frames made the policy act better (its imagined
+//! actions then succeed in MuJoCo too) or the imagined dynamics forgave actions that
+//! fail for real (they then fail there). The counts per checkpoint tell the two apart.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+
+use anyhow::{Context, Result, bail};
+use engine::{Setup, Start, Timing, replay_in_sim, sim_branch, wm_branch};
+use harness::results::EpisodeRow;
+use harness::rows::append_rows;
+use policies::dir::{checkpoint_dirs, checkpoint_name};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::rank::{load_judge, load_world_model};
+use crate::cli::SimulateArgs;
+use crate::output::{Staged, write_json};
+use crate::policy_kinds::{expectations, load_any};
+use crate::progress;
+use crate::scenario::load_task;
+
+/// One checkpoint's three success rates and how the imagined successes fare.
+#[derive(Debug, Serialize)]
+struct Replayed {
+    name: String,
+    episodes: usize,
+    /// The policy in MuJoCo.
+    mujoco: f64,
+    /// The policy in the world model.
+    imagined: f64,
+    /// The imagined episodes' actions in MuJoCo.
+    imagined_actions_in_mujoco: f64,
+    /// Imagined successes whose actions also succeed in MuJoCo.
+    imagined_success_holds: usize,
+    /// Imagined successes whose actions fail in MuJoCo.
+    imagined_success_fails: usize,
+}
+
+/// The judge folder: `--judge`, else the shipped one of a task without its own.
+fn judge_dir(args: &SimulateArgs, task: &dyn harness::task::Task) -> Result<Option<PathBuf>> {
+    if args.judge.is_some() {
+        return Ok(args.judge.clone());
+    }
+    let own = task.reset(args.common.seed_start)?.judge().is_some();
+    let shipped = Path::new("checkpoints").join(task.name()).join("judge");
+    Ok((!own).then_some(shipped))
+}
+
+/// Runs the three branches for every checkpoint under `--policy`.
+pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> {
+    let c = &args.common;
+    let task = load_task(&c.scenario)?;
+    let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
+    let device = world_model::device::selected()?;
+    let wm = load_world_model(wm_dir, None, &device)?;
+    let judge = match judge_dir(args, task.as_ref())? {
+        Some(d) => Some(Arc::new(load_judge(&d, task.as_ref(), &device)?) as Arc<dyn harness::judge::Judge>),
+        None => None,
+    };
+    let setup = Setup { task: task.as_ref(), master_seed: 0, max_steps, judge: judge.as_ref() };
+    let dirs = checkpoint_dirs(Path::new(&args.policy))?;
+    let out = Staged::new(&args.out, c.force)?;
+    let expect = expectations(task.as_ref());
+    let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();
+    let pool =
+        rayon::ThreadPoolBuilder::new().num_threads(c.jobs.max(1)).build().context("starting threads")?;
+    let pb = progress::bar((dirs.len() as u64) * c.episodes, "replay", quiet);
+    let (jsonl, replay_jsonl) = (out.file("episodes.jsonl"), out.file("replay.jsonl"));
+    let mut summary = Vec::new();
+    for d in &dirs {
+        let name = checkpoint_name(d);
+        let policy =
+            load_any(d, &expect, &device, task.as_ref()).with_context(|| format!("policy {name}"))?;
+        let horizons = (policy.obs_horizon(), policy.action_horizon());
+        let mut timing = Timing::default();
+        let (mut real, mut imagined, mut replayed) = (Vec::new(), Vec::new(), Vec::new());
+        for batch in seeds.chunks(c.episodes.clamp(1, 50) as usize) {
+            let mut start = Start::new(policy.name(), batch, &setup)?;
+            start.trajectories = true;
+            let wm_out = wm_branch(policy.as_ref(), &start, &setup, &wm, &mut timing)
+                .with_context(|| format!("policy {name}: the world-model branch"))?;
+            start.trajectories = false;
+            real.extend(pool.install(|| sim_branch(policy.as_ref(), start, &setup, &mut timing))?.rows);
+            let rows: Result<Vec<EpisodeRow>, _> = pool.install(|| {
+                wm_out
+                    .episodes
+                    .par_iter()
+                    .map(|e| {
+                        replay_in_sim(
+                            policy.name(),
+                            horizons,
+                            e.seed,
+                            e.actions.clone(),
+                            &setup,
+                            &mut Timing::default(),
+                        )
+                    })
+                    .collect()
+            });
+            replayed.extend(rows.with_context(|| format!("policy {name}: replaying the imagined actions"))?);
+            imagined.extend(wm_out.rows);
+            pb.inc(batch.len() as u64);
+        }
+        append_rows(&jsonl, &real)?;
+        append_rows(&jsonl, &imagined)?;
+        append_rows(&replay_jsonl, &replayed)?;
+        let r = tally(&name, &real, &imagined, &replayed);
+        println!(
+            "{name:<16} MuJoCo {:.2}  imagined {:.2}  imagined actions in MuJoCo {:.2}  (imagined successes: {} hold in MuJoCo, {} fail)",
+            r.mujoco,
+            r.imagined,
+            r.imagined_actions_in_mujoco,
+            r.imagined_success_holds,
+            r.imagined_success_fails
+        );
+        summary.push(r);
+    }
+    pb.finish_and_clear();
+    if summary.is_empty() {
+        bail!("--policy {}: no checkpoint ran", args.policy);
+    }
+    write_json(
+        &out.file("replay.json"),
+        &serde_json::json!({"scenario": c.scenario, "policies_dir": args.policy, "world_model": wm_dir,
+            "judge": judge_dir(args, task.as_ref())?, "seed_start": c.seed_start, "episodes": c.episodes,
+            "max_steps": max_steps, "policies": summary}),
+    )?;
+    let o = out.commit()?;
+    println!("-> {}", o.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The rates of one checkpoint's rows (each list in seed order, one row per seed).
+fn tally(name: &str, real: &[EpisodeRow], imagined: &[EpisodeRow], replayed: &[EpisodeRow]) -> Replayed {
+    let rate =
+        |rows: &[EpisodeRow]| rows.iter().filter(|r| r.success).count() as f64 / rows.len().max(1) as f64;
+    let both =
+        |holds: bool| imagined.iter().zip(replayed).filter(|(i, r)| i.success && r.success == holds).count();
+    Replayed {
+        name: name.to_string(),
+        episodes: real.len(),
+        mujoco: rate(real),
+        imagined: rate(imagined),
+        imagined_actions_in_mujoco: rate(replayed),
+        imagined_success_holds: both(true),
+        imagined_success_fails: both(false),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use harness::results::Branch;
+
+    #[test]
+    fn tally_counts_imagined_successes_by_their_replay() {
+        // Seeds 1–4, success (MuJoCo, imagined, replayed): (F, T, T), (F, T, F), (T, T, F),
+        // (F, F, F). Rates 1/4, 3/4, 1/4; of the 3 imagined successes, 1 holds and 2 fail.
+        let row = |seed, b, ok: bool| {
+            let x = f64::from(u8::from(ok));
+            EpisodeRow::new("p", seed, b, x, x, x, 0.5, 10) // success: x > 0.5
+        };
+        let rows = |b, oks: [bool; 4]| -> Vec<EpisodeRow> {
+            oks.iter().zip(1..).map(|(&ok, i)| row(i, b, ok)).collect()
+        };
+        let real = rows(Branch::Sim, [false, false, true, false]);
+        let imag = rows(Branch::WorldModel, [true, true, true, false]);
+        let rep = rows(Branch::Sim, [true, false, false, false]);
+        let t = tally("p", &real, &imag, &rep);
+        assert_eq!((t.mujoco, t.imagined, t.imagined_actions_in_mujoco), (0.25, 0.75, 0.25));
+        assert_eq!((t.imagined_success_holds, t.imagined_success_fails, t.episodes), (1, 2, 4));
+    }
+}
