@@ -464,6 +464,10 @@ pub struct SimulateArgs {
     /// forgave them). Writes replay.json and replay.jsonl.
     #[arg(long, value_name = "WORLD_MODEL", conflicts_with_all = ["observe_through", "record_scores"])]
     pub replay_imagined: Option<PathBuf>,
+    /// With a policy checkpoint: master seed of the policies' sampling noise, as `rank
+    /// --seed` (the same value gives the episodes of `rank`'s branches) [default: 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// With --replay-imagined: the learned judge of imagined frames [default, for a task
     /// without a judge of its own (Lift, Can): checkpoints/<task>/judge].
     #[arg(long, requires = "replay_imagined")]

@@ -60,11 +60,14 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
     // scored exactly, and the run says what the policy saw.
     let obs = dir.join("observed");
     let args = ["simulate", "--scenario", "can", "--policy", s(&pol), "--episodes", "1", "--max-steps", "4"];
-    let (stdout, _) =
-        expect_code(&run(&[&args[..], &["--observe-through", s(&wm), "--out", s(&obs)]].concat()), 0);
+    let (stdout, _) = expect_code(
+        &run(&[&args[..], &["--observe-through", s(&wm), "--seed", "7", "--out", s(&obs)]].concat()),
+        0,
+    );
     assert_eq!(stdout.matches("success 0.0%").count(), 2, "{stdout}");
     let summary = read_json(&obs.join("summary.json"));
     assert_eq!(summary["observe_through"], s(&wm), "{summary}");
+    assert_eq!(summary["seed"], 7, "the policies' noise seed is recorded: {summary}");
     let o2 = dir.join("o2");
     let refused = [&args[..], &["--observe-through", s(&wm), "--record-scores", "--out", s(&o2)]];
     let (_, stderr) = expect_code(&run(&refused.concat()), 2);
@@ -93,9 +96,14 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
     }
     let lines = std::fs::read_to_string(rep.join("replay.jsonl")).unwrap_or_default();
     assert_eq!(lines.lines().count(), 4, "2 policies × 2 replayed episodes: {lines}");
+    assert_eq!(replay["seed"], 0, "rank's default noise seed: {replay}");
     let builtin = ["simulate", "--scenario", "can", "--policy", "expert", "--replay-imagined", s(&wm)];
     let (_, stderr) = expect_code(&run(&[&builtin[..], &["--out", s(&dir.join("r2"))]].concat()), 2);
     assert!(stderr.contains("only a policy checkpoint acts on imagined frames"), "{stderr}");
+    let r3 = dir.join("r3");
+    let seeded = ["simulate", "--scenario", "can", "--policy", "expert", "--seed", "3", "--out", s(&r3)];
+    let (_, stderr) = expect_code(&run(&seeded), 2);
+    assert!(stderr.contains("--seed 3: it seeds a policy checkpoint's sampling noise"), "{stderr}");
 
     // rank both epochs in both branches: 2 policies × 2 episodes of 4 steps.
     let out = dir.join("rank");

@@ -40,6 +40,12 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
         }
         return super::simulate_policy::run(args, quiet);
     }
+    if let Some(seed) = args.seed {
+        bail!(
+            "--seed {seed}: it seeds a policy checkpoint's sampling noise; --policy {} is a built-in behaviour",
+            args.policy
+        );
+    }
     if let Some(wm) = &args.replay_imagined {
         bail!(
             "--replay-imagined {}: only a policy checkpoint acts on imagined frames; --policy {} is not a checkpoint folder",

@@ -30,7 +30,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let dir = std::path::Path::new(&args.policy);
     let task = load_task(&c.scenario)?;
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
-    let setup = Setup { task: task.as_ref(), master_seed: 0, max_steps, judge: None };
+    let setup = Setup { task: task.as_ref(), master_seed: args.seed.unwrap_or(0), max_steps, judge: None };
     let device = world_model::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
     let observe = match &args.observe_through {
@@ -95,6 +95,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
         &json!({"scenario": c.scenario, "policies_dir": dir, "seed_start": c.seed_start, "episodes": c.episodes,
                 "max_steps": max_steps, "score": task.score_kind().describe(),
                 "observe_through": args.observe_through.as_ref().map(|p| p.display().to_string()),
+                "seed": args.seed.unwrap_or(0),
                 "policies": summary}),
     )?;
     let o = out.commit()?;

@@ -65,7 +65,8 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
         Some(d) => Some(Arc::new(load_judge(&d, task.as_ref(), &device)?) as Arc<dyn harness::judge::Judge>),
         None => None,
     };
-    let setup = Setup { task: task.as_ref(), master_seed: 0, max_steps, judge: judge.as_ref() };
+    let setup =
+        Setup { task: task.as_ref(), master_seed: args.seed.unwrap_or(0), max_steps, judge: judge.as_ref() };
     let dirs = checkpoint_dirs(Path::new(&args.policy))?;
     let out = Staged::new(&args.out, c.force)?;
     let expect = expectations(task.as_ref());
@@ -131,7 +132,7 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
         &out.file("replay.json"),
         &serde_json::json!({"scenario": c.scenario, "policies_dir": args.policy, "world_model": wm_dir,
             "judge": judge_dir(args, task.as_ref())?, "seed_start": c.seed_start, "episodes": c.episodes,
-            "max_steps": max_steps, "policies": summary}),
+            "max_steps": max_steps, "seed": setup.master_seed, "policies": summary}),
     )?;
     let o = out.commit()?;
     println!("-> {}", o.display());
