@@ -90,11 +90,11 @@ pub fn report_html(s: &Summary, x: &Extras) -> String {
     }
     h.push_str("</div>\n");
     if let Some(c) = &s.ceiling {
-        let r = c.pearson.map_or("n/a".to_string(), |r| format!("{r:.3}"));
-        let ci = c.pearson_ci95.map_or(String::new(), |[lo, hi]| format!(" [{lo:.3}, {hi:.3}]"));
         h.push_str(&format!(
-            "<p class=\"sub\">Noise ceiling: two MuJoCo runs of this size (resampled from this one) agree at Pearson {r}{ci}, {:.1} inversions, mean absolute error {:.3}: the most a world model can reach with this many episodes.</p>\n",
-            c.rank_inversions, c.mean_abs_error
+            "<p class=\"sub\">Noise ceiling: two MuJoCo runs of this size (resampled from this one) agree at Pearson {}, {:.1} inversions, mean absolute error {:.3}: the most a world model can reach with this many episodes.</p>\n",
+            c.pearson_text(),
+            c.rank_inversions,
+            c.mean_abs_error
         ));
     }
     if !s.failed.is_empty() {

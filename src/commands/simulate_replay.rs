@@ -8,19 +8,19 @@
 //! actions then succeed in MuJoCo too) or the imagined dynamics forgave actions that
 //! fail for real (they then fail there). The counts per checkpoint tell the two apart.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::ExitCode;
 use std::sync::Arc;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use engine::{Setup, Start, Timing, replay_in_sim, sim_branch, wm_branch};
-use harness::results::EpisodeRow;
+use harness::results::{EpisodeRow, PairedSuccess};
 use harness::rows::append_rows;
 use policies::dir::{checkpoint_dirs, checkpoint_name};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::rank::{load_judge, load_world_model};
+use super::rank::{defaults, load_judge, load_world_model};
 use crate::cli::SimulateArgs;
 use crate::output::{Staged, write_json};
 use crate::policy_kinds::{expectations, load_any};
@@ -44,16 +44,6 @@ struct Replayed {
     imagined_success_fails: usize,
 }
 
-/// The judge folder: `--judge`, else the shipped one of a task without its own.
-fn judge_dir(args: &SimulateArgs, task: &dyn harness::task::Task) -> Result<Option<PathBuf>> {
-    if args.judge.is_some() {
-        return Ok(args.judge.clone());
-    }
-    let own = task.reset(args.common.seed_start)?.judge().is_some();
-    let shipped = Path::new("checkpoints").join(task.name()).join("judge");
-    Ok((!own).then_some(shipped))
-}
-
 /// Runs the three branches for every checkpoint under `--policy`.
 pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
@@ -61,8 +51,10 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
     let device = world_model::device::selected()?;
     let wm = load_world_model(wm_dir, None, &device)?;
-    let judge = match judge_dir(args, task.as_ref())? {
-        Some(d) => Some(Arc::new(load_judge(&d, task.as_ref(), &device)?) as Arc<dyn harness::judge::Judge>),
+    let (judge_dir, _) =
+        defaults::judge(args.judge.as_deref(), task.as_ref(), Path::new("checkpoints"), c.seed_start)?;
+    let judge = match &judge_dir {
+        Some(d) => Some(Arc::new(load_judge(d, task.as_ref(), &device)?) as Arc<dyn harness::judge::Judge>),
         None => None,
     };
     let setup =
@@ -83,7 +75,7 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
         let horizons = (policy.obs_horizon(), policy.action_horizon());
         let mut timing = Timing::default();
         let (mut real, mut imagined, mut replayed) = (Vec::new(), Vec::new(), Vec::new());
-        for batch in seeds.chunks(c.episodes.clamp(1, 50) as usize) {
+        for batch in seeds.chunks(50) {
             let mut start = Start::new(policy.name(), batch, &setup)?;
             start.trajectories = true;
             let wm_out = wm_branch(policy.as_ref(), &start, &setup, &wm, &mut timing)
@@ -125,13 +117,10 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
         summary.push(r);
     }
     pb.finish_and_clear();
-    if summary.is_empty() {
-        bail!("--policy {}: no checkpoint ran", args.policy);
-    }
     write_json(
         &out.file("replay.json"),
         &serde_json::json!({"scenario": c.scenario, "policies_dir": args.policy, "world_model": wm_dir,
-            "judge": judge_dir(args, task.as_ref())?, "seed_start": c.seed_start, "episodes": c.episodes,
+            "judge": judge_dir, "seed_start": c.seed_start, "episodes": c.episodes,
             "max_steps": max_steps, "seed": setup.master_seed, "policies": summary}),
     )?;
     let o = out.commit()?;
@@ -143,16 +132,16 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
 fn tally(name: &str, real: &[EpisodeRow], imagined: &[EpisodeRow], replayed: &[EpisodeRow]) -> Replayed {
     let rate =
         |rows: &[EpisodeRow]| rows.iter().filter(|r| r.success).count() as f64 / rows.len().max(1) as f64;
-    let both =
-        |holds: bool| imagined.iter().zip(replayed).filter(|(i, r)| i.success && r.success == holds).count();
+    // Each seed's replayed actions (in MuJoCo) against its imagined episode.
+    let c = PairedSuccess::count(replayed.iter().zip(imagined).map(|(r, i)| (r.success, i.success)));
     Replayed {
         name: name.to_string(),
         episodes: real.len(),
         mujoco: rate(real),
         imagined: rate(imagined),
         imagined_actions_in_mujoco: rate(replayed),
-        imagined_success_holds: both(true),
-        imagined_success_fails: both(false),
+        imagined_success_holds: c.both,
+        imagined_success_fails: c.imagined_only,
     }
 }
 

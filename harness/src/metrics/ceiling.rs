@@ -34,6 +34,15 @@ pub struct NoiseCeiling {
     pub replicates: usize,
 }
 
+impl NoiseCeiling {
+    /// The mean Pearson r with its interval, `0.974 [0.937, 0.994]` (`n/a` where r was
+    /// never defined), as the stdout line and the report state it.
+    pub fn pearson_text(&self) -> String {
+        let r = self.pearson.map_or("n/a".to_string(), |r| format!("{r:.3}"));
+        self.pearson_ci95.map_or(r.clone(), |[lo, hi]| format!("{r} [{lo:.3}, {hi:.3}]"))
+    }
+}
+
 /// The resampled mean of `v` (0 when empty).
 fn resampled_mean(v: &[f64], s: &mut Stream) -> f64 {
     let n = v.len();
@@ -80,6 +89,7 @@ mod tests {
         let c = noise_ceiling(&actual, 50, 3).unwrap();
         assert_eq!(c.pearson, Some(1.0));
         assert_eq!(c.pearson_ci95, Some([1.0, 1.0]));
+        assert_eq!(c.pearson_text(), "1.000 [1.000, 1.000]");
         assert_eq!((c.rank_inversions, c.mean_abs_error, c.replicates), (0.0, 0.0, 50));
     }
 

@@ -58,10 +58,7 @@ pub fn resolve(a: &RankArgs, task: &dyn Task, root: &Path) -> Result<Resolved> {
     } else {
         TaskDefaults::default()
     };
-    // A shipped judge is the default only where the task has no hand-written one.
-    let shipped_judge = dir.join("judge");
-    let own_judge = task.reset(a.seed_start)?.judge().is_some();
-    let judge = a.judge.clone().or_else(|| (!own_judge && shipped_judge.is_dir()).then_some(shipped_judge));
+    let (judge, own_judge) = judge(a.judge.as_deref(), task, root, a.seed_start)?;
     Ok(Resolved {
         policies: a.policies.clone().unwrap_or_else(|| dir.join("policies")),
         world_model: a.world_model.clone().unwrap_or_else(|| dir.join("world_model")),
@@ -70,6 +67,24 @@ pub fn resolve(a: &RankArgs, task: &dyn Task, root: &Path) -> Result<Resolved> {
         max_steps: a.max_steps.or(d.max_steps).unwrap_or_else(|| task.max_steps()),
         own_judge,
     })
+}
+
+/// The learned judge of imagined frames: `given`, else the shipped `root/<task>/judge`
+/// where it exists and the task has no hand-written judge (its episode at `seed` says);
+/// and whether it has one. Shared by `rank` and `simulate --replay-imagined`.
+///
+/// # Errors
+/// A reset of `seed` that fails.
+pub fn judge(
+    given: Option<&Path>,
+    task: &dyn Task,
+    root: &Path,
+    seed: u64,
+) -> Result<(Option<PathBuf>, bool)> {
+    let shipped = root.join(task.name()).join("judge");
+    let own = task.reset(seed)?.judge().is_some();
+    let judge = given.map(Path::to_path_buf).or_else(|| (!own && shipped.is_dir()).then_some(shipped));
+    Ok((judge, own))
 }
 
 impl Resolved {

@@ -172,10 +172,9 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
         f(ag.mean_abs_error)
     );
     if let Some(c) = &ag.noise_ceiling {
-        let ci = c.pearson_ci95.map_or(String::new(), |[lo, hi]| format!(" [{lo:.3}, {hi:.3}]"));
         println!(
-            "noise ceiling (two resampled MuJoCo runs of this size agree at): Pearson {}{ci}  inversions {:.1}  MAE {:.3}",
-            f(c.pearson),
+            "noise ceiling (two resampled MuJoCo runs of this size agree at): Pearson {}  inversions {:.1}  MAE {:.3}",
+            c.pearson_text(),
             c.rank_inversions,
             c.mean_abs_error
         );
