@@ -472,6 +472,12 @@ pub struct SimulateArgs {
     /// without a judge of its own (Lift, Can): checkpoints/<task>/judge].
     #[arg(long, requires = "replay_imagined")]
     pub judge: Option<PathBuf>,
+    /// With --replay-imagined: also write the replays (the imagined actions stepped in
+    /// MuJoCo, to a success or the last imagined action) as a dataset in `collect`'s layout,
+    /// each episode labelled `CHECKPOINT/imagined-actions`: training data in which the
+    /// actions a policy takes on a world model's frames meet their real outcome.
+    #[arg(long, value_name = "DATASET", requires = "replay_imagined")]
+    pub record: Option<PathBuf>,
 }
 
 /// `evalharness collect`.

@@ -81,9 +81,45 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
     // every imagined success (if any) is one whose actions fail there.
     let rep = dir.join("replay");
     let args = ["simulate", "--scenario", "can", "--policy", s(&pol), "--episodes", "2", "--max-steps", "4"];
-    let more = ["--replay-imagined", s(&wm), "--judge", s(&judge), "--out", s(&rep)];
+    let recorded = dir.join("replays.zarr");
+    let more =
+        ["--replay-imagined", s(&wm), "--judge", s(&judge), "--record", s(&recorded), "--out", s(&rep)];
     let (stdout, _) = expect_code(&run(&[&args[..], &more[..]].concat()), 0);
     assert!(stdout.contains("imagined actions in MuJoCo 0.00"), "{stdout}");
+    // The replays as a dataset: one episode per replayed row, labelled with its
+    // checkpoint, its length the row's, with the imagined outcome beside the real one.
+    assert!(stdout.contains("can dataset: 4 replayed episodes"), "{stdout}");
+    let attrs = read_json(&recorded.join(".zattrs"))["evalharness"].clone();
+    assert_eq!((attrs["scenario"].as_str(), attrs["replay_imagined"].as_str()), (Some("can"), Some(s(&wm))));
+    let rows: Vec<serde_json::Value> = std::fs::read_to_string(rep.join("replay.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let eps = attrs["episodes"].as_array().cloned().unwrap_or_default();
+    assert_eq!(eps.len(), rows.len(), "{attrs}");
+    for (e, r) in eps.iter().zip(&rows) {
+        let label = format!("{}/imagined-actions", r["policy"].as_str().unwrap_or("?"));
+        assert_eq!(
+            (e["seed"].clone(), e["steps"].clone()),
+            (r["seed"].clone(), r["steps"].clone()),
+            "{e} {r}"
+        );
+        assert_eq!(
+            (e["behaviour"].as_str(), e["success"].as_bool()),
+            (Some(label.as_str()), Some(false)),
+            "{e}"
+        );
+        assert!(e["imagined_success"].is_boolean(), "{e}");
+    }
+    // They merge with the scripted data, as post-training data does.
+    let merged = dir.join("merged.zarr");
+    expect_code(&run(&["dataset", "merge", s(&data), s(&recorded), "--out", s(&merged)]), 0);
+    // A second run refuses to overwrite the dataset.
+    let rep2 = dir.join("rep2");
+    let again = ["--replay-imagined", s(&wm), "--record", s(&recorded), "--out", s(&rep2)];
+    let (_, stderr) = expect_code(&run(&[&args[..], &again[..]].concat()), 2);
+    assert!(stderr.contains("replays.zarr"), "{stderr}");
     let replay = read_json(&rep.join("replay.json"));
     for p in replay["policies"].as_array().into_iter().flatten() {
         assert_eq!(
@@ -97,6 +133,17 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
     let lines = std::fs::read_to_string(rep.join("replay.jsonl")).unwrap_or_default();
     assert_eq!(lines.lines().count(), 4, "2 policies × 2 replayed episodes: {lines}");
     assert_eq!(replay["seed"], 0, "rank's default noise seed: {replay}");
+    // Without --judge, away from the repository's checkpoints/can/judge: refused before
+    // anything runs, naming where the judge was looked for.
+    let elsewhere = ["--replay-imagined", s(&wm), "--out", s(&rep2)];
+    let code = crate::util::evalharness()
+        .current_dir(dir)
+        .args([&args[..], &elsewhere[..]].concat())
+        .output()
+        .expect("evalharness runs");
+    let (_, stderr) = expect_code(&code, 2);
+    assert!(stderr.contains("checkpoints/can/judge is not a folder here"), "{stderr}");
+    assert!(!rep2.exists());
     let builtin = ["simulate", "--scenario", "can", "--policy", "expert", "--replay-imagined", s(&wm)];
     let (_, stderr) = expect_code(&run(&[&builtin[..], &["--out", s(&dir.join("r2"))]].concat()), 2);
     assert!(stderr.contains("only a policy checkpoint acts on imagined frames"), "{stderr}");

@@ -15,7 +15,7 @@ use harness::policy::{ActionChunk, Observation, Policy, PolicyError};
 use harness::results::EpisodeRow;
 use harness::rng::Rng;
 
-use crate::{EngineError, Setup, Start, Timing, sim_branch};
+use crate::{EngineError, Setup, Start, Timing, Trajectory, sim_branch};
 
 /// A policy that ignores what it sees and hands out one episode's recorded actions in
 /// chunks of `horizon`, in order (a batch of one episode).
@@ -71,6 +71,9 @@ impl Policy for Replay {
 /// the simulator branch ends it: the one in which it succeeds), for at most their
 /// number of steps, and returns the simulator branch's row, named `name`.
 ///
+/// With `record`, the episode also comes back whole (ending where its row ends: with
+/// the chunk that succeeds, or after the last action).
+///
 /// # Errors
 /// No actions, a reset that fails, or a diverging simulation.
 pub fn replay_in_sim(
@@ -78,17 +81,18 @@ pub fn replay_in_sim(
     (obs_horizon, horizon): (usize, usize),
     seed: u64,
     actions: Vec<Vec<f32>>,
-    s: &Setup,
+    (s, record): (&Setup, bool),
     timing: &mut Timing,
-) -> Result<EpisodeRow, EngineError> {
+) -> Result<(EpisodeRow, Option<Trajectory>), EngineError> {
     if actions.is_empty() {
         return Err(EngineError::EmptyChunk { policy: name.to_string() });
     }
     let setup = Setup { max_steps: actions.len(), ..*s };
     let policy = Replay::new(name, obs_horizon, horizon, actions);
-    let start = Start::new(name, &[seed], &setup)?;
+    let mut start = Start::new(name, &[seed], &setup)?;
+    start.trajectories = record;
     let mut out = sim_branch(&policy, start, &setup, timing)?;
-    Ok(out.rows.remove(0))
+    Ok((out.rows.remove(0), out.episodes.pop()))
 }
 
 #[cfg(test)]

@@ -153,20 +153,53 @@ fn recorded_actions_replayed_in_the_simulator_give_the_recorded_rows() {
     start.trajectories = true;
     let out = sim_branch(&ToGoal, start, &setup, &mut Timing::default()).unwrap();
     for (t, row) in out.episodes.iter().zip(&out.rows) {
-        let r = replay_in_sim("to-goal", (1, 2), t.seed, t.actions.clone(), &setup, &mut Timing::default())
-            .unwrap();
+        let (r, none) = replay_in_sim(
+            "to-goal",
+            (1, 2),
+            t.seed,
+            t.actions.clone(),
+            (&setup, false),
+            &mut Timing::default(),
+        )
+        .unwrap();
         assert_eq!((r.seed, r.steps, r.success, r.score), (row.seed, row.steps, row.success, row.score));
+        assert!(none.is_none());
     }
     // Seed 1 starts at 3: 5, 6, 6.5 (not < 0.5 from 7), 6.75: success at step 4.
     assert_eq!((out.rows[2].steps, out.rows[2].success), (4, true));
     // Other actions from the same state: seed 2 starts at 6 and is sent to 0 (3, 1.5):
     // a failure after the 2 replayed steps.
-    let r = replay_in_sim("to-goal", (1, 2), 2, vec![vec![0.0]; 2], &setup, &mut Timing::default()).unwrap();
+    let replay = |seed, actions| {
+        replay_in_sim("to-goal", (1, 2), seed, actions, (&setup, false), &mut Timing::default())
+    };
+    let (r, _) = replay(2, vec![vec![0.0]; 2]).unwrap();
     assert_eq!((r.steps, r.success), (2, false));
     // Seed 0's actions cut after 2 steps (3.5, 5.25) fail too.
-    let r = replay_in_sim("to-goal", (1, 2), 0, vec![vec![7.0]; 2], &setup, &mut Timing::default()).unwrap();
+    let (r, _) = replay(0, vec![vec![7.0]; 2]).unwrap();
     assert_eq!((r.steps, r.success), (2, false));
-    assert!(replay_in_sim("to-goal", (1, 2), 0, Vec::new(), &setup, &mut Timing::default()).is_err());
+    assert!(replay(0, Vec::new()).is_err());
+}
+
+#[test]
+fn a_recorded_replay_comes_back_whole_with_the_same_row() {
+    // Seed 1 starts at 3; actions to 7 step 5, 6, 6.5, 6.75: within 0.5 of the goal (7)
+    // after step 4, the end of the second chunk of 2, where the episode ends.
+    let setup = Setup { task: &Reach, master_seed: 0, max_steps: 10, judge: None };
+    let replay = |record| {
+        replay_in_sim("to-goal", (1, 2), 1, vec![vec![7.0]; 6], (&setup, record), &mut Timing::default())
+    };
+    let (row, none) = replay(false).unwrap();
+    let (recorded_row, t) = replay(true).unwrap();
+    assert!(none.is_none());
+    assert_eq!((row.steps, row.success), (4, true));
+    assert_eq!(
+        (recorded_row.steps, recorded_row.success, recorded_row.score),
+        (row.steps, row.success, row.score)
+    );
+    let t = t.unwrap();
+    assert_eq!((t.seed, t.actions.len(), t.frames.len(), t.success), (1, 4, 5, true));
+    assert_eq!(t.states, vec![vec![3.0], vec![5.0], vec![6.0], vec![6.5]]);
+    assert_eq!(t.raw, vec![0.0, 0.0, 0.0, 1.0]);
 }
 
 #[test]
@@ -255,7 +288,8 @@ fn robomimic_lift_runs_through_the_simulator_branch_with_a_given_judge() {
     assert_eq!(e.actions[3], vec![0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0]);
     assert!(e.frames.is_empty() && e.states.is_empty() && e.raw.is_empty());
     // Replayed in MuJoCo they step as the policy's own rollout below does: 4 steps, no lift.
-    let replayed = replay_in_sim("up", (1, 2), 0, e.actions.clone(), &setup, &mut Timing::default()).unwrap();
+    let (replayed, _) =
+        replay_in_sim("up", (1, 2), 0, e.actions.clone(), (&setup, false), &mut Timing::default()).unwrap();
     assert_eq!((replayed.steps, replayed.success, replayed.score), (4, false, 0.0));
     let out = sim_branch(&Up, start, &setup, &mut Timing::default()).unwrap();
     // Four steps of moving up with an open gripper never lift the cube.

@@ -77,7 +77,27 @@ pub(super) fn dataset_attrs<T: ArmTask>(
     max_steps: usize,
     episodes: Vec<Value>,
 ) -> Value {
-    let e = json!({
+    with_header(dataset_header(task), seed_start, source, max_steps, episodes)
+}
+
+/// [`dataset_attrs`] from a task's [`dataset_header`].
+pub(super) fn with_header(
+    mut header: Value,
+    seed_start: u64,
+    source: Value,
+    max_steps: usize,
+    episodes: Vec<Value>,
+) -> Value {
+    if let Some(m) = header.as_object_mut() {
+        m.insert("seed_start".into(), seed_start.into());
+    }
+    super::collect::with_source(header, source, max_steps, episodes)
+}
+
+/// A robosuite dataset's own attributes: the task, its config and the meaning of
+/// each array.
+pub(super) fn dataset_header<T: ArmTask>(task: &T) -> Value {
+    json!({
         "version": env!("CARGO_PKG_VERSION"),
         "scenario": task.name(),
         "scenario_config": task.config_json(),
@@ -85,9 +105,7 @@ pub(super) fn dataset_attrs<T: ArmTask>(
         "action": "robomimic OSC_POSE: delta position (x0.05 m), delta axis-angle (x0.5 rad), gripper (+1 close)",
         "success": "data/success: 1 while the task's success check holds, after each action",
         "image": "agentview, upright",
-        "seed_start": seed_start,
-    });
-    super::collect::with_source(e, source, max_steps, episodes)
+    })
 }
 
 /// Runs the command.

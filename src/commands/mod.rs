@@ -12,6 +12,7 @@ mod goal_free;
 pub(crate) mod plan;
 pub(crate) mod rank;
 mod read_judge;
+mod record;
 mod scripted;
 mod sessions;
 mod simulate;

@@ -12,7 +12,7 @@ use std::path::Path;
 use std::process::ExitCode;
 use std::sync::Arc;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use engine::{Setup, Start, Timing, replay_in_sim, sim_branch, wm_branch};
 use harness::results::{EpisodeRow, PairedSuccess};
 use harness::rows::append_rows;
@@ -21,6 +21,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::rank::{defaults, load_judge, load_world_model};
+use super::record::Sink;
 use crate::cli::SimulateArgs;
 use crate::output::{Staged, write_json};
 use crate::policy_kinds::{expectations, load_any};
@@ -51,8 +52,16 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
     let device = world_model::device::selected()?;
     let wm = load_world_model(wm_dir, None, &device)?;
-    let (judge_dir, _) =
+    let (judge_dir, own) =
         defaults::judge(args.judge.as_deref(), task.as_ref(), Path::new("checkpoints"), c.seed_start)?;
+    if judge_dir.is_none() && !own {
+        bail!(
+            "--judge: the {} task has no hand-written judge of imagined frames and checkpoints/{}/judge is \
+             not a folder here (run from the repository root, or pass --judge DIR)",
+            task.name(),
+            task.name()
+        );
+    }
     let judge = match &judge_dir {
         Some(d) => Some(Arc::new(load_judge(d, task.as_ref(), &device)?) as Arc<dyn harness::judge::Judge>),
         None => None,
@@ -67,6 +76,14 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
         rayon::ThreadPoolBuilder::new().num_threads(c.jobs.max(1)).build().context("starting threads")?;
     let pb = progress::bar((dirs.len() as u64) * c.episodes, "replay", quiet);
     let (jsonl, replay_jsonl) = (out.file("episodes.jsonl"), out.file("replay.jsonl"));
+    let mut sink = match &args.record {
+        Some(path) => {
+            crate::output::check_apart(path, &[("--policy", Path::new(&args.policy)), ("--out", &args.out)])?;
+            crate::output::check_apart(path, &[("--replay-imagined", wm_dir)])?;
+            Some((Sink::create(&c.scenario, path, c.force)?, Vec::new()))
+        }
+        None => None,
+    };
     let mut summary = Vec::new();
     for d in &dirs {
         let name = checkpoint_name(d);
@@ -82,7 +99,8 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
                 .with_context(|| format!("policy {name}: the world-model branch"))?;
             start.trajectories = false;
             real.extend(pool.install(|| sim_branch(policy.as_ref(), start, &setup, &mut timing))?.rows);
-            let rows: Result<Vec<EpisodeRow>, _> = pool.install(|| {
+            let record = sink.is_some();
+            let rows: Result<Vec<_>, _> = pool.install(|| {
                 wm_out
                     .episodes
                     .par_iter()
@@ -92,13 +110,24 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
                             horizons,
                             e.seed,
                             e.actions.clone(),
-                            &setup,
+                            (&setup, record),
                             &mut Timing::default(),
                         )
                     })
                     .collect()
             });
-            replayed.extend(rows.with_context(|| format!("policy {name}: replaying the imagined actions"))?);
+            let rows = rows.with_context(|| format!("policy {name}: replaying the imagined actions"))?;
+            for ((row, t), imagined_row) in rows.into_iter().zip(&wm_out.rows) {
+                if let (Some((sink, attrs)), Some(t)) = (sink.as_mut(), t) {
+                    let label = format!("{name}/imagined-actions");
+                    let (_, mut attr) = sink
+                        .append(&t, &label)
+                        .with_context(|| format!("recording {label}, seed {}", t.seed))?;
+                    attr["imagined_success"] = imagined_row.success.into();
+                    attrs.push(attr);
+                }
+                replayed.push(row);
+            }
             imagined.extend(wm_out.rows);
             pb.inc(batch.len() as u64);
         }
@@ -123,6 +152,13 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
             "judge": judge_dir, "seed_start": c.seed_start, "episodes": c.episodes,
             "max_steps": max_steps, "seed": setup.master_seed, "policies": summary}),
     )?;
+    if let Some((sink, episodes)) = sink {
+        let n = episodes.len();
+        let source = serde_json::json!({"policy": args.policy, "replay_imagined": wm_dir, "judge": judge_dir,
+            "seed": setup.master_seed, "what": "each imagined episode's executed actions, stepped in MuJoCo from the same initial state"});
+        let path = sink.finish(c.seed_start, source, max_steps, episodes)?;
+        println!("{} dataset: {n} replayed episodes -> {}", c.scenario, path.display());
+    }
     let o = out.commit()?;
     println!("-> {}", o.display());
     Ok(ExitCode::SUCCESS)

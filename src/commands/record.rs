@@ -1,0 +1,188 @@
+//! Recorded MuJoCo episodes ([`engine::Trajectory`]) written as a training dataset,
+//! in the zarr layout of the task's scripted `collect`.
+//!
+//! Why one place: `collect --policy` records policy checkpoints' closed-loop
+//! rollouts, and `simulate --replay-imagined --record` the MuJoCo replays of the
+//! actions a policy took in the world model. Both feed the same trainers, so both
+//! must write the same layout: Push-T's (agent and block poses, coverage) or the
+//! robosuite one (agentview frames, 7-D actions, state columns, `data/success`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use engine::Trajectory;
+use harness::replay::{EpisodeArrays, ReplayWriter};
+use harness::task::Task;
+use scenarios::pusht::rollout::{Episode, StepRow};
+use scenarios::pusht::{Pose2, PushTConfig};
+use scenarios::robosuite::task::{ArmEngine, RobosuiteTask};
+use serde_json::{Value, json};
+
+use super::collect::{dataset_attrs, episode_arrays, episode_attr, replay_spec};
+
+/// A dataset being written, episode by episode; nothing appears at its path until
+/// [`Sink::finish`] (the writer stages into `PATH.partial`).
+pub(super) enum Sink {
+    /// Push-T's layout.
+    PushT { writer: ReplayWriter, cfg: Box<PushTConfig> },
+    /// A robosuite task's layout; `header` holds the task's dataset attributes.
+    Arm { writer: ReplayWriter, size: usize, columns: usize, threshold: f64, header: Value },
+}
+
+impl Sink {
+    /// A dataset at `out` for the scenario `spec` (refused if `out` exists, unless `force`).
+    pub fn create(spec: &str, out: &Path, force: bool) -> Result<Self> {
+        let scenario = scenarios::scenario(spec).with_context(|| format!("loading scenario {spec}"))?;
+        match scenario {
+            scenarios::Scenario::PushT(cfg) => {
+                let writer = ReplayWriter::create(out, replay_spec(cfg.render.size as usize), force)?;
+                Ok(Self::PushT { writer, cfg })
+            }
+            scenarios::Scenario::Lift(cfg) => {
+                let sim = scenarios::lift::LiftSim::new(cfg).context("setting up Lift")?;
+                Self::arm(&RobosuiteTask::new(sim), out, force)
+            }
+            scenarios::Scenario::Can(cfg) => {
+                let sim = scenarios::can::CanSim::new(cfg).context("setting up Can")?;
+                Self::arm(&RobosuiteTask::new(sim), out, force)
+            }
+        }
+    }
+
+    fn arm<T: ArmEngine + 'static>(task: &RobosuiteTask<T>, out: &Path, force: bool) -> Result<Self> {
+        let (size, columns) = (task.observation_spec().image_size, task.sim().state_columns().len());
+        let writer = ReplayWriter::create(out, super::collect_arm::replay_spec(size, columns), force)?;
+        let header = super::collect_arm::dataset_header(task.sim());
+        Ok(Self::Arm { writer, size, columns, threshold: task.score_kind().threshold(), header })
+    }
+
+    /// Appends one episode, labelled `behaviour`; returns its score and its entry in
+    /// the dataset's attributes.
+    pub fn append(&mut self, t: &Trajectory, behaviour: &str) -> Result<(f64, Value)> {
+        match self {
+            Self::PushT { writer, .. } => {
+                let ep = pusht_episode(t)?;
+                writer.append(&episode_arrays(&ep))?;
+                Ok((ep.score, episode_attr(&ep, behaviour)))
+            }
+            Self::Arm { writer, size, columns, threshold, .. } => {
+                writer.append(&arm_arrays(t, *size, *columns, *threshold)?)?;
+                let attr = json!({"seed": t.seed, "behaviour": behaviour, "steps": t.actions.len(), "success": t.success});
+                Ok((t.score, attr))
+            }
+        }
+    }
+
+    /// Writes the attributes (how the episodes were made, the step limit, one entry
+    /// per episode) and moves the dataset into place; returns its path.
+    pub fn finish(
+        self,
+        seed_start: u64,
+        source: Value,
+        max_steps: usize,
+        episodes: Vec<Value>,
+    ) -> Result<PathBuf> {
+        Ok(match self {
+            Self::PushT { writer, cfg } => {
+                writer.finish(&dataset_attrs(&cfg, seed_start, source, max_steps, episodes))?
+            }
+            Self::Arm { writer, header, .. } => writer
+                .finish(&super::collect_arm::with_header(header, seed_start, source, max_steps, episodes))?,
+        })
+    }
+}
+
+/// A recorded robosuite episode's arrays: the frame and state before each action, the
+/// action, and whether the task succeeded after it (raw score above `threshold`).
+pub(super) fn arm_arrays(
+    t: &Trajectory,
+    size: usize,
+    columns: usize,
+    threshold: f64,
+) -> Result<EpisodeArrays> {
+    let n = t.actions.len();
+    if t.frames.len() < n || t.states.len() != n || t.raw.len() != n {
+        bail!("{} frames, {} states, {} scores for {n} actions", t.frames.len(), t.states.len(), t.raw.len());
+    }
+    let mut arrays = EpisodeArrays::default();
+    for (j, ((f, s), a)) in t.frames.iter().zip(&t.states).zip(&t.actions).enumerate() {
+        if f.len() != size * size * 3 || s.len() != columns || a.len() != 7 {
+            bail!(
+                "step {j}: frame of {} bytes, state of {} entries or action of {}, expected {}, {columns} and 7",
+                f.len(),
+                s.len(),
+                a.len(),
+                size * size * 3
+            );
+        }
+        arrays.img.extend_from_slice(f);
+        arrays.state.extend(s.iter().map(|&v| v as f32));
+        arrays.action.extend_from_slice(a);
+    }
+    arrays.extras.push(t.raw.iter().map(|&r| if r > threshold { 1.0 } else { 0.0 }).collect());
+    Ok(arrays)
+}
+
+/// A recorded Push-T episode in the dataset layout of `collect`: each step's state
+/// (agent x, y, block x, y, θ) before the action, the action and the coverage after it.
+fn pusht_episode(t: &Trajectory) -> Result<Episode> {
+    let g = t.goal.context("the episode has no goal pose")?;
+    let rows = t
+        .states
+        .iter()
+        .zip(&t.actions)
+        .zip(&t.raw)
+        .enumerate()
+        .map(|(j, ((s, a), &coverage))| match (&s[..], &a[..]) {
+            (&[ax, ay, bx, by, bth], &[x, y]) => Ok(StepRow {
+                step: j as u32,
+                agent: [ax, ay],
+                block: Pose2::new(bx, by, bth),
+                action: [f64::from(x), f64::from(y)],
+                coverage,
+            }),
+            _ => bail!("step {j}: state of {} entries or action of {}, expected 5 and 2", s.len(), a.len()),
+        })
+        .collect::<Result<_>>()?;
+    let (seed, score, success) = (t.seed, t.score, t.success);
+    Ok(Episode { seed, goal: Pose2::new(g[0], g[1], g[2]), rows, frames: t.frames.clone(), score, success })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn trajectory(n: usize, size: usize, columns: usize) -> Trajectory {
+        Trajectory {
+            seed: 7,
+            frames: vec![vec![1; size * size * 3]; n + 1],
+            states: vec![vec![0.5; columns]; n],
+            actions: vec![vec![0.1; 7]; n],
+            raw: (0..n).map(|j| j as f64 / n as f64).collect(),
+            goal: None,
+            score: 0.75,
+            success: true,
+        }
+    }
+
+    #[test]
+    fn arm_arrays_mark_success_after_each_action_above_the_threshold() {
+        // raw after each of 4 actions: 0, 0.25, 0.5, 0.75; above 0.4: the last two.
+        let a = arm_arrays(&trajectory(4, 2, 3), 2, 3, 0.4).unwrap();
+        assert_eq!(a.extras, vec![vec![0.0, 0.0, 1.0, 1.0]]);
+        // 4 frames of 2·2·3 bytes (the final frame is not stored), 4·3 states, 4·7 actions.
+        assert_eq!((a.img.len(), a.state.len(), a.action.len()), (48, 12, 28));
+    }
+
+    #[test]
+    fn arm_arrays_name_the_step_of_a_wrong_shape() {
+        let mut t = trajectory(3, 2, 3);
+        t.actions[1] = vec![0.0; 6];
+        let err = arm_arrays(&t, 2, 3, 0.5).unwrap_err().to_string();
+        assert!(err.contains("step 1") && err.contains("action of 6"), "{err}");
+        let mut t = trajectory(3, 2, 3);
+        t.states.pop();
+        let err = arm_arrays(&t, 2, 3, 0.5).unwrap_err().to_string();
+        assert!(err.contains("2 states") && err.contains("3 actions"), "{err}");
+    }
+}
