@@ -26,11 +26,10 @@ use harness::task::Task;
 use policies::dir::checkpoint_dirs;
 use serde_json::{Value, json};
 
-use super::record::Sink;
+use super::record::{Layout, Sink};
 use crate::cli::CollectArgs;
 use crate::policy_kinds::{expectations, load_any};
 use crate::progress;
-use crate::scenario::load_task;
 
 /// Episodes advanced together per batched policy call.
 const BATCH: usize = 100;
@@ -41,7 +40,7 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
     if c.noise != 0.0 || c.lag != 0 {
         bail!("--noise and --lag perturb the scripted expert; they do not apply to --policy");
     }
-    let task = load_task(&c.scenario)?;
+    let (task, layout) = Layout::load(&c.scenario)?;
     if task.name() == "pusht" {
         super::collect::refuse_run_on_for_pusht(args.no_early_stop)?;
     }
@@ -50,7 +49,7 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
         bail!("--episodes and --max-steps must be at least 1");
     }
     crate::output::check_apart(&args.out, &[("--policy", dir)])?;
-    let mut sink = Sink::create(&c.scenario, &args.out, c.force)?;
+    let mut sink = Sink::create(layout, &args.out, c.force)?;
     let (episodes, checkpoints) = roll_out(args, dir, task.as_ref(), max_steps, &mut sink, quiet)?;
     let (n, steps) = (episodes.len(), total_steps(&episodes));
     // Push-T datasets say how the expert was perturbed (not at all here), as `collect`'s do.

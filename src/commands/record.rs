@@ -14,59 +14,75 @@ use engine::Trajectory;
 use harness::replay::{EpisodeArrays, ReplayWriter};
 use harness::task::Task;
 use scenarios::pusht::rollout::{Episode, StepRow};
-use scenarios::pusht::{Pose2, PushTConfig};
+use scenarios::pusht::{Pose2, PushTConfig, PushTTask};
 use scenarios::robosuite::task::{ArmEngine, RobosuiteTask};
 use serde_json::{Value, json};
 
 use super::collect::{dataset_attrs, episode_arrays, episode_attr, replay_spec};
 
+/// How a scenario's recorded episodes are laid out in a dataset.
+pub(super) enum Layout {
+    /// Push-T's layout.
+    PushT(Box<PushTConfig>),
+    /// A robosuite task's layout; `header` holds the task's dataset attributes.
+    Arm { size: usize, columns: usize, threshold: f64, header: Value },
+}
+
+impl Layout {
+    /// The scenario `spec`'s task and its dataset layout, from one load of the scenario.
+    pub fn load(spec: &str) -> Result<(Box<dyn Task>, Self)> {
+        let what = || format!("loading scenario {spec}");
+        Ok(match scenarios::scenario(spec).with_context(what)? {
+            scenarios::Scenario::PushT(cfg) => {
+                (Box::new(PushTTask::new((*cfg).clone()).with_context(what)?), Self::PushT(cfg))
+            }
+            scenarios::Scenario::Lift(cfg) => {
+                Self::arm(scenarios::lift::LiftSim::new(cfg).with_context(what)?)
+            }
+            scenarios::Scenario::Can(cfg) => Self::arm(scenarios::can::CanSim::new(cfg).with_context(what)?),
+        })
+    }
+
+    fn arm<T: ArmEngine + 'static>(sim: T) -> (Box<dyn Task>, Self) {
+        let task = RobosuiteTask::new(sim);
+        let layout = Self::Arm {
+            size: task.observation_spec().image_size,
+            columns: task.sim().state_columns().len(),
+            threshold: task.score_kind().threshold(),
+            header: super::collect_arm::dataset_header(task.sim()),
+        };
+        (Box::new(task), layout)
+    }
+}
+
 /// A dataset being written, episode by episode; nothing appears at its path until
 /// [`Sink::finish`] (the writer stages into `PATH.partial`).
-pub(super) enum Sink {
-    /// Push-T's layout.
-    PushT { writer: ReplayWriter, cfg: Box<PushTConfig> },
-    /// A robosuite task's layout; `header` holds the task's dataset attributes.
-    Arm { writer: ReplayWriter, size: usize, columns: usize, threshold: f64, header: Value },
+pub(super) struct Sink {
+    writer: ReplayWriter,
+    layout: Layout,
 }
 
 impl Sink {
-    /// A dataset at `out` for the scenario `spec` (refused if `out` exists, unless `force`).
-    pub fn create(spec: &str, out: &Path, force: bool) -> Result<Self> {
-        let scenario = scenarios::scenario(spec).with_context(|| format!("loading scenario {spec}"))?;
-        match scenario {
-            scenarios::Scenario::PushT(cfg) => {
-                let writer = ReplayWriter::create(out, replay_spec(cfg.render.size as usize), force)?;
-                Ok(Self::PushT { writer, cfg })
-            }
-            scenarios::Scenario::Lift(cfg) => {
-                let sim = scenarios::lift::LiftSim::new(cfg).context("setting up Lift")?;
-                Self::arm(&RobosuiteTask::new(sim), out, force)
-            }
-            scenarios::Scenario::Can(cfg) => {
-                let sim = scenarios::can::CanSim::new(cfg).context("setting up Can")?;
-                Self::arm(&RobosuiteTask::new(sim), out, force)
-            }
-        }
-    }
-
-    fn arm<T: ArmEngine + 'static>(task: &RobosuiteTask<T>, out: &Path, force: bool) -> Result<Self> {
-        let (size, columns) = (task.observation_spec().image_size, task.sim().state_columns().len());
-        let writer = ReplayWriter::create(out, super::collect_arm::replay_spec(size, columns), force)?;
-        let header = super::collect_arm::dataset_header(task.sim());
-        Ok(Self::Arm { writer, size, columns, threshold: task.score_kind().threshold(), header })
+    /// A dataset at `out` in `layout` (refused if `out` exists, unless `force`).
+    pub fn create(layout: Layout, out: &Path, force: bool) -> Result<Self> {
+        let spec = match &layout {
+            Layout::PushT(cfg) => replay_spec(cfg.render.size as usize),
+            Layout::Arm { size, columns, .. } => super::collect_arm::replay_spec(*size, *columns),
+        };
+        Ok(Self { writer: ReplayWriter::create(out, spec, force)?, layout })
     }
 
     /// Appends one episode, labelled `behaviour`; returns its score and its entry in
     /// the dataset's attributes.
     pub fn append(&mut self, t: &Trajectory, behaviour: &str) -> Result<(f64, Value)> {
-        match self {
-            Self::PushT { writer, .. } => {
+        match &self.layout {
+            Layout::PushT(_) => {
                 let ep = pusht_episode(t)?;
-                writer.append(&episode_arrays(&ep))?;
+                self.writer.append(&episode_arrays(&ep))?;
                 Ok((ep.score, episode_attr(&ep, behaviour)))
             }
-            Self::Arm { writer, size, columns, threshold, .. } => {
-                writer.append(&arm_arrays(t, *size, *columns, *threshold)?)?;
+            Layout::Arm { size, columns, threshold, .. } => {
+                self.writer.append(&arm_arrays(t, *size, *columns, *threshold)?)?;
                 let attr = json!({"seed": t.seed, "behaviour": behaviour, "steps": t.actions.len(), "success": t.success});
                 Ok((t.score, attr))
             }
@@ -82,13 +98,13 @@ impl Sink {
         max_steps: usize,
         episodes: Vec<Value>,
     ) -> Result<PathBuf> {
-        Ok(match self {
-            Self::PushT { writer, cfg } => {
-                writer.finish(&dataset_attrs(&cfg, seed_start, source, max_steps, episodes))?
+        let attrs = match self.layout {
+            Layout::PushT(cfg) => dataset_attrs(&cfg, seed_start, source, max_steps, episodes),
+            Layout::Arm { header, .. } => {
+                super::collect_arm::with_header(header, seed_start, source, max_steps, episodes)
             }
-            Self::Arm { writer, header, .. } => writer
-                .finish(&super::collect_arm::with_header(header, seed_start, source, max_steps, episodes))?,
-        })
+        };
+        Ok(self.writer.finish(&attrs)?)
     }
 }
 

@@ -21,12 +21,11 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::rank::{defaults, load_judge, load_world_model};
-use super::record::Sink;
+use super::record::{Layout, Sink};
 use crate::cli::SimulateArgs;
 use crate::output::{Staged, write_json};
 use crate::policy_kinds::{expectations, load_any};
 use crate::progress;
-use crate::scenario::load_task;
 
 /// One checkpoint's three success rates and how the imagined successes fare.
 #[derive(Debug, Serialize)]
@@ -48,7 +47,7 @@ struct Replayed {
 /// Runs the three branches for every checkpoint under `--policy`.
 pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
-    let task = load_task(&c.scenario)?;
+    let (task, layout) = Layout::load(&c.scenario)?;
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
     let device = world_model::device::selected()?;
     let wm = load_world_model(wm_dir, None, &device)?;
@@ -78,9 +77,10 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     let (jsonl, replay_jsonl) = (out.file("episodes.jsonl"), out.file("replay.jsonl"));
     let mut sink = match &args.record {
         Some(path) => {
-            crate::output::check_apart(path, &[("--policy", Path::new(&args.policy)), ("--out", &args.out)])?;
-            crate::output::check_apart(path, &[("--replay-imagined", wm_dir)])?;
-            Some((Sink::create(&c.scenario, path, c.force)?, Vec::new()))
+            let inputs =
+                [("--policy", Path::new(&args.policy)), ("--out", &args.out), ("--replay-imagined", wm_dir)];
+            crate::output::check_apart(path, &inputs)?;
+            Some((Sink::create(layout, path, c.force)?, Vec::new()))
         }
         None => None,
     };
