@@ -249,7 +249,7 @@ pub struct WmEvalArgs {
 }
 
 /// `evalharness rank`.
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct RankArgs {
     /// A policy checkpoint, or a folder of them [default: checkpoints/<task>/policies].
     #[arg(long)]
@@ -317,6 +317,13 @@ pub struct RankArgs {
     /// Run only part i of n (0-based; whole batches), e.g. `--shard 0/4`.
     #[arg(long)]
     pub shard: Option<String>,
+    /// Split the run into this many `--shard i/N --jobs 1` processes running at once, join
+    /// them with `merge` and finish as one run (report, table, gates). Byte-identical rows
+    /// to one process. Faster on Lift and Can, whose GL renderer lets one thread of a
+    /// process render at a time; `--jobs` then only sets the report's replay threads
+    /// [default: the task's `rank.toml`, else 1; a `--shard` is one process].
+    #[arg(long, value_name = "N")]
+    pub processes: Option<usize>,
     /// Exit 1 if the Pearson correlation is below this (a number in [-1, 1]).
     #[arg(long, value_parser = correlation, allow_negative_numbers = true)]
     pub min_pearson: Option<f64>,

@@ -10,8 +10,9 @@ use std::process::{Command, Output};
 use crate::util::{expect_code, results, run, s};
 
 /// Variables the scripts read, cleared first so that the caller's shell cannot leak into a run.
-const SCRIPT_VARS: [&str; 13] = [
+const SCRIPT_VARS: [&str; 14] = [
     "OUT",
+    "PROCESSES",
     "SHARDS",
     "SCENARIO",
     "POLICIES",
@@ -188,4 +189,31 @@ fn correlation_job_resumes_a_rank_that_a_signal_killed() {
     assert!(err.contains("rank pusht ended with exit 139; resuming it once"), "{err}");
     assert!(stdout.contains("correlation report (pusht)"), "{stdout}");
     assert_eq!(std::fs::read_to_string(out.join("pusht/episodes.jsonl")).unwrap().lines().count(), 8);
+}
+
+#[test]
+fn correlation_job_in_shard_processes_equals_one_process() {
+    let tmp = tempfile::tempdir().unwrap();
+    let set = two_policies(tmp.path());
+    let one = tmp.path().join("one");
+    let (single, _) = expect_code(&correlation(&tiny_job(&one, &set)), 1);
+    // The same job with PROCESSES=2 (`rank --processes 2`: two shard processes of one policy
+    // each, joined and finished as one run): the same rows, the same undefined Pearson
+    // failing its gate (exit 1), the report, and the table printed once, for both policies.
+    let two = tmp.path().join("two");
+    let mut vars = tiny_job(&two, &set);
+    vars.push(("PROCESSES", "2"));
+    let (stdout, err) = expect_code(&correlation(&vars), 1);
+    assert!(err.contains("gate failed: Pearson is undefined"), "{err}");
+    assert!(err.contains("rank pusht: ") && err.contains("in 2 process(es)"), "{err}");
+    let rows = |dir: &Path| std::fs::read_to_string(dir.join("pusht/episodes.jsonl")).unwrap();
+    assert_eq!(rows(&two), rows(&one));
+    assert_eq!(rows(&two).lines().count(), 8);
+    assert!(two.join("pusht/report.html").is_file(), "{stdout}");
+    assert!(!two.join("pusht.shards").exists(), "the shards' folders are left");
+    // The shards print nothing; the resumed run prints what the one process did.
+    assert!(single.contains("Pearson n/a"), "{single}");
+    assert_eq!(stdout.matches("Pearson").count(), single.matches("Pearson").count(), "{stdout}");
+    assert!(stdout.contains("epoch-0001") && stdout.contains("epoch-0045"), "{stdout}");
+    assert!(stdout.contains("correlation report (pusht)") && stdout.contains("task table"), "{stdout}");
 }

@@ -312,6 +312,41 @@ fn pipeline_end_to_end() {
         without_timing(read_json(&out1.join("results.json")))
     );
 
+    // `--processes 2` runs those two shards as processes, joins them and finishes the run
+    // (the corrupt checkpoint fails in its shard and is reported by the joined run: exit 1).
+    let procs = dir.join("procs");
+    let mut a = base.to_vec();
+    a.extend(["--out", s(&procs), "--processes", "2", "--no-report"]);
+    let (stdout, _) = expect_code(&run(&a), 1);
+    assert_eq!(std::fs::read_to_string(procs.join("episodes.jsonl")).unwrap(), rows);
+    assert_eq!(std::fs::read(procs.join("episodes.parquet")).unwrap(), parquet);
+    let res_procs = without_timing(read_json(&procs.join("results.json")));
+    assert_eq!(res_procs, without_timing(read_json(&out1.join("results.json"))));
+    assert!(stdout.contains("Pearson") && !stdout.contains("merged"), "{stdout}");
+    // Its timing is the whole command's wall clock and the shards' summed thread times.
+    let t = &read_json(&procs.join("results.json"))["timing"];
+    assert!(t["note"].as_str().unwrap().starts_with("2 shard processes at once"), "{t}");
+    assert!(
+        t["wall_seconds"].as_f64().unwrap() > 0.0 && t["world_model_seconds"].as_f64().unwrap() > 0.0,
+        "{t}"
+    );
+    assert!(!dir.join("procs.shards").exists(), "the joined shards' folders are left");
+    // It runs the shards itself, and replaces a run only when told to.
+    let mut sharded = a.clone();
+    sharded.extend(["--shard", "0/2"]);
+    let (_, err) = expect_code(&run(&sharded), 2);
+    assert!(err.contains("without --shard"), "{err}");
+    let (_, err) = expect_code(&run(&a), 2);
+    assert!(err.contains(&format!("--out {} exists", procs.display())), "{err}");
+    assert_eq!(std::fs::read_to_string(procs.join("episodes.jsonl")).unwrap(), rows);
+    // A shard that fails is named with the end of its log, and the run it would have
+    // replaced stays (Push-T has no judge folder for --judge-persist to apply to).
+    let mut bad = a.clone();
+    bad.extend(["--force", "--judge-persist", "2"]);
+    let (_, err) = expect_code(&run(&bad), 2);
+    assert!(err.contains("--processes: shard ") && err.contains("no judge folder"), "{err}");
+    assert_eq!(std::fs::read_to_string(procs.join("episodes.jsonl")).unwrap(), rows);
+
     // Without the corrupt checkpoint the run passes, unless a gate fails.
     std::fs::remove_dir_all(set.join("c")).unwrap();
     let out2 = dir.join("rank2");

@@ -3,8 +3,9 @@
 //! Each task's shipped models live in `checkpoints/<task>/` (`policies/`,
 //! `world_model/`, and `judge/` for a task without a hand-written judge of imagined
 //! frames). An optional `checkpoints/<task>/rank.toml` sets the episodes and step
-//! limit that the task's recorded numbers were measured with; without it a run has
-//! 100 episodes per policy and the task's own step limit. Flags override every
+//! limit that the task's recorded numbers were measured with, and how many shard
+//! processes a run is split into; without it a run has 100 episodes per policy, the
+//! task's own step limit and one process. Flags override every
 //! default, and `config.json` records what was resolved.
 
 use std::path::{Path, PathBuf};
@@ -26,6 +27,8 @@ struct TaskDefaults {
     episodes: Option<usize>,
     /// Control steps per episode (e.g. shorter than robomimic's 400-step horizon).
     max_steps: Option<usize>,
+    /// Shard processes a run is split into (`rank --processes`).
+    processes: Option<usize>,
 }
 
 /// The inputs and sizes of a run, flags first, then the task's defaults.
@@ -43,6 +46,8 @@ pub struct Resolved {
     pub max_steps: usize,
     /// Whether the task's episodes have a hand-written judge of imagined frames.
     pub own_judge: bool,
+    /// Processes the run is split into (1 for a `--shard`, which is one process).
+    pub processes: usize,
 }
 
 /// Resolves `a` for `task` from the shipped folder `root/<task>` (`checkpoints`).
@@ -66,6 +71,7 @@ pub fn resolve(a: &RankArgs, task: &dyn Task, root: &Path) -> Result<Resolved> {
         episodes: a.episodes.or(d.episodes).unwrap_or(EPISODES),
         max_steps: a.max_steps.or(d.max_steps).unwrap_or_else(|| task.max_steps()),
         own_judge,
+        processes: a.processes.or(if a.shard.is_none() { d.processes } else { None }).unwrap_or(1),
     })
 }
 
@@ -143,11 +149,18 @@ mod tests {
                 episodes: 100,
                 max_steps: 300,
                 own_judge: true,
+                processes: 1,
             }
         );
-        std::fs::write(tmp.path().join("pusht/rank.toml"), "episodes = 50\nmax_steps = 120\n").unwrap();
+        let toml = "episodes = 50\nmax_steps = 120\nprocesses = 3\n";
+        std::fs::write(tmp.path().join("pusht/rank.toml"), toml).unwrap();
         let r = resolve(&args(&["--episodes", "7", "--policies", "p"]), task.as_ref(), tmp.path()).unwrap();
-        assert_eq!((r.episodes, r.max_steps, r.policies), (7, 120, PathBuf::from("p")));
+        assert_eq!((r.episodes, r.max_steps, r.policies, r.processes), (7, 120, PathBuf::from("p"), 3));
+        // The flag wins; a shard is one process whatever the file says.
+        let r = resolve(&args(&["--processes", "2"]), task.as_ref(), tmp.path()).unwrap();
+        assert_eq!(r.processes, 2);
+        let r = resolve(&args(&["--shard", "0/4"]), task.as_ref(), tmp.path()).unwrap();
+        assert_eq!(r.processes, 1);
         std::fs::write(tmp.path().join("pusht/rank.toml"), "episode = 50\n").unwrap();
         let e = format!("{:#}", resolve(&args(&[]), task.as_ref(), tmp.path()).unwrap_err());
         assert!(e.contains("rank.toml: invalid rank defaults") && e.contains("episode"), "{e}");
@@ -175,15 +188,15 @@ mod tests {
     }
 
     #[test]
-    fn the_shipped_lift_and_can_defaults_are_fifty_episodes_cut_short_with_every_input() {
+    fn the_shipped_lift_and_can_defaults_are_fifty_episodes_cut_short_in_three_processes() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
         // checkpoints/<task>/rank.toml: the paper's 50 seeds per policy, episodes cut at 150
-        // (Lift) and 250 (Can) steps instead of robomimic's 400.
+        // (Lift) and 250 (Can) steps instead of robomimic's 400, in 3 shard processes.
         for (name, steps) in [("lift", 150), ("can", 250)] {
             let task = scenarios::load_task(name).expect("robosuite assets (scripts/setup.sh)");
             let r = resolve(&args(&["--scenario", name]), task.as_ref(), &root).unwrap();
-            let want = (50, steps, root.join(name).join("policies"));
-            assert_eq!((r.episodes, r.max_steps, r.policies.clone()), want, "{name}");
+            let want = (50, steps, root.join(name).join("policies"), 3);
+            assert_eq!((r.episodes, r.max_steps, r.policies.clone(), r.processes), want, "{name}");
             // Every input `rank --scenario NAME` needs is shipped: policies, world model, judge.
             assert_eq!(r.missing(name), Vec::<String>::new(), "{name}");
         }

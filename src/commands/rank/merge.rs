@@ -71,11 +71,22 @@ fn check_complete_set(shards: &[PathBuf], configs: &[Value]) -> Result<()> {
     Ok(())
 }
 
-/// Merges shard folders into `out`.
+/// `evalharness merge`: joins shard folders into `out` and says so on stdout.
+///
+/// # Errors
+/// As [`join`].
+pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Result<ExitCode> {
+    let rows = join(shards, out, force, no_report)?;
+    println!("merged {} shards: {rows} rows -> {}", shards.len(), out.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Joins shard folders into `out` (written into `OUT.partial`, moved into place when
+/// complete); returns the number of rows.
 ///
 /// # Errors
 /// Missing files, shards of different runs, duplicate rows that disagree, or I/O failures.
-pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Result<ExitCode> {
+pub(super) fn join(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Result<usize> {
     if shards.is_empty() {
         bail!("give at least one shard folder");
     }
@@ -157,6 +168,5 @@ pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Resu
         super::report::write_report(&tmp)?;
     }
     staged.commit()?;
-    println!("merged {} shards: {} rows -> {}", shards.len(), rows.len(), out.display());
-    Ok(ExitCode::SUCCESS)
+    Ok(rows.len())
 }

@@ -11,6 +11,7 @@
 pub mod defaults;
 mod media;
 pub mod merge;
+mod processes;
 pub mod report;
 pub(crate) mod resume;
 pub mod scene;
@@ -53,6 +54,22 @@ fn parse_shard(s: Option<&str>) -> Result<(usize, usize)> {
 
 /// `evalharness rank`.
 pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
+    match (a.processes, &a.shard) {
+        (Some(0), _) => bail!("--processes 0: must be at least 1"),
+        (Some(n), Some(_)) if n > 1 => {
+            bail!("--processes {n} runs the shards itself: give it without --shard")
+        }
+        _ => {}
+    }
+    let task = crate::scenario::load_task(&a.scenario)?;
+    let r = defaults::resolve(a, task.as_ref(), Path::new("checkpoints"))?;
+    if r.processes > 1 { processes::run(a, &r, quiet) } else { run_with(a, quiet, None) }
+}
+
+/// One process's run. `shard_times`: the times of the shard processes whose joined rows this
+/// run finishes (`--processes`), which `results.json` reports instead of this process's
+/// own (it runs no batch); their wall clock is counted up to this process's start.
+fn run_with(a: &RankArgs, quiet: bool, shard_times: Option<RunTiming>) -> Result<ExitCode> {
     let (shard, shards) = parse_shard(a.shard.as_deref())?;
     // Every input is checked before the output folder is touched.
     let task = crate::scenario::load_task(&a.scenario)?;
@@ -195,13 +212,16 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         policies,
         agreement,
         failed_policies: failed.clone(),
-        timing: RunTiming {
-            wall_seconds: started.elapsed().as_secs_f64(),
-            sim_seconds: timing.sim_s,
-            world_model_seconds: timing.world_model_s,
-            world_model_ms_per_frame: 1e3 * timing.world_model_s / timing.frames.max(1) as f64,
-            policy_seconds: timing.policy_s,
-            note: "this process only (a resumed run times its own part)".into(),
+        timing: match shard_times {
+            Some(t) => RunTiming { wall_seconds: t.wall_seconds + started.elapsed().as_secs_f64(), ..t },
+            None => RunTiming {
+                wall_seconds: started.elapsed().as_secs_f64(),
+                sim_seconds: timing.sim_s,
+                world_model_seconds: timing.world_model_s,
+                world_model_ms_per_frame: 1e3 * timing.world_model_s / timing.frames.max(1) as f64,
+                policy_seconds: timing.policy_s,
+                note: "this process only (a resumed run times its own part)".into(),
+            },
         },
     };
     write_json(&a.out.join("results.json"), &res.to_json()?)?;

@@ -1,0 +1,306 @@
+//! `rank --processes N`: one run split into N `rank --shard i/N --jobs 1` processes
+//! running at once, joined with `merge`, then finished as one run (`--resume` over the
+//! joined rows runs no batch and writes the report, the table and the gates).
+//!
+//! Why processes and not threads: Lift's and Can's frames come from MuJoCo's GL
+//! renderer on Mesa's llvmpipe, which lets one thread of a process render at a time
+//! (two at once crashed it; `scenarios::robosuite::episode`), so `--jobs` workers of
+//! one process wait on each other's frames. Processes do not share the renderer. On
+//! the Can CI size (9 policies × 20 episodes × 250 steps) three processes took 13.4
+//! minutes where one took about 27 (BENCHMARKS.md, 2026-11-27). The rows are those of
+//! one process, byte for byte (merge's contract).
+
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitCode, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use harness::results::{RankResults, RunTiming};
+
+use super::defaults::Resolved;
+use crate::cli::RankArgs;
+use crate::progress;
+
+/// Runs `a` as `r.processes` shard processes, joins them into `a.out` and finishes
+/// the run there. The shards' folders (`OUT.shards/shard-i`, with each one's stderr
+/// in `shard-i.log`) are removed once the run is complete; an interrupted run keeps
+/// them, and the same command with `--resume` continues each.
+///
+/// # Errors
+/// An `--out` that exists without `--force` or `--resume`, a shard
+/// that failed (exit 2 or a signal; its log's last lines are quoted), or what `merge`
+/// and the finishing run report.
+pub fn run(a: &RankArgs, r: &Resolved, quiet: bool) -> Result<ExitCode> {
+    let started = Instant::now();
+    let n = r.processes;
+    if a.out.exists() && !a.force && !a.resume {
+        bail!("--out {} exists: pass --force to replace it or --resume to continue it", a.out.display());
+    }
+    // The inputs are checked here once, not by every shard.
+    let missing = r.missing(&a.scenario);
+    if !missing.is_empty() {
+        bail!("--scenario {}: missing inputs:\n  {}", a.scenario, missing.join("\n  "));
+    }
+    let total = policies::dir::checkpoint_dirs(&r.policies)?.len() * r.episodes;
+    let parts = shards_folder(&a.out);
+    std::fs::create_dir_all(&parts).with_context(|| format!("creating {}", parts.display()))?;
+    let exe = std::env::current_exe().context("finding this program to start the shard processes")?;
+    let mut shards = Vec::with_capacity(n);
+    for i in 0..n {
+        let dir = parts.join(format!("shard-{i}"));
+        let log = parts.join(format!("shard-{i}.log"));
+        let resume = a.resume && dir.exists();
+        let mut shard = Shard { i, dir, log, child: None, restarted: false };
+        shard.start(&exe, a, n, resume, false)?;
+        shards.push(shard);
+    }
+    let pb = progress::bar(total as u64, "rank", quiet);
+    let failed = wait_all(&mut shards, &exe, a, n, &pb)?;
+    pb.finish_and_clear();
+    if let Some((i, why)) = failed {
+        let s = &shards[i];
+        bail!(
+            "--processes: shard {i}/{n} ({}) {why}; its log {} ends:\n{}",
+            s.dir.display(),
+            s.log.display(),
+            tail(&s.log)
+        );
+    }
+    let dirs: Vec<PathBuf> = shards.iter().map(|s| s.dir.clone()).collect();
+    super::merge::join(&dirs, &a.out, true, true)?;
+    // The shards' thread times, summed by merge; the wall clock is this command's.
+    let summed = RankResults::read(&a.out.join("results.json"))?.timing;
+    let timing = RunTiming {
+        wall_seconds: started.elapsed().as_secs_f64(),
+        note: format!(
+            "{n} shard processes at once: wall clock of the whole run, thread times summed over the shards"
+        ),
+        ..summed
+    };
+    let mut whole = a.clone();
+    (whole.processes, whole.resume, whole.force) = (Some(1), true, false);
+    let code = super::run_with(&whole, quiet, Some(timing))?;
+    std::fs::remove_dir_all(&parts)
+        .with_context(|| format!("removing the joined shards {}", parts.display()))?;
+    Ok(code)
+}
+
+/// Where the shards of a run into `out` go: `OUT.shards` beside it.
+fn shards_folder(out: &Path) -> PathBuf {
+    let mut name = out.file_name().map_or_else(|| OsString::from("rank"), ToOwned::to_owned);
+    name.push(".shards");
+    out.with_file_name(name)
+}
+
+/// One shard process: its folder, its stderr log and, while it runs, the child.
+struct Shard {
+    i: usize,
+    dir: PathBuf,
+    log: PathBuf,
+    child: Option<Child>,
+    restarted: bool,
+}
+
+impl Shard {
+    /// Starts (or, `again`, restarts) the shard: `--resume` when `resume`, else `--force`.
+    fn start(&mut self, exe: &Path, a: &RankArgs, n: usize, resume: bool, again: bool) -> Result<()> {
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .write(true)
+            .append(again)
+            .truncate(!again)
+            .open(&self.log)
+            .with_context(|| format!("opening {}", self.log.display()))?;
+        let child = Command::new(exe)
+            .args(shard_args(a, self.i, n, &self.dir, resume))
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .with_context(|| format!("starting shard {}/{n} ({})", self.i, exe.display()))?;
+        self.child = Some(child);
+        Ok(())
+    }
+}
+
+/// Waits for every shard, counting their episodes on `pb` (each `episodes.jsonl` row is
+/// one branch of one episode). A shard killed by a signal (a crash inside the system's
+/// GL driver, say) keeps its finished batches and is resumed once. A shard that ends with
+/// exit 2 or more, or by a signal again, stops the others (their finished batches stay;
+/// `--resume` continues them) and is returned with why. Exit 1 (rows written, but a
+/// policy failed or the shard held fewer than two policies) counts as done: the joined
+/// run reports it.
+fn wait_all(
+    shards: &mut [Shard],
+    exe: &Path,
+    a: &RankArgs,
+    n: usize,
+    pb: &indicatif::ProgressBar,
+) -> Result<Option<(usize, String)>> {
+    let mut failed = None;
+    while failed.is_none() && shards.iter().any(|s| s.child.is_some()) {
+        for s in shards.iter_mut() {
+            let Some(child) = s.child.as_mut() else { continue };
+            let Some(status) = child.try_wait().with_context(|| format!("waiting for shard {}", s.i))? else {
+                continue;
+            };
+            s.child = None;
+            match status.code() {
+                Some(0 | 1) => {}
+                None if !s.restarted => {
+                    tracing::warn!("shard {}/{n} ended with {status}; resuming it once", s.i);
+                    s.restarted = true;
+                    s.start(exe, a, n, true, true)?;
+                }
+                _ => {
+                    failed = Some((s.i, format!("ended with {status}")));
+                    break;
+                }
+            }
+        }
+        let rows: u64 = shards.iter().map(|s| count_lines(&s.dir.join("episodes.jsonl"))).sum();
+        pb.set_position(rows / 2);
+        std::thread::sleep(Duration::from_millis(300));
+    }
+    for s in shards.iter_mut() {
+        if let Some(mut child) = s.child.take() {
+            // Already gone is fine: the wait reaps it either way.
+            let _ = child.kill();
+            child.wait().with_context(|| format!("waiting for shard {}", s.i))?;
+        }
+    }
+    Ok(failed)
+}
+
+/// Lines in `path` (0 when it is not there yet).
+fn count_lines(path: &Path) -> u64 {
+    std::fs::read(path).map_or(0, |b| b.iter().filter(|&&c| c == b'\n').count() as u64)
+}
+
+/// The last 20 lines of a shard's log.
+fn tail(log: &Path) -> String {
+    let text = std::fs::read_to_string(log).unwrap_or_default();
+    let lines: Vec<&str> = text.lines().collect();
+    lines[lines.len().saturating_sub(20)..].join("\n")
+}
+
+/// The command line of shard `i` of `n` into `dir`: every setting of the run
+/// (the finishing `--resume` refuses the joined rows if one differed), one worker, no
+/// report and no gates (they belong to the whole run); `--resume` or `--force`.
+fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> Vec<OsString> {
+    let mut v: Vec<OsString> = Vec::new();
+    let mut flag = |name: &str, value: OsString| {
+        v.push(name.into());
+        v.push(value);
+    };
+    if let Some(p) = &a.policies {
+        flag("--policies", p.into());
+    }
+    if let Some(p) = &a.world_model {
+        flag("--world-model", p.into());
+    }
+    if let Some(p) = &a.judge {
+        flag("--judge", p.into());
+    }
+    if let Some(k) = a.judge_persist {
+        flag("--judge-persist", k.to_string().into());
+    }
+    if let Some(x) = a.alpha {
+        flag("--alpha", x.to_string().into());
+    }
+    if let Some(e) = a.episodes {
+        flag("--episodes", e.to_string().into());
+    }
+    if let Some(m) = a.max_steps {
+        flag("--max-steps", m.to_string().into());
+    }
+    flag("--scenario", a.scenario.clone().into());
+    flag("--seed-start", a.seed_start.to_string().into());
+    flag("--batch", a.batch.to_string().into());
+    flag("--seed", a.seed.to_string().into());
+    flag("--bootstrap", a.bootstrap.to_string().into());
+    flag("--jobs", "1".into());
+    flag("--shard", format!("{i}/{n}").into());
+    flag("--out", dir.into());
+    let mut all: Vec<OsString> = vec!["-q".into(), "rank".into()];
+    all.extend(v);
+    all.push("--no-report".into());
+    all.push(if resume { "--resume" } else { "--force" }.into());
+    all
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn parse(args: &[OsString]) -> RankArgs {
+        let argv = std::iter::once(OsString::from("evalharness")).chain(args.iter().cloned());
+        match crate::cli::Cli::try_parse_from(argv).unwrap().command {
+            crate::cli::Command::Rank(r) => r,
+            other => panic!("not rank: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_shard_gets_every_setting_one_worker_and_no_gates() {
+        let a = parse(
+            &[
+                "rank",
+                "--scenario",
+                "can",
+                "--policies",
+                "p",
+                "--world-model",
+                "w",
+                "--judge",
+                "j",
+                "--judge-persist",
+                "2",
+                "--alpha",
+                "0.5",
+                "--episodes",
+                "20",
+                "--max-steps",
+                "30",
+                "--seed-start",
+                "7",
+                "--batch",
+                "5",
+                "--seed",
+                "3",
+                "--bootstrap",
+                "100",
+                "--jobs",
+                "4",
+                "--processes",
+                "3",
+                "--min-pearson",
+                "0.3",
+                "--max-inversions",
+                "2",
+                "--out",
+                "o",
+            ]
+            .map(OsString::from),
+        );
+        let s = parse(&shard_args(&a, 2, 3, Path::new("o.shards/shard-2"), false));
+        assert_eq!((&s.policies, &s.world_model, &s.judge), (&a.policies, &a.world_model, &a.judge));
+        assert_eq!(
+            (s.judge_persist, s.alpha, s.episodes, s.max_steps),
+            (Some(2), Some(0.5), Some(20), Some(30))
+        );
+        assert_eq!((s.scenario.as_str(), s.seed_start, s.batch, s.seed, s.bootstrap), ("can", 7, 5, 3, 100));
+        assert_eq!((s.jobs, s.shard.as_deref(), s.processes), (1, Some("2/3"), None));
+        assert_eq!((s.min_pearson, s.max_inversions, s.no_report), (None, None, true));
+        assert_eq!((s.out, s.force, s.resume), (PathBuf::from("o.shards/shard-2"), true, false));
+        let r = parse(&shard_args(&a, 0, 3, Path::new("d"), true));
+        assert!(r.resume && !r.force);
+    }
+
+    #[test]
+    fn shards_go_beside_the_output() {
+        assert_eq!(shards_folder(Path::new("out/can")), PathBuf::from("out/can.shards"));
+    }
+}
