@@ -49,15 +49,15 @@ ci_size() {
     case $1 in lift) echo "20 20 0.4 12 3" ;; can) echo "20 20 0.3 13 3" ;; *) echo "30 10 0.8 3 1" ;; esac
 }
 
-# once LABEL DIR COMMAND...: runs COMMAND --out DIR --force; a run killed by a signal (exit 128 + n;
+# once DIR COMMAND...: runs COMMAND --out DIR --force; a run killed by a signal (exit 128 + n;
 # a crash inside the system's GL driver, say) has its finished batches saved, so one `--resume`
 # completes the same run. Returns the exit code.
 once() {
-    local label=$1 dir=$2 rc=0
-    shift 2
+    local dir=$1 rc=0
+    shift
     "$@" --out "$dir" --force || rc=$?
     if [ "$rc" -ge 128 ]; then
-        echo "correlation.sh: rank $label ended with exit $rc; resuming it once" >&2
+        echo "correlation.sh: rank $(basename "$dir") ended with exit $rc; resuming it once" >&2
         rc=0
         "$@" --out "$dir" --resume || rc=$?
     fi
@@ -77,7 +77,7 @@ rank_task() {
     local name rc=0 started=$SECONDS
     name=$(basename "$task" .toml)
     local dir="$out/$name"
-    once "$name" "$dir" "$bin" rank --scenario "$task" --episodes "$episodes" --batch "$batch" --bootstrap 1000 \
+    once "$dir" "$bin" rank --scenario "$task" --episodes "$episodes" --batch "$batch" --bootstrap 1000 \
         --min-pearson "$min" --max-inversions "$max" --processes "$procs" "$@" || rc=$?
     echo "correlation.sh: rank $name: $((SECONDS - started)) s wall in $procs process(es)" >&2
     [ "$rc" -gt "$status" ] && status=$rc

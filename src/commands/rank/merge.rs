@@ -76,17 +76,22 @@ fn check_complete_set(shards: &[PathBuf], configs: &[Value]) -> Result<()> {
 /// # Errors
 /// As [`join`].
 pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Result<ExitCode> {
-    let rows = join(shards, out, force, no_report)?;
+    let (rows, _) = join(shards, out, force, no_report)?;
     println!("merged {} shards: {rows} rows -> {}", shards.len(), out.display());
     Ok(ExitCode::SUCCESS)
 }
 
 /// Joins shard folders into `out` (written into `OUT.partial`, moved into place when
-/// complete); returns the number of rows.
+/// complete); returns the number of rows and the shards' timing, summed.
 ///
 /// # Errors
 /// Missing files, shards of different runs, duplicate rows that disagree, or I/O failures.
-pub(super) fn join(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Result<usize> {
+pub(super) fn join(
+    shards: &[PathBuf],
+    out: &Path,
+    force: bool,
+    no_report: bool,
+) -> Result<(usize, RunTiming)> {
     if shards.is_empty() {
         bail!("give at least one shard folder");
     }
@@ -168,5 +173,5 @@ pub(super) fn join(shards: &[PathBuf], out: &Path, force: bool, no_report: bool)
         super::report::write_report(&tmp)?;
     }
     staged.commit()?;
-    Ok(rows.len())
+    Ok((rows.len(), res.timing))
 }

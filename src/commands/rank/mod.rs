@@ -61,27 +61,32 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
         }
         _ => {}
     }
-    let task = crate::scenario::load_task(&a.scenario)?;
-    let r = defaults::resolve(a, task.as_ref(), Path::new("checkpoints"))?;
-    if r.processes > 1 { processes::run(a, &r, quiet) } else { run_with(a, quiet, None) }
-}
-
-/// One process's run. `shard_times`: the times of the shard processes whose joined rows this
-/// run finishes (`--processes`), which `results.json` reports instead of this process's
-/// own (it runs no batch); their wall clock is counted up to this process's start.
-fn run_with(a: &RankArgs, quiet: bool, shard_times: Option<RunTiming>) -> Result<ExitCode> {
-    let (shard, shards) = parse_shard(a.shard.as_deref())?;
     // Every input is checked before the output folder is touched.
     let task = crate::scenario::load_task(&a.scenario)?;
     let r = defaults::resolve(a, task.as_ref(), Path::new("checkpoints"))?;
-    if r.max_steps == 0 || a.batch == 0 {
-        bail!("--max-steps and --batch must be positive");
-    }
-    let seeds: Vec<u64> = harness::seed::range(a.seed_start, r.episodes as u64)?.collect();
     let missing = r.missing(&a.scenario);
     if !missing.is_empty() {
         bail!("--scenario {}: missing inputs:\n  {}", a.scenario, missing.join("\n  "));
     }
+    if r.processes > 1 { processes::run(a, task, &r, quiet) } else { run_with(a, task, &r, quiet, None) }
+}
+
+/// One process's run of `a` for `task`, resolved as `r` (its inputs found). `shard_times`:
+/// the times of the shard processes whose joined rows this run finishes (`--processes`),
+/// which `results.json` reports instead of this process's own (it runs no batch); their
+/// wall clock is counted up to this process's start.
+fn run_with(
+    a: &RankArgs,
+    task: Box<dyn Task>,
+    r: &defaults::Resolved,
+    quiet: bool,
+    shard_times: Option<RunTiming>,
+) -> Result<ExitCode> {
+    let (shard, shards) = parse_shard(a.shard.as_deref())?;
+    if r.max_steps == 0 || a.batch == 0 {
+        bail!("--max-steps and --batch must be positive");
+    }
+    let seeds: Vec<u64> = harness::seed::range(a.seed_start, r.episodes as u64)?.collect();
     match (a.judge_persist, &r.judge) {
         (Some(0), _) => bail!("--judge-persist 0: must be at least 1 frame"),
         (Some(_), None) => {

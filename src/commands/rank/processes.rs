@@ -16,14 +16,15 @@ use std::process::{Child, Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use harness::results::{RankResults, RunTiming};
+use harness::results::RunTiming;
+use harness::task::Task;
 
 use super::defaults::Resolved;
 use crate::cli::RankArgs;
 use crate::progress;
 
-/// Runs `a` as `r.processes` shard processes, joins them into `a.out` and finishes
-/// the run there. The shards' folders (`OUT.shards/shard-i`, with each one's stderr
+/// Runs `a` (for `task`, resolved as `r`, its inputs found) as `r.processes` shard
+/// processes, joins them into `a.out` and finishes the run there. The shards' folders (`OUT.shards/shard-i`, with each one's stderr
 /// in `shard-i.log`) are removed once the run is complete; an interrupted run keeps
 /// them, and the same command with `--resume` continues each.
 ///
@@ -31,16 +32,11 @@ use crate::progress;
 /// An `--out` that exists without `--force` or `--resume`, a shard
 /// that failed (exit 2 or a signal; its log's last lines are quoted), or what `merge`
 /// and the finishing run report.
-pub fn run(a: &RankArgs, r: &Resolved, quiet: bool) -> Result<ExitCode> {
+pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Result<ExitCode> {
     let started = Instant::now();
     let n = r.processes;
     if a.out.exists() && !a.force && !a.resume {
         bail!("--out {} exists: pass --force to replace it or --resume to continue it", a.out.display());
-    }
-    // The inputs are checked here once, not by every shard.
-    let missing = r.missing(&a.scenario);
-    if !missing.is_empty() {
-        bail!("--scenario {}: missing inputs:\n  {}", a.scenario, missing.join("\n  "));
     }
     let total = policies::dir::checkpoint_dirs(&r.policies)?.len() * r.episodes;
     let parts = shards_folder(&a.out);
@@ -68,9 +64,8 @@ pub fn run(a: &RankArgs, r: &Resolved, quiet: bool) -> Result<ExitCode> {
         );
     }
     let dirs: Vec<PathBuf> = shards.iter().map(|s| s.dir.clone()).collect();
-    super::merge::join(&dirs, &a.out, true, true)?;
     // The shards' thread times, summed by merge; the wall clock is this command's.
-    let summed = RankResults::read(&a.out.join("results.json"))?.timing;
+    let (_, summed) = super::merge::join(&dirs, &a.out, true, true)?;
     let timing = RunTiming {
         wall_seconds: started.elapsed().as_secs_f64(),
         note: format!(
@@ -80,7 +75,7 @@ pub fn run(a: &RankArgs, r: &Resolved, quiet: bool) -> Result<ExitCode> {
     };
     let mut whole = a.clone();
     (whole.processes, whole.resume, whole.force) = (Some(1), true, false);
-    let code = super::run_with(&whole, quiet, Some(timing))?;
+    let code = super::run_with(&whole, task, r, quiet, Some(timing))?;
     std::fs::remove_dir_all(&parts)
         .with_context(|| format!("removing the joined shards {}", parts.display()))?;
     Ok(code)
@@ -159,8 +154,11 @@ fn wait_all(
                 }
             }
         }
-        let rows: u64 = shards.iter().map(|s| count_lines(&s.dir.join("episodes.jsonl"))).sum();
-        pb.set_position(rows / 2);
+        // The rows are counted only for a bar that shows.
+        if !pb.is_hidden() {
+            let rows: u64 = shards.iter().map(|s| count_lines(&s.dir.join("episodes.jsonl"))).sum();
+            pb.set_position(rows / 2);
+        }
         std::thread::sleep(Duration::from_millis(300));
     }
     for s in shards.iter_mut() {
