@@ -132,6 +132,14 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
     }
     let lines = std::fs::read_to_string(rep.join("replay.jsonl")).unwrap_or_default();
     assert_eq!(lines.lines().count(), 4, "2 policies × 2 replayed episodes: {lines}");
+    // Two workers (one checkpoint each) write the same files as one.
+    let rep_j2 = dir.join("replay-j2");
+    let more = ["--replay-imagined", s(&wm), "--judge", s(&judge), "--jobs", "2", "--out", s(&rep_j2)];
+    expect_code(&run(&[&args[..], &more[..]].concat()), 0);
+    for f in ["episodes.jsonl", "replay.jsonl"] {
+        let read = |d: &std::path::Path| std::fs::read_to_string(d.join(f)).unwrap_or_default();
+        assert_eq!(read(&rep_j2), read(&rep), "{f} with --jobs 2");
+    }
     assert_eq!(replay["seed"], 0, "rank's default noise seed: {replay}");
     // Without --judge, away from the repository's checkpoints/can/judge: refused before
     // anything runs, naming where the judge was looked for.
@@ -158,6 +166,17 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
     let more = ["--episodes", "2", "--max-steps", "4", "--no-report", "--policies", s(&pol)];
     let (stdout, _) = expect_code(&run(&[&args[..], &more[..], &["--out", s(&out)]].concat()), 0);
     assert!(stdout.contains("MuJoCo success"), "{stdout}");
+    // `simulate --replay-imagined` ran the same episodes (seeds, judge, noise seed, batch):
+    // its MuJoCo and imagined rows are rank's, line for line.
+    let sorted = |p: std::path::PathBuf| {
+        let mut v: Vec<String> =
+            std::fs::read_to_string(p).unwrap_or_default().lines().map(String::from).collect();
+        v.sort();
+        v
+    };
+    let ranked = sorted(out.join("episodes.jsonl"));
+    assert_eq!(ranked.len(), 8, "2 policies × 2 seeds × 2 branches");
+    assert_eq!(sorted(rep.join("episodes.jsonl")), ranked);
     let res = read_json(&out.join("results.json"));
     assert_eq!(res["policies"].as_array().map(Vec::len), Some(2), "{res}");
     assert_eq!(res["failed_policies"].as_array().map(Vec::len), Some(0), "{res}");

@@ -78,10 +78,7 @@ pub fn run_batches<E: From<EngineError>>(
     std::thread::scope(|sc| -> Result<(), E> {
         for _ in 0..jobs.max(1).min(2 * batches.len().max(1)) {
             let tx = tx.clone();
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(1)
-                .build()
-                .map_err(|e| EngineError::Threads(e.to_string()))?;
+            let pool = one_thread_pool()?;
             let (next, failed_at, timing) = (&next, &failed_at, &timing);
             sc.spawn(move || {
                 loop {
@@ -133,6 +130,63 @@ pub fn run_batches<E: From<EngineError>>(
         Ok(())
     })?;
     timing.into_inner().map_err(|_| EngineError::WorkerPanicked.into())
+}
+
+/// Runs `work` on each of `items` on `jobs` worker threads and calls `done(index,
+/// result)` on this thread in item order (an item waits for the ones before it).
+///
+/// For work that is not a rank batch (e.g. `simulate --replay-imagined`'s three
+/// branches of one checkpoint's seeds). As in [`run_batches`], every worker runs
+/// burn's kernels on its own one-thread rayon pool, so a result is a pure function of
+/// its item and any worker count hands on the same results.
+///
+/// # Errors
+/// What `done` returns (workers then take no further item), or a worker that could
+/// not start.
+pub fn run_ordered<T: Sync, R: Send, E: From<EngineError>>(
+    items: &[T],
+    jobs: usize,
+    work: &(dyn Fn(&T) -> R + Sync),
+    done: &mut dyn FnMut(usize, R) -> Result<(), E>,
+) -> Result<(), E> {
+    let next = AtomicUsize::new(0);
+    let (tx, rx) = mpsc::channel::<(usize, R)>();
+    std::thread::scope(|sc| -> Result<(), E> {
+        for _ in 0..jobs.max(1).min(items.len().max(1)) {
+            let tx = tx.clone();
+            let pool = one_thread_pool()?;
+            let next = &next;
+            sc.spawn(move || {
+                loop {
+                    let i = next.fetch_add(1, Ordering::SeqCst);
+                    let Some(item) = items.get(i) else { break };
+                    let r = pool.install(|| work(item));
+                    if tx.send((i, r)).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(tx);
+        let mut waiting = BTreeMap::new();
+        let mut handed = 0;
+        for (i, r) in rx {
+            waiting.insert(i, r);
+            while let Some(r) = waiting.remove(&handed) {
+                if let Err(e) = done(handed, r) {
+                    next.store(items.len(), Ordering::SeqCst);
+                    return Err(e);
+                }
+                handed += 1;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// A rayon pool of one thread, for a worker's kernels.
+fn one_thread_pool() -> Result<rayon::ThreadPool, EngineError> {
+    rayon::ThreadPoolBuilder::new().num_threads(1).build().map_err(|e| EngineError::Threads(e.to_string()))
 }
 
 /// The batch's rows from its two halves, or its error (the world model's first). A
@@ -222,5 +276,35 @@ mod tests {
             assert_eq!((rows[0].branch, rows[1].branch), (Branch::Sim, Branch::WorldModel));
         }
         assert_eq!(run(3), one, "three workers hand on exactly what one does");
+    }
+
+    #[test]
+    fn ordered_work_is_handed_on_in_item_order_on_one_thread_pools_and_stops_at_an_error() {
+        // Items 0..6, squared; the later items finish first (they sleep less), yet are
+        // handed on in order. Each runs on a pool of one thread.
+        let items: Vec<u64> = (0..6).collect();
+        let work = |&i: &u64| {
+            std::thread::sleep(std::time::Duration::from_millis(5 * (6 - i)));
+            (i * i, rayon::current_num_threads())
+        };
+        for jobs in [1, 3] {
+            let mut got = Vec::new();
+            run_ordered::<u64, _, EngineError>(&items, jobs, &work, &mut |j, r| {
+                got.push((j, r));
+                Ok(())
+            })
+            .unwrap();
+            let want: Vec<(usize, (u64, usize))> = (0..6).map(|i| (i, ((i * i) as u64, 1))).collect();
+            assert_eq!(got, want, "{jobs} workers");
+        }
+        // `done` failing at item 2 stops the run with its error; nothing after 2 is handed on.
+        let mut seen = Vec::new();
+        let err = run_ordered::<u64, _, EngineError>(&items, 2, &work, &mut |j, _| {
+            seen.push(j);
+            if j == 2 { Err(EngineError::Threads("stop".into())) } else { Ok(()) }
+        })
+        .unwrap_err();
+        assert_eq!(seen, vec![0, 1, 2]);
+        assert!(err.to_string().contains("stop"), "{err}");
     }
 }

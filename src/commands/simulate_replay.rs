@@ -13,12 +13,13 @@ use std::process::ExitCode;
 use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
-use engine::{Setup, Start, Timing, replay_in_sim, sim_branch, wm_branch};
+use engine::{Setup, Start, Timing, Trajectory, replay_in_sim, sim_branch, wm_branch};
+use harness::policy::Policy;
 use harness::results::{EpisodeRow, PairedSuccess};
 use harness::rows::append_rows;
 use policies::dir::{checkpoint_dirs, checkpoint_name};
-use rayon::prelude::*;
 use serde::Serialize;
+use world_model::model::WorldModel;
 
 use super::rank::{defaults, load_judge, load_world_model};
 use super::record::{Layout, Sink};
@@ -71,8 +72,6 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     let out = Staged::new(&args.out, c.force)?;
     let expect = expectations(task.as_ref());
     let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();
-    let pool =
-        rayon::ThreadPoolBuilder::new().num_threads(c.jobs.max(1)).build().context("starting threads")?;
     let pb = progress::bar((dirs.len() as u64) * c.episodes, "replay", quiet);
     let (jsonl, replay_jsonl) = (out.file("episodes.jsonl"), out.file("replay.jsonl"));
     let mut sink = match &args.record {
@@ -84,67 +83,61 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
         }
         None => None,
     };
-    let mut summary = Vec::new();
+    let mut policies = Vec::new();
     for d in &dirs {
         let name = checkpoint_name(d);
         let policy =
             load_any(d, &expect, &device, task.as_ref()).with_context(|| format!("policy {name}"))?;
-        let horizons = (policy.obs_horizon(), policy.action_horizon());
-        let mut timing = Timing::default();
-        let (mut real, mut imagined, mut replayed) = (Vec::new(), Vec::new(), Vec::new());
-        for batch in seeds.chunks(50) {
-            let mut start = Start::new(policy.name(), batch, &setup)?;
-            start.trajectories = true;
-            let wm_out = wm_branch(policy.as_ref(), &start, &setup, &wm, &mut timing)
-                .with_context(|| format!("policy {name}: the world-model branch"))?;
-            start.trajectories = false;
-            real.extend(pool.install(|| sim_branch(policy.as_ref(), start, &setup, &mut timing))?.rows);
-            let record = sink.is_some();
-            let rows: Result<Vec<_>, _> = pool.install(|| {
-                wm_out
-                    .episodes
-                    .par_iter()
-                    .map(|e| {
-                        replay_in_sim(
-                            policy.name(),
-                            horizons,
-                            e.seed,
-                            e.actions.clone(),
-                            (&setup, record),
-                            &mut Timing::default(),
-                        )
-                    })
-                    .collect()
-            });
-            let rows = rows.with_context(|| format!("policy {name}: replaying the imagined actions"))?;
-            for ((row, t), imagined_row) in rows.into_iter().zip(&wm_out.rows) {
-                if let (Some((sink, attrs)), Some(t)) = (sink.as_mut(), t) {
-                    let label = format!("{name}/imagined-actions");
-                    let (_, mut attr) = sink
-                        .append(&t, &label)
-                        .with_context(|| format!("recording {label}, seed {}", t.seed))?;
-                    attr["imagined_success"] = imagined_row.success.into();
-                    attrs.push(attr);
-                }
-                replayed.push(row);
-            }
-            imagined.extend(wm_out.rows);
-            pb.inc(batch.len() as u64);
-        }
-        append_rows(&jsonl, &real)?;
-        append_rows(&jsonl, &imagined)?;
-        append_rows(&replay_jsonl, &replayed)?;
-        let r = tally(&name, &real, &imagined, &replayed);
-        println!(
-            "{name:<16} MuJoCo {:.2}  imagined {:.2}  imagined actions in MuJoCo {:.2}  (imagined successes: {} hold in MuJoCo, {} fail)",
-            r.mujoco,
-            r.imagined,
-            r.imagined_actions_in_mujoco,
-            r.imagined_success_holds,
-            r.imagined_success_fails
-        );
-        summary.push(r);
+        policies.push((name, policy));
     }
+    // One unit per checkpoint and batch of up to 50 seeds (rank's default batch), run on
+    // `--jobs` workers and handed on in order: a checkpoint's rows are the same for any
+    // worker count.
+    let batches: Vec<&[u64]> = seeds.chunks(50).collect();
+    let units: Vec<(usize, &[u64])> =
+        (0..policies.len()).flat_map(|p| batches.iter().map(move |b| (p, *b))).collect();
+    let record = sink.is_some();
+    let work = |&(p, batch): &(usize, &[u64])| {
+        let (name, policy) = &policies[p];
+        three_ways(policy.as_ref(), batch, &setup, &wm, record).with_context(|| format!("policy {name}"))
+    };
+    let mut summary = Vec::new();
+    let (mut real, mut imagined, mut replayed) = (Vec::new(), Vec::new(), Vec::new());
+    engine::schedule::run_ordered(&units, c.jobs, &work, &mut |i, unit: Result<Unit>| -> Result<()> {
+        let unit = unit?;
+        let name = &policies[units[i].0].0;
+        for ((row, t), imagined_row) in unit.replayed.into_iter().zip(&unit.imagined) {
+            if let (Some((sink, attrs)), Some(t)) = (sink.as_mut(), t) {
+                let label = format!("{name}/imagined-actions");
+                let (_, mut attr) =
+                    sink.append(&t, &label).with_context(|| format!("recording {label}, seed {}", t.seed))?;
+                attr["imagined_success"] = imagined_row.success.into();
+                attrs.push(attr);
+            }
+            replayed.push(row);
+        }
+        real.extend(unit.real);
+        imagined.extend(unit.imagined);
+        pb.inc(units[i].1.len() as u64);
+        if (i + 1) % batches.len() == 0 {
+            // The checkpoint's last batch.
+            append_rows(&jsonl, &real)?;
+            append_rows(&jsonl, &imagined)?;
+            append_rows(&replay_jsonl, &replayed)?;
+            let r = tally(name, &real, &imagined, &replayed);
+            println!(
+                "{name:<16} MuJoCo {:.2}  imagined {:.2}  imagined actions in MuJoCo {:.2}  (imagined successes: {} hold in MuJoCo, {} fail)",
+                r.mujoco,
+                r.imagined,
+                r.imagined_actions_in_mujoco,
+                r.imagined_success_holds,
+                r.imagined_success_fails
+            );
+            summary.push(r);
+            (real, imagined, replayed) = (Vec::new(), Vec::new(), Vec::new());
+        }
+        Ok(())
+    })?;
     pb.finish_and_clear();
     write_json(
         &out.file("replay.json"),
@@ -162,6 +155,41 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     let o = out.commit()?;
     println!("-> {}", o.display());
     Ok(ExitCode::SUCCESS)
+}
+
+/// One batch of a checkpoint's seeds, run three ways: rows in seed order, the replays
+/// with their episodes when recording.
+struct Unit {
+    real: Vec<EpisodeRow>,
+    imagined: Vec<EpisodeRow>,
+    replayed: Vec<(EpisodeRow, Option<Trajectory>)>,
+}
+
+/// The policy in the world model (keeping its executed actions), in MuJoCo, and its
+/// imagined actions replayed in MuJoCo, on the seeds of `batch`, on this thread.
+fn three_ways(
+    policy: &dyn Policy,
+    batch: &[u64],
+    setup: &Setup,
+    wm: &WorldModel,
+    record: bool,
+) -> Result<Unit> {
+    let mut timing = Timing::default();
+    let mut start = Start::new(policy.name(), batch, setup)?;
+    start.trajectories = true;
+    let wm_out = wm_branch(policy, &start, setup, wm, &mut timing).context("the world-model branch")?;
+    start.trajectories = false;
+    let real = sim_branch(policy, start, setup, &mut timing).context("the MuJoCo branch")?.rows;
+    let horizons = (policy.obs_horizon(), policy.action_horizon());
+    let replayed = wm_out
+        .episodes
+        .iter()
+        .map(|e| {
+            replay_in_sim(policy.name(), horizons, e.seed, e.actions.clone(), (setup, record), &mut timing)
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .context("replaying the imagined actions")?;
+    Ok(Unit { real, imagined: wm_out.rows, replayed })
 }
 
 /// The rates of one checkpoint's rows (each list in seed order, one row per seed).

@@ -69,7 +69,8 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
     let timing = RunTiming {
         wall_seconds: started.elapsed().as_secs_f64(),
         note: format!(
-            "{n} shard processes at once: wall clock of the whole run, thread times summed over the shards"
+            "{n} shard processes at once: wall clock of the whole run, thread times summed over the \
+             shards (each a task's elapsed time, so with more processes than cores it includes waits for a core)"
         ),
         ..summed
     };
