@@ -24,9 +24,10 @@ use crate::cli::RankArgs;
 use crate::progress;
 
 /// Runs `a` (for `task`, resolved as `r`, its inputs found) as `r.processes` shard
-/// processes, joins them into `a.out` and finishes the run there. The shards' folders (`OUT.shards/shard-i`, with each one's stderr
-/// in `shard-i.log`) are removed once the run is complete; an interrupted run keeps
-/// them, and the same command with `--resume` continues each.
+/// processes, joins them into `a.out` and finishes the run there. The shards' folders
+/// (`OUT.shards/shard-i`, with each one's stderr in `shard-i.log`) are removed once the
+/// run is complete; an interrupted run keeps them, and the same command with `--resume`
+/// continues each.
 ///
 /// # Errors
 /// An `--out` that exists without `--force` or `--resume`, a shard
