@@ -272,6 +272,11 @@ pub struct RankArgs {
     /// `--accentuation` (default: its configured α).
     #[arg(long)]
     pub alpha: Option<f32>,
+    /// The scale of the world model's sampling noise, in [0, 1] (a one-pass model's
+    /// temperature; 0: one fixed chunk per history and actions) [default: the model's
+    /// `noise_scale`, else 1].
+    #[arg(long, value_name = "T")]
+    pub noise_scale: Option<f32>,
     /// Scenario name or .toml file.
     #[arg(long, default_value = "pusht")]
     pub scenario: String,
@@ -479,6 +484,10 @@ pub struct SimulateArgs {
     /// without a judge of its own (Lift, Can): checkpoints/<task>/judge].
     #[arg(long, requires = "replay_imagined")]
     pub judge: Option<PathBuf>,
+    /// With --replay-imagined: the world model's sampling-noise scale, as `rank
+    /// --noise-scale` [default: the model's, else 1].
+    #[arg(long, value_name = "T", requires = "replay_imagined")]
+    pub noise_scale: Option<f32>,
     /// With --replay-imagined: also write the replays (the imagined actions stepped in
     /// MuJoCo, to a success or the last imagined action) as a dataset in `collect`'s layout,
     /// each episode labelled `CHECKPOINT/imagined-actions`: training data in which the

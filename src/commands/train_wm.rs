@@ -206,6 +206,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
                 alpha: a.accentuation.then_some(a.alpha.unwrap_or(DEFAULT_ALPHA)),
                 goal_free: a.goal_free.then_some(true),
                 actions,
+                noise_scale: None,
             }
         }
     };

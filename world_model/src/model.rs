@@ -92,6 +92,12 @@ pub struct WorldModelConfig {
     /// How actions are normalised (absent: Push-T's world units, [`ActionScale::pusht`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub actions: Option<ActionScale>,
+    /// The scale of a one-pass model's input noise at inference: the generator's
+    /// temperature, as the truncation trick of GAN sampling (Brock et al. 2019) lowers
+    /// it. 0 gives each history and action sequence one fixed chunk; absent: 1, the
+    /// standard-normal noise the model was trained on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_scale: Option<f32>,
 }
 
 impl WorldModelConfig {
@@ -119,6 +125,7 @@ impl WorldModelConfig {
             alpha: None,
             goal_free: None,
             actions: None,
+            noise_scale: None,
         }
     }
 
@@ -218,7 +225,11 @@ impl WorldModel {
         }
         let cpu_decoder = cpu_decoder(&codec, device);
         let cpu_unet = cpu_unet(&unet, device);
-        Ok(Self { cfg, codec, unet, device: device.clone(), cpu_decoder, cpu_unet })
+        let mut wm = Self { cfg, codec, unet, device: device.clone(), cpu_decoder, cpu_unet };
+        if let Some(t) = wm.cfg.noise_scale {
+            wm.set_noise_scale(t).map_err(|e| ckpt(&cfg_path, format!("\"noise_scale\": {e}")))?;
+        }
+        Ok(wm)
     }
 
     /// Builds a model from parts (used by the trainer's evaluation).
@@ -297,6 +308,22 @@ impl WorldModel {
         Ok(())
     }
 
+    /// Sets the sampling noise's scale ([`WorldModelConfig::noise_scale`]).
+    ///
+    /// # Errors
+    /// A diffusion model (its noise is the DDIM trajectory's start, not a
+    /// temperature), or a scale that is not a finite value in [0, 1].
+    pub fn set_noise_scale(&mut self, scale: f32) -> Result<(), String> {
+        if self.cfg.objective == Objective::Diffusion {
+            return Err("a diffusion model's noise starts its DDIM sampling; it has no temperature".into());
+        }
+        if !(scale.is_finite() && (0.0..=1.0).contains(&scale)) {
+            return Err(format!("the noise scale must be a finite value in [0, 1], got {scale}"));
+        }
+        self.cfg.noise_scale = Some(scale);
+        Ok(())
+    }
+
     /// Whether the U-Net reads the anchor (the episode's first frame) passed to
     /// [`Self::predict`]; other models ignore it.
     pub fn uses_anchor(&self) -> bool {
@@ -322,7 +349,11 @@ impl WorldModel {
         let [_, f, _] = actions.dims();
         let hist = history.swap_dims(1, 2); // [b, C, K, s, s]
         let anchor = self.uses_anchor().then_some(anchor);
-        let noise = row_noise(rngs, c * f * s * s);
+        let mut noise = row_noise(rngs, c * f * s * s);
+        // The draws are made at any scale, so each row's RNG stream stays the same.
+        if let Some(t) = self.cfg.noise_scale.filter(|&t| t != 1.0) {
+            noise.iter_mut().for_each(|v| *v *= t);
+        }
         let x = Tensor::<5>::from_data(TensorData::new(noise, [b, c, f, s, s]), &self.device);
         let out = match self.cfg.objective {
             Objective::Drifting | Objective::Mse => self.unet_forward(x, hist, actions, anchor, None),

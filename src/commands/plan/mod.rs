@@ -111,7 +111,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     }
     let device = world_model::device::selected()?;
     let wm = if planners.contains(&Planner::WorldModel) {
-        let wm = crate::commands::rank::load_world_model(&a.world_model, a.alpha, &device)?;
+        let wm = crate::commands::rank::load_world_model(&a.world_model, a.alpha, None, &device)?;
         if wm.image_size() != size {
             bail!(
                 "world model {} generates {1}x{1} frames, the scenario renders {size}x{size}",

@@ -95,7 +95,7 @@ fn run_with(
         _ => {}
     }
     let device = world_model::device::selected()?;
-    let wm = load_world_model(&r.world_model, a.alpha, &device)?;
+    let wm = load_world_model(&r.world_model, a.alpha, a.noise_scale, &device)?;
     let mut judge = r.judge.as_deref().map(|d| load_judge(d, task.as_ref(), &device)).transpose()?;
     if let (Some(k), Some(j)) = (a.judge_persist, judge.as_mut()) {
         j.file.persist_frames = k;
@@ -325,19 +325,23 @@ pub(crate) fn prepare_run<'a>(
     Ok((dir, out.join("episodes.jsonl")))
 }
 
-/// Loads the world model in `dir`, with `--alpha` applied when given.
+/// Loads the world model in `dir`, with `--alpha` and `--noise-scale` applied when given.
 ///
 /// # Errors
-/// An unloadable model, or an α it cannot take, naming the folder.
+/// An unloadable model, or an α or noise scale it cannot take, naming the folder.
 pub(crate) fn load_world_model(
     dir: &Path,
     alpha: Option<f32>,
+    noise_scale: Option<f32>,
     device: &burn::tensor::Device,
 ) -> Result<WorldModel> {
     let mut wm =
         WorldModel::load(dir, device).with_context(|| format!("loading world model {}", dir.display()))?;
     if let Some(alpha) = alpha {
         wm.set_alpha(alpha).map_err(|e| anyhow::anyhow!("--alpha: {e} ({})", dir.display()))?;
+    }
+    if let Some(t) = noise_scale {
+        wm.set_noise_scale(t).map_err(|e| anyhow::anyhow!("--noise-scale: {e} ({})", dir.display()))?;
     }
     Ok(wm)
 }

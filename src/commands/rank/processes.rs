@@ -209,6 +209,9 @@ fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> Vec
     if let Some(x) = a.alpha {
         flag("--alpha", x.to_string().into());
     }
+    if let Some(x) = a.noise_scale {
+        flag("--noise-scale", x.to_string().into());
+    }
     if let Some(e) = a.episodes {
         flag("--episodes", e.to_string().into());
     }
@@ -260,6 +263,8 @@ mod tests {
                 "2",
                 "--alpha",
                 "0.5",
+                "--noise-scale",
+                "0.25",
                 "--episodes",
                 "20",
                 "--max-steps",
@@ -287,6 +292,7 @@ mod tests {
         );
         let s = parse(&shard_args(&a, 2, 3, Path::new("o.shards/shard-2"), false));
         assert_eq!((&s.policies, &s.world_model, &s.judge), (&a.policies, &a.world_model, &a.judge));
+        assert_eq!(s.noise_scale, Some(0.25));
         assert_eq!(
             (s.judge_persist, s.alpha, s.episodes, s.max_steps),
             (Some(2), Some(0.5), Some(20), Some(30))
