@@ -207,6 +207,32 @@ fn the_can_pipeline_collects_trains_every_model_and_ranks() {
         "{stdout}"
     );
     assert_eq!(res["scenario"], "can", "{res}");
+    // The world model sampled at temperature 0: recorded in the run's resolved config
+    // (absent from the default run's); a scale outside [0, 1] is refused, naming the flag,
+    // and so is one in a model folder's config.json, naming the file.
+    let cold = dir.join("rank-cold");
+    let one = ["--episodes", "1", "--max-steps", "4", "--no-report", "--policies", s(&pol)];
+    expect_code(&run(&[&args[..], &one[..], &["--noise-scale", "0", "--out", s(&cold)]].concat()), 0);
+    assert_eq!(read_json(&cold.join("config.json"))["world_model_config"]["noise_scale"], 0.0);
+    let plain = read_json(&out.join("config.json"));
+    assert!(plain["world_model_config"].get("noise_scale").is_none(), "{plain}");
+    let hot_out = dir.join("rank-hot");
+    let hot = ["--noise-scale", "1.5", "--out", s(&hot_out)];
+    let (_, stderr) = expect_code(&run(&[&args[..], &one[..], &hot[..]].concat()), 2);
+    assert!(
+        stderr.contains("--noise-scale: the noise scale must be a finite value in [0, 1], got 1.5"),
+        "{stderr}"
+    );
+    let wm_hot = dir.join("wm-hot");
+    std::fs::create_dir(&wm_hot).unwrap();
+    std::fs::copy(wm.join("ema.bpk"), wm_hot.join("ema.bpk")).unwrap();
+    let mut cfg = read_json(&wm.join("config.json"));
+    cfg["model"]["noise_scale"] = serde_json::json!(2.0);
+    std::fs::write(wm_hot.join("config.json"), cfg.to_string()).unwrap();
+    let args_hot = ["rank", "--scenario", "can", "--world-model", s(&wm_hot), "--judge", s(&judge)];
+    let (_, stderr) =
+        expect_code(&run(&[&args_hot[..], &one[..], &["--out", s(&dir.join("rank-hot2"))]].concat()), 2);
+    assert!(stderr.contains("wm-hot/config.json") && stderr.contains("\"noise_scale\""), "{stderr}");
     // The table of tasks reads the run: Can, 2 policies × 2 episodes from seed 100000.
     let (md, _) = expect_code(&run(&["tasks", s(&out)]), 0);
     assert!(md.contains("| can | 2 × 2 |") && md.contains("| 100000–100001 |"), "{md}");
