@@ -240,6 +240,10 @@ pub struct WmEvalArgs {
     /// configured α).
     #[arg(long)]
     pub alpha: Option<f32>,
+    /// The sampling-noise scale (temperature, in [0, 1]) of every compared model, as `rank
+    /// --noise-scale` [default: each model's, else 1].
+    #[arg(long, value_name = "T")]
+    pub noise_scale: Option<f32>,
     /// A learned judge (from `train judge`): read the whole-episode videos for success
     /// as `rank` reads imagined episodes, with the recorded actions replayed and no
     /// policy in the loop, grouped by the dataset's behaviour (on `collect --policy`

@@ -167,6 +167,12 @@ fn world_model_loss_variants_train_and_warm_start() {
     let models = read_json(&ev.join("eval.json"))["models"].clone();
     assert_eq!(models[0]["objective"], "diffusion");
     assert!(models[0]["ssim"].as_f64().unwrap().is_finite(), "{models}");
+    let sampling = read_json(&ev.join("eval.json"))["sampling"].clone();
+    assert_eq!(sampling[0]["noise_scale"], 1.0, "{sampling}");
+    // A diffusion model's noise starts its DDIM sampling: it takes no temperature.
+    let cold = ["--noise-scale", "0.5", "--force"];
+    let (_, err) = expect_code(&run(&[&args[..], &few[..], &cold[..]].concat()), 2);
+    assert!(err.contains("--noise-scale: a diffusion model's noise starts its DDIM sampling"), "{err}");
     // `wm export` makes a folder to ship: EMA weights, logs, provenance with an
     // `exported` entry, the autoencoder path rewritten for the new depth; no resume state.
     let shipped = dir.path().join("ship").join("pusht").join("wm_diffusion");

@@ -4,7 +4,7 @@
 use std::collections::HashMap;
 use std::process::ExitCode;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use scenarios::pusht::frame_score::FrameScorer;
 use serde_json::json;
 use world_model::data::{EpisodeData, Split};
@@ -89,11 +89,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         .iter()
         .map(|p| {
             let name = policies::dir::checkpoint_name(p);
-            let mut wm = WorldModel::load(p, &device).with_context(|| format!("loading {}", p.display()))?;
-            if let Some(alpha) = a.alpha {
-                wm.set_alpha(alpha).map_err(|e| anyhow::anyhow!("--alpha: {e} ({})", p.display()))?;
-            }
-            Ok((name, wm))
+            Ok((name, crate::commands::rank::load_world_model(p, a.alpha, a.noise_scale, &device)?))
         })
         .collect::<Result<_>>()?;
     let data = EpisodeData::load(&a.data, 96)?;
@@ -253,6 +249,8 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         &staged.file("eval.json"),
         &json!({
             "models": rows,
+            "sampling": models.iter().map(|(name, wm)| json!({"name": name, "alpha": wm.cfg.alpha,
+                "noise_scale": wm.cfg.noise_scale.unwrap_or(1.0)})).collect::<Vec<_>>(),
             "references_note": REFERENCES_NOTE,
             "ssim_by_block_motion": by_motion,
             "open_loop_scores": scores,
