@@ -142,13 +142,13 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     write_json(
         &out.file("replay.json"),
         &serde_json::json!({"scenario": c.scenario, "policies_dir": args.policy, "world_model": wm_dir,
-            "noise_scale": wm.cfg.noise_scale, "judge": judge_dir, "seed_start": c.seed_start, "episodes": c.episodes,
+            "noise_scale": wm.noise_scale(), "judge": judge_dir, "seed_start": c.seed_start, "episodes": c.episodes,
             "max_steps": max_steps, "seed": setup.master_seed, "policies": summary}),
     )?;
     if let Some((sink, episodes)) = sink {
         let n = episodes.len();
         let source = serde_json::json!({"policy": args.policy, "replay_imagined": wm_dir, "judge": judge_dir,
-            "noise_scale": wm.cfg.noise_scale, "seed": setup.master_seed, "what": "each imagined episode's executed actions, stepped in MuJoCo from the same initial state"});
+            "noise_scale": wm.noise_scale(), "seed": setup.master_seed, "what": "each imagined episode's executed actions, stepped in MuJoCo from the same initial state"});
         let path = sink.finish(c.seed_start, source, max_steps, episodes)?;
         println!("{} dataset: {n} replayed episodes -> {}", c.scenario, path.display());
     }

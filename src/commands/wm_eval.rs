@@ -250,7 +250,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         &json!({
             "models": rows,
             "sampling": models.iter().map(|(name, wm)| json!({"name": name, "alpha": wm.cfg.alpha,
-                "noise_scale": wm.cfg.noise_scale.unwrap_or(1.0)})).collect::<Vec<_>>(),
+                "noise_scale": wm.noise_scale()})).collect::<Vec<_>>(),
             "references_note": REFERENCES_NOTE,
             "ssim_by_block_motion": by_motion,
             "open_loop_scores": scores,

@@ -324,6 +324,11 @@ impl WorldModel {
         Ok(())
     }
 
+    /// The sampling-noise scale in effect: the configured one, else 1.
+    pub fn noise_scale(&self) -> f32 {
+        self.cfg.noise_scale.unwrap_or(1.0)
+    }
+
     /// Whether the U-Net reads the anchor (the episode's first frame) passed to
     /// [`Self::predict`]; other models ignore it.
     pub fn uses_anchor(&self) -> bool {
@@ -351,7 +356,8 @@ impl WorldModel {
         let anchor = self.uses_anchor().then_some(anchor);
         let mut noise = row_noise(rngs, c * f * s * s);
         // The draws are made at any scale, so each row's RNG stream stays the same.
-        if let Some(t) = self.cfg.noise_scale.filter(|&t| t != 1.0) {
+        let t = self.noise_scale();
+        if t != 1.0 {
             noise.iter_mut().for_each(|v| *v *= t);
         }
         let x = Tensor::<5>::from_data(TensorData::new(noise, [b, c, f, s, s]), &self.device);
