@@ -169,6 +169,8 @@ fn world_model_loss_variants_train_and_warm_start() {
     assert!(models[0]["ssim"].as_f64().unwrap().is_finite(), "{models}");
     let sampling = read_json(&ev.join("eval.json"))["sampling"].clone();
     assert_eq!(sampling[0]["noise_scale"], 1.0, "{sampling}");
+    // Its U-Net has no α input, so no α is in effect.
+    assert_eq!(sampling[0]["alpha"], serde_json::Value::Null, "{sampling}");
     // A diffusion model's noise starts its DDIM sampling: it takes no temperature.
     let cold = ["--noise-scale", "0.5", "--force"];
     let (_, err) = expect_code(&run(&[&args[..], &few[..], &cold[..]].concat()), 2);

@@ -249,7 +249,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         &staged.file("eval.json"),
         &json!({
             "models": rows,
-            "sampling": models.iter().map(|(name, wm)| json!({"name": name, "alpha": wm.cfg.alpha,
+            "sampling": models.iter().map(|(name, wm)| json!({"name": name, "alpha": wm.alpha(),
                 "noise_scale": wm.noise_scale()})).collect::<Vec<_>>(),
             "references_note": REFERENCES_NOTE,
             "ssim_by_block_motion": by_motion,

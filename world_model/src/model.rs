@@ -308,6 +308,12 @@ impl WorldModel {
         Ok(())
     }
 
+    /// The action-accentuation strength α in effect: the configured one, else 1, for a
+    /// model trained with accentuation; `None` for one without an α input.
+    pub fn alpha(&self) -> Option<f32> {
+        self.cfg.unet.uses_accentuation().then(|| self.cfg.alpha.unwrap_or(1.0))
+    }
+
     /// Sets the sampling noise's scale ([`WorldModelConfig::noise_scale`]).
     ///
     /// # Errors
@@ -379,11 +385,7 @@ impl WorldModel {
         timestep: Option<Tensor<1>>,
     ) -> Tensor<5> {
         let b = noise.dims()[0];
-        let alpha = self
-            .cfg
-            .unet
-            .uses_accentuation()
-            .then(|| Tensor::<1>::full([b], self.cfg.alpha.unwrap_or(1.0), &self.device));
+        let alpha = self.alpha().map(|a| Tensor::<1>::full([b], a, &self.device));
         let Some(cpu) = &self.cpu_unet else {
             return self.unet.forward_accentuated(noise, hist, actions, anchor, timestep, alpha);
         };

@@ -1,5 +1,5 @@
 //! Tests of inference sampling: the DDIM sampler against the one-pass model, the
-//! cosine schedule, and the sampling temperature (`noise_scale`).
+//! cosine schedule, the sampling temperature (`noise_scale`) and the α in effect.
 
 use super::*;
 
@@ -116,4 +116,23 @@ fn the_noise_scale_is_written_only_when_set() {
     assert_eq!(v["noise_scale"], 0.5);
     let back: WorldModelConfig = serde_json::from_value(v).unwrap();
     assert_eq!(back, cfg);
+}
+
+#[test]
+fn alpha_is_the_one_in_effect_and_none_without_accentuation() {
+    // A plain model has no α input: `set_alpha` is refused and `alpha()` is None.
+    let (mut plain, ..) = one_pass();
+    assert_eq!(plain.alpha(), None);
+    assert!(plain.set_alpha(2.0).is_err());
+    assert_eq!(plain.alpha(), None);
+    // An accentuated model whose config sets no α runs at α = 1 (the U-Net's
+    // `None` means 1), so that is the value in effect; a set α replaces it.
+    let device = Device::flex();
+    let unet_cfg = UNetConfig { model_channels: 32, accentuation: Some(true), ..UNetConfig::pusht_latent(3) };
+    let cfg = WorldModelConfig::pixels(unet_cfg.clone(), 8);
+    assert_eq!(cfg.alpha, None);
+    let mut acc = WorldModel::from_parts(cfg, FrameCodec::pixels(8), unet_cfg.init(&device), &device);
+    assert_eq!(acc.alpha(), Some(1.0));
+    acc.set_alpha(4.0).unwrap();
+    assert_eq!(acc.alpha(), Some(4.0));
 }
