@@ -15,7 +15,6 @@
 //!   ([`crate::runfile::write_atomic`]), so a killed run leaves the old state or
 //!   the new one.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -98,7 +97,7 @@ impl Driver {
     /// # Errors
     /// [`RunFileError`] naming the log when it cannot be written.
     pub fn log(&mut self, line: &serde_json::Value) -> Result<(), RunFileError> {
-        writeln!(self.log, "{line}")
+        crate::runfile::append_line(&mut self.log, line)
             .map_err(|e| RunFileError { path: self.log_path.clone(), message: e.to_string() })
     }
 }

@@ -82,8 +82,10 @@ pub fn write_atomic(path: &Path, text: &str) -> Result<(), RunFileError> {
 /// `step`, the checkpoint the run resumes from. A run killed between checkpoints
 /// logged steps that the resumed run repeats; keeping both would give the log two
 /// histories for the same steps. Lines without `key` (another stage's, sharing the
-/// file) are kept. The file is rewritten (through a temporary file and a rename)
-/// only when a line is dropped.
+/// file) are kept. A last line without its newline was torn by a kill in the
+/// middle of writing it and is dropped too, so the next line does not run on from
+/// it. The file is rewritten (through a temporary file and a rename) only when a
+/// line is dropped.
 ///
 /// # Errors
 /// [`RunFileError`] naming `path` when it cannot be read, rewritten or opened.
@@ -100,14 +102,29 @@ pub fn open_log(path: &Path, key: &str, step: u64) -> Result<std::fs::File, RunF
             .and_then(|v| v[key].as_u64())
             .is_some_and(|s| s > step)
     };
-    let kept: Vec<&str> = text.lines().filter(|l| !later(l)).collect();
-    if kept.len() < text.lines().count() {
+    let whole = text.rfind('\n').map_or("", |i| &text[..=i]);
+    let kept: Vec<&str> = whole.lines().filter(|l| !later(l)).collect();
+    if whole.len() < text.len() || kept.len() < whole.lines().count() {
         let tmp = path.with_extension("jsonl.partial");
         std::fs::write(&tmp, kept.iter().flat_map(|l| [*l, "\n"]).collect::<String>())
             .map_err(|e| err(e.to_string()))?;
         std::fs::rename(&tmp, path).map_err(|e| err(e.to_string()))?;
     }
     std::fs::OpenOptions::new().create(true).append(true).open(path).map_err(|e| err(e.to_string()))
+}
+
+/// Appends `line` and its newline to `w` in one `write_all`. Formatting a
+/// `serde_json::Value` straight into an unbuffered file (`writeln!(file, "{line}")`)
+/// writes it token by token, so a run killed there left half a line that no
+/// resume could read; one write leaves a whole line or, at worst, a torn last
+/// line that [`open_log`] drops.
+///
+/// # Errors
+/// The writer's error.
+pub fn append_line<W: std::io::Write>(w: &mut W, line: &serde_json::Value) -> std::io::Result<()> {
+    let mut text = line.to_string();
+    text.push('\n');
+    w.write_all(text.as_bytes())
 }
 
 #[cfg(test)]
@@ -188,7 +205,43 @@ mod tests {
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(text, "{\"step\":1}\n{\"step\":2,\"loss\":0.5}\nnot json\n{\"step\":3,\"loss\":0.4}\n");
         assert!(!dir.path().join("train_log.jsonl.partial").exists());
+        // A kill in the middle of a line tore it: it is dropped, and the next line
+        // starts on a line of its own.
+        std::fs::write(&path, "{\"step\":1}\n{\"step\":2,\"lo").unwrap();
+        append_line(&mut open_log(&path, "step", 1).unwrap(), &serde_json::json!({"step": 2})).unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "{\"step\":1}\n{\"step\":2}\n");
+        std::fs::write(&path, "{\"st").unwrap();
+        drop(open_log(&path, "step", 0).unwrap());
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "");
         let bad = dir.path().join("missing/dir/log.jsonl");
         assert_eq!(open_log(&bad, "step", 0).unwrap_err().path, bad);
+    }
+
+    /// Counts the writes it is given.
+    #[derive(Default)]
+    struct Writes(Vec<Vec<u8>>);
+
+    impl std::io::Write for Writes {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            self.0.push(buf.to_vec());
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_log_line_is_written_whole_in_one_write() {
+        use std::io::Write;
+        let line = serde_json::json!({"step": 3, "loss": 0.5});
+        // The cause of a torn line: formatting the value into the writer writes
+        // it in pieces, any of which a kill can be the last.
+        let mut pieces = Writes::default();
+        writeln!(pieces, "{line}").unwrap();
+        assert!(pieces.0.len() > 2, "{:?}", pieces.0.len());
+        let mut whole = Writes::default();
+        append_line(&mut whole, &line).unwrap();
+        assert_eq!(whole.0, vec![b"{\"loss\":0.5,\"step\":3}\n".to_vec()]);
     }
 }

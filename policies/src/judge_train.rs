@@ -20,7 +20,6 @@
 //! evaluated and written, with the steps it took. Ctrl-C abandons the run, and
 //! the folder is written, atomically, only when the run ends.
 
-use std::io::Write;
 use std::path::Path;
 
 use burn::module::Module;
@@ -229,7 +228,7 @@ pub fn train_judge(
         m
     };
     let mut log_line = |line: serde_json::Value| {
-        writeln!(logf, "{line}").map_err(|e| PolicyLoadError::new(log, e.to_string()))
+        harness::runfile::append_line(&mut logf, &line).map_err(|e| PolicyLoadError::new(log, e.to_string()))
     };
     let (mut lv, mut done) = (f64::NAN, 0);
     for step in 0..cfg.steps {

@@ -9,7 +9,6 @@
 //! checkpoint the run resumes from (the steps after it were lost with the process).
 //! Without this, a run's provenance would list fewer steps than its weights have.
 
-use std::io::Write;
 use std::path::Path;
 
 use anyhow::{Context, Result};
@@ -103,7 +102,7 @@ fn append(out: &Path, line: &serde_json::Value) -> Result<()> {
         .append(true)
         .open(&path)
         .with_context(|| format!("opening {}", path.display()))?;
-    writeln!(f, "{line}").with_context(|| format!("writing {}", path.display()))
+    harness::runfile::append_line(&mut f, line).with_context(|| format!("writing {}", path.display()))
 }
 
 /// Why `provenance.json` in `dir` does not describe the weights there, if it does
