@@ -326,6 +326,12 @@ pub struct RankArgs {
     /// Run only part i of n (0-based; whole batches), e.g. `--shard 0/4`.
     #[arg(long)]
     pub shard: Option<String>,
+    /// With `--shard i/n`: run each batch this process claims first in DIR (a file per
+    /// batch, naming its shard) instead of every n-th one, so shards that run at once
+    /// share the batches out as they go. A shard resumed or restarted takes its own
+    /// claims back. `--processes` gives its shards one folder.
+    #[arg(long, hide = true, value_name = "DIR", requires = "shard")]
+    pub claims: Option<PathBuf>,
     /// Split the run into this many `--shard i/N --jobs 1` processes running at once, join
     /// them with `merge` and finish as one run (report, table, gates). Byte-identical rows
     /// to one process. Faster on Lift and Can, whose GL renderer lets one thread of a

@@ -312,6 +312,28 @@ fn pipeline_end_to_end() {
         without_timing(read_json(&out1.join("results.json")))
     );
 
+    // With a shared claims folder a shard runs the batches it claims first: one after
+    // the other, the first takes all four and the second none, and the join is the same.
+    let claims = dir.join("claims");
+    let mut claimed = Vec::new();
+    for i in 0..2 {
+        let d = dir.join(format!("claimed{i}"));
+        let mut a = base.to_vec();
+        let spec = format!("{i}/2");
+        a.extend(["--out", s(&d), "--shard", &spec, "--claims", s(&claims), "--no-report"]);
+        expect_code(&run(&a), 1); // the corrupt checkpoint fails in each
+        claimed.push(d);
+    }
+    // (A shard that ran nothing has no rows file.)
+    let lines =
+        |d: &Path| std::fs::read_to_string(d.join("episodes.jsonl")).unwrap_or_default().lines().count();
+    assert_eq!((lines(&claimed[0]), lines(&claimed[1])), (12, 0));
+    assert_eq!(std::fs::read_dir(&claims).unwrap().count(), 4, "a claim per batch (2 policies x 2)");
+    let joined = dir.join("joined");
+    let args = ["merge", s(&claimed[0]), s(&claimed[1]), "--out", s(&joined), "--no-report"];
+    expect_code(&run(&args), 0);
+    assert_eq!(std::fs::read_to_string(joined.join("episodes.jsonl")).unwrap(), rows);
+
     // `--processes 2` runs those two shards as processes, joins them and finishes the run
     // (the corrupt checkpoint fails in its shard and is reported by the joined run: exit 1).
     let procs = dir.join("procs");

@@ -5,9 +5,11 @@
 //! Output folder: `config.json` (resolved arguments), `episodes.jsonl` (appended
 //! as batches finish), `episodes.csv` and `episodes.parquet` (the same rows, sorted),
 //! `results.json`. `--resume` skips episodes
-//! already in `episodes.jsonl`; `--shard i/n` runs every n-th batch; `--judge`
+//! already in `episodes.jsonl`; `--shard i/n` runs every n-th batch (with `--claims`,
+//! the batches it claims first); `--judge`
 //! scores the imagined frames with a learned judge instead of the task's own.
 
+mod claims;
 pub mod defaults;
 mod media;
 pub mod merge;
@@ -156,11 +158,12 @@ fn run_with(
             }
         }
     }
-    let mut jobs: Vec<Batch> = Vec::new();
+    let claims = a.claims.as_deref().map(|d| claims::Claims::open(d, shard)).transpose()?;
+    let (mut jobs, mut keys): (Vec<Batch>, Vec<String>) = (Vec::new(), Vec::new());
     for (li, (pi, _)) in loaded.iter().enumerate() {
         for (bi, batch) in batches.iter().enumerate() {
             let name = &names[*pi];
-            if (pi * batches.len() + bi) % shards != shard {
+            if claims.is_none() && (pi * batches.len() + bi) % shards != shard {
                 pb.inc(batch.len() as u64);
                 continue;
             }
@@ -172,6 +175,7 @@ fn run_with(
             pb.inc((batch.len() - todo.len()) as u64);
             if !todo.is_empty() {
                 jobs.push(Batch { policy: li, seeds: todo });
+                keys.push(claims::Claims::key(*pi, bi));
             }
         }
     }
@@ -202,7 +206,10 @@ fn run_with(
         }
         Ok(())
     };
-    let timing = schedule::run_batches::<anyhow::Error>(&policies, &jobs, &setup, &wm, a.jobs, &mut done)?;
+    let timing = match &claims {
+        Some(c) => claims::run_claimed(&policies, &jobs, &keys, c, &setup, &wm, &mut done)?,
+        None => schedule::run_batches::<anyhow::Error>(&policies, &jobs, &setup, &wm, a.jobs, &mut done)?,
+    };
     pb.finish_and_clear();
     let failed_names: Vec<&str> = failed.iter().map(|f| f.policy.as_str()).collect();
     let ok_names: Vec<String> =

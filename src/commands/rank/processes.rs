@@ -9,6 +9,10 @@
 //! the Can CI size (9 policies × 20 episodes × 250 steps) three processes took 13.4
 //! minutes where one took about 27 (BENCHMARKS.md, 2026-11-27). The rows are those of
 //! one process, byte for byte (merge's contract).
+//!
+//! The shards share one claims folder (`OUT.shards/claims`, [`super::claims`]): each
+//! runs the next batch no shard has claimed, so a shard that drew short episodes takes
+//! more batches instead of waiting for the others.
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -42,6 +46,13 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
     let total = policies::dir::checkpoint_dirs(&r.policies)?.len() * r.episodes;
     let parts = shards_folder(&a.out);
     std::fs::create_dir_all(&parts).with_context(|| format!("creating {}", parts.display()))?;
+    // A fresh run's shards start empty (`--force`), so claims left by an interrupted
+    // one would hold batches nobody runs; a resumed run keeps them for their shards.
+    let claims = parts.join("claims");
+    if !a.resume && claims.exists() {
+        std::fs::remove_dir_all(&claims)
+            .with_context(|| format!("removing the old claims {}", claims.display()))?;
+    }
     let exe = std::env::current_exe().context("finding this program to start the shard processes")?;
     let mut shards = Vec::with_capacity(n);
     for i in 0..n {
@@ -225,6 +236,8 @@ fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> Vec
     flag("--bootstrap", a.bootstrap.to_string().into());
     flag("--jobs", "1".into());
     flag("--shard", format!("{i}/{n}").into());
+    let claims = dir.parent().map_or_else(|| PathBuf::from("claims"), |p| p.join("claims"));
+    flag("--claims", claims.into());
     flag("--out", dir.into());
     let mut all: Vec<OsString> = vec!["-q".into(), "rank".into()];
     all.extend(v);
@@ -301,6 +314,7 @@ mod tests {
         assert_eq!((s.jobs, s.shard.as_deref(), s.processes), (1, Some("2/3"), None));
         assert_eq!((s.min_pearson, s.max_inversions, s.no_report), (None, None, true));
         assert_eq!((s.out, s.force, s.resume), (PathBuf::from("o.shards/shard-2"), true, false));
+        assert_eq!(s.claims, Some(PathBuf::from("o.shards/claims")), "the shards share one claims folder");
         let r = parse(&shard_args(&a, 0, 3, Path::new("d"), true));
         assert!(r.resume && !r.force);
     }
