@@ -9,14 +9,15 @@
 //! every shard walks the batches in the same order and runs the next one no shard has
 //! claimed, so the last batches go to whichever shards are free.
 //!
-//! A claim is a file `DIR/policy-P-batch-B` holding the shard's index, made whole in
-//! one step (written aside, then hard-linked into place, which fails if it exists).
-//! A shard that is resumed or restarted takes its own claims back; its rows say which
-//! of them it finished. The rows do not depend on which shard ran a batch (a batch's
+//! A claim is a file `DIR/policy-P-batch-B` holding the shard's index, created only
+//! if it does not exist (`O_EXCL`, which any local file system honours). A shard that
+//! is resumed or restarted takes its own claims back; its rows say which of them it
+//! finished. (A shard killed between creating a claim and writing its index leaves a
+//! claim nobody takes back: the joined run runs that batch.) The rows do not depend on which shard ran a batch (a batch's
 //! rows are a pure function of it), and the joined run runs any batch no shard
 //! finished, so a lost claim costs time, never a row.
 
-use std::io::ErrorKind;
+use std::io::{ErrorKind, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
@@ -56,12 +57,12 @@ impl Claims {
     pub fn take(&self, key: &str) -> Result<bool> {
         let path = self.dir.join(key);
         let mine = self.shard.to_string();
-        let aside = self.dir.join(format!(".shard-{}.tmp", self.shard));
-        std::fs::write(&aside, &mine).with_context(|| format!("writing {}", aside.display()))?;
-        let linked = std::fs::hard_link(&aside, &path);
-        std::fs::remove_file(&aside).with_context(|| format!("removing {}", aside.display()))?;
-        match linked {
-            Ok(()) => Ok(true),
+        match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
+            Ok(mut f) => {
+                f.write_all(mine.as_bytes())
+                    .with_context(|| format!("writing the claim {}", path.display()))?;
+                Ok(true)
+            }
             Err(e) if e.kind() == ErrorKind::AlreadyExists => {
                 let owner = std::fs::read_to_string(&path)
                     .with_context(|| format!("reading the claim {}", path.display()))?;
@@ -127,7 +128,6 @@ mod tests {
         assert!(a.take(&key).unwrap(), "a resumed shard takes its own claim back");
         assert!(b.take(&Claims::key(2, 4)).unwrap());
         assert_eq!(std::fs::read_to_string(claims.join(&key)).unwrap(), "0");
-        // Only the claims are left: the files written aside are gone.
         let mut names: Vec<String> = std::fs::read_dir(&claims)
             .unwrap()
             .map(|e| e.unwrap().file_name().into_string().unwrap())
