@@ -353,6 +353,18 @@ fn pipeline_end_to_end() {
         "{t}"
     );
     assert!(!dir.join("procs.shards").exists(), "the joined shards' folders are left");
+    // `--resume` keeps an interrupted run's claims: shard 1 takes its own back, and the
+    // batch held by a shard of another split (7) is run by the joined run; same rows.
+    let resumed = dir.join("procs_resumed");
+    let held = dir.join("procs_resumed.shards/claims");
+    std::fs::create_dir_all(&held).unwrap();
+    std::fs::write(held.join("policy-0-batch-0"), "1").unwrap();
+    std::fs::write(held.join("policy-1-batch-1"), "7").unwrap();
+    let mut r = base.to_vec();
+    r.extend(["--out", s(&resumed), "--processes", "2", "--no-report", "--resume"]);
+    expect_code(&run(&r), 1);
+    assert_eq!(std::fs::read_to_string(resumed.join("episodes.jsonl")).unwrap(), rows);
+    assert!(!dir.join("procs_resumed.shards").exists());
     // It runs the shards itself, and replaces a run only when told to.
     let mut sharded = a.clone();
     sharded.extend(["--shard", "0/2"]);
