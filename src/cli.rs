@@ -329,8 +329,9 @@ pub struct RankArgs {
     /// With `--shard i/n`: run each batch this process claims first in DIR (a file per
     /// batch, naming its shard) instead of every n-th one, so shards that run at once
     /// share the batches out as they go. A shard resumed or restarted takes its own
-    /// claims back. `--processes` gives its shards one folder.
-    #[arg(long, hide = true, value_name = "DIR", requires = "shard")]
+    /// claims back. `--processes` gives its shards one folder (the claims are created with
+    /// `O_EXCL`).
+    #[arg(long, value_name = "DIR", requires = "shard")]
     pub claims: Option<PathBuf>,
     /// Split the run into this many `--shard i/N --jobs 1` processes running at once, join
     /// them with `merge` and finish as one run (report, table, gates). Byte-identical rows
