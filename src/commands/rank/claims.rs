@@ -13,9 +13,10 @@
 //! if it does not exist (`O_EXCL`, which any local file system honours). A shard that
 //! is resumed or restarted takes its own claims back; its rows say which of them it
 //! finished. (A shard killed between creating a claim and writing its index leaves a
-//! claim nobody takes back: the joined run runs that batch.) The rows do not depend on which shard ran a batch (a batch's
-//! rows are a pure function of it), and the joined run runs any batch no shard
-//! finished, so a lost claim costs time, never a row.
+//! claim nobody takes back: the joined run runs that batch.) The rows do not depend
+//! on which shard ran a batch (a batch's rows are a pure function of it), and the
+//! joined run runs any batch no shard finished, so a lost claim costs time, never a
+//! row.
 
 use std::io::{ErrorKind, Write};
 use std::path::{Path, PathBuf};
@@ -23,7 +24,6 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use engine::schedule::{self, Batch, BatchResult};
 use engine::{Setup, Timing};
-
 use world_model::model::WorldModel;
 
 /// One shard's hold on a claims folder.
