@@ -107,7 +107,7 @@ else
 fi
 
 if [ "${#runs[@]}" -gt 0 ]; then
-    "$bin" tasks "${runs[@]}" --tex "$out/tasks.tex" | tee "$out/tasks.md"
+    "$bin" tasks "${runs[@]}" --tex "$out/tasks.tex" --force | tee "$out/tasks.md"
     echo "task table: $where/tasks.md"
 fi
 exit "$status"

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
+pub mod bounds;
 mod choices;
 mod judge;
 mod plan;
@@ -225,7 +226,7 @@ pub struct WmEvalArgs {
     #[arg(long, default_value_t = 4)]
     pub full_episodes: usize,
     /// Videos generated together.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 20, value_parser = bounds::count(1, 1000))]
     pub batch: usize,
     /// Seed of the generator noise.
     #[arg(long, default_value_t = 0)]
@@ -298,7 +299,7 @@ pub struct RankArgs {
     /// the default run into 14 batches, so the workers finish together (with 100, one
     /// idled during the last world-model batch). Part of the run's settings: float
     /// rounding depends on it, so `--resume` must use the same value.
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = 50, value_parser = bounds::batch())]
     pub batch: usize,
     /// Output folder.
     #[arg(long, default_value = "results/rank")]
@@ -307,7 +308,7 @@ pub struct RankArgs {
     /// branches (world model, MuJoCo) and runs it with burn's kernels single-threaded,
     /// so results are identical (bit for bit) for any value; also the threads that
     /// replay the report's episodes.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, value_parser = bounds::workers())]
     pub jobs: usize,
     /// Master seed of the policies' sampling noise and of the bootstrap.
     #[arg(long, default_value_t = 0)]
@@ -338,7 +339,7 @@ pub struct RankArgs {
     /// to one process. Faster on Lift and Can, whose GL renderer lets one thread of a
     /// process render at a time; `--jobs` then only sets the report's replay threads
     /// [default: the task's `rank.toml`, else 1; a `--shard` is one process].
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = bounds::count(1, bounds::MAX_PROCESSES))]
     pub processes: Option<usize>,
     /// Exit 1 if the Pearson correlation is below this (a number in [-1, 1]).
     #[arg(long, value_parser = correlation, allow_negative_numbers = true)]
@@ -384,6 +385,9 @@ pub struct TasksArgs {
     /// Also write the table as booktabs LaTeX to this file.
     #[arg(long)]
     pub tex: Option<PathBuf>,
+    /// Replace an existing `--tex` file.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Options shared by commands that run a scenario.
@@ -402,7 +406,7 @@ pub struct ScenarioArgs {
     #[arg(long)]
     pub max_steps: Option<u32>,
     /// Worker threads (results are identical for any value).
-    #[arg(long, default_value_t = default_jobs())]
+    #[arg(long, default_value_t = default_jobs(), value_parser = bounds::workers())]
     pub jobs: usize,
     /// Replace the output if it exists.
     #[arg(long)]
@@ -462,7 +466,7 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Side in pixels of the GIF frames.
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = 256, value_parser = bounds::count(16, 2048))]
     pub gif_size: usize,
     /// Renderer of the GIF: `raster` (the observations' 2-D rasteriser) or `mujoco`
     /// (MuJoCo's OpenGL renderer beside the rasteriser, a visual cross-check; also

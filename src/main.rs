@@ -4,6 +4,8 @@
 //! `main` only wires logging and maps the outcome to an exit code:
 //! 0 success, 1 an evaluation ran but a gate failed, 2 an error.
 
+#[macro_use]
+mod stdout;
 mod cli;
 mod commands;
 #[cfg(test)]
@@ -22,34 +24,28 @@ fn main() -> ExitCode {
     let args = cli::Cli::parse();
     init_logging(args.verbose, args.quiet);
     scenarios::init_mujoco();
-    // `evalharness dataset info X | head -1`: once the reader is gone, `println!`
-    // panics on the broken pipe. Like ripgrep, exit quietly (0) instead: no panic
-    // message, and the unwinding still runs every guard's clean-up.
-    let default_hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        if !is_broken_pipe(info.payload()) {
-            default_hook(info);
-        }
-    }));
-    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| commands::run(&args))) {
-        Ok(Ok(code)) => code,
-        Ok(Err(e)) => {
-            eprintln!("error: {e:#}");
+    // Results go through `out!`/`outln!` (`stdout.rs`), which stay quiet once the
+    // reader of a pipe is gone: the command finishes and exits as it would have.
+    match commands::run(&args) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {}", chain(&e));
             ExitCode::from(2)
         }
-        Err(payload) if is_broken_pipe(payload.as_ref()) => ExitCode::SUCCESS,
-        Err(payload) => std::panic::resume_unwind(payload),
     }
 }
 
-/// Whether a panic is the standard library's "failed printing to stdout: Broken pipe".
-fn is_broken_pipe(payload: &(dyn std::any::Any + Send)) -> bool {
-    let text = payload
-        .downcast_ref::<String>()
-        .map(String::as_str)
-        .or_else(|| payload.downcast_ref::<&str>().copied())
-        .unwrap_or_default();
-    text.starts_with("failed printing to std") && text.contains("Broken pipe")
+/// An error and its causes, each said once: an I/O error wrapped by a context that
+/// already quotes it (`reading X: No such file…: No such file…`) is not repeated.
+fn chain(e: &anyhow::Error) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if !parts.last().is_some_and(|p| p.ends_with(&text)) {
+            parts.push(text);
+        }
+    }
+    parts.join(": ")
 }
 
 /// Logs go to stderr (stdout carries results only); `RUST_LOG` overrides the level.

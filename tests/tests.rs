@@ -3,6 +3,7 @@
 mod agreement;
 mod can_models;
 mod dataset;
+mod guarantees;
 mod deploy;
 mod docs;
 mod judge;

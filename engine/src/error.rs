@@ -39,6 +39,17 @@ pub enum EngineError {
         /// The task.
         task: String,
     },
+    /// A judge scored a frame with something other than a number in [0, 1] (non-finite
+    /// weights, say): every episode would otherwise read as a success or a failure.
+    #[error("the judge scored a frame of policy {policy}'s episode {seed} as {value}, not a number in [0, 1]")]
+    Judge {
+        /// The policy whose episode was being judged.
+        policy: String,
+        /// The episode seed.
+        seed: u64,
+        /// The score.
+        value: f64,
+    },
     /// A policy returned chunks shorter than a plan imagines or executes.
     #[error("policy {policy} returned fewer than {need} actions per proposal")]
     ShortChunk {
@@ -85,4 +96,16 @@ pub enum EngineError {
     /// A worker thread panicked.
     #[error("a rank worker panicked")]
     WorkerPanicked,
+}
+
+/// `score`, refused with [`EngineError::Judge`] when it is not a number in [0, 1].
+///
+/// # Errors
+/// [`EngineError::Judge`] naming the policy and the seed.
+pub(crate) fn judged(score: f64, policy: &str, seed: u64) -> Result<f64, EngineError> {
+    if (0.0..=1.0).contains(&score) {
+        Ok(score)
+    } else {
+        Err(EngineError::Judge { policy: policy.to_string(), seed, value: score })
+    }
 }

@@ -25,6 +25,7 @@ use world_model::model::WorldModel;
 use world_model::rollout::Rollout;
 
 use crate::EngineError;
+use crate::error::judged;
 use crate::decide::{decide, record_chunk};
 use crate::start::{Begin, BranchOut, Setup, Start, Timing, Track, Trajectory, push, still_active};
 use harness::policy::Policy;
@@ -54,9 +55,9 @@ pub fn wm_branch(
         .iter()
         .map(|j| j.as_deref().ok_or_else(|| EngineError::NoJudge { task: s.task.name().to_string() }))
         .collect::<Result<_, _>>()?;
-    for ((t, judge), f) in track.iter_mut().zip(&judges).zip(&start.first) {
+    for (((t, judge), f), &seed) in track.iter_mut().zip(&judges).zip(&start.first).zip(&start.seeds) {
         t.persist(judge.persist());
-        t.add(judge.score(&f.frame), &kind);
+        t.add(judged(judge.score(&f.frame), &name, seed)?, &kind);
         t.scene = judge.scene(&f.frame);
     }
     let tw = Instant::now();
@@ -113,7 +114,7 @@ pub fn wm_branch(
                     if j >= first_seen {
                         let fr = &mut frames[p * m + j - first_seen];
                         imagine[i].to_observation(fr);
-                        track[i].add(judges[i].score(fr), &kind);
+                        track[i].add(judged(judges[i].score(fr), &name, start.seeds[i])?, &kind);
                         let seen = Seen { frame: std::mem::take(fr), proprio: imagine[i].proprio() };
                         push(&mut hist[i], seen, o);
                     }

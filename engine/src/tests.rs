@@ -16,7 +16,7 @@ use world_model::codec::FrameCodec;
 use world_model::model::{WorldModel, WorldModelConfig};
 use world_model::unet::UNetConfig;
 
-use crate::{Setup, Start, Timing, replay_in_sim, sim_branch};
+use crate::{EngineError, Setup, Start, Timing, replay_in_sim, sim_branch};
 
 /// An agent on a line moves halfway to its commanded target each step; it succeeds
 /// within 0.5 of the goal at 7. The frame's first byte shows the position × 25.
@@ -352,4 +352,31 @@ fn the_policy_sees_the_rewritten_frames_and_the_scores_stay_exact() {
     assert_eq!(r.scorer_abs_error, Some(0.0));
     // The recorded trajectory keeps the real frames (6 × 25 = 150 first).
     assert_eq!(out.episodes[0].frames[0][0], 150);
+}
+
+/// A judge whose weights went non-finite: its scores are NaN.
+struct Broken;
+
+impl Judge for Broken {
+    fn score(&self, _: &[u8]) -> f64 {
+        f64::NAN
+    }
+}
+
+#[test]
+fn a_judge_scoring_nan_stops_the_imagined_branch_by_name() {
+    // At 92f9f2b a learned judge with non-finite weights read +inf logits as sure
+    // successes and NaN as failures, and the run went on: every imagined row was wrong.
+    let task = scenarios::load_task("lift").expect("robosuite assets (scripts/setup.sh)");
+    let broken: std::sync::Arc<dyn Judge> = std::sync::Arc::new(Broken);
+    let setup = Setup { task: task.as_ref(), master_seed: 0, max_steps: 2, judge: Some(&broken) };
+    let start = Start::new("up", &[7], &setup).unwrap();
+    let device = burn::tensor::Device::flex();
+    let unet = UNetConfig { action_dim: 7, ..UNetConfig::new(3, 8, vec![1], vec![]).with_groups(4) };
+    let mut cfg = WorldModelConfig::pixels(unet, 96);
+    cfg.actions = Some(ActionScale { low: vec![-1.0; 7], high: vec![1.0; 7] });
+    let wm = WorldModel::from_parts(cfg.clone(), FrameCodec::pixels(96), cfg.unet.init(&device), &device);
+    let e = crate::wm_branch(&Up, &start, &setup, &wm, &mut Timing::default()).err().unwrap();
+    assert!(matches!(e, EngineError::Judge { seed: 7, .. }), "{e:?}");
+    assert!(e.to_string().contains("policy up's episode 7 as NaN"), "{e}");
 }

@@ -20,6 +20,7 @@
 //! - [`zarr`] and [`replay`]: the diffusion_policy / GPC replay-buffer dataset layout.
 
 pub mod blosc;
+pub mod checkpoint;
 pub mod driver;
 pub mod fingerprint;
 pub mod image;

@@ -77,7 +77,9 @@ fn f32_bytes(v: &[f32]) -> Vec<u8> {
 
 /// Streams episodes into a new dataset.
 pub struct ReplayWriter {
-    path: PathBuf,
+    /// Where [`ReplayWriter::finish`] moves the dataset; `None` when the caller
+    /// staged the folder itself ([`ReplayWriter::create_in`]) and moves it.
+    path: Option<PathBuf>,
     tmp: PathBuf,
     spec: ReplaySpec,
     img: ArrayWriter,
@@ -105,6 +107,18 @@ impl ReplayWriter {
         if tmp.exists() {
             fs::remove_dir_all(&tmp).map_err(|source| ReplayError::Io { path: tmp.clone(), source })?;
         }
+        let mut w = Self::create_in(&tmp, spec)?;
+        w.path = Some(path.to_path_buf());
+        Ok(w)
+    }
+
+    /// Starts a dataset in the folder `dir`, which the caller made (empty, or holding
+    /// only files of its own) and moves into place when [`ReplayWriter::finish`] returns.
+    ///
+    /// # Errors
+    /// I/O errors naming the folder.
+    pub fn create_in(dir: &Path, spec: ReplaySpec) -> Result<Self, ReplayError> {
+        let tmp = dir.to_path_buf();
         write_group(&tmp, None)?;
         write_group(&tmp.join("data"), None)?;
         write_group(&tmp.join("meta"), None)?;
@@ -119,7 +133,7 @@ impl ReplayWriter {
             .iter()
             .map(|name| ArrayWriter::create(&d.join(name), DType::F32, &[], 8192))
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Self { path: path.to_path_buf(), tmp, spec, img, action, state, extras, ends: Vec::new() })
+        Ok(Self { path: None, tmp, spec, img, action, state, extras, ends: Vec::new() })
     }
 
     /// Appends one episode.
@@ -156,7 +170,7 @@ impl ReplayWriter {
     }
 
     /// Writes the metadata and `attrs` (stored under the root's `.zattrs`), then
-    /// moves the dataset into place.
+    /// moves the dataset into place (with [`ReplayWriter::create`]; returns its folder).
     ///
     /// # Errors
     /// I/O errors naming the file.
@@ -176,13 +190,12 @@ impl ReplayWriter {
         ends.append(&self.ends.iter().flat_map(|e| e.to_le_bytes()).collect::<Vec<u8>>())?;
         ends.finish()?;
         write_group(&self.tmp, Some(attrs))?;
-        if self.path.exists() {
-            fs::remove_dir_all(&self.path)
-                .map_err(|source| ReplayError::Io { path: self.path.clone(), source })?;
+        let Some(path) = self.path else { return Ok(self.tmp) };
+        if path.exists() {
+            fs::remove_dir_all(&path).map_err(|source| ReplayError::Io { path: path.clone(), source })?;
         }
-        fs::rename(&self.tmp, &self.path)
-            .map_err(|source| ReplayError::Io { path: self.path.clone(), source })?;
-        Ok(self.path)
+        fs::rename(&self.tmp, &path).map_err(|source| ReplayError::Io { path: path.clone(), source })?;
+        Ok(path)
     }
 }
 

@@ -265,12 +265,41 @@ pub fn checkpoint_dirs(dir: &Path) -> Result<Vec<PathBuf>, PolicyLoadError> {
     if dirs.is_empty() {
         return Err(PolicyLoadError::new(dir, "no policy.json and no checkpoint sub-folders"));
     }
+    // A policy's rows are keyed by its name as text: two folders whose names read the
+    // same (non-UTF-8 bytes both decoded to U+FFFD) would pool their rows.
+    for (i, a) in dirs.iter().enumerate() {
+        if let Some(b) = dirs[i + 1..].iter().find(|b| checkpoint_name(b) == checkpoint_name(a)) {
+            return Err(PolicyLoadError::new(
+                dir,
+                format!(
+                    "checkpoints {:?} and {:?} have the same name as text ({}); rename one",
+                    a.file_name().unwrap_or_default(),
+                    b.file_name().unwrap_or_default(),
+                    checkpoint_name(a)
+                ),
+            ));
+        }
+    }
     Ok(dirs)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn folders_whose_names_read_the_same_are_refused() {
+        // At 92f9f2b folders named b"a\xff" and b"a\xfe" both became "a\u{fffd}" and
+        // their rows were pooled as one policy.
+        use std::os::unix::ffi::OsStrExt;
+        let dir = std::env::temp_dir().join(format!("evalharness-names-{}", std::process::id()));
+        for name in [&b"a\xff"[..], &b"a\xfe"[..]] {
+            std::fs::create_dir_all(dir.join(std::ffi::OsStr::from_bytes(name))).unwrap();
+        }
+        let e = checkpoint_dirs(&dir).unwrap_err().to_string();
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(e.contains("same name as text"), "{e}");
+    }
 
     #[test]
     fn f16_weights_round_trip() {

@@ -278,7 +278,12 @@ impl FrameJudge {
                 .try_into_vec::<f32>()
                 .unwrap_or_default(),
         };
-        logits.into_iter().map(|z| 1.0 / (1.0 + (-f64::from(z)).exp())).collect()
+        // A non-finite logit (non-finite weights) is not a certainty: it scores NaN,
+        // which the engine refuses, where the sigmoid would read +inf as a sure success.
+        logits
+            .into_iter()
+            .map(|z| if z.is_finite() { 1.0 / (1.0 + (-f64::from(z)).exp()) } else { f64::NAN })
+            .collect()
     }
 }
 

@@ -241,6 +241,9 @@ pub fn pretrain_encoder(
     let mut probe = PoseProbe::new(cfg, targets.dim(), &device);
     let mut optim = AdamWConfig::new().with_weight_decay(1e-6).init();
     let mut state = PretrainState::default();
+    if files[2].exists() || dir.join("encoder_checkpoint.next").exists() {
+        harness::checkpoint::recover(dir, harness::checkpoint::ENCODER).map_err(|e| err(&e.path, e.message))?;
+    }
     if files[2].exists() {
         state = read_state(&files[2]).map_err(|e| err(&e.path, e.message))?;
         probe = probe.try_load_file(&files[0]).map_err(|e| err(&files[0], e.to_string()))?;
@@ -257,9 +260,14 @@ pub fn pretrain_encoder(
     )
     .map_err(|e| err(&e.path, e.message))?;
     let save = |probe: &PoseProbe, optim: &burn::optim::ModuleOptimizer, state: &PretrainState| {
-        probe.clone().save_file(&files[0]).map_err(|e| err(&files[0], e.to_string()))?;
-        optim.save(&files[1]).map_err(|e| err(&files[1], e.to_string()))?;
-        write_state(&files[2], state).map_err(|e| err(&e.path, e.message))
+        // The three files are one checkpoint: staged, then committed by a manifest.
+        let fail = |e: harness::runfile::RunFileError| err(&e.path, e.message);
+        let mut stage = harness::checkpoint::begin(dir, harness::checkpoint::ENCODER).map_err(fail)?;
+        let p = ["encoder.bpk", "encoder_optimizer.bpk", "encoder_state.json"].map(|n| stage.path(n));
+        probe.clone().save_file(&p[0]).map_err(|e| err(&p[0], e.to_string()))?;
+        optim.save(&p[1]).map_err(|e| err(&p[1], e.to_string()))?;
+        write_state(&p[2], state).map_err(fail)?;
+        stage.commit().map_err(fail)
     };
     let s = cfg.image_size;
     while state.step < p.steps {

@@ -206,6 +206,8 @@ pub fn train_policy(
     let paths = ["model.bpk", "optimizer.bpk", "state.json", "ema.bpk"].map(|p| dir.join(p));
     let mut state = State::default();
     if run.resume {
+        harness::checkpoint::recover(&dir, harness::checkpoint::MAIN)
+            .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
         net = net.try_load_file(&paths[0]).map_err(|e| PolicyLoadError::new(&paths[0], e.to_string()))?;
         optim = optim.load(&paths[1]).map_err(|e| PolicyLoadError::new(&paths[1], e.to_string()))?;
         state =
@@ -222,16 +224,19 @@ pub fn train_policy(
     }
     let save_state =
         |net: &DiffusionNet, ema: &Ema<DiffusionNet>, optim: &burn::optim::ModuleOptimizer, state: &State| {
-            net.clone().save_file(&paths[0]).map_err(|e| PolicyLoadError::new(&paths[0], e.to_string()))?;
-            optim.save(&paths[1]).map_err(|e| PolicyLoadError::new(&paths[1], e.to_string()))?;
+            // The files are one checkpoint: staged, then committed by a manifest.
+            let fail = |e: harness::runfile::RunFileError| PolicyLoadError::new(&e.path, e.message);
+            let mut stage = harness::checkpoint::begin(&dir, harness::checkpoint::MAIN).map_err(fail)?;
+            let p = ["model.bpk", "optimizer.bpk", "state.json"].map(|n| stage.path(n));
+            net.clone().save_file(&p[0]).map_err(|e| PolicyLoadError::new(&p[0], e.to_string()))?;
+            optim.save(&p[1]).map_err(|e| PolicyLoadError::new(&p[1], e.to_string()))?;
+            // The manifest lists only what this checkpoint has (no EMA before its first update).
             if state.ema_updates > 0 {
-                ema.module
-                    .clone()
-                    .save_file(&paths[3])
-                    .map_err(|e| PolicyLoadError::new(&paths[3], e.to_string()))?;
+                let e = stage.path("ema.bpk");
+                ema.module.clone().save_file(&e).map_err(|err| PolicyLoadError::new(&e, err.to_string()))?;
             }
-            harness::driver::write_state(&paths[2], state)
-                .map_err(|e| PolicyLoadError::new(&e.path, e.message))
+            harness::driver::write_state(&p[2], state).map_err(fail)?;
+            stage.commit().map_err(fail)
         };
     // One clock for both stages: `--max-minutes` bounds the session, pre-training included.
     let clock = Clock::start(run.max_minutes);

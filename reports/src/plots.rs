@@ -44,8 +44,10 @@ const WM: RGBColor = RGBColor(214, 39, 40);
 
 type Res = Result<(), String>;
 
-fn e<T: std::fmt::Debug>(x: T) -> String {
-    format!("{x:?}")
+/// A plotting error as its message (`Drawing backend error: …`), not the nested
+/// `BackendError(DrawingError(…))` of its debug form.
+fn e<T: std::fmt::Display>(x: T) -> String {
+    x.to_string()
 }
 
 /// Least-squares line y = a + b x (None for fewer than 2 distinct x).

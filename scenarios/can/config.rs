@@ -74,18 +74,42 @@ impl CanConfig {
             field: field.to_string(),
             reason: reason.into(),
         };
-        if self.bin_size.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-            return Err(bad("bin_size", "every entry must be > 0"));
+        for (field, v) in [("bin1_pos", self.bin1_pos), ("bin2_pos", self.bin2_pos)] {
+            if v.iter().any(|x| !(x.is_finite() && x.abs() <= 10.0)) {
+                return Err(bad(field, "every entry must be finite, within 10 m of the origin"));
+            }
+        }
+        if self.bin_size.iter().any(|v| !(v.is_finite() && *v > 0.0 && *v <= 10.0)) {
+            return Err(bad("bin_size", "every entry must be in (0, 10] m"));
+        }
+        if !(self.can_radius.is_finite() && self.can_radius > 0.0 && self.can_radius <= 0.2) {
+            return Err(bad("can_radius", "must be in (0, 0.2] m"));
+        }
+        if !(self.can_bottom.is_finite() && (-0.3..=0.0).contains(&self.can_bottom)) {
+            return Err(bad("can_bottom", "must be in [-0.3, 0] m (the bottom is below the can's origin)"));
+        }
+        if !(self.placement_margin.is_finite() && self.placement_margin >= 0.0) {
+            return Err(bad("placement_margin", "must be >= 0"));
         }
         let room = [0, 1].map(|i| self.bin_size[i] / 2.0 - self.placement_margin - self.can_radius);
         if room.iter().any(|r| !(r.is_finite() && *r >= 0.0)) {
             return Err(bad("placement_margin", "leaves no room for the can in bin 1"));
         }
-        if !(self.init_noise.is_finite() && self.init_noise >= 0.0) {
-            return Err(bad("init_noise", "must be >= 0"));
+        // Success needs the can inside bin 2's quadrant and not in bin 1 at reset: bins
+        // that overlap would make some resets successes before any action.
+        let apart = (0..2).any(|i| (self.bin1_pos[i] - self.bin2_pos[i]).abs() >= self.bin_size[i]);
+        if !apart {
+            return Err(bad("bin2_pos", "overlaps bin 1, so a can could start in the target quadrant"));
         }
-        if self.max_steps == 0 {
-            return Err(bad("max_steps", "must be >= 1"));
+        if !(self.init_noise.is_finite() && (0.0..=0.5).contains(&self.init_noise)) {
+            return Err(bad("init_noise", "must be in [0, 0.5] rad"));
+        }
+        if !(self.release_distance.is_finite() && self.release_distance > 0.0 && self.release_distance <= 0.5)
+        {
+            return Err(bad("release_distance", "must be in (0, 0.5] m"));
+        }
+        if !(1..=100_000).contains(&self.max_steps) {
+            return Err(bad("max_steps", "must be in [1, 100000]"));
         }
         Ok(())
     }
@@ -138,5 +162,29 @@ mod tests {
         std::fs::write(&p, "name = \"can\"\nbin3_pos = [0.0, 0.0, 0.0]\n").unwrap();
         let e = CanConfig::from_file(&p).unwrap_err().to_string();
         assert!(e.contains("bin3_pos"), "{e}");
+    }
+
+    #[test]
+    fn values_that_make_success_automatic_or_impossible_are_refused_by_name() {
+        // Each was accepted at 92f9f2b (negative radii, NaN or overlapping bins).
+        let dir = std::env::temp_dir().join(format!("evalharness-can-ranges-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("bad.toml");
+        for (line, field) in [
+            ("can_radius = -0.03", "can_radius"),
+            ("can_bottom = nan", "can_bottom"),
+            ("bin2_pos = [0.1, -0.25, 0.8]", "bin2_pos"),
+            ("bin1_pos = [inf, 0.0, 0.8]", "bin1_pos"),
+            ("release_distance = -1.0", "release_distance"),
+            ("placement_margin = -0.5", "placement_margin"),
+            ("init_noise = 3.0", "init_noise"),
+            ("max_steps = 1000000000", "max_steps"),
+        ] {
+            std::fs::write(&p, format!("name = \"can\"\n{line}\n")).unwrap();
+            let e = CanConfig::from_file(&p).unwrap_err().to_string();
+            assert!(e.contains(field), "{line}: {e}");
+        }
+        // The defaults pass: the bins' centres are 0.53 m apart in y, more than 0.49.
+        CanConfig::default().validate(&p).unwrap();
     }
 }

@@ -78,25 +78,55 @@ impl LiftConfig {
             field: field.to_string(),
             reason: reason.into(),
         };
-        if self.table_full_size.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-            return Err(bad("table_full_size", "every entry must be > 0"));
+        let finite3 = |v: [f64; 3]| v.iter().all(|x| x.is_finite());
+        if self.table_full_size.iter().any(|v| !(v.is_finite() && *v > 0.0 && *v <= 10.0)) {
+            return Err(bad("table_full_size", "every entry must be in (0, 10] m"));
+        }
+        if self.table_friction.iter().any(|v| !(v.is_finite() && *v >= 0.0 && *v <= 100.0)) {
+            return Err(bad("table_friction", "every entry must be in [0, 100]"));
+        }
+        if !finite3(self.table_offset) || self.table_offset.iter().any(|v| v.abs() > 10.0) {
+            return Err(bad("table_offset", "every entry must be finite, within 10 m of the origin"));
         }
         for i in 0..3 {
             let (lo, hi) = (self.cube_half_min[i], self.cube_half_max[i]);
-            if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
-                return Err(bad("cube_half_min", "needs 0 < cube_half_min <= cube_half_max per axis"));
+            if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi && hi <= 0.2) {
+                return Err(bad("cube_half_min", "needs 0 < cube_half_min <= cube_half_max <= 0.2 m per axis"));
             }
         }
-        for (field, r) in [("cube_x_range", self.cube_x_range), ("cube_y_range", self.cube_y_range)] {
+        for (i, (field, r)) in [("cube_x_range", self.cube_x_range), ("cube_y_range", self.cube_y_range)]
+            .into_iter()
+            .enumerate()
+        {
             if !(r[0].is_finite() && r[1].is_finite() && r[0] <= r[1]) {
-                return Err(bad(field, "needs low <= high"));
+                return Err(bad(field, "needs finite low <= high"));
+            }
+            // The whole cube stays on the table top at every draw.
+            let half_table = self.table_full_size[i] / 2.0 - self.cube_half_max[i];
+            if r[0] < -half_table || r[1] > half_table {
+                return Err(bad(field, "puts the cube (partly) off the table"));
             }
         }
-        if !(self.init_noise.is_finite() && self.init_noise >= 0.0) {
-            return Err(bad("init_noise", "must be >= 0"));
+        if !(self.cube_z_offset.is_finite() && (0.0..=0.1).contains(&self.cube_z_offset)) {
+            return Err(bad("cube_z_offset", "must be in [0, 0.1] m"));
         }
-        if self.max_steps == 0 {
-            return Err(bad("max_steps", "must be >= 1"));
+        if !(self.init_noise.is_finite() && (0.0..=0.5).contains(&self.init_noise)) {
+            return Err(bad("init_noise", "must be in [0, 0.5] rad"));
+        }
+        // Success must be neither automatic (the cube's centre at rest is at least its
+        // smallest half-height above the table) nor out of the arm's reach.
+        let rest = self.cube_half_min[2];
+        if !(self.success_height.is_finite() && self.success_height > rest + self.cube_z_offset)
+            || self.success_height > 0.5
+        {
+            return Err(bad(
+                "success_height",
+                "must exceed the resting cube's centre height (cube_half_min[2] + cube_z_offset) \
+                 and be at most 0.5 m, or success is automatic or impossible",
+            ));
+        }
+        if !(1..=100_000).contains(&self.max_steps) {
+            return Err(bad("max_steps", "must be in [1, 100000]"));
         }
         Ok(())
     }
@@ -125,6 +155,34 @@ mod tests {
         std::fs::write(&p, "name = \"lift\"\nmax_steps = 0\n").unwrap();
         let e = LiftConfig::from_file(&p).unwrap_err().to_string();
         assert!(e.contains("max_steps"), "{e}");
+    }
+
+    #[test]
+    fn values_that_make_success_automatic_or_impossible_are_refused_by_name() {
+        // Each of these was accepted at 92f9f2b: success_height = -1 made every episode
+        // a success, NaN none; a cube range of 1 m puts it off the 0.8 m table.
+        let dir = std::env::temp_dir().join(format!("evalharness-lift-ranges-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("bad.toml");
+        for (line, field) in [
+            ("success_height = -1.0", "success_height"),
+            ("success_height = nan", "success_height"),
+            ("success_height = inf", "success_height"),
+            ("success_height = 0.015", "success_height"),
+            ("cube_x_range = [0.0, 1.0]", "cube_x_range"),
+            ("cube_half_min = [-0.02, 0.02, 0.02]", "cube_half_min"),
+            ("table_friction = [-1.0, 0.0, 0.0]", "table_friction"),
+            ("table_offset = [0.0, 0.0, inf]", "table_offset"),
+            ("cube_z_offset = -0.5", "cube_z_offset"),
+            ("init_noise = 1e9", "init_noise"),
+            ("max_steps = 1000000000", "max_steps"),
+        ] {
+            std::fs::write(&p, format!("name = \"lift\"\n{line}\n")).unwrap();
+            let e = LiftConfig::from_file(&p).unwrap_err().to_string();
+            assert!(e.contains(field), "{line}: {e}");
+        }
+        // The defaults pass: 0.04 > 0.020 + 0.01.
+        LiftConfig::default().validate(&p).unwrap();
     }
 
     #[test]

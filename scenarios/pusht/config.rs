@@ -210,6 +210,17 @@ impl PushTConfig {
                 ),
             ));
         }
+        // Bounded so that an episode's cost stays finite: 1,000 physics steps a second of
+        // 1,000 substeps each is already a million MuJoCo steps per simulated second.
+        if t.physics_hz > 1000 || t.mujoco_substeps > 1000 || t.control_hz > 1000 {
+            return Err(bad(
+                "timing",
+                format!(
+                    "physics_hz ({}), control_hz ({}) and mujoco_substeps ({}) must each be at most 1000",
+                    t.physics_hz, t.control_hz, t.mujoco_substeps
+                ),
+            ));
+        }
         let d = self.reset.min_agent_block_distance;
         if !(d.is_finite() && d >= 0.0) {
             return Err(bad(
@@ -222,8 +233,9 @@ impl PushTConfig {
         if let Err(e) = super::initial_state(self, 0) {
             return Err(bad("reset.min_agent_block_distance", e.to_string()));
         }
-        if self.task.max_steps == 0 || self.task.success_coverage > 1.0 {
-            return Err(bad("task", "max_steps >= 1 and success_coverage <= 1".into()));
+        let sc = self.task.success_coverage;
+        if !(1..=100_000).contains(&self.task.max_steps) || !(sc.is_finite() && sc > 0.0 && sc <= 1.0) {
+            return Err(bad("task", "max_steps in [1, 100000] and success_coverage in (0, 1]".into()));
         }
         if !(8..=1024).contains(&self.render.size) || !(1..=8).contains(&self.render.supersample) {
             return Err(bad("render", "size in 8..=1024, supersample in 1..=8".into()));
@@ -265,6 +277,11 @@ mod tests {
         assert_ne!(text, DEFAULT_TOML);
         let err = PushTConfig::from_toml_str(&text, Path::new("z.toml")).unwrap_err().to_string();
         assert!(err.contains("reset.min_agent_block_distance") && err.contains("seed 0"), "{err}");
+        // At 92f9f2b any substep count was taken: 4e9 per physics step never finishes.
+        let text = DEFAULT_TOML.replace("mujoco_substeps = 2 ", "mujoco_substeps = 4000000000 ");
+        assert_ne!(text, DEFAULT_TOML);
+        let err = PushTConfig::from_toml_str(&text, Path::new("z.toml")).unwrap_err().to_string();
+        assert!(err.contains("mujoco_substeps (4000000000)"), "{err}");
     }
 
     #[test]

@@ -128,6 +128,15 @@ impl ArmEpisode {
         if let Some(detail) = bad("qpos", self.data.qpos()).or_else(|| bad("qvel", self.data.qvel())) {
             return Err(fail(self.step, detail));
         }
+        // MuJoCo resets the data itself when qpos, qvel or qacc go NaN or huge ("the
+        // simulation is unstable"), so a finite state alone proves nothing: its
+        // warning counters (mjWARN_BADQPOS/BADQVEL/BADQACC) say it happened.
+        let warnings = &self.data.ffi().warning;
+        for (i, what) in [(3, "qpos"), (4, "qvel"), (5, "qacc")] {
+            if warnings[i].number > 0 {
+                return Err(fail(self.step, format!("MuJoCo reported a bad {what} (an unstable simulation) and reset it")));
+            }
+        }
         Ok(())
     }
 

@@ -45,7 +45,7 @@ pub struct PlanArgs {
     #[arg(long, value_delimiter = ',', default_value = "none,world-model,simulator")]
     pub planners: Vec<Planner>,
     /// Proposals sampled per decision (GPC-RANK: 50; each costs one imagined rollout).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, value_parser = crate::cli::bounds::count(1, 4096))]
     pub proposals: usize,
     /// Actions of each proposal imagined before it is scored (default: all the
     /// policy predicts from the current step on, 15 for horizon 16 and 2 observations).
@@ -77,7 +77,7 @@ pub struct PlanArgs {
     pub max_steps: usize,
     /// Episodes advanced together (their proposals form one batched policy and
     /// world-model call). Part of the run's settings: float rounding depends on it.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, value_parser = crate::cli::bounds::count(1, 1000))]
     pub batch: usize,
     /// Master seed of the proposals' sampling noise, the world model's noise and the bootstrap.
     #[arg(long, default_value_t = 0)]
@@ -86,7 +86,7 @@ pub struct PlanArgs {
     #[arg(long, default_value_t = 2000, value_parser = crate::cli::bootstrap_replicates)]
     pub bootstrap: usize,
     /// Threads for the simulator's rollouts (results do not depend on it).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, value_parser = crate::cli::bounds::workers())]
     pub jobs: usize,
     /// Episodes (the first seeds) whose decisions are drawn as filmstrips: the real frame,
     /// and what the world model and the simulator imagined of the picked proposal's outcome.

@@ -100,6 +100,6 @@ pub fn run(a: &AgreementArgs) -> Result<ExitCode> {
         "agreement": m.to_json(&names, ci.as_ref()),
         "bootstrap": {"replicates": a.bootstrap, "seed": a.seed, "scheme": "paired, stratified by policy (episodes resampled within each policy)"},
     });
-    println!("{}", serde_json::to_string_pretty(&out)?);
+    outln!("{}", serde_json::to_string_pretty(&out)?);
     Ok(ExitCode::SUCCESS)
 }

@@ -9,7 +9,9 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use harness::replay::{EpisodeArrays, ReplaySpec, ReplayWriter};
+use harness::replay::{EpisodeArrays, ReplaySpec};
+
+use crate::output::dataset::StagedDataset;
 use harness::seed::{derive, fnv1a};
 use serde_json::{Value, json};
 
@@ -171,7 +173,8 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     let size = runner.cfg.render.size as usize;
     let work: Vec<(u64, BehaviourKind)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, draw(&mix, seed))).collect();
-    let mut writer = ReplayWriter::create(&args.out, replay_spec(size), c.force)?;
+    let inputs = crate::output::Inputs::new().scenario(&c.scenario);
+    let mut writer = StagedDataset::create(&args.out, c.force, &inputs, replay_spec(size))?;
     let pb = progress::bar(c.episodes, "collect", quiet);
     let mut episodes = Vec::new();
     runner.run(
@@ -190,7 +193,7 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     let source = json!({"mix": mix_text, "noise": c.noise, "lag": c.lag});
     let attrs = dataset_attrs(&runner.cfg, c.seed_start, source, runner.max_steps, episodes);
     let path = writer.finish(&attrs)?;
-    println!("pusht dataset: {n} episodes, {steps} steps -> {}", path.display());
+    outln!("pusht dataset: {n} episodes, {steps} steps -> {}", path.display());
     Ok(ExitCode::SUCCESS)
 }
 

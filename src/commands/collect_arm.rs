@@ -17,7 +17,9 @@
 use std::process::ExitCode;
 
 use anyhow::{Result, bail};
-use harness::replay::{EpisodeArrays, ReplaySpec, ReplayWriter};
+use harness::replay::{EpisodeArrays, ReplaySpec};
+
+use crate::output::dataset::StagedDataset;
 use scenarios::robosuite::rollout::{ArmTask, Episode, Perturbation};
 use serde_json::{Value, json};
 
@@ -125,7 +127,8 @@ pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<Exit
     let work: Vec<(u64, T::Behaviour)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, draw(&mix, seed))).collect();
     let spec = replay_spec(IMAGE_SIZE, task.state_columns().len());
-    let mut writer = ReplayWriter::create(&args.out, spec, c.force)?;
+    let inputs = crate::output::Inputs::new().scenario(&c.scenario);
+    let mut writer = StagedDataset::create(&args.out, c.force, &inputs, spec)?;
     let pb = progress::bar(c.episodes, &format!("collect {name}"), quiet);
     let mut episodes = Vec::new();
     let runner = ArmRun { task, perturbation, max_steps, stop_at_success: !args.no_early_stop, jobs: c.jobs };
@@ -151,6 +154,6 @@ pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<Exit
         json!({"mix": mix_text, "noise": c.noise, "lag": c.lag, "no_early_stop": args.no_early_stop});
     let attrs = dataset_attrs(task, c.seed_start, source, max_steps, episodes);
     let path = writer.finish(&attrs)?;
-    println!("{name} dataset: {n} episodes, {steps} steps -> {}", path.display());
+    outln!("{name} dataset: {n} episodes, {steps} steps -> {}", path.display());
     Ok(ExitCode::SUCCESS)
 }

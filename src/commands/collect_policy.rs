@@ -48,8 +48,8 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
     if max_steps == 0 || c.episodes == 0 {
         bail!("--episodes and --max-steps must be at least 1");
     }
-    crate::output::check_apart(&args.out, &[("--policy", dir)])?;
-    let mut sink = Sink::create(layout, &args.out, c.force)?;
+    let inputs = crate::output::Inputs::new().scenario(&c.scenario).add("--policy", dir);
+    let mut sink = Sink::create(layout, &args.out, c.force, &inputs)?;
     let (episodes, checkpoints) = roll_out(args, dir, task.as_ref(), max_steps, &mut sink, quiet)?;
     let (n, steps) = (episodes.len(), total_steps(&episodes));
     // Push-T datasets say how the expert was perturbed (not at all here), as `collect`'s do.
@@ -59,7 +59,7 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
         json!({"policy": dir, "checkpoints": checkpoints, "no_early_stop": args.no_early_stop})
     };
     let path = sink.finish(c.seed_start, source, max_steps, episodes)?;
-    println!(
+    outln!(
         "{} dataset: {n} episodes of {} checkpoint(s), {steps} steps -> {}",
         task.name(),
         checkpoints.len(),

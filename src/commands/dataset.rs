@@ -106,7 +106,7 @@ pub fn info(path: &Path, as_json: bool) -> Result<ExitCode> {
         }
     }
     if as_json {
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        outln!("{}", serde_json::to_string_pretty(&out)?);
     } else {
         print_text(&out);
     }
@@ -116,8 +116,8 @@ pub fn info(path: &Path, as_json: bool) -> Result<ExitCode> {
 fn print_text(v: &Value) {
     let f = |x: &Value| x.as_f64().unwrap_or(f64::NAN);
     let s = &v["steps_per_episode"];
-    println!("dataset    {}", v["path"].as_str().unwrap_or(""));
-    println!(
+    outln!("dataset    {}", v["path"].as_str().unwrap_or(""));
+    outln!(
         "episodes   {}   steps {} (per episode: min {}, mean {:.1}, max {})",
         v["episodes"],
         v["steps"],
@@ -125,9 +125,9 @@ fn print_text(v: &Value) {
         f(&s["mean"]),
         f(&s["max"])
     );
-    println!("arrays     img {}   action {}   state {}", v["image"], v["action_dim"], v["state_dim"]);
+    outln!("arrays     img {}   action {}   state {}", v["image"], v["action_dim"], v["state_dim"]);
     match v.get("score") {
-        Some(sc) => println!(
+        Some(sc) => outln!(
             "score      mean {:.3}  std {:.3}  min {:.3}  max {:.3}  success {:.1}%   (from {})",
             f(&sc["mean"]),
             f(&sc["std"]),
@@ -136,11 +136,11 @@ fn print_text(v: &Value) {
             100.0 * f(&sc["success_rate"]),
             v["score_source"].as_str().unwrap_or("")
         ),
-        None => println!("score      {}", v["score_source"].as_str().unwrap_or("")),
+        None => outln!("score      {}", v["score_source"].as_str().unwrap_or("")),
     }
     if let Some(b) = v["behaviours"].as_object() {
         for (name, s) in b {
-            println!(
+            outln!(
                 "behaviour  {name:<8} {:>5} episodes   mean score {:.3}   success {:.1}%",
                 s["episodes"],
                 f(&s["mean_score"]),

@@ -16,7 +16,9 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use harness::replay::{ReplayReader, ReplayWriter};
+use harness::replay::ReplayReader;
+
+use crate::output::dataset::StagedDataset;
 use serde_json::{Value, json};
 
 use super::episodes::{BehaviourKind, Perturbation, behaviour_label};
@@ -76,8 +78,10 @@ pub fn run(inputs: &[PathBuf], out: &Path, force: bool, quiet: bool) -> Result<E
     if inputs.len() < 2 {
         bail!("dataset merge needs at least two input datasets, got {}", inputs.len());
     }
-    let apart: Vec<(&str, &Path)> = inputs.iter().map(|p| ("dataset", p.as_path())).collect();
-    crate::output::check_apart(out, &apart)?;
+    let listed = crate::output::Inputs::new().all("dataset", inputs);
+    // Inputs before outputs: checked before any dataset is opened or anything written.
+    listed.check(out)?;
+    listed.check_kept(out, ".partial")?;
     let readers = inputs
         .iter()
         .map(|p| ReplayReader::open(p).with_context(|| format!("opening dataset {}", p.display())))
@@ -87,8 +91,7 @@ pub fn run(inputs: &[PathBuf], out: &Path, force: bool, quiet: bool) -> Result<E
     }
     let spec = readers[0].spec()?;
     let total: usize = readers.iter().map(ReplayReader::episodes).sum();
-    let mut writer = ReplayWriter::create(out, spec.clone(), force)
-        .with_context(|| format!("creating {}", out.display()))?;
+    let mut writer = StagedDataset::create(out, force, &listed, spec.clone())?;
     let pb = progress::bar(total as u64, "merge", quiet);
     let mut episodes = Vec::with_capacity(total);
     let mut sources = Vec::with_capacity(readers.len());
@@ -121,6 +124,6 @@ pub fn run(inputs: &[PathBuf], out: &Path, force: bool, quiet: bool) -> Result<E
     }
     let path = writer.finish(&json!({ "evalharness": attrs }))?;
     let steps: usize = readers.iter().map(ReplayReader::steps).sum();
-    println!("merged {} datasets: {total} episodes, {steps} steps -> {}", readers.len(), path.display());
+    outln!("merged {} datasets: {total} episodes, {steps} steps -> {}", readers.len(), path.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -61,11 +61,10 @@ pub fn run(a: &ExportPoliciesArgs) -> Result<ExitCode> {
     }
     // `--add` moves new checkpoints into `--out`, so only plain replacing must stay
     // apart from `--from`.
-    if !a.add {
-        crate::output::check_apart(&a.out, &[("--from", &a.from)])?;
-    }
-    let out = Staged::new(&a.out, a.force || a.add)?;
-    let command: Vec<String> = std::env::args().collect();
+    // With --add the output is the folder being added to, which may hold --from.
+    let inputs = if a.add { crate::output::Inputs::new() } else { crate::output::Inputs::new().add("--from", &a.from) };
+    let out = Staged::new(&a.out, a.force || a.add, &inputs)?;
+    let command: Vec<String> = crate::stdout::command_line();
     let (command, commit) = (command.join(" "), git_commit());
     for p in &mut picked {
         let dst = out.file(&p.name);
@@ -90,7 +89,7 @@ pub fn run(a: &ExportPoliciesArgs) -> Result<ExitCode> {
     }
     let root = if a.add { out.commit_into()? } else { out.commit()? };
     for p in &picked {
-        println!("{}", root.join(&p.name).display());
+        outln!("{}", root.join(&p.name).display());
     }
     Ok(ExitCode::SUCCESS)
 }

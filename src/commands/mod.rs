@@ -68,10 +68,12 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Rank(a) => rank::run(a, cli.quiet),
         Command::Plan(a) => plan::run(a, cli.quiet),
         Command::Merge(a) => rank::merge::run(&a.shards, &a.out, a.force, a.no_report),
-        Command::Tasks(a) => rank::report::tasks_table(&a.runs, a.tex.as_deref()),
+        Command::Tasks(a) => rank::report::tasks_table(&a.runs, a.tex.as_deref(), a.force),
         Command::Report(a) => {
+            // The report is written into the run's folder: not while a run writes there.
+            let _lock = crate::output::lock::lock(&a.out)?;
             let html = rank::report::write_report(&a.out)?;
-            println!("{}", html.display());
+            outln!("{}", html.display());
             Ok(ExitCode::SUCCESS)
         }
         Command::Wm(WmCommand::Eval(a)) => wm_eval::run(a),

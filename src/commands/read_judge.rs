@@ -67,17 +67,15 @@ pub fn run(a: &ReadJudgeArgs) -> Result<ExitCode> {
     }
     let staged = match &a.out {
         Some(out) => {
-            let mut inputs: Vec<(&str, &std::path::Path)> = vec![("--data", &a.data)];
-            if let Some(j) = &a.judge {
-                inputs.push(("--judge", j));
-            }
-            crate::output::check_apart(out, &inputs)?;
-            Some(crate::output::Staged::new(out, a.force)?)
+            let inputs =
+                crate::output::Inputs::new().add("--data", &a.data).maybe("--judge", a.judge.as_deref());
+            Some(crate::output::Staged::new(out, a.force, &inputs)?)
         }
         None => None,
     };
     let (judge, from) = match (&a.judge, a.rule) {
-        (Some(dir), _) => (FrameJudge::load(dir, &burn::tensor::Device::flex())?, dir.display().to_string()),
+        (Some(dir), _) => (FrameJudge::load(dir, &burn::tensor::Device::flex())
+            .map_err(|e| anyhow::anyhow!("--judge {}: {}", e.path.display(), e.message))?, dir.display().to_string()),
         (None, Some(JudgeRule::LiftRed)) => {
             (FrameJudge::rule(rule_file(ColourHeight::lift_red())), "lift-red".into())
         }
@@ -110,7 +108,7 @@ pub fn run(a: &ReadJudgeArgs) -> Result<ExitCode> {
         let mut file = judge.file.clone();
         file.persist_frames = best;
         file.provenance["persistence"] = json!({
-            "command": std::env::args().collect::<Vec<_>>().join(" "),
+            "command": crate::stdout::command_line().join(" "),
             "commit": git_commit(),
             "from": from,
             "data": a.data.display().to_string(),
@@ -123,12 +121,12 @@ pub fn run(a: &ReadJudgeArgs) -> Result<ExitCode> {
         tracing::info!(persist = best, out = %out.display(), "judge written");
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(ExitCode::SUCCESS);
     }
     let f = &report.frames;
     let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));
-    println!(
+    outln!(
         "judged frames: {} ({} successes): accuracy {}, recall {}, precision {}, mean abs error {:.4}",
         f.frames,
         f.positives,
@@ -137,18 +135,18 @@ pub fn run(a: &ReadJudgeArgs) -> Result<ExitCode> {
         pct(f.precision),
         f.mean_abs_error
     );
-    println!();
-    println!("| k | episodes read right | false successes | missed successes |");
-    println!("|---|---|---|---|");
+    outln!();
+    outln!("| k | episodes read right | false successes | missed successes |");
+    outln!("|---|---|---|---|");
     for r in &report.readings {
         let k = r.reading.map_or(0, |x| x.persist);
-        println!(
+        outln!(
             "| {k} | {} of {} ({} succeed) | {} | {} |",
             r.agree, r.episodes, r.successes, r.false_successes, r.missed_successes
         );
     }
-    println!();
-    println!("most episodes read right: k = {}", report.best);
+    outln!();
+    outln!("most episodes read right: k = {}", report.best);
     Ok(ExitCode::SUCCESS)
 }
 

@@ -11,7 +11,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use engine::Trajectory;
-use harness::replay::{EpisodeArrays, ReplayWriter};
+use harness::replay::EpisodeArrays;
+
+use crate::output::Inputs;
+use crate::output::dataset::StagedDataset;
 use harness::task::Task;
 use scenarios::pusht::rollout::{Episode, StepRow};
 use scenarios::pusht::{Pose2, PushTConfig, PushTTask};
@@ -56,20 +59,21 @@ impl Layout {
 }
 
 /// A dataset being written, episode by episode; nothing appears at its path until
-/// [`Sink::finish`] (the writer stages into `PATH.partial`).
+/// [`Sink::finish`] (it is staged into `PATH.partial`, [`StagedDataset`]).
 pub(super) struct Sink {
-    writer: ReplayWriter,
+    writer: StagedDataset,
     layout: Layout,
 }
 
 impl Sink {
-    /// A dataset at `out` in `layout` (refused if `out` exists, unless `force`).
-    pub fn create(layout: Layout, out: &Path, force: bool) -> Result<Self> {
+    /// A dataset at `out` in `layout` for a command reading `inputs` (refused if `out`
+    /// exists, unless `force`, or if it overlaps an input).
+    pub fn create(layout: Layout, out: &Path, force: bool, inputs: &Inputs) -> Result<Self> {
         let spec = match &layout {
             Layout::PushT(cfg) => replay_spec(cfg.render.size as usize),
             Layout::Arm { size, columns, .. } => super::collect_arm::replay_spec(*size, *columns),
         };
-        Ok(Self { writer: ReplayWriter::create(out, spec, force)?, layout })
+        Ok(Self { writer: StagedDataset::create(out, force, inputs, spec)?, layout })
     }
 
     /// Appends one episode, labelled `behaviour`; returns its score and its entry in
@@ -104,7 +108,7 @@ impl Sink {
                 super::collect_arm::with_header(header, seed_start, source, max_steps, episodes)
             }
         };
-        Ok(self.writer.finish(&attrs)?)
+        self.writer.finish(&attrs)
     }
 }
 

@@ -32,8 +32,8 @@ pub fn run(a: &ScriptedArgs) -> Result<ExitCode> {
             bail!("--noise {noise} rounds to a folder that already exists ({name})");
         }
     }
-    let out = Staged::new(&a.out, a.force)?;
-    let command: Vec<String> = std::env::args().collect();
+    let out = Staged::new(&a.out, a.force, &crate::output::Inputs::new())?;
+    let command: Vec<String> = crate::stdout::command_line();
     let provenance = json!({"command": command.join(" "), "commit": git_commit()});
     for (name, noise, lag) in &combos {
         let file = ScriptedFile {
@@ -47,7 +47,7 @@ pub fn run(a: &ScriptedArgs) -> Result<ExitCode> {
     }
     let root = out.commit()?;
     for (name, _, _) in &combos {
-        println!("{}", root.join(name).display());
+        outln!("{}", root.join(name).display());
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -138,7 +138,7 @@ pub fn run<T: ArmTask>(args: &SimulateArgs, task: &T, quiet: bool) -> Result<Exi
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };
     let work: Vec<(u64, T::Behaviour)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, kind)).collect();
-    let out = Staged::new(&args.out, c.force)?;
+    let out = Staged::new(&args.out, c.force, &super::simulate::inputs(args))?;
     write_json(
         &out.file("config.json"),
         &json!({
@@ -222,7 +222,7 @@ pub fn run<T: ArmTask>(args: &SimulateArgs, task: &T, quiet: bool) -> Result<Exi
         }),
     )?;
     let dir = out.commit()?;
-    println!(
+    outln!(
         "{name} {}: {} episodes, success rate {:.1}% -> {}",
         args.policy,
         c.episodes,

@@ -42,7 +42,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
             "--record-scores records MuJoCo scores on real frames; it cannot be given with --observe-through"
         );
     }
-    let out = Staged::new(&args.out, c.force)?;
+    let out = Staged::new(&args.out, c.force, &super::simulate::inputs(args))?;
     let expect = expectations(task.as_ref());
     let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();
     let pool =
@@ -71,7 +71,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
                 append_rows(&jsonl, &rows)?;
                 let refs: Vec<&EpisodeRow> = rows.iter().collect();
                 let stats = branch_stats(&refs, 2000, 0);
-                println!(
+                outln!(
                     "{name:<16} mean score {:.3}  success {:.1}%  ({:.0} s)",
                     stats.mean,
                     100.0 * stats.success_rate,
@@ -99,7 +99,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
                 "policies": summary}),
     )?;
     let o = out.commit()?;
-    println!("-> {}", o.display());
+    outln!("-> {}", o.display());
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
 }
 
@@ -134,7 +134,7 @@ fn record(
 ) -> Result<()> {
     let pj = dir.join("policy.json");
     let file = read_json(&pj)?;
-    let args: Vec<String> = std::env::args().collect();
+    let args: Vec<String> = crate::stdout::command_line();
     write_json(
         &dir.join("provenance.json"),
         &json!({

@@ -69,17 +69,16 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     let setup =
         Setup { task: task.as_ref(), master_seed: args.seed.unwrap_or(0), max_steps, judge: judge.as_ref() };
     let dirs = checkpoint_dirs(Path::new(&args.policy))?;
-    let out = Staged::new(&args.out, c.force)?;
+    let inputs = super::simulate::inputs(args).maybe("--judge", judge_dir.as_deref());
+    let out = Staged::new(&args.out, c.force, &inputs)?;
     let expect = expectations(task.as_ref());
     let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();
     let pb = progress::bar((dirs.len() as u64) * c.episodes, "replay", quiet);
     let (jsonl, replay_jsonl) = (out.file("episodes.jsonl"), out.file("replay.jsonl"));
     let mut sink = match &args.record {
         Some(path) => {
-            let inputs =
-                [("--policy", Path::new(&args.policy)), ("--out", &args.out), ("--replay-imagined", wm_dir)];
-            crate::output::check_apart(path, &inputs)?;
-            Some((Sink::create(layout, path, c.force)?, Vec::new()))
+            let inputs = inputs.clone().add("--out", &args.out);
+            Some((Sink::create(layout, path, c.force, &inputs)?, Vec::new()))
         }
         None => None,
     };
@@ -125,7 +124,7 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
             append_rows(&jsonl, &imagined)?;
             append_rows(&replay_jsonl, &replayed)?;
             let r = tally(name, &real, &imagined, &replayed);
-            println!(
+            outln!(
                 "{name:<16} MuJoCo {:.2}  imagined {:.2}  imagined actions in MuJoCo {:.2}  (imagined successes: {} hold in MuJoCo, {} fail)",
                 r.mujoco,
                 r.imagined,
@@ -150,10 +149,10 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
         let source = serde_json::json!({"policy": args.policy, "replay_imagined": wm_dir, "judge": judge_dir,
             "noise_scale": wm.noise_scale(), "seed": setup.master_seed, "what": "each imagined episode's executed actions, stepped in MuJoCo from the same initial state"});
         let path = sink.finish(c.seed_start, source, max_steps, episodes)?;
-        println!("{} dataset: {n} replayed episodes -> {}", c.scenario, path.display());
+        outln!("{} dataset: {n} replayed episodes -> {}", c.scenario, path.display());
     }
     let o = out.commit()?;
-    println!("-> {}", o.display());
+    outln!("-> {}", o.display());
     Ok(ExitCode::SUCCESS)
 }
 

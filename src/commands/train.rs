@@ -150,11 +150,12 @@ pub(super) fn prepare_out(
             bail!("{flag} {}: no such file or folder", p.display());
         }
     }
-    crate::output::check_apart(out, inputs)?;
+    let listed = inputs.iter().fold(crate::output::Inputs::new(), |acc, (f, p)| acc.add(f, p));
+    listed.check(out)?;
     if resume && !out.join(state).is_file() {
         bail!("--resume: {} has no checkpoint ({state})", out.display());
     }
-    crate::output::RunDir::prepare(out, resume, force, state)
+    crate::output::RunDir::prepare(out, &listed, resume, force, state)
 }
 
 /// The `data` entry of a world-model or autoencoder provenance file.
@@ -206,7 +207,7 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     tracing::info!(data = %a.data.display(), "loading frames");
     let data = EpisodeData::load(&a.data, model_cfg.image_size)?;
     tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");
-    let args: Vec<String> = std::env::args().collect();
+    let args: Vec<String> = crate::stdout::command_line();
     open_session(&a.out, &args.join(" "), from_step)?;
     let pb = progress::bar(cfg.steps, "autoencoder", quiet);
     let run = RunOptions {
@@ -264,7 +265,7 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
             "metrics": {"held_out_psnr_db": outcome.psnr, "held_out_mse": outcome.mse},
         }),
     )?;
-    println!(
+    outln!(
         "autoencoder: step {}/{}{}, held-out PSNR {:.2} dB, MSE {:.6} -> {}",
         outcome.step,
         outcome.total,

@@ -43,9 +43,8 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     if !a.data.exists() {
         bail!("--data {}: no such file or folder", a.data.display());
     }
-    crate::output::check_apart(&a.out, &[("--data", &a.data)])?;
     // Written into OUT.partial; an old OUT is replaced only once the judge is complete.
-    let staged = crate::output::Staged::new(&a.out, a.force)?;
+    let staged = crate::output::Staged::new(&a.out, a.force, &crate::output::Inputs::new().add("--data", &a.data))?;
     let label = label_of(a)?;
     let threshold = match label {
         Label::Coverage => 0.95,
@@ -68,7 +67,7 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
         symmetries: a.symmetries,
         eval_every: a.eval_every,
     };
-    let args: Vec<String> = std::env::args().collect();
+    let args: Vec<String> = crate::stdout::command_line();
     let mut file = JudgeFile {
         kind: "learned".into(),
         net,
@@ -134,7 +133,7 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
             a.persist, e.agree, e.episodes, e.successes, e.false_successes, e.missed_successes
         )
     });
-    println!(
+    outln!(
         "judge of {}: held-out {} frames ({} above {threshold}): mean abs error {:.4}, accuracy {}, recall {}, precision {}{whole} -> {}",
         label.array(),
         heldout.frames,

@@ -57,7 +57,7 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         }
         None => demos.normalisation(),
     };
-    let args: Vec<String> = std::env::args().collect();
+    let args: Vec<String> = crate::stdout::command_line();
     let configs = RunConfigs {
         train: PolicyTrainConfig {
             epochs: a.epochs.unwrap_or(20),
@@ -130,9 +130,9 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
     pb.finish_and_clear();
     record_session(&train_dir, &args.join(" "), from_step, outcome.step, outcome.elapsed_s)?;
     for ck in &outcome.saved {
-        println!("saved {}", ck.display());
+        outln!("saved {}", ck.display());
     }
-    println!(
+    outln!(
         "policy: step {}/{}{}, mean loss (last 50 steps) {:.4} -> {}",
         outcome.step,
         outcome.total,

@@ -210,7 +210,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             }
         }
     };
-    let args: Vec<String> = std::env::args().collect();
+    let args: Vec<String> = crate::stdout::command_line();
     open_session(&a.out, &args.join(" "), from_step)?;
     let pb = progress::bar(cfg.steps, objective.name(), quiet);
     let run = RunOptions {
@@ -258,7 +258,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             "init_from": warm_start_record(&a.out)?,
         }),
     )?;
-    println!(
+    outln!(
         "world model ({}): step {}/{}{}, held-out one-chunk latent MSE {:.5} -> {}",
         saved.objective.name(),
         outcome.step,

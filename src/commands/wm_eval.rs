@@ -39,12 +39,12 @@ const REFERENCES_NOTE: &str = "references on the same videos: \"persistence\" re
 /// One line of the text summary.
 fn print_row(row: &EvalRow, note: &str) {
     let horizon = if row.horizon == "64" { "64-frame:" } else { "episode: " };
-    println!(
+    outln!(
         "{:<20} {:<9} {horizon} MSE {:.5} PSNR {:.2} SSIM {:.4} ({:.1} ms/frame){note}",
         row.name, row.objective, row.mse, row.psnr, row.ssim, row.ms_per_frame
     );
     let curve: Vec<String> = row.ssim_curve.iter().map(|p| format!("{}: {:.3}", p.frame, p.ssim)).collect();
-    println!("{:<20} SSIM by generated frame  {}", "", curve.join("  "));
+    outln!("{:<20} SSIM by generated frame  {}", "", curve.join("  "));
 }
 
 /// The 64-frame rows' SSIM by block motion (printed, and for `eval.json`), from the
@@ -76,13 +76,20 @@ fn motion_breakdown(
         let to = b.to.map_or_else(|| "inf".to_string(), |t| t.to_string());
         let ssim: Vec<String> = b.ssim.iter().map(|(n, s)| format!("{n} {s:.4}")).collect();
         let line = format!("block motion [{}, {to}): {:>4} videos  {}", b.from, b.videos, ssim.join("  "));
-        println!("{}", line.trim_end());
+        outln!("{}", line.trim_end());
     }
     json!({"note": wm_eval_motion::NOTE, "bins": bins})
 }
 
 /// `evalharness wm eval`.
 pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
+    // Inputs before outputs: a misplaced --out is refused before any model is loaded.
+    let inputs = a
+        .world_models
+        .iter()
+        .fold(crate::output::Inputs::new().add("--data", &a.data), |acc, m| acc.world_model("--world-model", m))
+        .maybe("--judge", a.judge.as_deref());
+    inputs.check(&a.out)?;
     let device = world_model::device::selected()?;
     let models: Vec<(String, WorldModel)> = a
         .world_models
@@ -114,11 +121,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
     if short.is_empty() {
         bail!("{}: no {which} has {} frames", a.data.display(), k + 60);
     }
-    let mut apart: Vec<(&str, &std::path::Path)> = vec![("--data", &a.data)];
-    apart.extend(a.world_models.iter().map(|m| ("--world-model", m.as_path())));
-    apart.extend(a.judge.iter().map(|j| ("--judge", j.as_path())));
-    crate::output::check_apart(&a.out, &apart)?;
-    let staged = Staged::new(&a.out, a.force)?;
+    let staged = Staged::new(&a.out, a.force, &inputs)?;
     // The dataset's scenario and state rows, read once: for the goal-free view, the
     // open-loop scores and the SSIM by block motion.
     let scene = DatasetScene::load(&a.data)?;
@@ -215,7 +218,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         scores.push(sc.persistence(&data, &full_videos, k));
         for r in &scores {
             let r_text = r.pearson.map_or_else(|| "n/a".to_string(), |p| format!("{p:.3}"));
-            println!(
+            outln!(
                 "{:<20} open-loop score over whole episodes: real {:.3} imagined {:.3}  mean |error| {:.3}  per-video r {r_text}",
                 r.name, r.real_mean, r.imagined_mean, r.mean_abs_error
             );
@@ -224,7 +227,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
                 .iter()
                 .map(|c| format!("{}: {:.2}/{:.2}", c.frame, c.real, c.imagined))
                 .collect();
-            println!("{:<20} coverage real/imagined by frame  {}", "", curve.join("  "));
+            outln!("{:<20} coverage real/imagined by frame  {}", "", curve.join("  "));
         }
     }
     // SSIM intervals by episode: resample episodes, since windows of one episode overlap.
@@ -239,7 +242,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         row.ssim_ci = harness::metrics::bootstrap::clustered_mean_ci(&clusters, SSIM_BOOTSTRAP, a.seed);
         if let Some([lo, hi]) = row.ssim_ci {
             let horizon = if row.horizon == "64" { "64-frame" } else { "episode" };
-            println!("{:<20} {horizon:<8} SSIM 95% CI [{lo:.4}, {hi:.4}] (episodes resampled)", row.name);
+            outln!("{:<20} {horizon:<8} SSIM 95% CI [{lo:.4}, {hi:.4}] (episodes resampled)", row.name);
         }
     }
     let by_motion = motion_breakdown(&scene, &data, &short, k, &rows);
@@ -271,6 +274,6 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         }),
     )?;
     let out = staged.commit()?;
-    println!("-> {}", out.display());
+    outln!("-> {}", out.display());
     Ok(ExitCode::SUCCESS)
 }

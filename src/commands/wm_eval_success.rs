@@ -103,7 +103,8 @@ impl SuccessCheck {
     /// An unreadable judge, one that reads frames of another size, or an unreadable
     /// `data/success` array.
     pub fn load(dir: &Path, path: &Path, data: &EpisodeData) -> Result<Self> {
-        let judge = FrameJudge::load(dir, &burn::tensor::Device::flex())?;
+        let judge = FrameJudge::load(dir, &burn::tensor::Device::flex())
+            .map_err(|e| anyhow::anyhow!("--judge {}: {}", e.path.display(), e.message))?;
         if judge.image_size() != data.size {
             let (j, d) = (judge.image_size(), data.size);
             bail!("--judge {}: it reads {j}x{j} frames, and {} has {d}x{d}", dir.display(), path.display());
@@ -214,9 +215,9 @@ pub fn print(row: &SuccessRow) {
         )
     };
     let r = row.pearson.map_or_else(|| "n/a".to_string(), |p| format!("{p:.3}"));
-    println!("{:<20} open-loop success, by behaviour (r over behaviours {r}):", row.name);
+    outln!("{:<20} open-loop success, by behaviour (r over behaviours {r}):", row.name);
     for g in row.groups.iter().chain([&row.all]) {
-        println!("{:<20} {}", "", line(g));
+        outln!("{:<20} {}", "", line(g));
     }
 }
 

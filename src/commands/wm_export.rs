@@ -82,10 +82,10 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
     if let Some(alpha) = a.alpha {
         config["model"]["alpha"] = json!(alpha);
     }
-    let mut apart: Vec<(&str, &std::path::Path)> = vec![("--from", &a.from)];
-    apart.extend(a.autoencoder.as_deref().map(|p| ("--autoencoder", p)));
-    crate::output::check_apart(&a.out, &apart)?;
-    let staged = Staged::new(&a.out, a.force)?;
+    let inputs = crate::output::Inputs::new()
+        .world_model("--from", &a.from)
+        .maybe("--autoencoder", a.autoencoder.as_deref());
+    let staged = Staged::new(&a.out, a.force, &inputs)?;
     if let Some(ae) = config["model"]["autoencoder"].as_str() {
         let trained_on = a.from.join(ae);
         let target = match &a.autoencoder {
@@ -124,7 +124,7 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
             std::fs::copy(&src, &dst).with_context(|| format!("copying {}", src.display()))?;
         }
     }
-    let command: Vec<String> = std::env::args().collect();
+    let command: Vec<String> = crate::stdout::command_line();
     let mut entry =
         json!({"command": command.join(" "), "commit": git_commit(), "from": a.from.display().to_string()});
     if let Some(alpha) = a.alpha {
@@ -135,6 +135,6 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
     let out = staged.commit()?;
     WorldModel::load(&out, &device)
         .with_context(|| format!("{}: the exported model does not load", out.display()))?;
-    println!("{}", out.display());
+    outln!("{}", out.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -241,6 +241,7 @@ pub fn train_autoencoder(
     let (model_path, optim_path, state_path) =
         (out.join("model.bpk"), out.join("optimizer.bpk"), out.join("state.json"));
     if resume {
+        harness::checkpoint::recover(out, harness::checkpoint::MAIN).map_err(|e| ckpt(&e.path, e.message))?;
         model = model.try_load_file(&model_path).map_err(|e| ckpt(&model_path, e))?;
         optim = optim.load(&optim_path).map_err(|e| ckpt(&optim_path, e))?;
         state = harness::driver::read_state(&state_path).map_err(|e| ckpt(&e.path, e.message))?;
@@ -263,9 +264,14 @@ pub fn train_autoencoder(
                 optim: &burn::optim::ModuleOptimizer,
                 state: &State|
      -> Result<(), WorldModelError> {
-        model.clone().save_file(&model_path).map_err(|e| ckpt(&model_path, e))?;
-        optim.save(&optim_path).map_err(|e| ckpt(&optim_path, e))?;
-        harness::driver::write_state(&state_path, state).map_err(|e| ckpt(&e.path, e.message))
+        // The three files are one checkpoint: staged, then committed by a manifest.
+        let fail = |e: harness::runfile::RunFileError| ckpt(&e.path, e.message);
+        let mut stage = harness::checkpoint::begin(out, harness::checkpoint::MAIN).map_err(fail)?;
+        let p = ["model.bpk", "optimizer.bpk", "state.json"].map(|n| stage.path(n));
+        model.clone().save_file(&p[0]).map_err(|e| ckpt(&p[0], e))?;
+        optim.save(&p[1]).map_err(|e| ckpt(&p[1], e))?;
+        harness::driver::write_state(&p[2], state).map_err(fail)?;
+        stage.commit().map_err(fail)
     };
     while state.step < cfg.steps {
         if driver.should_stop() {

@@ -272,6 +272,7 @@ pub fn train_world_model(
         ema.module = unet.valid(); // the same draw of any new (zero-output) layers
     }
     if run.resume {
+        harness::checkpoint::recover(out, harness::checkpoint::MAIN).map_err(|e| ckpt(&e.path, e.message))?;
         unet = unet.try_load_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;
         ema.module = model_cfg.unet.init(&inner).try_load_file(&paths[1]).map_err(|e| ckpt(&paths[1], e))?;
         optim = optim.load(&paths[2]).map_err(|e| ckpt(&paths[2], e))?;
@@ -279,11 +280,16 @@ pub fn train_world_model(
     }
     // Noise continues from a seed of (seed, step), so a resumed run draws fresh noise.
     device.seed(derive(cfg.seed, &[u64::MAX, state.step]));
+    // The four files are one checkpoint: staged, then committed by a manifest.
     let save = |unet: &UNet, ema: &UNet, optim: &burn::optim::ModuleOptimizer, state: &State| {
-        unet.clone().save_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;
-        ema.clone().save_file(&paths[1]).map_err(|e| ckpt(&paths[1], e))?;
-        optim.save(&paths[2]).map_err(|e| ckpt(&paths[2], e))?;
-        harness::driver::write_state(&paths[3], state).map_err(|e| ckpt(&e.path, e.message))
+        let fail = |e: harness::runfile::RunFileError| ckpt(&e.path, e.message);
+        let mut stage = harness::checkpoint::begin(out, harness::checkpoint::MAIN).map_err(fail)?;
+        let p = ["model.bpk", "ema.bpk", "optimizer.bpk", "state.json"].map(|n| stage.path(n));
+        unet.clone().save_file(&p[0]).map_err(|e| ckpt(&p[0], e))?;
+        ema.clone().save_file(&p[1]).map_err(|e| ckpt(&p[1], e))?;
+        optim.save(&p[2]).map_err(|e| ckpt(&p[2], e))?;
+        harness::driver::write_state(&p[3], state).map_err(fail)?;
+        stage.commit().map_err(fail)
     };
     let clock = Clock::start(run.max_minutes);
     let mut driver = Driver::start(&out.join("train_log.jsonl"), "step", state.step, state.elapsed_s, clock)

@@ -20,7 +20,7 @@ use serde::Serialize;
 /// ```
 pub fn pearson(x: &[f64], y: &[f64]) -> Option<f64> {
     let n = x.len();
-    if n < 2 || y.len() != n {
+    if n < 2 || y.len() != n || x.iter().chain(y).any(|v| !v.is_finite()) {
         return None;
     }
     let (mx, my) = (x.iter().sum::<f64>() / n as f64, y.iter().sum::<f64>() / n as f64);
@@ -29,6 +29,27 @@ pub fn pearson(x: &[f64], y: &[f64]) -> Option<f64> {
         sxy += (a - mx) * (b - my);
         sxx += (a - mx).powi(2);
         syy += (b - my).powi(2);
+    }
+    let denom = (sxx * syy).sqrt();
+    if sxy.is_finite() && denom.is_finite() && denom > 0.0 {
+        return Some((sxy / denom).clamp(-1.0, 1.0));
+    }
+    // A sum overflowed or underflowed (at 92f9f2b, values near ±1e300 made every
+    // square infinite and r came out as -0.0; values near 1e-200 gave none): centre
+    // and scale by the largest deviation, then sum again. Ordinary inputs never get
+    // here, so their r keeps its rounding.
+    let centred = |v: &[f64]| -> Option<Vec<f64>> {
+        let mean = v.iter().map(|a| a / n as f64).sum::<f64>();
+        let d: Vec<f64> = v.iter().map(|a| a - mean).collect();
+        let scale = d.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+        (scale > 0.0 && scale.is_finite()).then(|| d.iter().map(|a| a / scale).collect())
+    };
+    let (dx, dy) = (centred(x)?, centred(y)?);
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for (a, b) in dx.iter().zip(&dy) {
+        sxy += a * b;
+        sxx += a * a;
+        syy += b * b;
     }
     if sxx == 0.0 || syy == 0.0 {
         return None;

@@ -120,3 +120,20 @@ fn a_ranking_of_fewer_than_two_policies_reports_no_metrics() {
     let j = agreement(&[0.1, 0.2], &[0.3, 0.4]).to_json(&["a", "b"], None);
     assert_eq!((j["rank_inversions"].as_u64(), j["mmrv"].as_f64()), (Some(0), Some(0.0)));
 }
+
+#[test]
+fn pearson_is_stable_at_extreme_magnitudes() {
+    // At 92f9f2b, x = (1e300, -1e300, 0) against y = (1, -1, 0) gave -0.0: every
+    // square was infinite. The vectors are exactly proportional, so r = 1; the same
+    // for tiny values whose squares underflow to 0 (which gave None).
+    let r = pearson(&[1e300, -1e300, 0.0], &[1.0, -1.0, 0.0]).unwrap();
+    assert_eq!(r, 1.0);
+    let r = pearson(&[1e-200, -1e-200, 0.0], &[-3.0, 3.0, 0.0]).unwrap();
+    assert_eq!(r, -1.0);
+    // Shifted by 1e15 the scipy example keeps its value to 1e-6 (the shift costs digits).
+    let x: Vec<f64> = [1., 2., 3., 4., 5.].iter().map(|v| v + 1e15).collect();
+    let r = pearson(&x, &[10., 9., 2.5, 6., 4.]).unwrap();
+    assert!((r + 0.7426106572325057).abs() < 1e-6, "{r}");
+    assert_eq!(pearson(&[f64::INFINITY, 0.0], &[1.0, 0.0]), None);
+    assert_eq!(pearson(&[f64::MAX, -f64::MAX], &[1.0, 0.0]), Some(1.0));
+}

@@ -16,7 +16,6 @@
 
 mod results;
 
-use std::path::Path;
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -125,17 +124,18 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     };
     let (policy, imagine, execute) = load_proposer(a, task.as_ref(), &device)?;
     // Every input is checked; only now is the output folder touched.
-    let inputs = crate::commands::rank::model_inputs(
+    let mut inputs = crate::commands::rank::model_inputs(
         wm.as_ref().map(|w| (a.world_model.as_path(), w)),
         std::slice::from_ref(&a.policy),
     )?;
-    let mut apart: Vec<(&str, &Path)> = vec![("--policy", &a.policy)];
+    inputs.extend(crate::commands::rank::scenario_input(&a.scenario)?);
+    let mut listed = crate::output::Inputs::new().scenario(&a.scenario).add("--policy", &a.policy);
     if wm.is_some() {
-        apart.push(("--world-model", &a.world_model));
+        listed = listed.world_model("--world-model", &a.world_model);
     }
-    let (out_dir, jsonl) = crate::commands::rank::prepare_run(&a.out, apart, &inputs, a.resume, a.force)?;
+    let (out_dir, jsonl) = crate::commands::rank::prepare_run(&a.out, listed, &inputs, a.resume, a.force)?;
     let config = json!({
-        "command": std::env::args().collect::<Vec<_>>().join(" "),
+        "command": crate::stdout::command_line().join(" "),
         "scenario": a.scenario, "policy": a.policy,
         "world_model": wm.as_ref().map(|_| &a.world_model),
         "world_model_config": wm.as_ref().map(|w| serde_json::to_value(&w.cfg)).transpose()?,

@@ -112,7 +112,7 @@ pub fn write_csv(path: &Path, rows: &[PlanRow]) -> Result<()> {
 
 /// The table on stdout.
 pub fn print_summary(res: &Value, out: &Path) {
-    println!("{:<12} {:>8} {:>17} {:>9} {:>22}", "planner", "score", "95% CI", "success", "vs none [95% CI]");
+    outln!("{:<12} {:>8} {:>17} {:>9} {:>22}", "planner", "score", "95% CI", "success", "vs none [95% CI]");
     let Some(ps) = res["planners"].as_object() else { return };
     for (name, p) in ps {
         let ci = |v: &Value| match (v[0].as_f64(), v[1].as_f64()) {
@@ -122,7 +122,7 @@ pub fn print_summary(res: &Value, out: &Path) {
         let vs = p.get("vs_none").map_or_else(String::new, |d| {
             format!("{:+.3} {}", d["mean_difference"].as_f64().unwrap_or(f64::NAN), ci(&d["ci95"]))
         });
-        println!(
+        outln!(
             "{name:<12} {:>8.3} {:>17} {:>9.2} {vs:>22}",
             p["mean"].as_f64().unwrap_or(f64::NAN),
             ci(&p["ci95"]),
@@ -130,7 +130,7 @@ pub fn print_summary(res: &Value, out: &Path) {
         );
     }
     if let Some(s) = res["planners"]["world-model"].get("vs_simulator") {
-        println!(
+        outln!(
             "world model's picks: the simulator's own in {:.0}% of decisions; {:.1} units farther from the goal \
              than the simulator's best, on average (a pick at random: {:.1})",
             100.0 * s["pick_agreement"].as_f64().unwrap_or(f64::NAN),
@@ -138,7 +138,7 @@ pub fn print_summary(res: &Value, out: &Path) {
             s["random_pick_mean_regret_units"].as_f64().unwrap_or(f64::NAN)
         );
     }
-    println!("results: {}", out.join("results.json").display());
+    outln!("results: {}", out.join("results.json").display());
 }
 
 /// Writes one recorded episode's filmstrip: row 1 the real frame at each decision, row 2

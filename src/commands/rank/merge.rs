@@ -71,32 +71,76 @@ fn check_complete_set(shards: &[PathBuf], configs: &[Value]) -> Result<()> {
     Ok(())
 }
 
+/// Refuses joined rows that lack a row of some (policy, seed, branch) of the run: a
+/// shard killed before it finished a batch, or a claim whose batch nobody ran, would
+/// otherwise give a result over fewer episodes than the run says. Policies that failed
+/// (reported in `failed_policies`) are exempt.
+///
+/// # Errors
+/// The first policy with missing rows, naming it and up to five seeds.
+fn check_every_row(rows: &[EpisodeRow], names: &[String], failed: &[FailedPolicy], cfg: &Value) -> Result<()> {
+    let (Some(start), Some(n)) = (cfg["seed_start"].as_u64(), cfg["episodes"].as_u64()) else {
+        bail!("the shards' config.json has no seed_start and episodes (not a rank output)");
+    };
+    let seeds = harness::seed::range(start, n)?;
+    let mut have: std::collections::HashSet<(&str, u64, harness::results::Branch)> =
+        std::collections::HashSet::with_capacity(rows.len());
+    for r in rows {
+        have.insert((r.policy.as_str(), r.seed, r.branch));
+    }
+    for name in names.iter().filter(|n| !failed.iter().any(|f| &f.policy == *n)) {
+        let missing: Vec<u64> = seeds
+            .clone()
+            .filter(|&s| {
+                super::resume::RANK_KINDS.iter().any(|&b| !have.contains(&(name.as_str(), s, b)))
+            })
+            .collect();
+        if !missing.is_empty() {
+            let shown: Vec<String> = missing.iter().take(5).map(u64::to_string).collect();
+            bail!(
+                "policy {name} lacks rows of {} of its {n} seeds ({}{}): a shard did not finish its \
+                 batches; resume the shards (rank --shard i/n --resume, or rank --processes N --resume) \
+                 and merge again",
+                missing.len(),
+                shown.join(", "),
+                if missing.len() > 5 { ", ..." } else { "" }
+            );
+        }
+    }
+    Ok(())
+}
+
 /// `evalharness merge`: joins shard folders into `out` and says so on stdout.
 ///
 /// # Errors
 /// As [`join`].
 pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Result<ExitCode> {
-    let (rows, _) = join(shards, out, force, no_report)?;
-    println!("merged {} shards: {rows} rows -> {}", shards.len(), out.display());
+    let (rows, _) = join(shards, out, force, no_report, true)?;
+    outln!("merged {} shards: {rows} rows -> {}", shards.len(), out.display());
     Ok(ExitCode::SUCCESS)
 }
 
 /// Joins shard folders into `out` (written into `OUT.partial`, moved into place when
-/// complete); returns the number of rows and the shards' timing, summed.
+/// complete); returns the number of rows and the shards' timing, summed. With
+/// `complete`, every ranked policy must have both rows of every seed (the `merge`
+/// command's contract); without, a batch no shard finished is left for the finishing
+/// `--resume` run to do (`rank --processes`).
 ///
 /// # Errors
-/// Missing files, shards of different runs, duplicate rows that disagree, or I/O failures.
+/// Missing files, shards of different runs, duplicate rows that disagree, missing
+/// rows (with `complete`), or I/O failures.
 pub(super) fn join(
     shards: &[PathBuf],
     out: &Path,
     force: bool,
     no_report: bool,
+    complete: bool,
 ) -> Result<(usize, RunTiming)> {
     if shards.is_empty() {
         bail!("give at least one shard folder");
     }
-    let inputs: Vec<(&str, &Path)> = shards.iter().map(|s| ("shard", s.as_path())).collect();
-    crate::output::check_apart(out, &inputs)?;
+    let listed = crate::output::Inputs::new().all("shard", shards);
+    listed.check(out)?;
     let configs: Vec<Value> =
         shards.iter().map(|s| read_json(&s.join("config.json"))).collect::<Result<_>>()?;
     let first = &configs[0];
@@ -115,8 +159,22 @@ pub(super) fn join(
     let mut frames = 0.0;
     let mut first_res: Option<RankResults> = None;
     for (s, cfg) in shards.iter().zip(&configs) {
-        if run_key(cfg) != key {
-            bail!("{}: not a shard of the same run as {}", s.display(), shards[0].display());
+        let this = run_key(cfg);
+        if this != key {
+            let differs: Vec<String> = this
+                .as_object()
+                .into_iter()
+                .flatten()
+                .filter(|(k, v)| key.get(k.as_str()) != Some(*v))
+                .map(|(k, _)| k.clone())
+                .chain(key.as_object().into_iter().flatten().filter(|(k, _)| this.get(k.as_str()).is_none()).map(|(k, _)| k.clone()))
+                .collect();
+            bail!(
+                "{}: not a shard of the same run as {} (they differ in {})",
+                s.display(),
+                shards[0].display(),
+                differs.join(", ")
+            );
         }
         for r in read_rows::<EpisodeRow>(&s.join("episodes.jsonl"))? {
             match rows.iter().find(|x| x.policy == r.policy && x.seed == r.seed && x.branch == r.branch) {
@@ -154,8 +212,11 @@ pub(super) fn join(
         .collect();
     let order = |p: &str| names.iter().position(|n| n == p).unwrap_or(usize::MAX);
     rows.sort_by_key(|r| (order(&r.policy), r.seed, r.branch));
+    if complete {
+        check_every_row(&rows, &names, &failed, first)?;
+    }
     // Everything is written into OUT.partial and moved into place at the end.
-    let staged = Staged::new(out, force)?;
+    let staged = Staged::new(out, force, &listed)?;
     let tmp = staged.dir().to_path_buf();
     append_rows(&tmp.join("episodes.jsonl"), &rows)?;
     let failed_names: Vec<&str> = failed.iter().map(|f| f.policy.as_str()).collect();

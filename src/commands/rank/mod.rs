@@ -9,6 +9,7 @@
 //! the batches it claims first); `--judge`
 //! scores the imagined frames with a learned judge instead of the task's own.
 
+mod check;
 mod claims;
 pub mod defaults;
 mod media;
@@ -85,6 +86,9 @@ fn run_with(
     shard_times: Option<RunTiming>,
 ) -> Result<ExitCode> {
     let (shard, shards) = parse_shard(a.shard.as_deref())?;
+    if shards > 1 {
+        processes::watch_parent();
+    }
     if r.max_steps == 0 || a.batch == 0 {
         bail!("--max-steps and --batch must be positive");
     }
@@ -108,10 +112,15 @@ fn run_with(
         let f = harness::fingerprint::folder(d)?;
         inputs.push(("judge".to_string(), d.clone(), f));
     }
-    let flags: Vec<(&str, &Path)> = vec![("--policies", &r.policies), ("--world-model", &r.world_model)];
-    let (out_dir, jsonl) = prepare_run(&a.out, flags, &inputs, a.resume, a.force)?;
+    inputs.extend(scenario_input(&a.scenario)?);
+    let listed = crate::output::Inputs::new()
+        .scenario(&a.scenario)
+        .add("--policies", &r.policies)
+        .world_model("--world-model", &r.world_model)
+        .maybe("--judge", r.judge.as_deref());
+    let (out_dir, jsonl) = prepare_run(&a.out, listed, &inputs, a.resume, a.force)?;
     let mut config = json!({
-        "command": std::env::args().collect::<Vec<_>>().join(" "),
+        "command": crate::stdout::command_line().join(" "),
         "scenario": a.scenario, "policies": r.policies, "world_model": r.world_model,
         "world_model_config": serde_json::to_value(&wm.cfg)?,
         "episodes": r.episodes, "seed_start": a.seed_start, "max_steps": r.max_steps,
@@ -198,6 +207,13 @@ fn run_with(
                     r.world_model.display(),
                 );
             }
+            // A judge that scores nonsense would make every policy's imagined rows wrong.
+            Err(e @ EngineError::Judge { .. }) => {
+                let judge = r.judge.as_ref().map_or_else(|| "the task's own judge".to_string(), |d| {
+                    format!("judge {}", d.display())
+                });
+                bail!("{judge}: {e}; the rows of the batches before this one are kept");
+            }
             Err(e) => {
                 let e = anyhow::Error::new(e);
                 tracing::error!("policy {name}: {e:#}; continuing with the other policies");
@@ -211,6 +227,9 @@ fn run_with(
         None => schedule::run_batches::<anyhow::Error>(&policies, &jobs, &setup, &wm, a.jobs, &mut done)?,
     };
     pb.finish_and_clear();
+    if a.resume {
+        resume::straight_order(&jsonl, &mut rows, &names, &batches)?;
+    }
     let failed_names: Vec<&str> = failed.iter().map(|f| f.policy.as_str()).collect();
     let ok_names: Vec<String> =
         names.iter().filter(|n| !failed_names.contains(&n.as_str())).cloned().collect();
@@ -262,7 +281,9 @@ fn run_with(
 /// # Errors
 /// An unloadable judge, or one of another frame size or score kind, naming its folder.
 pub(crate) fn load_judge(dir: &Path, task: &dyn Task, device: &burn::tensor::Device) -> Result<FrameJudge> {
-    let j = FrameJudge::load(dir, device)?;
+    // The loader's error type is the policies' (it says "policy X"); a judge is named as one.
+    let j = FrameJudge::load(dir, device)
+        .map_err(|e| anyhow::anyhow!("--judge {}: {}", e.path.display(), e.message))?;
     let size = task.observation_spec().image_size;
     if j.image_size() != size {
         bail!(
@@ -313,22 +334,36 @@ pub(crate) fn model_inputs(
         .collect()
 }
 
-/// Checks that `out` stays apart from every input (the `flags`' paths and the model
+/// The scenario file a run reads, as a [`model_inputs`] entry (`scenario`, its path, the
+/// SHA-256 of its bytes), so that `--resume` and `merge` refuse rows of a changed scene;
+/// none for a built-in scenario given by name.
+///
+/// # Errors
+/// A scenario file that cannot be read.
+pub(crate) fn scenario_input(scenario: &str) -> Result<Option<(String, std::path::PathBuf, String)>> {
+    let path = Path::new(scenario);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let f = harness::fingerprint::file(path)?;
+    Ok(Some(("scenario".to_string(), path.to_path_buf(), f)))
+}
+
+/// Checks that `out` stays apart from every input (those `listed` and the model
 /// folders of [`model_inputs`]), then prepares it for a run that appends rows (see
 /// [`crate::output::RunDir::prepare_episodes`]); returns it and its `episodes.jsonl`.
 ///
 /// # Errors
 /// An `out` that overlaps an input, or one `--resume` / `--force` cannot take.
-pub(crate) fn prepare_run<'a>(
+pub(crate) fn prepare_run(
     out: &Path,
-    mut apart: Vec<(&'a str, &'a Path)>,
-    inputs: &'a [(String, std::path::PathBuf, String)],
+    listed: crate::output::Inputs,
+    inputs: &[(String, std::path::PathBuf, String)],
     resume: bool,
     force: bool,
 ) -> Result<(crate::output::RunDir, std::path::PathBuf)> {
-    apart.extend(inputs.iter().map(|(_, dir, _)| ("model folder", dir.as_path())));
-    crate::output::check_apart(out, &apart)?;
-    let dir = crate::output::RunDir::prepare_episodes(out, resume, force)?;
+    let listed = inputs.iter().fold(listed, |acc, (_, dir, _)| acc.add("model folder", dir));
+    let dir = crate::output::RunDir::prepare_episodes(out, &listed, resume, force)?;
     Ok((dir, out.join("episodes.jsonl")))
 }
 

@@ -39,13 +39,42 @@ use crate::progress;
 /// and the finishing run report.
 pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Result<ExitCode> {
     let started = Instant::now();
-    let n = r.processes;
-    if a.out.exists() && !a.force && !a.resume {
+    let parts = shards_folder(&a.out);
+    let dangling = std::fs::symlink_metadata(&a.out).is_ok() && !a.out.exists();
+    if (a.out.exists() || dangling) && !a.force && !a.resume {
         bail!("--out {} exists: pass --force to replace it or --resume to continue it", a.out.display());
     }
-    let total = policies::dir::checkpoint_dirs(&r.policies)?.len() * r.episodes;
-    let parts = shards_folder(&a.out);
-    std::fs::create_dir_all(&parts).with_context(|| format!("creating {}", parts.display()))?;
+    // Resuming a run that has rows but no shards (finished, or run in one process): the
+    // one-process path continues it, checking every setting against its config.json
+    // first, so a resume under other settings is refused, never run over it.
+    if a.resume && a.out.join("episodes.jsonl").is_file() && std::fs::symlink_metadata(&parts).is_err() {
+        tracing::info!("{} has no shards to resume; continuing it in this process", a.out.display());
+        let mut one = a.clone();
+        one.processes = Some(1);
+        return super::run_with(&one, task, r, quiet, None);
+    }
+    let dirs = policies::dir::checkpoint_dirs(&r.policies)?;
+    let total = dirs.len() * r.episodes;
+    // No more processes than batches: a shard without a batch would only start up.
+    let batches = dirs.len() * r.episodes.div_ceil(a.batch.max(1));
+    let n = r.processes.min(batches.max(1));
+    if n < r.processes {
+        tracing::info!("--processes {}: the run has {batches} batches, so {n} processes", r.processes);
+    }
+    // The whole run writes `--out` (and its shards beside it): one writer at a time.
+    let _lock = crate::output::lock::lock(&a.out)?;
+    let inputs = crate::output::Inputs::new()
+        .scenario(&a.scenario)
+        .add("--policies", &r.policies)
+        .world_model("--world-model", &r.world_model)
+        .maybe("--judge", r.judge.as_deref());
+    inputs.check(&a.out)?;
+    inputs.check_kept(&a.out, ".shards")?;
+    if a.resume {
+        check_split(&parts, n)?;
+    }
+    // `OUT.shards` is the tool's own folder: a user's folder of that name is refused, never cleared.
+    crate::output::make_owned(&parts, "the shards of a `rank --processes` run", false)?;
     // A fresh run's shards start empty (`--force`), so claims left by an interrupted
     // one would hold batches nobody runs; a resumed run keeps them for their shards.
     let claims = parts.join("claims");
@@ -77,7 +106,7 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
     }
     let dirs: Vec<PathBuf> = shards.iter().map(|s| s.dir.clone()).collect();
     // The shards' thread times, summed by merge; the wall clock is this command's.
-    let (_, summed) = super::merge::join(&dirs, &a.out, true, true)?;
+    let (_, summed) = super::merge::join(&dirs, &a.out, true, true, false)?;
     let timing = RunTiming {
         wall_seconds: started.elapsed().as_secs_f64(),
         note: format!(
@@ -92,6 +121,29 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
     std::fs::remove_dir_all(&parts)
         .with_context(|| format!("removing the joined shards {}", parts.display()))?;
     Ok(code)
+}
+
+/// Refuses to resume shards split another way: a shard resumed as `i/m` over rows of
+/// `i/n` would be refused by its own settings check, which says `--force` (and would
+/// throw away finished batches); this names the count to resume with instead.
+///
+/// # Errors
+/// A saved split of another count.
+fn check_split(parts: &Path, n: usize) -> Result<()> {
+    let cfg = parts.join("shard-0").join("config.json");
+    let Ok(text) = std::fs::read_to_string(&cfg) else { return Ok(()) };
+    let saved: Option<usize> = serde_json::from_str::<serde_json::Value>(&text)
+        .ok()
+        .and_then(|v| v["shard"][1].as_u64())
+        .and_then(|k| usize::try_from(k).ok());
+    match saved {
+        Some(k) if k != n => bail!(
+            "--resume: {} holds a run split into {k} processes, and this one would be {n}; \
+             resume with --processes {k} (the shards keep their finished batches)",
+            parts.display()
+        ),
+        _ => Ok(()),
+    }
 }
 
 /// Where the shards of a run into `out` go: `OUT.shards` beside it.
@@ -122,6 +174,7 @@ impl Shard {
             .with_context(|| format!("opening {}", self.log.display()))?;
         let child = Command::new(exe)
             .args(shard_args(a, self.i, n, &self.dir, resume))
+            .env(PARENT_ENV, std::process::id().to_string())
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(log)
@@ -130,6 +183,28 @@ impl Shard {
         self.child = Some(child);
         Ok(())
     }
+}
+
+/// The environment variable naming a shard's parent process ([`watch_parent`]).
+const PARENT_ENV: &str = "EVALHARNESS_PARENT_PID";
+
+/// In a shard started by `rank --processes`: a thread that ends this process once
+/// the parent is gone (killed with `kill -9`, say), so that no shard goes on running
+/// (and claiming batches) for a run nobody will finish. The batches it finished are
+/// on disk whole; `--resume` continues from them. A shard started by hand has no
+/// such parent and is not watched.
+pub(super) fn watch_parent() {
+    let Some(parent) = std::env::var(PARENT_ENV).ok().and_then(|p| p.parse::<u32>().ok()) else { return };
+    std::thread::spawn(move || {
+        loop {
+            // Once the parent dies the shard is re-parented (to init or a subreaper).
+            if std::os::unix::process::parent_id() != parent {
+                tracing::error!("the rank --processes parent {parent} is gone; this shard stops");
+                std::process::exit(2);
+            }
+            std::thread::sleep(Duration::from_millis(500));
+        }
+    });
 }
 
 /// Waits for every shard, counting their episodes on `pb` (each `episodes.jsonl` row is

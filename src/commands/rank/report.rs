@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use harness::results::RankResults;
 use reports::html::{Extras, report_html};
 use reports::plots::write_plots;
@@ -36,6 +36,7 @@ fn provenance(dir: &Path) -> String {
 /// Missing or malformed input files (named), or unwritable outputs.
 pub fn write_report(out: &Path) -> Result<PathBuf> {
     let results = RankResults::read(&out.join("results.json"))?;
+    super::check::ranges(&results).with_context(|| format!("{}", out.display()))?;
     let summary = Summary::from_results(&results);
     let config = read_json(&out.join("config.json"))?;
     let mut plots = write_plots(&out.join("plots"), &summary)?;
@@ -136,8 +137,16 @@ fn filmstrips(out: &Path) -> (Vec<(PathBuf, String)>, Vec<String>) {
 ///
 /// # Errors
 /// A run folder without a readable `results.json` (named), or an unwritable `tex`.
-pub fn tasks_table(runs: &[PathBuf], tex: Option<&Path>) -> Result<std::process::ExitCode> {
+pub fn tasks_table(runs: &[PathBuf], tex: Option<&Path>, force: bool) -> Result<std::process::ExitCode> {
     use reports::tasks::{TaskRow, latex_tasks, markdown_tasks};
+    // Inputs before outputs: the LaTeX file is neither a run folder nor inside one (its
+    // results.json would be overwritten), and an existing file is kept without --force.
+    if let Some(path) = tex {
+        crate::output::Inputs::new().all("RUN", runs).check(path)?;
+        if std::fs::symlink_metadata(path).is_ok() && !force {
+            bail!("--tex {} already exists (pass --force to replace it)", path.display());
+        }
+    }
     let rows = runs
         .iter()
         .map(|dir| {
@@ -146,8 +155,9 @@ pub fn tasks_table(runs: &[PathBuf], tex: Option<&Path>) -> Result<std::process:
         })
         .collect::<Result<Vec<_>>>()?;
     if let Some(path) = tex {
-        std::fs::write(path, latex_tasks(&rows)).with_context(|| format!("writing {}", path.display()))?;
+        harness::runfile::write_atomic(path, &latex_tasks(&rows))
+            .map_err(|e| anyhow::anyhow!("writing {}: {}", e.path.display(), e.message))?;
     }
-    print!("{}", markdown_tasks(&rows));
+    out!("{}", markdown_tasks(&rows));
     Ok(std::process::ExitCode::SUCCESS)
 }

@@ -89,6 +89,37 @@ fn check_fingerprints(path: &Path, saved: &Value, config: &Value) -> Result<()> 
     Ok(())
 }
 
+/// Puts a resumed or extended run's rows in the order a straight run appends them
+/// (policy by policy in folder order, each policy's batches in seed order; rows within
+/// a batch as the engine gave them), rewriting `episodes.jsonl` atomically when the
+/// order changed. A run grown with `--episodes` appended its new batches after every
+/// policy's old ones; sorted, its file equals the straight run's byte for byte.
+///
+/// # Errors
+/// The file cannot be written.
+pub(crate) fn straight_order(
+    jsonl: &Path,
+    rows: &mut Vec<EpisodeRow>,
+    names: &[String],
+    batches: &[&[u64]],
+) -> Result<()> {
+    let batch_of = |seed: u64| batches.iter().position(|b| b.contains(&seed)).unwrap_or(usize::MAX);
+    let key = |r: &EpisodeRow| {
+        (names.iter().position(|n| *n == r.policy).unwrap_or(usize::MAX), batch_of(r.seed))
+    };
+    if rows.windows(2).all(|w| key(&w[0]) <= key(&w[1])) {
+        return Ok(());
+    }
+    rows.sort_by_key(key);
+    let mut text = String::new();
+    for r in rows.iter() {
+        text.push_str(&serde_json::to_string(r)?);
+        text.push('\n');
+    }
+    harness::runfile::write_atomic(jsonl, &text)
+        .map_err(|e| anyhow::anyhow!("rewriting {} in run order: {}", e.path.display(), e.message))
+}
+
 /// A `rank` row's (policy, seed, branch), for [`harness::rows::whole_batches`].
 pub(crate) fn rank_key(r: &EpisodeRow) -> (&str, u64, Branch) {
     (r.policy.as_str(), r.seed, r.branch)

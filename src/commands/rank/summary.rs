@@ -104,7 +104,7 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
     let or_nan = |v: Option<f64>| v.unwrap_or(f64::NAN);
     let scene = res.policies.iter().any(|p| p.world_model.block_area.is_some() || p.sim.block_area.is_some());
     if scene {
-        println!(
+        outln!(
             "{:<16} {:>10} {:>12} {:>12} {:>10} {:>11}",
             "policy", "MuJoCo", "world model", "block kept", "goal kept", "agent kept"
         );
@@ -112,7 +112,7 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
         // A task without scene checks (robomimic's, scored by success alone): the success
         // rates with their Wilson 95% intervals, the mean steps to success, and the seeds
         // that succeed in one branch only.
-        println!(
+        outln!(
             "{:<16} {:>22} {:>22} {:>14} {:>14} {:>14} {:>12} {:>6}",
             "policy",
             "MuJoCo success",
@@ -127,7 +127,7 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
     for p in &res.policies {
         let wm = &p.world_model;
         if scene {
-            println!(
+            outln!(
                 "{:<16} {:>10.3} {:>12.3} {:>12.2} {:>10.2} {:>11.2}",
                 p.name,
                 p.sim.mean,
@@ -146,7 +146,7 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
             };
             let kappa =
                 p.paired_success.and_then(|c| c.kappa()).map_or("-".to_string(), |k| format!("{k:.2}"));
-            println!(
+            outln!(
                 "{:<16} {:>22} {:>22} {:>14} {:>14} {:>14} {:>12} {:>6}",
                 p.name,
                 rate(&p.sim),
@@ -161,7 +161,7 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
     }
     let ag = &res.agreement;
     let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.3}"));
-    println!(
+    outln!(
         "Pearson {}  Spearman {}  Kendall tau_b {}  inversions {}  MMRV {}  regret@1 {}  MAE {}",
         f(ag.pearson),
         f(ag.spearman),
@@ -172,15 +172,15 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
         f(ag.mean_abs_error)
     );
     if let Some(c) = &ag.noise_ceiling {
-        println!(
+        outln!(
             "noise ceiling (two resampled MuJoCo runs of this size agree at): Pearson {}  inversions {:.1}  MAE {:.3}",
             c.pearson_text(),
             c.rank_inversions,
             c.mean_abs_error
         );
     }
-    println!("results: {}", out.join("results.json").display());
+    outln!("results: {}", out.join("results.json").display());
     if let Some(html) = report {
-        println!("report: {}", html.display());
+        outln!("report: {}", html.display());
     }
 }

@@ -1,12 +1,52 @@
-//! Output directories that never look complete before they are.
+//! Output directories that never look complete before they are, and never cost the
+//! user an input or a finished result.
 //!
-//! A command writes into `OUT.partial/` and renames it to `OUT` at the end; an
-//! existing `OUT` is refused unless `--force`. A resumable run ([`RunDir`]) writes
-//! in place, and moves a folder it replaces aside until it completes.
+//! A command writes into `OUT.partial/` and renames it to `OUT` at the end ([`Staged`]);
+//! an existing `OUT` is refused unless `--force`. A resumable run ([`RunDir`]) writes
+//! in place, and moves a folder it replaces aside until it completes. Both take the
+//! command's [`Inputs`] and check them against `--out` before touching anything
+//! ([`inputs`]), refuse a dangling `--out` link, and hold the output's lock ([`lock`])
+//! while they write.
+
+pub mod dataset;
+pub mod inputs;
+pub mod lock;
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
+
+pub use inputs::Inputs;
+use inputs::{check_not_dangling, sibling};
+
+/// The file that marks a folder beside `--out` as the tool's own (`OUT.partial`,
+/// `OUT.shards`): only a folder with it is ever cleared. A folder of the same name
+/// without it is the user's, and the command is refused instead.
+pub const OWNED_MARK: &str = ".evalharness-owned";
+
+/// Makes `dir` (fresh) as a folder the tool owns; an existing `dir` is removed first
+/// only when it carries [`OWNED_MARK`] (`what` says what it is for, in the error).
+///
+/// # Errors
+/// An existing `dir` without the mark, or an I/O failure.
+pub fn make_owned(dir: &Path, what: &str, clear: bool) -> Result<()> {
+    if std::fs::symlink_metadata(dir).is_ok() {
+        if !dir.join(OWNED_MARK).is_file() {
+            bail!(
+                "{} exists and was not made by evalharness, which keeps {what} there; \
+                 move or rename it (nothing was written)",
+                dir.display()
+            );
+        }
+        if !clear {
+            return Ok(());
+        }
+        std::fs::remove_dir_all(dir).with_context(|| format!("removing the old {}", dir.display()))?;
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    std::fs::write(dir.join(OWNED_MARK), format!("{what}\n"))
+        .with_context(|| format!("writing {}", dir.join(OWNED_MARK).display()))
+}
 
 /// A run's output folder that `--resume` can continue, guarded so that a failed or
 /// refused run never costs the user a finished result (the guarantees in
@@ -25,19 +65,32 @@ pub struct RunDir {
     created: bool,
     progress: &'static str,
     settled: bool,
+    _lock: lock::OutLock,
 }
 
 impl RunDir {
-    /// Prepares `out`; call it only after every input has been checked.
-    /// `progress` names the file whose presence means the run has something to keep
-    /// (e.g. `episodes.jsonl`, `state.json`).
+    /// Prepares `out` for a command reading `inputs`; call it only after every input
+    /// has been read and checked. `progress` names the file whose presence means the
+    /// run has something to keep (e.g. `episodes.jsonl`, `state.json`).
     ///
     /// # Errors
-    /// An existing folder without `resume` or `force`, an `OUT.replaced` left by an
+    /// An `out` that overlaps an input or is a dangling link, another process writing
+    /// it, an existing folder without `resume` or `force`, an `OUT.replaced` left by an
     /// interrupted `--force` run, or a failure to rename or create a folder.
-    pub fn prepare(out: &Path, resume: bool, force: bool, progress: &'static str) -> Result<Self> {
+    pub fn prepare(
+        out: &Path,
+        inputs: &Inputs,
+        resume: bool,
+        force: bool,
+        progress: &'static str,
+    ) -> Result<Self> {
+        inputs.check(out)?;
+        inputs.check_kept(out, ".replaced")?;
+        check_not_dangling(out)?;
+        let lock = lock::lock(out)?;
         let aside = sibling(out, ".replaced");
-        let mut dir = Self { out: out.to_path_buf(), aside: None, created: false, progress, settled: false };
+        let mut dir =
+            Self { out: out.to_path_buf(), aside: None, created: false, progress, settled: false, _lock: lock };
         if resume {
             // A resumed `--force` run completes the replacement when it finishes.
             dir.aside = aside.exists().then_some(aside);
@@ -62,8 +115,10 @@ impl RunDir {
             dir.aside = Some(aside);
         }
         if !dir.out.exists() {
-            dir.created = true;
             std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+            // Only a folder this run made is removed again by a failure (never the
+            // path it could not create, which may be the user's link or file).
+            dir.created = true;
         }
         Ok(dir)
     }
@@ -74,7 +129,7 @@ impl RunDir {
     ///
     /// # Errors
     /// As [`RunDir::prepare`], and rows without a `config.json` on `--resume`.
-    pub fn prepare_episodes(out: &Path, resume: bool, force: bool) -> Result<Self> {
+    pub fn prepare_episodes(out: &Path, inputs: &Inputs, resume: bool, force: bool) -> Result<Self> {
         if resume && out.join("episodes.jsonl").exists() && !out.join("config.json").is_file() {
             bail!(
                 "--resume: {} has episodes but no config.json, so the settings its rows were run with \
@@ -82,7 +137,7 @@ impl RunDir {
                 out.display()
             );
         }
-        Self::prepare(out, resume, force, "episodes.jsonl")
+        Self::prepare(out, inputs, resume, force, "episodes.jsonl")
     }
 
     /// The run ended: a `complete` run deletes the folder it replaced; an incomplete
@@ -115,8 +170,9 @@ impl Drop for RunDir {
             return;
         }
         if let Some(aside) = &self.aside {
-            let restored =
-                std::fs::remove_dir_all(&self.out).and_then(|()| std::fs::rename(aside, &self.out));
+            let cleared =
+                if std::fs::symlink_metadata(&self.out).is_ok() { std::fs::remove_dir_all(&self.out) } else { Ok(()) };
+            let restored = cleared.and_then(|()| std::fs::rename(aside, &self.out));
             match restored {
                 Ok(()) => tracing::warn!("the run failed; {} is as it was before", self.out.display()),
                 Err(e) => tracing::error!(
@@ -136,79 +192,32 @@ fn has_content(path: &Path) -> bool {
     std::fs::metadata(path).is_ok_and(|m| m.len() > 0)
 }
 
-/// `path` with `suffix` appended to its last component (`out` -> `out.replaced`).
-fn sibling(path: &Path, suffix: &str) -> PathBuf {
-    let mut s = path.as_os_str().to_owned();
-    s.push(suffix);
-    PathBuf::from(s)
-}
-
-/// Refuses an output folder that is, lies inside, or contains one of the inputs
-/// (each given with the flag that named it): replacing it would delete the input,
-/// and an output inside a policy folder would be loaded as a policy next time.
-///
-/// # Errors
-/// The first overlap, naming the flag and both paths.
-pub fn check_apart(out: &Path, inputs: &[(&str, &Path)]) -> Result<()> {
-    let o = absolute(out);
-    for (flag, input) in inputs {
-        let i = absolute(input);
-        let how = if o == i {
-            "is"
-        } else if o.starts_with(&i) {
-            "lies inside"
-        } else if i.starts_with(&o) {
-            "contains"
-        } else {
-            continue;
-        };
-        bail!(
-            "--out {} {how} the input {flag} {}; write the output somewhere else",
-            out.display(),
-            input.display()
-        );
-    }
-    Ok(())
-}
-
-/// `p` as an absolute path with its existing part resolved (symbolic links, `..`),
-/// so two spellings of one folder compare equal even when `p` does not exist yet.
-fn absolute(p: &Path) -> PathBuf {
-    let p = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
-    let mut tail = Vec::new();
-    let mut head = p.as_path();
-    loop {
-        if let Ok(real) = head.canonicalize() {
-            return tail.iter().rev().fold(real, |acc, c| acc.join(c));
-        }
-        match (head.parent(), head.file_name()) {
-            (Some(parent), Some(name)) => {
-                tail.push(name.to_os_string());
-                head = parent;
-            }
-            _ => return p,
-        }
-    }
-}
-
 /// A staging directory for an output folder.
 pub struct Staged {
     target: PathBuf,
     tmp: PathBuf,
+    _lock: lock::OutLock,
 }
 
 impl Staged {
-    /// Prepares `target` (refusing an existing one unless `force`).
-    pub fn new(target: &Path, force: bool) -> Result<Self> {
-        if target.exists() && !force {
+    /// Prepares `target` for a command reading `inputs` (refusing an existing one
+    /// unless `force`); call it only after every input has been read and checked.
+    ///
+    /// # Errors
+    /// A `target` that overlaps an input or is a dangling link, another process
+    /// writing it, an existing one without `force`, an `OUT.partial` that is not the
+    /// tool's, or an I/O failure.
+    pub fn new(target: &Path, force: bool, inputs: &Inputs) -> Result<Self> {
+        inputs.check(target)?;
+        inputs.check_kept(target, ".partial")?;
+        check_not_dangling(target)?;
+        let lock = lock::lock(target)?;
+        if std::fs::symlink_metadata(target).is_ok() && !force {
             bail!("output {} already exists (pass --force to replace it)", target.display());
         }
         let tmp = sibling(target, ".partial");
-        if tmp.exists() {
-            std::fs::remove_dir_all(&tmp).with_context(|| format!("removing stale {}", tmp.display()))?;
-        }
-        std::fs::create_dir_all(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
-        Ok(Self { target: target.to_path_buf(), tmp })
+        make_owned(&tmp, "a command's output while it is written", true)?;
+        Ok(Self { target: target.to_path_buf(), tmp, _lock: lock })
     }
 
     /// The staging directory itself.
@@ -223,10 +232,13 @@ impl Staged {
 
     /// Moves the staging directory into place (replacing an old output).
     pub fn commit(self) -> Result<PathBuf> {
-        if self.target.exists() {
-            std::fs::remove_dir_all(&self.target)
-                .with_context(|| format!("removing old {}", self.target.display()))?;
+        let _ = std::fs::remove_file(self.tmp.join(OWNED_MARK));
+        match std::fs::symlink_metadata(&self.target) {
+            Ok(m) if m.is_dir() => std::fs::remove_dir_all(&self.target),
+            Ok(_) => std::fs::remove_file(&self.target),
+            Err(_) => Ok(()),
         }
+        .with_context(|| format!("removing old {}", self.target.display()))?;
         std::fs::rename(&self.tmp, &self.target)
             .with_context(|| format!("moving {} into place", self.target.display()))?;
         Ok(self.target.clone())
@@ -235,6 +247,7 @@ impl Staged {
     /// Moves each entry of the staging directory into the existing target folder,
     /// refusing (before moving anything) names the target already holds.
     pub fn commit_into(self) -> Result<PathBuf> {
+        let _ = std::fs::remove_file(self.tmp.join(OWNED_MARK));
         let entries: Vec<PathBuf> = std::fs::read_dir(&self.tmp)
             .with_context(|| format!("reading {}", self.tmp.display()))?
             .map(|e| e.map(|e| e.path()))

@@ -1,0 +1,61 @@
+//! "Bounded, validated values": every count a command takes is checked at parsing
+//! against a range that the machine can honour, so that a typo (`--jobs 20000`,
+//! `--proposals 1e9`, `--feature-dim 0`) is refused by clap, naming the flag, instead
+//! of aborting on memory, spawning without end, or panicking inside burn.
+
+use clap::builder::RangedU64ValueParser;
+
+/// Worker threads or processes a command may start.
+pub const MAX_WORKERS: u64 = 256;
+/// `rank --processes`: shard processes at once.
+pub const MAX_PROCESSES: u64 = 64;
+/// Episodes or samples advanced together in one batch.
+pub const MAX_BATCH: u64 = 10_000;
+/// A network's width (channels, features).
+pub const MAX_WIDTH: u64 = 4096;
+
+/// A count in `lo..=hi`, as `usize`.
+pub fn count(lo: u64, hi: u64) -> RangedU64ValueParser<usize> {
+    RangedU64ValueParser::<usize>::new().range(lo..=hi)
+}
+
+/// `--jobs`: 1 to [`MAX_WORKERS`].
+pub fn workers() -> RangedU64ValueParser<usize> {
+    count(1, MAX_WORKERS)
+}
+
+/// A batch size: 1 to [`MAX_BATCH`].
+pub fn batch() -> RangedU64ValueParser<usize> {
+    count(1, MAX_BATCH)
+}
+
+/// A network width: 1 to [`MAX_WIDTH`].
+pub fn width() -> RangedU64ValueParser<usize> {
+    count(1, MAX_WIDTH)
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    #[test]
+    fn counts_out_of_range_are_refused_by_flag() {
+        // Each of these was accepted at 92f9f2b (and panicked inside burn, or could
+        // abort on memory or spawn without end).
+        for argv in [
+            "evalharness rank --jobs 0",
+            "evalharness rank --jobs 100000",
+            "evalharness rank --processes 1000",
+            "evalharness rank --batch 0",
+            "evalharness plan --proposals 1000000000",
+            "evalharness train judge --data d --out o --feature-dim 0",
+            "evalharness train judge --data d --out o --encoder-width 0",
+            "evalharness train judge --data d --out o --batch 100000000",
+        ] {
+            let flag = argv.split_whitespace().rev().nth(1).unwrap();
+            let e = crate::cli::Cli::try_parse_from(argv.split_whitespace()).unwrap_err().to_string();
+            assert!(e.contains(flag), "{argv}: {e}");
+        }
+        crate::cli::Cli::try_parse_from("evalharness rank --jobs 2 --processes 3".split_whitespace()).unwrap();
+    }
+}
