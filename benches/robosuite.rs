@@ -3,6 +3,11 @@
 //! of an episode's reset (Lift composes and compiles its scene per episode for
 //! the cube's size; Can copies one compiled model).
 //!
+//! The `frame` group times one 96 × 96 agentview frame of each task under each
+//! rendering setting of `scenarios::robosuite::visual::Visual`, switched alone and
+//! together (the mean pixel difference each makes is measured by the ignored test
+//! `scenarios::robosuite::tests::frame_cost_per_visual_setting`).
+//!
 //! `cargo bench --bench robosuite`; results are recorded in BENCHMARKS.md.
 
 // criterion_group! generates undocumented functions.
@@ -14,6 +19,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use scenarios::can::{CanConfig, CanSim};
 use scenarios::lift::{LiftConfig, LiftSim};
 use scenarios::robosuite::episode::release_renderer;
+use scenarios::robosuite::visual::Visual;
 
 fn lift(c: &mut Criterion) {
     let sim = LiftSim::new(LiftConfig::default()).expect("robosuite assets (scripts/setup.sh)");
@@ -60,5 +66,33 @@ fn can(c: &mut Criterion) {
     release_renderer();
 }
 
-criterion_group!(benches, lift, can);
+/// The rendering settings the `frame` group compares, each alone, then together.
+fn settings() -> Vec<(&'static str, Visual)> {
+    let base = Visual::default();
+    vec![
+        ("default", base),
+        ("offscreen_96", Visual { offscreen: [96, 96], ..base }),
+        ("samples_0", Visual { samples: 0, ..base }),
+        ("shadow_256", Visual { shadow_size: 256, ..base }),
+        ("no_reflections", Visual { reflections: false, ..base }),
+        ("all", Visual { offscreen: [96, 96], samples: 0, shadow_size: 256, reflections: false }),
+    ]
+}
+
+fn frame(c: &mut Criterion) {
+    let mut g = c.benchmark_group("frame");
+    for (name, visual) in settings() {
+        let lift = LiftSim::new(LiftConfig { visual, ..LiftConfig::default() }).expect("robosuite assets");
+        let mut ep = lift.reset(1).expect("reset");
+        g.bench_function(format!("lift_{name}"), |b| b.iter(|| ep.render(black_box(96)).expect("renders")));
+        release_renderer();
+        let can = CanSim::new(CanConfig { visual, ..CanConfig::default() }).expect("robosuite assets");
+        let mut ep = can.reset(1).expect("reset");
+        g.bench_function(format!("can_{name}"), |b| b.iter(|| ep.arm_mut().render(black_box(96)).expect("renders")));
+        release_renderer();
+    }
+    g.finish();
+}
+
+criterion_group!(benches, lift, can, frame);
 criterion_main!(benches);

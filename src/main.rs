@@ -66,3 +66,16 @@ fn init_logging(verbose: u8, quiet: bool) {
         .with_target(false)
         .init();
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn an_error_says_each_cause_once() {
+        // At 92f9f2b `{e:#}` printed an I/O error twice when its context quoted it.
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "No such file or directory (os error 2)");
+        let e = anyhow::Error::new(io).context("reading x.json: No such file or directory (os error 2)");
+        assert_eq!(super::chain(&e), "reading x.json: No such file or directory (os error 2)");
+        let e = anyhow::anyhow!("disk full").context("writing y");
+        assert_eq!(super::chain(&e), "writing y: disk full");
+    }
+}

@@ -42,5 +42,6 @@ pub fn expectations(task: &dyn Task) -> Expectations {
         proprio_dim: obs.proprio.len(),
         action_low: act.low,
         action_high: act.high,
+        task: Some(task.name().to_string()),
     }
 }

@@ -312,3 +312,20 @@ fn alive(pid: u32) -> bool {
     std::fs::read_to_string(format!("/proc/{pid}/stat"))
         .is_ok_and(|st| st.rsplit(')').next().is_some_and(|rest| !rest.trim_start().starts_with('Z')))
 }
+
+#[test]
+fn a_resume_with_another_split_names_the_count_to_use() {
+    // D22: resuming a `--processes 3` run with `--processes 2` suggested `--force`,
+    // which would throw the finished batches away.
+    let tmp = tempfile::tempdir().unwrap();
+    let (set, wm) = inputs(tmp.path());
+    let out = tmp.path().join("r");
+    let shards = tmp.path().join("r.shards");
+    std::fs::create_dir_all(shards.join("shard-0")).unwrap();
+    std::fs::write(shards.join(".evalharness-owned"), "shards\n").unwrap();
+    std::fs::write(shards.join("shard-0/config.json"), r#"{"shard": [0, 3]}"#).unwrap();
+    let mut args = rank_args(&set, &wm, &out);
+    args.extend(["--processes", "2", "--resume"]);
+    let (_, err) = expect_code(&run(&args), 2);
+    assert!(err.contains("resume with --processes 3") && !err.contains("--force"), "{err}");
+}

@@ -358,6 +358,8 @@ fn pipeline_end_to_end() {
     let resumed = dir.join("procs_resumed");
     let held = dir.join("procs_resumed.shards/claims");
     std::fs::create_dir_all(&held).unwrap();
+    // The tool marks the shards' folder as its own (a user's folder of that name is refused).
+    std::fs::write(dir.join("procs_resumed.shards/.evalharness-owned"), "shards\n").unwrap();
     std::fs::write(held.join("policy-0-batch-0"), "1").unwrap();
     std::fs::write(held.join("policy-1-batch-1"), "7").unwrap();
     let mut r = base.to_vec();

@@ -53,6 +53,11 @@ pub struct PolicyFile {
     pub provenance: Value,
     /// Training loss at the checkpoint.
     pub train_loss: f64,
+    /// The task its demonstrations came from (`pusht`, `lift`, `can`): a checkpoint of
+    /// one arm task reads and acts like one of the other, so only this tells them apart.
+    /// Absent in checkpoints written before 2026-11-29, which are not checked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task: Option<String>,
 }
 
 impl PolicyFile {
@@ -64,6 +69,7 @@ impl PolicyFile {
         step: u64,
         provenance: &Value,
         train_loss: f64,
+        task: Option<&str>,
     ) -> Self {
         Self {
             kind: "diffusion".into(),
@@ -73,6 +79,7 @@ impl PolicyFile {
             normalisation: norm.clone(),
             provenance: provenance.clone(),
             train_loss,
+            task: task.map(str::to_owned),
         }
     }
 }
@@ -126,12 +133,20 @@ pub struct Expectations {
     pub action_low: Vec<f32>,
     /// Each action entry's upper bound.
     pub action_high: Vec<f32>,
+    /// The task's name: a checkpoint that records another task is refused.
+    pub task: Option<String>,
 }
 
 impl Expectations {
     /// Push-T's: `image_size`² frames, the agent's 2-D position, targets in [0, 512]².
     pub fn pusht(image_size: usize) -> Self {
-        Self { image_size, proprio_dim: 2, action_low: vec![0.0; 2], action_high: vec![512.0; 2] }
+        Self {
+            image_size,
+            proprio_dim: 2,
+            action_low: vec![0.0; 2],
+            action_high: vec![512.0; 2],
+            task: Some("pusht".into()),
+        }
     }
 
     /// Entries per action.
@@ -159,6 +174,11 @@ pub fn load_policy(
     let err = |m: String| PolicyLoadError::new(dir, m);
     let file = read_policy_file(dir)?;
     let name = checkpoint_name(dir);
+    if let (Some(theirs), Some(ours)) = (&file.task, &expect.task)
+        && theirs != ours
+    {
+        return Err(err(format!("was trained on task {theirs}'s demonstrations; this run is task {ours}")));
+    }
     match file.kind.as_str() {
         "diffusion" => {
             let cfg = diffusion_config(dir, &file)?;
@@ -337,6 +357,7 @@ mod tests {
             1,
             &Value::Null,
             0.0,
+            Some("pusht"),
         );
         file.kind = "transformer".into();
         std::fs::write(ck.join("policy.json"), serde_json::to_string(&file).unwrap()).unwrap();
@@ -346,6 +367,11 @@ mod tests {
         std::fs::write(ck.join("policy.json"), serde_json::to_string(&file).unwrap()).unwrap();
         let e = load_policy(&ck, &Expectations::pusht(64), &device).err().unwrap();
         assert!(e.to_string().contains("96x96"), "{e}");
+        // At 92f9f2b a checkpoint of another task with the same widths (Lift's on Can)
+        // loaded and ranked; its recorded task is now checked first.
+        let can = Expectations { task: Some("can".into()), ..Expectations::pusht(96) };
+        let e = load_policy(&ck, &can, &device).err().unwrap();
+        assert!(e.to_string().contains("trained on task pusht's demonstrations; this run is task can"), "{e}");
         // Weights missing, then truncated.
         let e = load_policy(&ck, expect, &device).err().unwrap();
         assert!(e.to_string().contains("model.bpk"), "{e}");

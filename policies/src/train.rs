@@ -136,6 +136,9 @@ pub struct RunConfigs {
     pub normalisation: Normalisation,
     /// Free-form provenance (data, command) copied into every checkpoint.
     pub provenance: serde_json::Value,
+    /// The task of the demonstrations, recorded in every checkpoint's `policy.json`.
+    #[serde(default)]
+    pub task: Option<String>,
 }
 
 /// What a session ended with.
@@ -363,7 +366,15 @@ pub fn train_policy(
                 } else {
                     json!("raw")
                 };
-                let file = PolicyFile::diffusion(pc, &configs.normalisation, done, state.step, &prov, lv);
+                let file = PolicyFile::diffusion(
+                    pc,
+                    &configs.normalisation,
+                    done,
+                    state.step,
+                    &prov,
+                    lv,
+                    configs.task.as_deref(),
+                );
                 let weights = if tc.ema > 0.0 { ema.module.clone() } else { net.valid() };
                 write_policy(&ck, &file, &weights)?;
                 saved.push(ck);

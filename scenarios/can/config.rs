@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::ScenarioError;
 use crate::robosuite::read_named_toml;
+use crate::robosuite::visual::Visual;
 
 /// Everything that defines a Can episode except the seed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -34,6 +35,10 @@ pub struct CanConfig {
     pub release_distance: f64,
     /// Control steps per episode (robomimic's rollout horizon).
     pub max_steps: usize,
+    /// How agentview frames are rendered (`[visual]`; the default is what the shipped
+    /// models were trained on).
+    #[serde(skip_serializing_if = "Visual::is_default")]
+    pub visual: Visual,
 }
 
 impl Default for CanConfig {
@@ -48,6 +53,7 @@ impl Default for CanConfig {
             init_noise: 0.02,
             release_distance: 0.4f64.atanh() / 10.0,
             max_steps: 400,
+            visual: Visual::default(),
         }
     }
 }
@@ -111,7 +117,7 @@ impl CanConfig {
         if !(1..=100_000).contains(&self.max_steps) {
             return Err(bad("max_steps", "must be in [1, 100000]"));
         }
-        Ok(())
+        self.visual.validate(path)
     }
 
     /// The robot base: robosuite's Panda `base_xpos_offset["bins"]` (−0.5, −0.1)

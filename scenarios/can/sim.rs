@@ -69,7 +69,7 @@ impl CanInit {
 /// # Errors
 /// Missing assets or a model MuJoCo refuses.
 pub fn can_model(cfg: &CanConfig, dir: &Path) -> Result<MjModel, ScenarioError> {
-    let mut b = SceneBuilder::bins_arena(dir)?;
+    let mut b = SceneBuilder::bins_arena(dir, &cfg.visual)?;
     b.panda(cfg.robot_base())?;
     let meshes = dir.join("objects/meshes");
     // The markers sit at their quadrant's centre, their bottom on bin 2's reference height.

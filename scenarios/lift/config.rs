@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::ScenarioError;
 use crate::robosuite::read_named_toml;
+use crate::robosuite::visual::Visual;
 
 /// Everything that defines a Lift episode except the seed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -36,6 +37,10 @@ pub struct LiftConfig {
     pub success_height: f64,
     /// Control steps per episode (robomimic's rollout horizon).
     pub max_steps: usize,
+    /// How agentview frames are rendered (`[visual]`; the default is what the shipped
+    /// models were trained on).
+    #[serde(skip_serializing_if = "Visual::is_default")]
+    pub visual: Visual,
 }
 
 impl Default for LiftConfig {
@@ -52,6 +57,7 @@ impl Default for LiftConfig {
             init_noise: 0.02,
             success_height: 0.04,
             max_steps: 400,
+            visual: Visual::default(),
         }
     }
 }
@@ -128,7 +134,7 @@ impl LiftConfig {
         if !(1..=100_000).contains(&self.max_steps) {
             return Err(bad("max_steps", "must be in [1, 100000]"));
         }
-        Ok(())
+        self.visual.validate(path)
     }
 
     /// The robot base for this table: robosuite's Panda `base_xpos_offset["table"]`

@@ -67,7 +67,7 @@ impl LiftInit {
 pub fn lift_model(cfg: &LiftConfig, dir: &Path, cube_half: [f64; 3]) -> Result<MjModel, ScenarioError> {
     let table =
         Table { full_size: cfg.table_full_size, friction: cfg.table_friction, offset: cfg.table_offset };
-    let mut b = SceneBuilder::table_arena(dir, &table)?;
+    let mut b = SceneBuilder::table_arena(dir, &table, &cfg.visual)?;
     b.panda(cfg.robot_base())?;
     // robosuite's BoxObject("cube", rgba red, material "redwood"), its names under
     // the prefix `cube_` as robosuite's: a collision box

@@ -14,6 +14,7 @@ pub mod osc;
 pub mod rollout;
 pub mod scene;
 pub mod task;
+pub mod visual;
 pub mod wander;
 
 #[cfg(test)]

@@ -24,6 +24,7 @@ use std::path::{Path, PathBuf};
 use mujoco_rs::prelude::*;
 
 use crate::error::ScenarioError;
+use crate::robosuite::visual::Visual;
 
 /// The Panda's joint names in the composed model, in qpos order.
 pub const ARM_JOINTS: [&str; 7] = [
@@ -47,12 +48,12 @@ const ARM_DAMPING: [f64; 7] = [0.1, 0.1, 0.1, 0.1, 0.1, 0.01, 0.01];
 
 /// robosuite's global physics options (base.xml) plus its 0.002 s timestep,
 /// put into the arena file (the root of the composed scene).
+/// The `<visual>` element follows, from [`Visual::xml`].
 const BASE_OPTIONS: &str = r#"
   <compiler angle="radian" inertiagrouprange="0 0" autolimits="true"/>
   <option timestep="0.002" impratio="20" cone="elliptic" density="1.2" viscosity="0.00002"/>
   <size memory="64M"/>
-  <visual><map znear="0.001"/><global offwidth="640" offheight="480"/></visual>
-"#;
+  "#;
 
 /// The table of robosuite's `TableArena`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -94,7 +95,7 @@ fn load(dir: &Path, rel: &str) -> Result<MjSpec, ScenarioError> {
 /// Loads an arena file as the root of a scene: robosuite's global options go in
 /// and its relative texture paths are made absolute (the text is parsed from
 /// memory, so MuJoCo has no file to resolve them against).
-fn load_root(dir: &Path, rel: &str) -> Result<MjSpec, ScenarioError> {
+fn load_root(dir: &Path, rel: &str, visual: &Visual) -> Result<MjSpec, ScenarioError> {
     let path = dir.join(rel);
     let text =
         std::fs::read_to_string(&path).map_err(|source| ScenarioError::Io { path: path.clone(), source })?;
@@ -103,7 +104,7 @@ fn load_root(dir: &Path, rel: &str) -> Result<MjSpec, ScenarioError> {
     let Some(open) = text.find("<mujoco").and_then(|i| text[i..].find('>').map(|j| i + j + 1)) else {
         return Err(model_err(format!("{}: no <mujoco> element", path.display())));
     };
-    let text = format!("{}{BASE_OPTIONS}{}", &text[..open], &text[open..]);
+    let text = visual.arena(&format!("{}{BASE_OPTIONS}{}\n{}", &text[..open], visual.xml(), &text[open..]));
     MjSpec::from_xml_string(&text).map_err(|e| model_err(format!("{}: {e}", path.display())))
 }
 
@@ -118,9 +119,9 @@ impl SceneBuilder {
     ///
     /// # Errors
     /// The file is missing, lacks an element robosuite resizes, or MuJoCo refuses it.
-    pub fn table_arena(dir: &Path, t: &Table) -> Result<Self, ScenarioError> {
+    pub fn table_arena(dir: &Path, t: &Table, visual: &Visual) -> Result<Self, ScenarioError> {
         let rel = "arenas/table_arena.xml";
-        let mut arena = load_root(dir, rel)?;
+        let mut arena = load_root(dir, rel, visual)?;
         let half = [t.full_size[0] / 2.0, t.full_size[1] / 2.0, t.full_size[2] / 2.0];
         // The body sits half a thickness under the top surface.
         let centre = [t.offset[0], t.offset[1], t.offset[2] - half[2]];
@@ -159,8 +160,8 @@ impl SceneBuilder {
     ///
     /// # Errors
     /// The file is missing or MuJoCo refuses it.
-    pub fn bins_arena(dir: &Path) -> Result<Self, ScenarioError> {
-        Ok(Self { spec: load_root(dir, "arenas/bins_arena.xml")?, dir: dir.to_path_buf() })
+    pub fn bins_arena(dir: &Path, visual: &Visual) -> Result<Self, ScenarioError> {
+        Ok(Self { spec: load_root(dir, "arenas/bins_arena.xml", visual)?, dir: dir.to_path_buf() })
     }
 
     /// Attaches an object given as MJCF text under `prefix` (robosuite's object

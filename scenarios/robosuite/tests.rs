@@ -13,7 +13,7 @@ use crate::lift::sim::{LiftInit, LiftSim, lift_model};
 
 fn lift_scene() -> MjModel {
     let dir = assets_dir().expect("robosuite assets (scripts/setup.sh)");
-    let mut b = SceneBuilder::table_arena(&dir, &Table::LIFT).unwrap();
+    let mut b = SceneBuilder::table_arena(&dir, &Table::LIFT, &crate::robosuite::visual::Visual::default()).unwrap();
     // Lift: base at (-0.16 - 0.8 / 2, 0, 0) raised by the mount's 0.912 m.
     b.panda([-0.56, 0.0, 0.912]).unwrap();
     b.compile("lift").unwrap()
@@ -84,4 +84,72 @@ fn the_cube_weighs_what_robosuites_does_for_the_same_size() {
     let init = LiftInit::draw(sim.config(), 0);
     let ep = sim.reset_to(0, init).unwrap();
     assert_eq!(ep.arm().arm_q(), init.arm_q);
+}
+
+/// What each rendering setting costs and changes (run by hand, `--ignored --nocapture`;
+/// the criterion bench times the same settings).
+#[test]
+#[ignore = "a measurement, printed: cargo test -p scenarios frame_cost -- --ignored --nocapture"]
+fn frame_cost_per_visual_setting() {
+    use crate::robosuite::visual::Visual;
+    let base = Visual::default();
+    let variants = [
+        ("default", base),
+        ("offscreen 96x96", Visual { offscreen: [96, 96], ..base }),
+        ("samples 0", Visual { samples: 0, ..base }),
+        ("samples 1", Visual { samples: 1, ..base }),
+        ("samples 2", Visual { samples: 2, ..base }),
+        ("shadow 256", Visual { shadow_size: 256, ..base }),
+        ("no reflections", Visual { reflections: false, ..base }),
+        ("all cheap", Visual { offscreen: [96, 96], samples: 0, shadow_size: 256, reflections: false }),
+        ("cheap, samples 4", Visual { offscreen: [96, 96], samples: 4, shadow_size: 256, reflections: false }),
+    ];
+    for task in ["lift", "can"] {
+        let mut reference: Vec<Vec<u8>> = Vec::new();
+        for (name, v) in variants {
+            let mut frames = Vec::new();
+            let t = std::time::Instant::now();
+            let n = if task == "lift" {
+                let sim = crate::lift::LiftSim::new(crate::lift::LiftConfig { visual: v, ..Default::default() }).unwrap();
+                let mut ep = sim.reset(3).unwrap();
+                let t0 = std::time::Instant::now();
+                for k in 0..30 {
+                    let s = if k % 20 < 10 { 0.3 } else { -0.3 };
+                    ep.step(&[s, -s, 0.0, 0.0, 0.0, 0.1 * s, 1.0]).unwrap();
+                    frames.push(ep.render(96).unwrap());
+                }
+                t0
+            } else {
+                let sim = crate::can::CanSim::new(crate::can::CanConfig { visual: v, ..Default::default() }).unwrap();
+                let mut ep = sim.reset(3).unwrap();
+                let t0 = std::time::Instant::now();
+                for k in 0..30 {
+                    let s = if k % 20 < 10 { 0.3 } else { -0.3 };
+                    ep.arm_mut().step(&[s, -s, 0.0, 0.0, 0.0, 0.1 * s, 1.0]).unwrap();
+                    frames.push(ep.arm_mut().render(96).unwrap());
+                }
+                t0
+            };
+            let per = n.elapsed().as_secs_f64() * 1e3 / 30.0;
+            let _ = t;
+            if reference.is_empty() {
+                reference = frames.clone();
+            }
+            let (mut sum, mut count, mut over8) = (0u64, 0u64, 0u64);
+            for (a, b) in reference.iter().zip(&frames) {
+                for (x, y) in a.iter().zip(b) {
+                    let d = u64::from(x.abs_diff(*y));
+                    sum += d;
+                    count += 1;
+                    over8 += u64::from(d > 8);
+                }
+            }
+            eprintln!(
+                "{task} {name:>18}: {per:6.1} ms per step+frame; mean |diff| {:.3}, {:.3}% of values > 8 levels",
+                sum as f64 / count as f64,
+                100.0 * over8 as f64 / count as f64
+            );
+            crate::robosuite::episode::release_renderer();
+        }
+    }
 }

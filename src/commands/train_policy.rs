@@ -94,6 +94,7 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
             })),
         }),
         policy,
+        task: Some(task.name().to_string()),
     };
     if a.session.resume {
         check_resume_flags(&a.out.join(".train").join("config.json"), &configs)?;

@@ -97,11 +97,18 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
     pb.finish_and_clear();
     if let Some((i, why)) = failed {
         let s = &shards[i];
+        let log = tail(&s.log);
+        // Nothing to resume (no shard finished a batch): the shards' folder goes, so
+        // the corrected command runs as a fresh one.
+        if shards.iter().all(|s| count_lines(&s.dir.join("episodes.jsonl")) == 0) {
+            let _ = std::fs::remove_dir_all(&parts);
+            bail!("--processes: shard {i}/{n} {why} before any batch was done; its log ended:\n{log}");
+        }
         bail!(
             "--processes: shard {i}/{n} ({}) {why}; its log {} ends:\n{}",
             s.dir.display(),
             s.log.display(),
-            tail(&s.log)
+            log
         );
     }
     let dirs: Vec<PathBuf> = shards.iter().map(|s| s.dir.clone()).collect();

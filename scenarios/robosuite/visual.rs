@@ -1,0 +1,121 @@
+//! How Lift's and Can's agentview frames are rendered: the few MuJoCo `<visual>` and
+//! material settings that decide what a frame costs on a CPU rasteriser (Mesa's
+//! llvmpipe), typed so that a scenario TOML can choose a cheaper rendering.
+//!
+//! The default is exactly what the shipped models and judges were trained on
+//! (robosuite's arena files as they are, MuJoCo's defaults otherwise), so a scenario
+//! that does not mention `[visual]` renders the same bytes as before this existed.
+//! Each setting is benchmarked on its own (`cargo bench --bench robosuite`), with the
+//! pixel difference it makes, in BENCHMARKS.md.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::ScenarioError;
+
+/// The rendering settings of an arm scene.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Visual {
+    /// The offscreen buffer, `<global offwidth offheight>`, pixels (robosuite: 640 × 480).
+    /// It must hold the rendered frame; a frame renders into its corner either way.
+    pub offscreen: [u32; 2],
+    /// Multisamples per pixel of the offscreen buffer, `<quality offsamples>` (MuJoCo: 4).
+    pub samples: u32,
+    /// The shadow map's side, `<quality shadowsize>` (MuJoCo: 4096).
+    pub shadow_size: u32,
+    /// Keep the materials' reflectance (robosuite's floor reflects at 0.01); `false`
+    /// sets every arena material's reflectance to 0, which skips MuJoCo's mirrored
+    /// second pass over the scene.
+    pub reflections: bool,
+}
+
+impl Default for Visual {
+    fn default() -> Self {
+        Self { offscreen: [640, 480], samples: 4, shadow_size: 4096, reflections: true }
+    }
+}
+
+impl Visual {
+    /// Whether these are the defaults (a config that keeps them writes no `visual`).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Checks ranges, for `field` of a scenario file.
+    ///
+    /// # Errors
+    /// [`ScenarioError::InvalidField`] naming the setting.
+    pub fn validate(&self, path: &std::path::Path) -> Result<(), ScenarioError> {
+        let bad = |field: &str, reason: &str| ScenarioError::InvalidField {
+            path: path.into(),
+            field: format!("visual.{field}"),
+            reason: reason.into(),
+        };
+        if self.offscreen.iter().any(|&s| !(96..=4096).contains(&s)) {
+            return Err(bad("offscreen", "each side must be in [96, 4096] (it holds the 96 x 96 frame)"));
+        }
+        if self.samples > 16 {
+            return Err(bad("samples", "must be in [0, 16]"));
+        }
+        if !(1..=16384).contains(&self.shadow_size) {
+            return Err(bad("shadow_size", "must be in [1, 16384]"));
+        }
+        Ok(())
+    }
+
+    /// The `<visual>` element robosuite's global options carry, with these settings
+    /// (at the defaults, the element as it always was: MuJoCo's quality defaults unsaid).
+    pub fn xml(&self) -> String {
+        let [w, h] = self.offscreen;
+        if self.samples == 4 && self.shadow_size == 4096 {
+            return format!(r#"<visual><map znear="0.001"/><global offwidth="{w}" offheight="{h}"/></visual>"#);
+        }
+        format!(
+            r#"<visual><map znear="0.001"/><global offwidth="{w}" offheight="{h}"/><quality offsamples="{}" shadowsize="{}"/></visual>"#,
+            self.samples, self.shadow_size
+        )
+    }
+
+    /// An arena file's text with these settings applied to its materials.
+    pub fn arena(&self, text: &str) -> String {
+        if self.reflections {
+            return text.to_string();
+        }
+        let mut out = String::with_capacity(text.len());
+        let mut rest = text;
+        while let Some(i) = rest.find("reflectance=\"") {
+            let start = i + "reflectance=\"".len();
+            out.push_str(&rest[..start]);
+            let end = rest[start..].find('"').map_or(rest.len(), |j| start + j);
+            out.push('0');
+            rest = &rest[end..];
+        }
+        out.push_str(rest);
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_is_mujocos_and_robosuites_and_reflections_can_go() {
+        // MuJoCo's documented defaults: offsamples 4, shadowsize 4096; robosuite's
+        // offscreen buffer 640 x 480.
+        let v = Visual::default();
+        assert_eq!(v.xml(), r#"<visual><map znear="0.001"/><global offwidth="640" offheight="480"/></visual>"#);
+        let cheap = Visual { samples: 0, shadow_size: 256, ..v };
+        assert!(cheap.xml().contains(r#"<quality offsamples="0" shadowsize="256"/>"#), "{}", cheap.xml());
+        let xml = r#"<material name="floor" reflectance="0.01"/><material name="legs" reflectance="0.8" shininess="0.8"/>"#;
+        assert_eq!(v.arena(xml), xml);
+        let off = Visual { reflections: false, ..v };
+        assert_eq!(
+            off.arena(xml),
+            r#"<material name="floor" reflectance="0"/><material name="legs" reflectance="0" shininess="0.8"/>"#
+        );
+        let p = std::path::Path::new("s.toml");
+        assert!(Visual { offscreen: [64, 64], ..v }.validate(p).unwrap_err().to_string().contains("visual.offscreen"));
+        v.validate(p).unwrap();
+    }
+}
