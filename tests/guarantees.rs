@@ -82,7 +82,18 @@ fn no_command_writes_over_its_inputs() {
     std::fs::create_dir_all(&out).unwrap();
     let scene = scenario_variant(&out, "scene.toml", "max_steps = 300", "max_steps = 300");
     let (_, err) = expect_code(
-        &run(&["collect", "--scenario", s(&scene), "--episodes", "1", "--max-steps", "2", "--out", s(&out), "--force"]),
+        &run(&[
+            "collect",
+            "--scenario",
+            s(&scene),
+            "--episodes",
+            "1",
+            "--max-steps",
+            "2",
+            "--out",
+            s(&out),
+            "--force",
+        ]),
         2,
     );
     assert!(err.contains("contains the input --scenario"), "{err}");
@@ -117,7 +128,8 @@ fn folders_of_the_users_named_like_the_tools_are_never_cleared() {
     let partial = tmp.path().join("d.zarr.partial");
     std::fs::create_dir_all(&partial).unwrap();
     std::fs::write(partial.join("notes.txt"), "mine").unwrap();
-    let (_, err) = expect_code(&run(&["collect", "--episodes", "1", "--max-steps", "2", "--out", s(&data)]), 2);
+    let (_, err) =
+        expect_code(&run(&["collect", "--episodes", "1", "--max-steps", "2", "--out", s(&data)]), 2);
     assert!(err.contains("was not made by evalharness"), "{err}");
     assert!(partial.join("notes.txt").is_file());
 }
@@ -187,7 +199,8 @@ fn a_second_writer_of_one_output_is_refused() {
     let lock = tmp.path().join(".d.zarr.evalharness-lock");
     let held = std::fs::File::create(&lock).unwrap();
     held.try_lock().unwrap();
-    let (_, err) = expect_code(&run(&["collect", "--episodes", "1", "--max-steps", "2", "--out", s(&out)]), 2);
+    let (_, err) =
+        expect_code(&run(&["collect", "--episodes", "1", "--max-steps", "2", "--out", s(&out)]), 2);
     assert!(err.contains("being written by another evalharness process"), "{err}");
     assert!(!out.exists() && !tmp.path().join("d.zarr.partial").exists());
     drop(held);
@@ -258,7 +271,10 @@ fn non_utf8_arguments_are_errors_not_panics() {
     let placeholder = tmp.path().join("placeholder");
     let args = rank_args(&set, &wm, &placeholder);
     let out = evalharness()
-        .args(args.iter().map(|a| if *a == s(&placeholder) { odd.as_os_str() } else { std::ffi::OsStr::new(a) }))
+        .args(
+            args.iter()
+                .map(|a| if *a == s(&placeholder) { odd.as_os_str() } else { std::ffi::OsStr::new(a) }),
+        )
         .output()
         .unwrap();
     expect_code(&out, 0);
@@ -328,4 +344,22 @@ fn a_resume_with_another_split_names_the_count_to_use() {
     args.extend(["--processes", "2", "--resume"]);
     let (_, err) = expect_code(&run(&args), 2);
     assert!(err.contains("resume with --processes 3") && !err.contains("--force"), "{err}");
+}
+
+#[test]
+fn shards_of_different_runs_are_refused_naming_the_setting() {
+    // D22: merge said only "not a shard of the same run".
+    let tmp = tempfile::tempdir().unwrap();
+    let (set, wm) = inputs(tmp.path());
+    let (a, b) = (tmp.path().join("s0"), tmp.path().join("s1"));
+    for (i, d, seed) in [(0, &a, "0"), (1, &b, "3")] {
+        let shard = format!("{i}/2");
+        let mut v = rank_args(&set, &wm, d);
+        v.extend(["--shard", shard.as_str(), "--seed", seed]);
+        let code = run(&v).status.code();
+        assert!(matches!(code, Some(0 | 1)), "shard {i}: {code:?}");
+    }
+    let m = tmp.path().join("m");
+    let (_, err) = expect_code(&run(&["merge", s(&a), s(&b), "--out", s(&m)]), 2);
+    assert!(err.contains("they differ in seed"), "{err}");
 }

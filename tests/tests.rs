@@ -3,9 +3,9 @@
 mod agreement;
 mod can_models;
 mod dataset;
-mod guarantees;
 mod deploy;
 mod docs;
+mod guarantees;
 mod judge;
 mod lift;
 mod lift_models;

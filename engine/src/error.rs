@@ -41,7 +41,9 @@ pub enum EngineError {
     },
     /// A judge scored a frame with something other than a number in [0, 1] (non-finite
     /// weights, say): every episode would otherwise read as a success or a failure.
-    #[error("the judge scored a frame of policy {policy}'s episode {seed} as {value}, not a number in [0, 1]")]
+    #[error(
+        "the judge scored a frame of policy {policy}'s episode {seed} as {value}, not a number in [0, 1]"
+    )]
     Judge {
         /// The policy whose episode was being judged.
         policy: String,

@@ -25,8 +25,8 @@ use world_model::model::WorldModel;
 use world_model::rollout::Rollout;
 
 use crate::EngineError;
-use crate::error::judged;
 use crate::decide::{decide, record_chunk};
+use crate::error::judged;
 use crate::start::{Begin, BranchOut, Setup, Start, Timing, Track, Trajectory, push, still_active};
 use harness::policy::Policy;
 

@@ -210,7 +210,10 @@ mod tests {
         drop(st);
         recover(run, MAIN).unwrap();
         assert!(!stage_dir(run, MAIN).exists());
-        assert_eq!((read(run, "model.bpk"), read(run, "state.json")), ("model.bpk at 1".into(), "state.json at 1".into()));
+        assert_eq!(
+            (read(run, "model.bpk"), read(run, "state.json")),
+            ("model.bpk at 1".into(), "state.json at 1".into())
+        );
         // Killed after the commit point, with one file moved: rolled forward to step 3.
         let mut st = save(run, "3");
         let next = st.path("model.bpk").parent().unwrap().to_path_buf();
@@ -218,7 +221,8 @@ mod tests {
             .iter()
             .map(|n| Entry { name: n.to_string(), sha256: crate::fingerprint::file(&next.join(n)).unwrap() })
             .collect();
-        write_atomic(&next.join(manifest_name(MAIN)), &serde_json::to_string(&Manifest { files }).unwrap()).unwrap();
+        write_atomic(&next.join(manifest_name(MAIN)), &serde_json::to_string(&Manifest { files }).unwrap())
+            .unwrap();
         std::fs::rename(next.join("model.bpk"), run.join("model.bpk")).unwrap();
         recover(run, MAIN).unwrap();
         for n in ["model.bpk", "ema.bpk", "state.json"] {

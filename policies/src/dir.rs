@@ -371,7 +371,10 @@ mod tests {
         // loaded and ranked; its recorded task is now checked first.
         let can = Expectations { task: Some("can".into()), ..Expectations::pusht(96) };
         let e = load_policy(&ck, &can, &device).err().unwrap();
-        assert!(e.to_string().contains("trained on task pusht's demonstrations; this run is task can"), "{e}");
+        assert!(
+            e.to_string().contains("trained on task pusht's demonstrations; this run is task can"),
+            "{e}"
+        );
         // Weights missing, then truncated.
         let e = load_policy(&ck, expect, &device).err().unwrap();
         assert!(e.to_string().contains("model.bpk"), "{e}");

@@ -242,7 +242,8 @@ pub fn pretrain_encoder(
     let mut optim = AdamWConfig::new().with_weight_decay(1e-6).init();
     let mut state = PretrainState::default();
     if files[2].exists() || dir.join("encoder_checkpoint.next").exists() {
-        harness::checkpoint::recover(dir, harness::checkpoint::ENCODER).map_err(|e| err(&e.path, e.message))?;
+        harness::checkpoint::recover(dir, harness::checkpoint::ENCODER)
+            .map_err(|e| err(&e.path, e.message))?;
     }
     if files[2].exists() {
         state = read_state(&files[2]).map_err(|e| err(&e.path, e.message))?;

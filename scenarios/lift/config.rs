@@ -97,12 +97,14 @@ impl LiftConfig {
         for i in 0..3 {
             let (lo, hi) = (self.cube_half_min[i], self.cube_half_max[i]);
             if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi && hi <= 0.2) {
-                return Err(bad("cube_half_min", "needs 0 < cube_half_min <= cube_half_max <= 0.2 m per axis"));
+                return Err(bad(
+                    "cube_half_min",
+                    "needs 0 < cube_half_min <= cube_half_max <= 0.2 m per axis",
+                ));
             }
         }
-        for (i, (field, r)) in [("cube_x_range", self.cube_x_range), ("cube_y_range", self.cube_y_range)]
-            .into_iter()
-            .enumerate()
+        for (i, (field, r)) in
+            [("cube_x_range", self.cube_x_range), ("cube_y_range", self.cube_y_range)].into_iter().enumerate()
         {
             if !(r[0].is_finite() && r[1].is_finite() && r[0] <= r[1]) {
                 return Err(bad(field, "needs finite low <= high"));

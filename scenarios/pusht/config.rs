@@ -234,7 +234,8 @@ impl PushTConfig {
             return Err(bad("reset.min_agent_block_distance", e.to_string()));
         }
         let sc = self.task.success_coverage;
-        if !(1..=100_000).contains(&self.task.max_steps) || !(sc.is_finite() && sc > 0.0 && sc <= 1.0) {
+        let steps_ok = (1..=100_000).contains(&self.task.max_steps);
+        if !(steps_ok && sc.is_finite() && sc > 0.0 && sc <= 1.0) {
             return Err(bad("task", "max_steps in [1, 100000] and success_coverage in (0, 1]".into()));
         }
         if !(8..=1024).contains(&self.render.size) || !(1..=8).contains(&self.render.supersample) {

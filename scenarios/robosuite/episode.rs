@@ -134,7 +134,10 @@ impl ArmEpisode {
         let warnings = &self.data.ffi().warning;
         for (i, what) in [(3, "qpos"), (4, "qvel"), (5, "qacc")] {
             if warnings[i].number > 0 {
-                return Err(fail(self.step, format!("MuJoCo reported a bad {what} (an unstable simulation) and reset it")));
+                return Err(fail(
+                    self.step,
+                    format!("MuJoCo reported a bad {what} (an unstable simulation) and reset it"),
+                ));
             }
         }
         Ok(())

@@ -13,7 +13,8 @@ use crate::lift::sim::{LiftInit, LiftSim, lift_model};
 
 fn lift_scene() -> MjModel {
     let dir = assets_dir().expect("robosuite assets (scripts/setup.sh)");
-    let mut b = SceneBuilder::table_arena(&dir, &Table::LIFT, &crate::robosuite::visual::Visual::default()).unwrap();
+    let mut b =
+        SceneBuilder::table_arena(&dir, &Table::LIFT, &crate::robosuite::visual::Visual::default()).unwrap();
     // Lift: base at (-0.16 - 0.8 / 2, 0, 0) raised by the mount's 0.912 m.
     b.panda([-0.56, 0.0, 0.912]).unwrap();
     b.compile("lift").unwrap()
@@ -102,7 +103,10 @@ fn frame_cost_per_visual_setting() {
         ("shadow 256", Visual { shadow_size: 256, ..base }),
         ("no reflections", Visual { reflections: false, ..base }),
         ("all cheap", Visual { offscreen: [96, 96], samples: 0, shadow_size: 256, reflections: false }),
-        ("cheap, samples 4", Visual { offscreen: [96, 96], samples: 4, shadow_size: 256, reflections: false }),
+        (
+            "cheap, samples 4",
+            Visual { offscreen: [96, 96], samples: 4, shadow_size: 256, reflections: false },
+        ),
     ];
     for task in ["lift", "can"] {
         let mut reference: Vec<Vec<u8>> = Vec::new();
@@ -110,7 +114,9 @@ fn frame_cost_per_visual_setting() {
             let mut frames = Vec::new();
             let t = std::time::Instant::now();
             let n = if task == "lift" {
-                let sim = crate::lift::LiftSim::new(crate::lift::LiftConfig { visual: v, ..Default::default() }).unwrap();
+                let sim =
+                    crate::lift::LiftSim::new(crate::lift::LiftConfig { visual: v, ..Default::default() })
+                        .unwrap();
                 let mut ep = sim.reset(3).unwrap();
                 let t0 = std::time::Instant::now();
                 for k in 0..30 {
@@ -120,7 +126,8 @@ fn frame_cost_per_visual_setting() {
                 }
                 t0
             } else {
-                let sim = crate::can::CanSim::new(crate::can::CanConfig { visual: v, ..Default::default() }).unwrap();
+                let sim = crate::can::CanSim::new(crate::can::CanConfig { visual: v, ..Default::default() })
+                    .unwrap();
                 let mut ep = sim.reset(3).unwrap();
                 let t0 = std::time::Instant::now();
                 for k in 0..30 {

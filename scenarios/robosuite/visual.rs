@@ -5,7 +5,7 @@
 //! The default is exactly what the shipped models and judges were trained on
 //! (robosuite's arena files as they are, MuJoCo's defaults otherwise), so a scenario
 //! that does not mention `[visual]` renders the same bytes as before this existed.
-//! Each setting is benchmarked on its own (`cargo bench --bench robosuite`), with the
+//! Each setting is benchmarked on its own (`cargo bench -p scenarios --bench robosuite`), with the
 //! pixel difference it makes, in BENCHMARKS.md.
 
 use serde::{Deserialize, Serialize};
@@ -68,7 +68,9 @@ impl Visual {
     pub fn xml(&self) -> String {
         let [w, h] = self.offscreen;
         if self.samples == 4 && self.shadow_size == 4096 {
-            return format!(r#"<visual><map znear="0.001"/><global offwidth="{w}" offheight="{h}"/></visual>"#);
+            return format!(
+                r#"<visual><map znear="0.001"/><global offwidth="{w}" offheight="{h}"/></visual>"#
+            );
         }
         format!(
             r#"<visual><map znear="0.001"/><global offwidth="{w}" offheight="{h}"/><quality offsamples="{}" shadowsize="{}"/></visual>"#,
@@ -104,7 +106,10 @@ mod tests {
         // MuJoCo's documented defaults: offsamples 4, shadowsize 4096; robosuite's
         // offscreen buffer 640 x 480.
         let v = Visual::default();
-        assert_eq!(v.xml(), r#"<visual><map znear="0.001"/><global offwidth="640" offheight="480"/></visual>"#);
+        assert_eq!(
+            v.xml(),
+            r#"<visual><map znear="0.001"/><global offwidth="640" offheight="480"/></visual>"#
+        );
         let cheap = Visual { samples: 0, shadow_size: 256, ..v };
         assert!(cheap.xml().contains(r#"<quality offsamples="0" shadowsize="256"/>"#), "{}", cheap.xml());
         let xml = r#"<material name="floor" reflectance="0.01"/><material name="legs" reflectance="0.8" shininess="0.8"/>"#;
@@ -115,7 +120,13 @@ mod tests {
             r#"<material name="floor" reflectance="0"/><material name="legs" reflectance="0" shininess="0.8"/>"#
         );
         let p = std::path::Path::new("s.toml");
-        assert!(Visual { offscreen: [64, 64], ..v }.validate(p).unwrap_err().to_string().contains("visual.offscreen"));
+        assert!(
+            Visual { offscreen: [64, 64], ..v }
+                .validate(p)
+                .unwrap_err()
+                .to_string()
+                .contains("visual.offscreen")
+        );
         v.validate(p).unwrap();
     }
 }

@@ -56,6 +56,7 @@ mod tests {
             let e = crate::cli::Cli::try_parse_from(argv.split_whitespace()).unwrap_err().to_string();
             assert!(e.contains(flag), "{argv}: {e}");
         }
-        crate::cli::Cli::try_parse_from("evalharness rank --jobs 2 --processes 3".split_whitespace()).unwrap();
+        crate::cli::Cli::try_parse_from("evalharness rank --jobs 2 --processes 3".split_whitespace())
+            .unwrap();
     }
 }

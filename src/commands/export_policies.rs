@@ -62,7 +62,11 @@ pub fn run(a: &ExportPoliciesArgs) -> Result<ExitCode> {
     // `--add` moves new checkpoints into `--out`, so only plain replacing must stay
     // apart from `--from`.
     // With --add the output is the folder being added to, which may hold --from.
-    let inputs = if a.add { crate::output::Inputs::new() } else { crate::output::Inputs::new().add("--from", &a.from) };
+    let inputs = if a.add {
+        crate::output::Inputs::new()
+    } else {
+        crate::output::Inputs::new().add("--from", &a.from)
+    };
     let out = Staged::new(&a.out, a.force || a.add, &inputs)?;
     let command: Vec<String> = crate::stdout::command_line();
     let (command, commit) = (command.join(" "), git_commit());

@@ -74,8 +74,11 @@ pub fn run(a: &ReadJudgeArgs) -> Result<ExitCode> {
         None => None,
     };
     let (judge, from) = match (&a.judge, a.rule) {
-        (Some(dir), _) => (FrameJudge::load(dir, &burn::tensor::Device::flex())
-            .map_err(|e| anyhow::anyhow!("--judge {}: {}", e.path.display(), e.message))?, dir.display().to_string()),
+        (Some(dir), _) => (
+            FrameJudge::load(dir, &burn::tensor::Device::flex())
+                .map_err(|e| anyhow::anyhow!("--judge {}: {}", e.path.display(), e.message))?,
+            dir.display().to_string(),
+        ),
         (None, Some(JudgeRule::LiftRed)) => {
             (FrameJudge::rule(rule_file(ColourHeight::lift_red())), "lift-red".into())
         }
@@ -142,7 +145,11 @@ pub fn run(a: &ReadJudgeArgs) -> Result<ExitCode> {
         let k = r.reading.map_or(0, |x| x.persist);
         outln!(
             "| {k} | {} of {} ({} succeed) | {} | {} |",
-            r.agree, r.episodes, r.successes, r.false_successes, r.missed_successes
+            r.agree,
+            r.episodes,
+            r.successes,
+            r.false_successes,
+            r.missed_successes
         );
     }
     outln!();

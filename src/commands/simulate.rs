@@ -196,7 +196,9 @@ pub(super) fn inputs(args: &SimulateArgs) -> crate::output::Inputs {
         .scenario(&args.common.scenario)
         .maybe("--policy", policy.exists().then_some(policy))
         .maybe("--judge", args.judge.as_deref());
-    for (flag, wm) in [("--observe-through", &args.observe_through), ("--replay-imagined", &args.replay_imagined)] {
+    for (flag, wm) in
+        [("--observe-through", &args.observe_through), ("--replay-imagined", &args.replay_imagined)]
+    {
         if let Some(wm) = wm {
             inputs = inputs.world_model(flag, wm);
         }

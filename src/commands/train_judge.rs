@@ -44,7 +44,8 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
         bail!("--data {}: no such file or folder", a.data.display());
     }
     // Written into OUT.partial; an old OUT is replaced only once the judge is complete.
-    let staged = crate::output::Staged::new(&a.out, a.force, &crate::output::Inputs::new().add("--data", &a.data))?;
+    let staged =
+        crate::output::Staged::new(&a.out, a.force, &crate::output::Inputs::new().add("--data", &a.data))?;
     let label = label_of(a)?;
     let threshold = match label {
         Label::Coverage => 0.95,

@@ -41,7 +41,12 @@ fn print_row(row: &EvalRow, note: &str) {
     let horizon = if row.horizon == "64" { "64-frame:" } else { "episode: " };
     outln!(
         "{:<20} {:<9} {horizon} MSE {:.5} PSNR {:.2} SSIM {:.4} ({:.1} ms/frame){note}",
-        row.name, row.objective, row.mse, row.psnr, row.ssim, row.ms_per_frame
+        row.name,
+        row.objective,
+        row.mse,
+        row.psnr,
+        row.ssim,
+        row.ms_per_frame
     );
     let curve: Vec<String> = row.ssim_curve.iter().map(|p| format!("{}: {:.3}", p.frame, p.ssim)).collect();
     outln!("{:<20} SSIM by generated frame  {}", "", curve.join("  "));
@@ -87,7 +92,9 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
     let inputs = a
         .world_models
         .iter()
-        .fold(crate::output::Inputs::new().add("--data", &a.data), |acc, m| acc.world_model("--world-model", m))
+        .fold(crate::output::Inputs::new().add("--data", &a.data), |acc, m| {
+            acc.world_model("--world-model", m)
+        })
         .maybe("--judge", a.judge.as_deref());
     inputs.check(&a.out)?;
     let device = world_model::device::selected()?;
@@ -220,7 +227,10 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             let r_text = r.pearson.map_or_else(|| "n/a".to_string(), |p| format!("{p:.3}"));
             outln!(
                 "{:<20} open-loop score over whole episodes: real {:.3} imagined {:.3}  mean |error| {:.3}  per-video r {r_text}",
-                r.name, r.real_mean, r.imagined_mean, r.mean_abs_error
+                r.name,
+                r.real_mean,
+                r.imagined_mean,
+                r.mean_abs_error
             );
             let curve: Vec<String> = r
                 .coverage_curve

@@ -89,8 +89,14 @@ impl RunDir {
         check_not_dangling(out)?;
         let lock = lock::lock(out)?;
         let aside = sibling(out, ".replaced");
-        let mut dir =
-            Self { out: out.to_path_buf(), aside: None, created: false, progress, settled: false, _lock: lock };
+        let mut dir = Self {
+            out: out.to_path_buf(),
+            aside: None,
+            created: false,
+            progress,
+            settled: false,
+            _lock: lock,
+        };
         if resume {
             // A resumed `--force` run completes the replacement when it finishes.
             dir.aside = aside.exists().then_some(aside);
@@ -170,8 +176,11 @@ impl Drop for RunDir {
             return;
         }
         if let Some(aside) = &self.aside {
-            let cleared =
-                if std::fs::symlink_metadata(&self.out).is_ok() { std::fs::remove_dir_all(&self.out) } else { Ok(()) };
+            let cleared = if std::fs::symlink_metadata(&self.out).is_ok() {
+                std::fs::remove_dir_all(&self.out)
+            } else {
+                Ok(())
+            };
             let restored = cleared.and_then(|()| std::fs::rename(aside, &self.out));
             match restored {
                 Ok(()) => tracing::warn!("the run failed; {} is as it was before", self.out.display()),

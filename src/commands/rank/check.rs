@@ -32,7 +32,8 @@ pub fn ranges(r: &RankResults) -> Result<()> {
     corr("pearson", a.pearson);
     corr("spearman", a.spearman);
     corr("kendall_tau_b", a.kendall_tau_b);
-    for (field, v) in [("mmrv", a.mmrv), ("regret_at_1", a.regret_at_1), ("mean_abs_error", a.mean_abs_error)] {
+    for (field, v) in [("mmrv", a.mmrv), ("regret_at_1", a.regret_at_1), ("mean_abs_error", a.mean_abs_error)]
+    {
         if let Some(v) = v.filter(|v| !(v.is_finite() && (0.0..=1.0).contains(v))) {
             bad.push(format!("agreement.{field} = {v} (must be in [0, 1])"));
         }
@@ -40,11 +41,17 @@ pub fn ranges(r: &RankResults) -> Result<()> {
     if let Some(n) = a.rank_inversions {
         let k = r.policies.len();
         if n > k * k.saturating_sub(1) / 2 {
-            bad.push(format!("agreement.rank_inversions = {n} (at most {} pairs of {k} policies)", k * k.saturating_sub(1) / 2));
+            bad.push(format!(
+                "agreement.rank_inversions = {n} (at most {} pairs of {k} policies)",
+                k * k.saturating_sub(1) / 2
+            ));
         }
     }
     match bad.first() {
-        Some(first) => bail!("results.json: {first}{}", if bad.len() > 1 { format!(" (and {} more)", bad.len() - 1) } else { String::new() }),
+        Some(first) => bail!(
+            "results.json: {first}{}",
+            if bad.len() > 1 { format!(" (and {} more)", bad.len() - 1) } else { String::new() }
+        ),
         None => Ok(()),
     }
 }

@@ -78,7 +78,12 @@ fn check_complete_set(shards: &[PathBuf], configs: &[Value]) -> Result<()> {
 ///
 /// # Errors
 /// The first policy with missing rows, naming it and up to five seeds.
-fn check_every_row(rows: &[EpisodeRow], names: &[String], failed: &[FailedPolicy], cfg: &Value) -> Result<()> {
+fn check_every_row(
+    rows: &[EpisodeRow],
+    names: &[String],
+    failed: &[FailedPolicy],
+    cfg: &Value,
+) -> Result<()> {
     let (Some(start), Some(n)) = (cfg["seed_start"].as_u64(), cfg["episodes"].as_u64()) else {
         bail!("the shards' config.json has no seed_start and episodes (not a rank output)");
     };
@@ -91,9 +96,7 @@ fn check_every_row(rows: &[EpisodeRow], names: &[String], failed: &[FailedPolicy
     for name in names.iter().filter(|n| !failed.iter().any(|f| &f.policy == *n)) {
         let missing: Vec<u64> = seeds
             .clone()
-            .filter(|&s| {
-                super::resume::RANK_KINDS.iter().any(|&b| !have.contains(&(name.as_str(), s, b)))
-            })
+            .filter(|&s| super::resume::RANK_KINDS.iter().any(|&b| !have.contains(&(name.as_str(), s, b))))
             .collect();
         if !missing.is_empty() {
             let shown: Vec<String> = missing.iter().take(5).map(u64::to_string).collect();
@@ -167,7 +170,13 @@ pub(super) fn join(
                 .flatten()
                 .filter(|(k, v)| key.get(k.as_str()) != Some(*v))
                 .map(|(k, _)| k.clone())
-                .chain(key.as_object().into_iter().flatten().filter(|(k, _)| this.get(k.as_str()).is_none()).map(|(k, _)| k.clone()))
+                .chain(
+                    key.as_object()
+                        .into_iter()
+                        .flatten()
+                        .filter(|(k, _)| this.get(k.as_str()).is_none())
+                        .map(|(k, _)| k.clone()),
+                )
                 .collect();
             bail!(
                 "{}: not a shard of the same run as {} (they differ in {})",

@@ -209,9 +209,10 @@ fn run_with(
             }
             // A judge that scores nonsense would make every policy's imagined rows wrong.
             Err(e @ EngineError::Judge { .. }) => {
-                let judge = r.judge.as_ref().map_or_else(|| "the task's own judge".to_string(), |d| {
-                    format!("judge {}", d.display())
-                });
+                let judge = r
+                    .judge
+                    .as_ref()
+                    .map_or_else(|| "the task's own judge".to_string(), |d| format!("judge {}", d.display()));
                 bail!("{judge}: {e}; the rows of the batches before this one are kept");
             }
             Err(e) => {

@@ -99,14 +99,13 @@ fn check_fingerprints(path: &Path, saved: &Value, config: &Value) -> Result<()> 
 /// The file cannot be written.
 pub(crate) fn straight_order(
     jsonl: &Path,
-    rows: &mut Vec<EpisodeRow>,
+    rows: &mut [EpisodeRow],
     names: &[String],
     batches: &[&[u64]],
 ) -> Result<()> {
     let batch_of = |seed: u64| batches.iter().position(|b| b.contains(&seed)).unwrap_or(usize::MAX);
-    let key = |r: &EpisodeRow| {
-        (names.iter().position(|n| *n == r.policy).unwrap_or(usize::MAX), batch_of(r.seed))
-    };
+    let key =
+        |r: &EpisodeRow| (names.iter().position(|n| *n == r.policy).unwrap_or(usize::MAX), batch_of(r.seed));
     if rows.windows(2).all(|w| key(&w[0]) <= key(&w[1])) {
         return Ok(());
     }

@@ -106,7 +106,12 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
     if scene {
         outln!(
             "{:<16} {:>10} {:>12} {:>12} {:>10} {:>11}",
-            "policy", "MuJoCo", "world model", "block kept", "goal kept", "agent kept"
+            "policy",
+            "MuJoCo",
+            "world model",
+            "block kept",
+            "goal kept",
+            "agent kept"
         );
     } else {
         // A task without scene checks (robomimic's, scored by success alone): the success

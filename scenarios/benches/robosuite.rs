@@ -8,7 +8,8 @@
 //! together (the mean pixel difference each makes is measured by the ignored test
 //! `scenarios::robosuite::tests::frame_cost_per_visual_setting`).
 //!
-//! `cargo bench --bench robosuite`; results are recorded in BENCHMARKS.md.
+//! `cargo bench -p scenarios --bench robosuite` (it lives in `scenarios`, so it builds
+//! only the simulator's dependencies); results are recorded in BENCHMARKS.md.
 
 // criterion_group! generates undocumented functions.
 #![allow(missing_docs)]
@@ -88,7 +89,9 @@ fn frame(c: &mut Criterion) {
         release_renderer();
         let can = CanSim::new(CanConfig { visual, ..CanConfig::default() }).expect("robosuite assets");
         let mut ep = can.reset(1).expect("reset");
-        g.bench_function(format!("can_{name}"), |b| b.iter(|| ep.arm_mut().render(black_box(96)).expect("renders")));
+        g.bench_function(format!("can_{name}"), |b| {
+            b.iter(|| ep.arm_mut().render(black_box(96)).expect("renders"))
+        });
         release_renderer();
     }
     g.finish();
