@@ -135,3 +135,33 @@ pub fn init_mujoco() {
         };
     });
 }
+
+/// Builds the model a render worker is asked for: the same function, config and
+/// assets as the episode that asked, so the same compiled model.
+///
+/// # Errors
+/// An unknown task, a config that does not parse, or the build's own errors.
+pub fn build_arm_model(
+    key: &robosuite::render_pool::ModelKey,
+) -> Result<mujoco_rs::prelude::MjModel, ScenarioError> {
+    let bad = |e: serde_json::Error| ScenarioError::Render { message: format!("{} config: {e}", key.task) };
+    match (key.task.as_str(), key.object_half) {
+        ("lift", Some(half)) => {
+            let cfg: lift::LiftConfig = serde_json::from_str(&key.config).map_err(bad)?;
+            lift::sim::lift_model(&cfg, &key.assets, half)
+        }
+        ("can", None) => {
+            let cfg: can::CanConfig = serde_json::from_str(&key.config).map_err(bad)?;
+            can::sim::can_model(&cfg, &key.assets)
+        }
+        (task, _) => Err(ScenarioError::Render { message: format!("no arm model for task {task}") }),
+    }
+}
+
+/// A render worker's loop on `input` and `output` (`evalharness render-worker`).
+///
+/// # Errors
+/// A malformed request or a broken pipe.
+pub fn serve_render_worker(input: impl std::io::Read, output: impl std::io::Write) -> std::io::Result<()> {
+    robosuite::render_pool::serve(input, output, &build_arm_model)
+}

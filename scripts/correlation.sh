@@ -11,13 +11,14 @@
 # - Lift: 9 policies × 20 episodes of 150 steps (the default run has 50 episodes), gated at
 #   Pearson 0.4 and 12 inversions of 36 pairs (a random order has 18 on average). On three
 #   sizing ranges it read Pearson 0.70, 0.56 and 0.79 (5, 8 and 3 inversions), against the
-#   50-episode headline's 0.77 and 4. In 3 shard processes (see rank_task); about 6 minutes.
+#   50-episode headline's 0.77 and 4. In one process with 2 render workers (the task's
+#   rank.toml; see rank_task); about 4 minutes on the faster kind.
 # - Can: 9 policies × 20 episodes of 250 steps (the default run has 50), gated at Pearson 0.3
 #   and 13 inversions of 36. Sized with the Can world model shipped before the present one: on
 #   two sizing ranges it read Pearson 0.45 and 0.77 (9 and 2 inversions), against that model's
 #   50-episode headline of 0.71 and 7. With the present model this part read 0.65 with 6
-#   inversions on one machine and 0.68 with 7 on the other (its headline: 0.74 and 7). In 3
-#   shard processes; about 14 minutes (27 in one process).
+#   inversions on one machine and 0.68 with 7 on the other (its headline: 0.74 and 7). In one
+#   process with 2 render workers; it took 14 minutes in 3 shard processes on the slower kind.
 # Then `evalharness tasks` writes the side-by-side table ($OUT/tasks.md, $OUT/tasks.tex).
 #
 # To rank your own checkpoints instead, set SCENARIO (default pusht) and any of POLICIES,
@@ -46,7 +47,7 @@ runs=()
 
 # The CI size and gates of a shipped task: episodes, batch, min Pearson, max inversions, processes.
 ci_size() {
-    case $1 in lift) echo "20 20 0.4 12 3" ;; can) echo "20 20 0.3 13 3" ;; *) echo "30 10 0.8 3 1" ;; esac
+    case $1 in lift) echo "20 20 0.4 12 1" ;; can) echo "20 20 0.3 13 1" ;; *) echo "30 10 0.8 3 1" ;; esac
 }
 
 # once DIR COMMAND...: runs COMMAND --out DIR --force; a run killed by a signal (exit 128 + n;
@@ -67,10 +68,11 @@ once() {
 # rank_task TASK EPISODES BATCH MIN_PEARSON MAX_INVERSIONS PROCESSES [extra rank flags...]
 #
 # PROCESSES > 1 runs `rank --processes`: the run split into that many shard processes, joined
-# and finished as one run. Lift's and Can's frames come from MuJoCo's GL renderer on Mesa's
-# llvmpipe, which lets one thread of a process render at a time (two at once crashed it), so
-# two workers of one process wait on each other's frames; processes do not share it. The rows
-# are byte-identical to one process's (BENCHMARKS.md, 2026-11-27, "the CI job's time").
+# and finished as one run. With 1 (the default of every task), Lift's and Can's frames are
+# rendered by the render workers their rank.toml asks for: one process renders one frame at a
+# time (Mesa's llvmpipe crashed with two at once), render worker processes do not share that
+# limit. The rows are byte-identical either way (BENCHMARKS.md, 2026-11-27, "the CI job's
+# time"; 2026-11-29, "render workers").
 rank_task() {
     local task=$1 episodes=$2 batch=$3 min=$4 max=$5 procs=$6
     shift 6

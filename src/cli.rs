@@ -25,6 +25,12 @@ pub struct Cli {
     /// Only warnings and errors on stderr, no progress bars.
     #[arg(short, long, global = true)]
     pub quiet: bool,
+    /// Render Lift's and Can's frames in this many worker processes, so that `--jobs`
+    /// threads render at once (one process renders one frame at a time); the frames are
+    /// the same bytes. 0: in this process.
+    /// [default: 0; `rank`: the task's `rank.toml`, 2 for Lift and Can]
+    #[arg(long, global = true, value_name = "N", value_parser = bounds::count(0, 64))]
+    pub render_workers: Option<usize>,
     /// The command.
     #[command(subcommand)]
     pub command: Command,
@@ -54,6 +60,10 @@ pub fn given_on_command_line(path: &[&str]) -> Vec<String> {
 /// evalharness commands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// A render worker of `--render-workers` (started by evalharness itself; requests on
+    /// stdin, frames on stdout).
+    #[command(hide = true)]
+    RenderWorker,
     /// Run episodes in the MuJoCo reference simulator and score them.
     Simulate(SimulateArgs),
     /// Collect a dataset (zarr replay buffer) from a mix of scripted behaviours.

@@ -13,6 +13,7 @@ mod fuzz;
 mod output;
 mod policy_kinds;
 mod progress;
+mod render_workers;
 mod scenario;
 
 use std::io::IsTerminal;
@@ -24,6 +25,21 @@ fn main() -> ExitCode {
     let args = cli::Cli::parse();
     init_logging(args.verbose, args.quiet);
     scenarios::init_mujoco();
+    if matches!(args.command, cli::Command::RenderWorker) {
+        return match scenarios::serve_render_worker(std::io::stdin().lock(), std::io::stdout().lock()) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("error: render worker: {e}");
+                ExitCode::from(2)
+            }
+        };
+    }
+    if let Some(n) = args.render_workers.filter(|&n| n > 0)
+        && let Err(e) = render_workers::start(n)
+    {
+        eprintln!("error: {}", chain(&e));
+        return ExitCode::from(2);
+    }
     // Results go through `out!`/`outln!` (`stdout.rs`), which stay quiet once the
     // reader of a pipe is gone: the command finishes and exits as it would have.
     match commands::run(&args) {

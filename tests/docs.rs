@@ -30,7 +30,7 @@ const PAGES: &[(&str, &[&str])] = &[
 ];
 
 /// Flags every command has, documented once in `docs/cli/README.md`.
-const GLOBAL: &[&str] = &["--help", "--version", "--verbose", "--quiet"];
+const GLOBAL: &[&str] = &["--help", "--version", "--verbose", "--quiet", "--render-workers"];
 
 /// Flags of cargo and of the project's scripts, which README.md names too.
 const TOOLS: &[&str] =

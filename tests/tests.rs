@@ -12,6 +12,7 @@ mod lift_models;
 mod pipeline;
 mod plan;
 mod reliability;
+mod render_workers;
 mod shipped;
 mod simulate;
 mod train;

@@ -17,6 +17,7 @@ use super::config::CanConfig;
 use crate::error::ScenarioError;
 use crate::robosuite::assets::assets_dir;
 use crate::robosuite::episode::{ArmEpisode, ObjectNames, noisy_init_qpos};
+use crate::robosuite::render_pool::ModelKey;
 use crate::robosuite::scene::SceneBuilder;
 
 /// Names of the state columns, in order.
@@ -109,6 +110,8 @@ pub fn can_model(cfg: &CanConfig, dir: &Path) -> Result<MjModel, ScenarioError> 
 pub struct CanSim {
     cfg: CanConfig,
     model: MjModel,
+    /// The asset folder it was compiled from (a render worker compiles the same).
+    dir: PathBuf,
 }
 
 impl CanSim {
@@ -120,7 +123,7 @@ impl CanSim {
         cfg.validate(Path::new("<can>"))?;
         let dir: PathBuf = assets_dir()?;
         let model = can_model(&cfg, &dir)?;
-        Ok(Self { cfg, model })
+        Ok(Self { cfg, model, dir })
     }
 
     /// The config.
@@ -145,7 +148,15 @@ impl CanSim {
         let [x, y, z] = init.can_pos;
         let [qw, qx, qy, qz] = init.can_quat;
         let names = ObjectNames { body: "Can_main", joint: "Can_joint0" };
-        let arm = ArmEpisode::start("can", seed, model, &names, init.arm_q, [x, y, z, qw, qx, qy, qz])?;
+        let key = ModelKey {
+            task: "can".into(),
+            config: serde_json::to_string(&self.cfg)
+                .map_err(|e| ScenarioError::Render { message: e.to_string() })?,
+            assets: self.dir.clone(),
+            object_half: None,
+        };
+        let arm = ArmEpisode::start("can", seed, model, &names, init.arm_q, [x, y, z, qw, qx, qy, qz])?
+            .with_model_key(key);
         Ok(CanEpisode { arm, cfg: self.cfg.clone(), init })
     }
 }

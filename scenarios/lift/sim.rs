@@ -17,6 +17,7 @@ use super::config::LiftConfig;
 use crate::error::ScenarioError;
 use crate::robosuite::assets::assets_dir;
 use crate::robosuite::episode::{ArmEpisode, ObjectNames, noisy_init_qpos};
+use crate::robosuite::render_pool::ModelKey;
 use crate::robosuite::scene::{SceneBuilder, Table};
 
 /// Names of the state columns, in order.
@@ -130,7 +131,15 @@ impl LiftSim {
         let [x, y, z] = init.cube_pos;
         let [qw, qx, qy, qz] = init.cube_quat;
         let names = ObjectNames { body: "cube_main", joint: "cube_joint0" };
-        let arm = ArmEpisode::start("lift", seed, model, &names, init.arm_q, [x, y, z, qw, qx, qy, qz])?;
+        let key = ModelKey {
+            task: "lift".into(),
+            config: serde_json::to_string(&self.cfg)
+                .map_err(|e| ScenarioError::Render { message: e.to_string() })?,
+            assets: self.dir.clone(),
+            object_half: Some(init.cube_half),
+        };
+        let arm = ArmEpisode::start("lift", seed, model, &names, init.arm_q, [x, y, z, qw, qx, qy, qz])?
+            .with_model_key(key);
         Ok(LiftEpisode {
             arm,
             table_top: self.cfg.table_offset[2],

@@ -56,6 +56,11 @@ pub struct ArmEpisode {
     data: MjData<Arc<MjModel>>,
     osc: Osc,
     object: usize,
+    /// The joint positions the data's poses were last computed at (what a frame
+    /// shows), for a render worker ([`super::render_pool`]).
+    shown: Vec<f64>,
+    /// The recipe of the model, for a render worker to build the same one.
+    key: Option<Arc<super::render_pool::ModelKey>>,
 }
 
 impl ArmEpisode {
@@ -94,7 +99,16 @@ impl ArmEpisode {
         }
         data.forward();
         let osc = Osc::new(&data, index);
-        Ok(Self { scenario, seed, step: 0, data, osc, object: body })
+        let shown = data.qpos().to_vec();
+        Ok(Self { scenario, seed, step: 0, data, osc, object: body, shown, key: None })
+    }
+
+    /// Names the recipe of this episode's model, so that render workers
+    /// ([`super::render_pool`]) can render its frames; without one it renders itself.
+    #[must_use]
+    pub fn with_model_key(mut self, key: super::render_pool::ModelKey) -> Self {
+        self.key = Some(Arc::new(key));
+        self
     }
 
     /// The episode's seed.
@@ -121,7 +135,7 @@ impl ArmEpisode {
         if action.iter().any(|v| !v.is_finite()) {
             return Err(fail(self.step, format!("action {action:?}")));
         }
-        self.osc.step(&mut self.data, action);
+        self.osc.step(&mut self.data, action, &mut self.shown);
         self.step += 1;
         let bad =
             |what: &str, v: &[f64]| v.iter().position(|x| !x.is_finite()).map(|i| format!("{what}[{i}]"));
@@ -190,7 +204,13 @@ impl ArmEpisode {
     ///
     /// # Errors
     /// [`ScenarioError::Render`] when no offscreen GL context can be made.
+    ///
+    /// With render workers running ([`super::render_pool::start`]) a worker renders
+    /// it, the same bytes, so that several threads render at once.
     pub fn render(&mut self, size: usize) -> Result<Vec<u8>, ScenarioError> {
+        if let (true, Some(key)) = (super::render_pool::active(), &self.key) {
+            return super::render_pool::render(key, &self.shown, size);
+        }
         render_agentview(&mut self.data, size)
     }
 }
@@ -254,7 +274,10 @@ pub fn release_renderer() {
 /// and no sites, as robosuite's offscreen renderer does by default. A model with
 /// other meshes or textures than the last one (another task) gets a fresh GL
 /// context from mujoco-rs.
-fn render_agentview(data: &mut MjData<Arc<MjModel>>, size: usize) -> Result<Vec<u8>, ScenarioError> {
+pub(super) fn render_agentview(
+    data: &mut MjData<Arc<MjModel>>,
+    size: usize,
+) -> Result<Vec<u8>, ScenarioError> {
     let err = |e: &dyn std::fmt::Display| ScenarioError::Render { message: e.to_string() };
     let cam = data.model().camera("agentview").map(|c| c.id).ok_or_else(|| err(&"no camera 'agentview'"))?;
     let _gl = render_lock();

@@ -11,6 +11,7 @@ pub mod assets;
 pub mod episode;
 pub mod linalg;
 pub mod osc;
+pub mod render_pool;
 pub mod rollout;
 pub mod scene;
 pub mod task;

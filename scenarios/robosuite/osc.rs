@@ -305,9 +305,16 @@ impl Osc {
 
     /// One control step: 25 physics steps under `action` (7 entries, robomimic's
     /// layout: Δposition, Δaxis-angle, gripper).
-    pub fn step(&mut self, d: &mut Data, action: &[f64; 7]) {
+    ///
+    /// `shown` receives the joint positions of the last substep's kinematics: after
+    /// the step, MuJoCo's body and geom poses (what a frame shows) are those, not the
+    /// integrated `qpos`.
+    pub fn step(&mut self, d: &mut Data, action: &[f64; 7], shown: &mut [f64]) {
         let nv = d.qvel().len();
         for sub in 0..SUBSTEPS {
+            if sub + 1 == SUBSTEPS {
+                shown.copy_from_slice(d.qpos());
+            }
             d.step1();
             let s = read(d, &self.index, nv);
             if sub == 0 {

@@ -160,3 +160,18 @@ fn frame_cost_per_visual_setting() {
         }
     }
 }
+
+#[test]
+#[ignore = "a measurement, printed"]
+fn model_sizes() {
+    let lift = crate::lift::LiftSim::new(crate::lift::LiftConfig::default()).unwrap();
+    let ep = lift.reset(1).unwrap();
+    let _ = ep;
+    let m = crate::lift::sim::lift_model(
+        &crate::lift::LiftConfig::default(),
+        &crate::robosuite::assets::assets_dir().unwrap(),
+        [0.02; 3],
+    )
+    .unwrap();
+    eprintln!("lift model {} bytes", m.size());
+}

@@ -65,10 +65,12 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
             }
         }
         Command::Agreement(a) => agreement::run(a),
-        Command::Rank(a) => rank::run(a, cli.quiet),
+        Command::Rank(a) => rank::run(a, cli.render_workers, cli.quiet),
         Command::Plan(a) => plan::run(a, cli.quiet),
         Command::Merge(a) => rank::merge::run(&a.shards, &a.out, a.force, a.no_report),
         Command::Tasks(a) => rank::report::tasks_table(&a.runs, a.tex.as_deref(), a.force),
+        // Answered in `main`, before any command runs.
+        Command::RenderWorker => Ok(ExitCode::SUCCESS),
         Command::Report(a) => {
             // The report is written into the run's folder: not while a run writes there.
             let _lock = crate::output::lock::lock(&a.out)?;

@@ -29,6 +29,8 @@ struct TaskDefaults {
     max_steps: Option<usize>,
     /// Shard processes a run is split into (`rank --processes`).
     processes: Option<usize>,
+    /// Render worker processes of a one-process run (`--render-workers`).
+    render_workers: Option<usize>,
 }
 
 /// The inputs and sizes of a run, flags first, then the task's defaults.
@@ -48,13 +50,30 @@ pub struct Resolved {
     pub own_judge: bool,
     /// Processes the run is split into (1 for a `--shard`, which is one process).
     pub processes: usize,
+    /// Render worker processes (`--render-workers`, else the task's; 0: frames are
+    /// rendered in this process).
+    pub render_workers: usize,
 }
 
 /// Resolves `a` for `task` from the shipped folder `root/<task>` (`checkpoints`).
 ///
 /// # Errors
 /// An unreadable or invalid `rank.toml`, naming it.
+#[cfg(test)]
 pub fn resolve(a: &RankArgs, task: &dyn Task, root: &Path) -> Result<Resolved> {
+    resolve_with(a, None, task, root)
+}
+
+/// [`resolve`], with the global `--render-workers` when it was given.
+///
+/// # Errors
+/// An unreadable or invalid `rank.toml`, naming it.
+pub fn resolve_with(
+    a: &RankArgs,
+    render_workers: Option<usize>,
+    task: &dyn Task,
+    root: &Path,
+) -> Result<Resolved> {
     let dir = root.join(task.name());
     let file = dir.join("rank.toml");
     let d: TaskDefaults = if file.exists() {
@@ -72,6 +91,7 @@ pub fn resolve(a: &RankArgs, task: &dyn Task, root: &Path) -> Result<Resolved> {
         max_steps: a.max_steps.or(d.max_steps).unwrap_or_else(|| task.max_steps()),
         own_judge,
         processes: a.processes.or(if a.shard.is_none() { d.processes } else { None }).unwrap_or(1),
+        render_workers: render_workers.or(d.render_workers).unwrap_or(0),
     })
 }
 
@@ -150,6 +170,7 @@ mod tests {
                 max_steps: 300,
                 own_judge: true,
                 processes: 1,
+                render_workers: 0,
             }
         );
         let toml = "episodes = 50\nmax_steps = 120\nprocesses = 3\n";
@@ -188,15 +209,19 @@ mod tests {
     }
 
     #[test]
-    fn the_shipped_lift_and_can_defaults_are_fifty_episodes_cut_short_in_three_processes() {
+    fn the_shipped_lift_and_can_defaults_are_fifty_episodes_cut_short_with_two_render_workers() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints");
         // checkpoints/<task>/rank.toml: the paper's 50 seeds per policy, episodes cut at 150
-        // (Lift) and 250 (Can) steps instead of robomimic's 400, in 3 shard processes.
+        // (Lift) and 250 (Can) steps instead of robomimic's 400, in one process whose frames
+        // 2 render workers draw; the global flag overrides it.
         for (name, steps) in [("lift", 150), ("can", 250)] {
             let task = scenarios::load_task(name).expect("robosuite assets (scripts/setup.sh)");
             let r = resolve(&args(&["--scenario", name]), task.as_ref(), &root).unwrap();
-            let want = (50, steps, root.join(name).join("policies"), 3);
-            assert_eq!((r.episodes, r.max_steps, r.policies.clone(), r.processes), want, "{name}");
+            let want = (50, steps, root.join(name).join("policies"), 1, 2);
+            let got = (r.episodes, r.max_steps, r.policies.clone(), r.processes, r.render_workers);
+            assert_eq!(got, want, "{name}");
+            let r = resolve_with(&args(&["--scenario", name]), Some(0), task.as_ref(), &root).unwrap();
+            assert_eq!(r.render_workers, 0);
             // Every input `rank --scenario NAME` needs is shipped: policies, world model, judge.
             assert_eq!(r.missing(name), Vec::<String>::new(), "{name}");
         }

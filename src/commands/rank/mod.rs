@@ -55,8 +55,8 @@ fn parse_shard(s: Option<&str>) -> Result<(usize, usize)> {
     Ok((i, n))
 }
 
-/// `evalharness rank`.
-pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
+/// `evalharness rank`; `render_workers` is the global `--render-workers` when given.
+pub fn run(a: &RankArgs, render_workers: Option<usize>, quiet: bool) -> Result<ExitCode> {
     match (a.processes, &a.shard) {
         (Some(0), _) => bail!("--processes 0: must be at least 1"),
         (Some(n), Some(_)) if n > 1 => {
@@ -66,12 +66,20 @@ pub fn run(a: &RankArgs, quiet: bool) -> Result<ExitCode> {
     }
     // Every input is checked before the output folder is touched.
     let task = crate::scenario::load_task(&a.scenario)?;
-    let r = defaults::resolve(a, task.as_ref(), Path::new("checkpoints"))?;
+    let r = defaults::resolve_with(a, render_workers, task.as_ref(), Path::new("checkpoints"))?;
     let missing = r.missing(&a.scenario);
     if !missing.is_empty() {
         bail!("--scenario {}: missing inputs:\n  {}", a.scenario, missing.join("\n  "));
     }
-    if r.processes > 1 { processes::run(a, task, &r, quiet) } else { run_with(a, task, &r, quiet, None) }
+    if r.processes > 1 {
+        return processes::run(a, task, &r, quiet);
+    }
+    // The task's default render workers (a one-process run); the global flag, when
+    // given, started them (or not) already.
+    if r.render_workers > 0 && render_workers.is_none() {
+        crate::render_workers::start(r.render_workers)?;
+    }
+    run_with(a, task, &r, quiet, None)
 }
 
 /// One process's run of `a` for `task`, resolved as `r` (its inputs found). `shard_times`:
