@@ -3,33 +3,13 @@
 //! `docs/guarantees.md` now states instead: inputs before outputs, the same run or
 //! refuse, one writer per output, a closed pipe changes nothing.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use crate::util::{copy_dir, evalharness, expect_code, run, s, scenario_variant, tree_bytes};
+use crate::util::{evalharness, expect_code, run, s, scenario_variant, tree_bytes};
 
-const SHIPPED: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/checkpoints/pusht");
-
-/// Two scripted checkpoints and a copy of the shipped world model with its
-/// autoencoder, in `dir`; returns (policy set, world model).
-fn inputs(dir: &Path) -> (PathBuf, PathBuf) {
-    let set = dir.join("set");
-    for name in ["noise000-lag0", "noise100-lag0"] {
-        copy_dir(&Path::new(SHIPPED).join("scripted").join(name), &set.join(name));
-    }
-    let models = dir.join("models");
-    copy_dir(&Path::new(SHIPPED).join("world_model"), &models.join("world_model"));
-    copy_dir(&Path::new(SHIPPED).join("autoencoder"), &models.join("autoencoder"));
-    (set, models.join("world_model"))
-}
-
-/// A tiny paired run: 4 episodes in batches of 2, 6 steps, no report.
-fn rank_args<'a>(set: &'a Path, wm: &'a Path, out: &'a Path) -> Vec<&'a str> {
-    let mut v = vec!["rank", "--policies", s(set), "--world-model", s(wm), "--episodes", "4"];
-    v.extend(["--max-steps", "6", "--batch", "2", "--bootstrap", "20", "--no-report", "--out", s(out)]);
-    v
-}
+use crate::util::{pusht_inputs as inputs, tiny_rank_args as rank_args};
 
 #[test]
 fn a_resume_under_other_settings_is_refused_on_every_path() {

@@ -9,41 +9,15 @@ use crate::util::{
     copy_dir, evalharness, expect_code, read_json, results, run, s, scenario_variant, tree_bytes, with_flag,
 };
 
-const SHIPPED: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/checkpoints/pusht");
-
-/// Two scripted checkpoints (no training needed) and a copy of the shipped world
-/// model with its autoencoder, in `dir`; returns (policy set, world model).
+/// Two scripted checkpoints and a copy of the shipped world model (see
+/// [`crate::util::pusht_inputs`]); returns (policy set, world model).
 fn inputs(dir: &Path) -> (PathBuf, PathBuf) {
-    let set = dir.join("set");
-    for name in ["noise000-lag0", "noise100-lag0"] {
-        copy_dir(&Path::new(SHIPPED).join("scripted").join(name), &set.join(name));
-    }
-    let models = dir.join("models");
-    copy_dir(&Path::new(SHIPPED).join("world_model"), &models.join("world_model"));
-    copy_dir(&Path::new(SHIPPED).join("autoencoder"), &models.join("autoencoder"));
-    (set, models.join("world_model"))
+    crate::util::pusht_inputs(dir)
 }
 
-/// A tiny paired run: 4 episodes in batches of 2, 6 steps, no report.
+/// A tiny paired run (see [`crate::util::tiny_rank_args`]).
 fn rank_args<'a>(set: &'a Path, wm: &'a Path, out: &'a Path) -> Vec<&'a str> {
-    vec![
-        "rank",
-        "--policies",
-        s(set),
-        "--world-model",
-        s(wm),
-        "--episodes",
-        "4",
-        "--max-steps",
-        "6",
-        "--batch",
-        "2",
-        "--bootstrap",
-        "20",
-        "--no-report",
-        "--out",
-        s(out),
-    ]
+    crate::util::tiny_rank_args(set, wm, out)
 }
 
 #[test]

@@ -81,6 +81,29 @@ pub fn copy_dir(from: &Path, to: &Path) {
     }
 }
 
+/// The shipped Push-T checkpoints.
+const PUSHT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/checkpoints/pusht");
+
+/// Two scripted checkpoints (no training needed) and a copy of the shipped world
+/// model with its autoencoder, in `dir`; returns (policy set, world model).
+pub fn pusht_inputs(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let set = dir.join("set");
+    for name in ["noise000-lag0", "noise100-lag0"] {
+        copy_dir(&Path::new(PUSHT).join("scripted").join(name), &set.join(name));
+    }
+    let models = dir.join("models");
+    copy_dir(&Path::new(PUSHT).join("world_model"), &models.join("world_model"));
+    copy_dir(&Path::new(PUSHT).join("autoencoder"), &models.join("autoencoder"));
+    (set, models.join("world_model"))
+}
+
+/// A tiny paired run of `pusht_inputs`: 4 episodes in batches of 2, 6 steps, no report.
+pub fn tiny_rank_args<'a>(set: &'a Path, wm: &'a Path, out: &'a Path) -> Vec<&'a str> {
+    let mut v = vec!["rank", "--policies", s(set), "--world-model", s(wm), "--episodes", "4"];
+    v.extend(["--max-steps", "6", "--batch", "2", "--bootstrap", "20", "--no-report", "--out", s(out)]);
+    v
+}
+
 /// Writes `dir/name`: the shipped `scenarios/pusht.toml` with `from` replaced by `to`.
 pub fn scenario_variant(dir: &Path, name: &str, from: &str, to: &str) -> std::path::PathBuf {
     let shipped = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/pusht.toml"))

@@ -321,7 +321,8 @@ fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> Vec
     let claims = dir.parent().map_or_else(|| PathBuf::from("claims"), |p| p.join("claims"));
     flag("--claims", claims.into());
     flag("--out", dir.into());
-    let mut all: Vec<OsString> = vec!["-q".into(), "rank".into()];
+    // A shard renders its own frames: the processes are the parallelism.
+    let mut all: Vec<OsString> = vec!["-q".into(), "--render-workers".into(), "0".into(), "rank".into()];
     all.extend(v);
     all.push("--no-report".into());
     all.push(if resume { "--resume" } else { "--force" }.into());
@@ -385,7 +386,11 @@ mod tests {
             ]
             .map(OsString::from),
         );
-        let s = parse(&shard_args(&a, 2, 3, Path::new("o.shards/shard-2"), false));
+        let args = shard_args(&a, 2, 3, Path::new("o.shards/shard-2"), false);
+        let argv = std::iter::once(OsString::from("evalharness")).chain(args.iter().cloned());
+        let cli = crate::cli::Cli::try_parse_from(argv).unwrap();
+        assert_eq!(cli.render_workers, Some(0), "a shard renders its own frames");
+        let s = parse(&args);
         assert_eq!((&s.policies, &s.world_model, &s.judge), (&a.policies, &a.world_model, &a.judge));
         assert_eq!(s.noise_scale, Some(0.25));
         assert_eq!(
