@@ -343,3 +343,45 @@ fn shards_of_different_runs_are_refused_naming_the_setting() {
     let (_, err) = expect_code(&run(&["merge", s(&a), s(&b), "--out", s(&m)]), 2);
     assert!(err.contains("they differ in seed"), "{err}");
 }
+
+/// A small tmpfs mounted for a test, unmounted when dropped.
+struct SmallDisk(std::path::PathBuf);
+
+impl SmallDisk {
+    /// Mounts `kib` KiB of tmpfs at a new folder under `dir`. CI runs as root, as the
+    /// sessions do, and mounts it; where mounting is not permitted (a user's machine
+    /// without root) there is no small disk to fill, said on stderr, and `None`.
+    fn mount(dir: &Path, kib: u32) -> Option<Self> {
+        let at = dir.join("small");
+        std::fs::create_dir_all(&at).unwrap();
+        let out = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={kib}k"), "tmpfs"])
+            .arg(&at)
+            .output()
+            .ok()?;
+        if !out.status.success() {
+            eprintln!("no small disk: mounting a tmpfs failed: {}", String::from_utf8_lossy(&out.stderr));
+            return None;
+        }
+        Some(Self(at))
+    }
+}
+
+impl Drop for SmallDisk {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount").arg(&self.0).status();
+    }
+}
+
+#[test]
+fn a_full_disk_leaves_nothing_half_written() {
+    // D22: `collect` and `dataset merge` on a full disk left OUT.partial behind.
+    let tmp = tempfile::tempdir().unwrap();
+    let Some(disk) = SmallDisk::mount(tmp.path(), 64) else { return };
+    let out = disk.0.join("d.zarr");
+    let (_, err) =
+        expect_code(&run(&["collect", "--episodes", "4", "--max-steps", "80", "--out", s(&out)]), 2);
+    assert!(err.contains("No space left on device"), "{err}");
+    let left: Vec<_> = std::fs::read_dir(&disk.0).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
