@@ -137,6 +137,12 @@ fn read_manifest(path: &Path) -> Result<Manifest, RunFileError> {
     serde_json::from_str(&text).map_err(|e| fail(path, format!("not a checkpoint manifest: {e}")))
 }
 
+/// Whether an interrupted write left a staged checkpoint of `unit` in `run` (committed
+/// or not): [`recover`] has something to do even where the unit's own files are absent.
+pub fn pending(run: &Path, unit: &str) -> bool {
+    stage_dir(run, unit).exists()
+}
+
 /// Makes the run folder's checkpoint whole before a resume reads it, and checks it
 /// (see the module docs).
 ///

@@ -43,17 +43,21 @@ fn defines_the_model(name: &str) -> bool {
 /// # Errors
 /// [`FingerprintError`] naming the file that could not be read.
 pub fn file(path: &Path) -> Result<String, FingerprintError> {
-    let mut f = fs::File::open(path).map_err(err(path))?;
     let mut h = Sha256::new();
+    feed(&mut h, &mut fs::File::open(path).map_err(err(path))?, path)?;
+    Ok(hex(h))
+}
+
+/// Hashes the rest of the open file `f` (at `path`, for errors) into `h`.
+fn feed(h: &mut Sha256, f: &mut fs::File, path: &Path) -> Result<(), FingerprintError> {
     let mut buf = vec![0u8; 1 << 16];
     loop {
         let n = f.read(&mut buf).map_err(err(path))?;
         if n == 0 {
-            break;
+            return Ok(());
         }
         h.update(&buf[..n]);
     }
-    Ok(hex(h))
 }
 
 /// `sha256:<hex>` of a finished hash.
@@ -83,7 +87,6 @@ pub fn folder(dir: &Path) -> Result<String, FingerprintError> {
     }
     names.sort();
     let mut h = Sha256::new();
-    let mut buf = vec![0u8; 1 << 16];
     for name in names {
         let path = dir.join(&name);
         let mut f = fs::File::open(&path).map_err(err(&path))?;
@@ -91,13 +94,7 @@ pub fn folder(dir: &Path) -> Result<String, FingerprintError> {
         h.update((name.len() as u64).to_le_bytes());
         h.update(name.as_bytes());
         h.update(len.to_le_bytes());
-        loop {
-            let n = f.read(&mut buf).map_err(err(&path))?;
-            if n == 0 {
-                break;
-            }
-            h.update(&buf[..n]);
-        }
+        feed(&mut h, &mut f, &path)?;
     }
     Ok(hex(h))
 }

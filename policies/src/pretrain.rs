@@ -241,7 +241,7 @@ pub fn pretrain_encoder(
     let mut probe = PoseProbe::new(cfg, targets.dim(), &device);
     let mut optim = AdamWConfig::new().with_weight_decay(1e-6).init();
     let mut state = PretrainState::default();
-    if files[2].exists() || dir.join("encoder_checkpoint.next").exists() {
+    if files[2].exists() || harness::checkpoint::pending(dir, harness::checkpoint::ENCODER) {
         harness::checkpoint::recover(dir, harness::checkpoint::ENCODER)
             .map_err(|e| err(&e.path, e.message))?;
     }

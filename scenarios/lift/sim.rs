@@ -139,7 +139,7 @@ impl LiftSim {
             object_half: Some(init.cube_half),
         };
         let arm = ArmEpisode::start("lift", seed, model, &names, init.arm_q, [x, y, z, qw, qx, qy, qz])?
-            .with_model_key(key);
+            .with_model_key(&key)?;
         Ok(LiftEpisode {
             arm,
             table_top: self.cfg.table_offset[2],

@@ -59,8 +59,9 @@ pub struct ArmEpisode {
     /// The joint positions the data's poses were last computed at (what a frame
     /// shows), for a render worker ([`super::render_pool`]).
     shown: Vec<f64>,
-    /// The recipe of the model, for a render worker to build the same one.
-    key: Option<Arc<super::render_pool::ModelKey>>,
+    /// The recipe of the model as a render request names it, for a render worker to
+    /// build the same one.
+    key: Option<Arc<str>>,
 }
 
 impl ArmEpisode {
@@ -105,10 +106,12 @@ impl ArmEpisode {
 
     /// Names the recipe of this episode's model, so that render workers
     /// ([`super::render_pool`]) can render its frames; without one it renders itself.
-    #[must_use]
-    pub fn with_model_key(mut self, key: super::render_pool::ModelKey) -> Self {
-        self.key = Some(Arc::new(key));
-        self
+    ///
+    /// # Errors
+    /// A key that cannot be written as a request.
+    pub fn with_model_key(mut self, key: &super::render_pool::ModelKey) -> Result<Self, ScenarioError> {
+        self.key = Some(Arc::from(key.text()?));
+        Ok(self)
     }
 
     /// The episode's seed.

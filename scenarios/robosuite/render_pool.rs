@@ -103,12 +103,22 @@ pub fn active() -> bool {
     POOL.get().is_some()
 }
 
-/// Renders a `size`² frame of the model `key` builds, at joint positions `qpos`, in
-/// this thread's worker.
+impl ModelKey {
+    /// The key as a request names it (JSON), made once per episode.
+    ///
+    /// # Errors
+    /// A key that cannot be written as JSON (an asset path that is not UTF-8).
+    pub fn text(&self) -> Result<String, ScenarioError> {
+        serde_json::to_string(self).map_err(|e| err(format!("render worker request: {e}")))
+    }
+}
+
+/// Renders a `size`² frame of the model the key `text` ([`ModelKey::text`]) builds, at
+/// joint positions `qpos`, in this thread's worker.
 ///
 /// # Errors
 /// A worker that failed or died (its message, or the I/O error).
-pub fn render(key: &ModelKey, qpos: &[f64], size: usize) -> Result<Vec<u8>, ScenarioError> {
+pub fn render(text: &str, qpos: &[f64], size: usize) -> Result<Vec<u8>, ScenarioError> {
     let pool = POOL.get().ok_or_else(|| err("no render workers"))?;
     let i = MINE.with(|m| {
         *m.get().get_or_insert_with(|| {
@@ -118,8 +128,7 @@ pub fn render(key: &ModelKey, qpos: &[f64], size: usize) -> Result<Vec<u8>, Scen
         })
     });
     let mut w = pool.workers[i].lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    let text = serde_json::to_string(key).map_err(|e| err(format!("render worker request: {e}")))?;
-    ask(&mut w, &text, qpos, size)
+    ask(&mut w, text, qpos, size)
 }
 
 /// One request and its answer.

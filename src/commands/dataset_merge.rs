@@ -80,8 +80,7 @@ pub fn run(inputs: &[PathBuf], out: &Path, force: bool, quiet: bool) -> Result<E
     }
     let listed = crate::output::Inputs::new().all("dataset", inputs);
     // Inputs before outputs: checked before any dataset is opened or anything written.
-    listed.check(out)?;
-    listed.check_kept(out, ".partial")?;
+    listed.refuse(out, ".partial")?;
     let readers = inputs
         .iter()
         .map(|p| ReplayReader::open(p).with_context(|| format!("opening dataset {}", p.display())))

@@ -75,8 +75,7 @@ pub fn run(a: &ReadJudgeArgs) -> Result<ExitCode> {
     };
     let (judge, from) = match (&a.judge, a.rule) {
         (Some(dir), _) => (
-            FrameJudge::load(dir, &burn::tensor::Device::flex())
-                .map_err(|e| anyhow::anyhow!("--judge {}: {}", e.path.display(), e.message))?,
+            crate::commands::rank::read_judge_folder(dir, &burn::tensor::Device::flex())?,
             dir.display().to_string(),
         ),
         (None, Some(JudgeRule::LiftRed)) => {

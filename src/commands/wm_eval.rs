@@ -96,7 +96,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
             acc.world_model("--world-model", m)
         })
         .maybe("--judge", a.judge.as_deref());
-    inputs.check(&a.out)?;
+    inputs.refuse(&a.out, ".partial")?;
     let device = world_model::device::selected()?;
     let models: Vec<(String, WorldModel)> = a
         .world_models

@@ -103,8 +103,7 @@ impl SuccessCheck {
     /// An unreadable judge, one that reads frames of another size, or an unreadable
     /// `data/success` array.
     pub fn load(dir: &Path, path: &Path, data: &EpisodeData) -> Result<Self> {
-        let judge = FrameJudge::load(dir, &burn::tensor::Device::flex())
-            .map_err(|e| anyhow::anyhow!("--judge {}: {}", e.path.display(), e.message))?;
+        let judge = crate::commands::rank::read_judge_folder(dir, &burn::tensor::Device::flex())?;
         if judge.image_size() != data.size {
             let (j, d) = (judge.image_size(), data.size);
             bail!("--judge {}: it reads {j}x{j} frames, and {} has {d}x{d}", dir.display(), path.display());

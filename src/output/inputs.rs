@@ -112,6 +112,28 @@ impl Inputs {
         }
         Ok(())
     }
+
+    /// Everything an output must pass before it is touched: `out` apart from every
+    /// input ([`Inputs::check`]), no input where the command keeps `OUT{kept}`
+    /// ([`Inputs::check_kept`]), and `out` not a dangling link.
+    ///
+    /// # Errors
+    /// The first of those that fails.
+    pub fn refuse(&self, out: &Path, kept: &str) -> Result<()> {
+        self.check(out)?;
+        self.check_kept(out, kept)?;
+        check_not_dangling(out)
+    }
+
+    /// [`Inputs::refuse`], then the output's lock ([`super::lock`]), held while the
+    /// returned guard lives.
+    ///
+    /// # Errors
+    /// As [`Inputs::refuse`], or another process writing `out`.
+    pub fn claim(&self, out: &Path, kept: &str) -> Result<super::lock::OutLock> {
+        self.refuse(out, kept)?;
+        super::lock::lock(out)
+    }
 }
 
 /// `path` with `suffix` appended to its last component (`out` -> `out.replaced`).
@@ -146,7 +168,7 @@ pub fn absolute(p: &Path) -> PathBuf {
 ///
 /// # Errors
 /// A dangling link, naming it and its target.
-pub fn check_not_dangling(out: &Path) -> Result<()> {
+fn check_not_dangling(out: &Path) -> Result<()> {
     let is_link = std::fs::symlink_metadata(out).is_ok_and(|m| m.file_type().is_symlink());
     if is_link && std::fs::metadata(out).is_err() {
         let target = std::fs::read_link(out).map_or_else(|_| "?".into(), |t| t.display().to_string());

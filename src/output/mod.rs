@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 
 pub use inputs::Inputs;
-use inputs::{check_not_dangling, sibling};
+use inputs::sibling;
 
 /// The file that marks a folder beside `--out` as the tool's own (`OUT.partial`,
 /// `OUT.shards`): only a folder with it is ever cleared. A folder of the same name
@@ -84,10 +84,7 @@ impl RunDir {
         force: bool,
         progress: &'static str,
     ) -> Result<Self> {
-        inputs.check(out)?;
-        inputs.check_kept(out, ".replaced")?;
-        check_not_dangling(out)?;
-        let lock = lock::lock(out)?;
+        let lock = inputs.claim(out, ".replaced")?;
         let aside = sibling(out, ".replaced");
         let mut dir = Self {
             out: out.to_path_buf(),
@@ -217,10 +214,7 @@ impl Staged {
     /// writing it, an existing one without `force`, an `OUT.partial` that is not the
     /// tool's, or an I/O failure.
     pub fn new(target: &Path, force: bool, inputs: &Inputs) -> Result<Self> {
-        inputs.check(target)?;
-        inputs.check_kept(target, ".partial")?;
-        check_not_dangling(target)?;
-        let lock = lock::lock(target)?;
+        let lock = inputs.claim(target, ".partial")?;
         if std::fs::symlink_metadata(target).is_ok() && !force {
             bail!("output {} already exists (pass --force to replace it)", target.display());
         }

@@ -133,7 +133,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     if wm.is_some() {
         listed = listed.world_model("--world-model", &a.world_model);
     }
-    let (out_dir, jsonl) = crate::commands::rank::prepare_run(&a.out, listed, &inputs, a.resume, a.force)?;
+    let (out_dir, jsonl) = crate::commands::rank::prepare_run(&a.out, &listed, a.resume, a.force)?;
     let config = json!({
         "command": crate::stdout::command_line().join(" "),
         "scenario": a.scenario, "policy": a.policy,

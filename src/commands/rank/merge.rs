@@ -164,19 +164,13 @@ pub(super) fn join(
     for (s, cfg) in shards.iter().zip(&configs) {
         let this = run_key(cfg);
         if this != key {
-            let differs: Vec<String> = this
-                .as_object()
-                .into_iter()
-                .flatten()
-                .filter(|(k, v)| key.get(k.as_str()) != Some(*v))
-                .map(|(k, _)| k.clone())
-                .chain(
-                    key.as_object()
-                        .into_iter()
-                        .flatten()
-                        .filter(|(k, _)| this.get(k.as_str()).is_none())
-                        .map(|(k, _)| k.clone()),
-                )
+            let names = |v: &Value| -> std::collections::BTreeSet<String> {
+                v.as_object().into_iter().flatten().map(|(k, _)| k.clone()).collect()
+            };
+            let differs: Vec<String> = names(&this)
+                .union(&names(&key))
+                .filter(|k| this.get(k.as_str()) != key.get(k.as_str()))
+                .cloned()
                 .collect();
             bail!(
                 "{}: not a shard of the same run as {} (they differ in {})",

@@ -121,12 +121,14 @@ fn run_with(
         inputs.push(("judge".to_string(), d.clone(), f));
     }
     inputs.extend(scenario_input(&a.scenario)?);
+    // Each checkpoint too: one linked into --policies lies elsewhere on disk.
     let listed = crate::output::Inputs::new()
         .scenario(&a.scenario)
         .add("--policies", &r.policies)
+        .all("policy checkpoint", &dirs)
         .world_model("--world-model", &r.world_model)
         .maybe("--judge", r.judge.as_deref());
-    let (out_dir, jsonl) = prepare_run(&a.out, listed, &inputs, a.resume, a.force)?;
+    let (out_dir, jsonl) = prepare_run(&a.out, &listed, a.resume, a.force)?;
     let mut config = json!({
         "command": crate::stdout::command_line().join(" "),
         "scenario": a.scenario, "policies": r.policies, "world_model": r.world_model,
@@ -290,9 +292,7 @@ fn run_with(
 /// # Errors
 /// An unloadable judge, or one of another frame size or score kind, naming its folder.
 pub(crate) fn load_judge(dir: &Path, task: &dyn Task, device: &burn::tensor::Device) -> Result<FrameJudge> {
-    // The loader's error type is the policies' (it says "policy X"); a judge is named as one.
-    let j = FrameJudge::load(dir, device)
-        .map_err(|e| anyhow::anyhow!("--judge {}: {}", e.path.display(), e.message))?;
+    let j = read_judge_folder(dir, device)?;
     let size = task.observation_spec().image_size;
     if j.image_size() != size {
         bail!(
@@ -315,6 +315,15 @@ pub(crate) fn load_judge(dir: &Path, task: &dyn Task, device: &burn::tensor::Dev
         );
     }
     Ok(j)
+}
+
+/// Reads a judge folder, named in any error as the `--judge` it is (the loader's error
+/// type is the policies', which says "policy X").
+///
+/// # Errors
+/// A missing or invalid judge folder.
+pub(crate) fn read_judge_folder(dir: &Path, device: &burn::tensor::Device) -> Result<FrameJudge> {
+    FrameJudge::load(dir, device).map_err(|e| anyhow::anyhow!("--judge {}: {}", e.path.display(), e.message))
 }
 
 /// The model folders a run depends on, each as (name in `config.json`'s
@@ -358,21 +367,19 @@ pub(crate) fn scenario_input(scenario: &str) -> Result<Option<(String, std::path
     Ok(Some(("scenario".to_string(), path.to_path_buf(), f)))
 }
 
-/// Checks that `out` stays apart from every input (those `listed` and the model
-/// folders of [`model_inputs`]), then prepares it for a run that appends rows (see
+/// Checks that `out` stays apart from every input `listed` (every folder of
+/// [`model_inputs`] among them), then prepares it for a run that appends rows (see
 /// [`crate::output::RunDir::prepare_episodes`]); returns it and its `episodes.jsonl`.
 ///
 /// # Errors
 /// An `out` that overlaps an input, or one `--resume` / `--force` cannot take.
 pub(crate) fn prepare_run(
     out: &Path,
-    listed: crate::output::Inputs,
-    inputs: &[(String, std::path::PathBuf, String)],
+    listed: &crate::output::Inputs,
     resume: bool,
     force: bool,
 ) -> Result<(crate::output::RunDir, std::path::PathBuf)> {
-    let listed = inputs.iter().fold(listed, |acc, (_, dir, _)| acc.add("model folder", dir));
-    let dir = crate::output::RunDir::prepare_episodes(out, &listed, resume, force)?;
+    let dir = crate::output::RunDir::prepare_episodes(out, listed, resume, force)?;
     Ok((dir, out.join("episodes.jsonl")))
 }
 

@@ -40,8 +40,15 @@ use crate::progress;
 pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Result<ExitCode> {
     let started = Instant::now();
     let parts = shards_folder(&a.out);
-    let dangling = std::fs::symlink_metadata(&a.out).is_ok() && !a.out.exists();
-    if (a.out.exists() || dangling) && !a.force && !a.resume {
+    // The whole run writes `--out` (and its shards beside it): its inputs are checked
+    // and it is locked first, as any output is.
+    let _lock = crate::output::Inputs::new()
+        .scenario(&a.scenario)
+        .add("--policies", &r.policies)
+        .world_model("--world-model", &r.world_model)
+        .maybe("--judge", r.judge.as_deref())
+        .claim(&a.out, ".shards")?;
+    if a.out.exists() && !a.force && !a.resume {
         bail!("--out {} exists: pass --force to replace it or --resume to continue it", a.out.display());
     }
     // Resuming a run that has rows but no shards (finished, or run in one process): the
@@ -61,15 +68,6 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
     if n < r.processes {
         tracing::info!("--processes {}: the run has {batches} batches, so {n} processes", r.processes);
     }
-    // The whole run writes `--out` (and its shards beside it): one writer at a time.
-    let _lock = crate::output::lock::lock(&a.out)?;
-    let inputs = crate::output::Inputs::new()
-        .scenario(&a.scenario)
-        .add("--policies", &r.policies)
-        .world_model("--world-model", &r.world_model)
-        .maybe("--judge", r.judge.as_deref());
-    inputs.check(&a.out)?;
-    inputs.check_kept(&a.out, ".shards")?;
     if a.resume {
         check_split(&parts, n)?;
     }
