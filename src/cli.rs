@@ -6,10 +6,12 @@ use clap::{Args, Parser, Subcommand};
 
 pub mod bounds;
 mod choices;
+mod import;
 mod judge;
 mod plan;
 mod train;
 pub use choices::*;
+pub use import::*;
 pub use judge::*;
 pub use plan::*;
 pub use train::*;
@@ -88,6 +90,10 @@ pub enum Command {
     /// World-model tools.
     #[command(subcommand)]
     Wm(WmCommand),
+    /// Convert models trained by other code (the official DriftWorld checkpoints) into
+    /// evalharness's folders.
+    #[command(subcommand)]
+    Import(ImportCommand),
     /// Rank policy checkpoints in the world model, checked against MuJoCo (paired episodes).
     Rank(RankArgs),
     /// GPC-RANK planning: a policy proposes several action chunks per decision, the

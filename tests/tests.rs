@@ -6,6 +6,7 @@ mod dataset;
 mod deploy;
 mod docs;
 mod guarantees;
+mod import;
 mod judge;
 mod lift;
 mod lift_models;

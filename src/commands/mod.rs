@@ -9,6 +9,7 @@ mod dataset_merge;
 mod episodes;
 mod export_policies;
 mod goal_free;
+mod import_wm;
 pub(crate) mod plan;
 pub(crate) mod rank;
 mod read_judge;
@@ -34,7 +35,7 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 
-use crate::cli::{Cli, Command, DatasetCommand, TrainCommand, WmCommand};
+use crate::cli::{Cli, Command, DatasetCommand, ImportCommand, TrainCommand, WmCommand};
 
 /// The commit this binary was built from (`+dirty` if tracked files differed from it;
 /// "unknown" when built outside a git checkout), recorded by `build.rs`: the
@@ -80,6 +81,7 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         }
         Command::Wm(WmCommand::Eval(a)) => wm_eval::run(a),
         Command::Wm(WmCommand::Export(a)) => wm_export::run(a),
+        Command::Import(ImportCommand::WorldModel(a)) => import_wm::run(a),
         Command::Scripted(a) => scripted::run(a),
         Command::ExportPolicies(a) => export_policies::run(a),
         Command::ReadJudge(a) => read_judge::run(a),

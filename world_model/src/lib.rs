@@ -12,7 +12,8 @@
 //!   (drifting, MSE and diffusion objectives); [`context_noise`]: corrupted training histories;
 //! - [`model`]: a trained world model for inference; [`rollout`]: autoregressive
 //!   generation, chunk by chunk; [`eval`]: video-quality metrics;
-//! - [`data`]: datasets with a held-out split; [`action`]: how actions are normalised.
+//! - [`data`]: datasets with a held-out split; [`action`]: how actions are normalised;
+//! - [`import`]: world models trained by other code (the official DriftWorld checkpoints).
 
 pub mod action;
 pub mod autoencoder;
@@ -25,6 +26,7 @@ pub mod drift;
 pub mod drift_step;
 pub mod error;
 pub mod eval;
+pub mod import;
 pub mod latents;
 pub mod model;
 pub mod motion;

@@ -163,10 +163,23 @@ impl Attention {
     /// # Shapes
     /// `[b, c, f, h, w] -> [b, c, f, h, w]`
     pub fn forward(&self, x: Tensor<5>) -> Tensor<5> {
+        self.forward_normed(x, false)
+    }
+
+    /// [`Self::forward`] with the GroupNorm statistics taken per frame (`per_frame`, as
+    /// the official DriftWorld code does) or over the whole clip.
+    ///
+    /// # Shapes
+    /// `[b, c, f, h, w] -> [b, c, f, h, w]`
+    pub fn forward_normed(&self, x: Tensor<5>, per_frame: bool) -> Tensor<5> {
         let [b, c, f, h, w] = x.dims();
         let t = h * w;
         let (n, d) = (self.heads, c / self.heads);
-        let y = group_norm(&self.norm, x.clone()).swap_dims(1, 2).reshape([b * f, c, t]); // [b f, c, t]
+        let y = if per_frame {
+            self.norm.forward(x.clone().swap_dims(1, 2).reshape([b * f, c, t])) // [b f, c, t]
+        } else {
+            group_norm(&self.norm, x.clone()).swap_dims(1, 2).reshape([b * f, c, t]) // [b f, c, t]
+        };
         let qkv = self.qkv.forward(y); // [b f, 3c, t]
         let split = |i: usize| qkv.clone().narrow(1, i * c, c).reshape([b * f * n, d, t]); // [b f n, d, t]
         let (q, k, v) = (split(0), split(1), split(2));

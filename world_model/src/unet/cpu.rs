@@ -269,10 +269,13 @@ struct Attn {
     proj_w: Vec<f32>,
     proj_b: Vec<f32>,
     heads: usize,
+    /// GroupNorm statistics per frame rather than over the clip
+    /// ([`crate::unet::UNetConfig::frame_attention_norm`]).
+    per_frame: bool,
 }
 
 impl Attn {
-    fn new(a: &Attention, layer: &str) -> Result<Self, UnsupportedLayer> {
+    fn new(a: &Attention, layer: &str, per_frame: bool) -> Result<Self, UnsupportedLayer> {
         let c = a.proj.weight.dims()[0];
         let one =
             |conv: &burn::nn::conv::Conv1d| conv.kernel_size == 1 && conv.stride == 1 && conv.groups == 1;
@@ -286,6 +289,7 @@ impl Attn {
             proj_w: values(a.proj.weight.val(), layer)?,
             proj_b: bias_values(&a.proj.bias, c, layer)?,
             heads: a.heads,
+            per_frame,
         })
     }
 
@@ -295,7 +299,9 @@ impl Attn {
         let (c, t) = (x.c, x.h * x.w);
         let cols = x.cols();
         let mut y = x.data.clone();
-        group_norm_cols(&mut y, &self.norm, x.n, x.f, t, None, |v| v);
+        // Columns run (sample, frame, position): per frame, each frame is a sample of one frame.
+        let (samples, frames) = if self.per_frame { (x.n * x.f, 1) } else { (x.n, x.f) };
+        group_norm_cols(&mut y, &self.norm, samples, frames, t, None, |v| v);
         let mut qkv: Vec<f32> = self.qkv_b.iter().flat_map(|&b| std::iter::repeat_n(b, cols)).collect();
         matmul(3 * c, c, cols, &self.qkv_w, &y, &mut qkv, true); // [3c, cols]
         let heads = Heads { channels: c, heads: self.heads, images: x.n * x.f, positions: t };
@@ -317,8 +323,8 @@ struct Lvl {
 }
 
 impl Lvl {
-    fn new(l: &Level, layer: &str) -> Result<Self, UnsupportedLayer> {
-        let attn = l.attn.as_ref().map(|a| Attn::new(a, &format!("{layer}.attn"))).transpose()?;
+    fn new(l: &Level, layer: &str, per_frame: bool) -> Result<Self, UnsupportedLayer> {
+        let attn = l.attn.as_ref().map(|a| Attn::new(a, &format!("{layer}.attn"), per_frame)).transpose()?;
         Ok(Self { res: Res::new(&l.res, layer)?, attn })
     }
 
@@ -352,8 +358,9 @@ impl CpuUNet {
     /// # Errors
     /// [`UnsupportedLayer`] naming a layer these kernels cannot run, or non-f32 weights.
     pub fn new(u: &UNet) -> Result<Self, UnsupportedLayer> {
+        let per_frame = u.frame_attention_norm;
         let levels = |ls: &[Level], name: &str| -> Result<Vec<Lvl>, UnsupportedLayer> {
-            ls.iter().enumerate().map(|(i, l)| Lvl::new(l, &format!("{name}.{i}"))).collect()
+            ls.iter().enumerate().map(|(i, l)| Lvl::new(l, &format!("{name}.{i}"), per_frame)).collect()
         };
         let convs = |cs: &[Conv3dF], name: &str| -> Result<Vec<Conv>, UnsupportedLayer> {
             cs.iter().enumerate().map(|(i, c)| Conv::new(c, &format!("{name}.{i}"))).collect()
@@ -363,7 +370,7 @@ impl CpuUNet {
             enc: levels(&u.enc, "enc")?,
             downs: convs(&u.downs, "downs")?,
             mid: [Res::new(&u.mid[0], "mid.0")?, Res::new(&u.mid[1], "mid.1")?],
-            mid_attn: Attn::new(&u.mid_attn, "mid_attn")?,
+            mid_attn: Attn::new(&u.mid_attn, "mid_attn", per_frame)?,
             dec: levels(&u.dec, "dec")?,
             ups: convs(&u.ups, "ups")?,
             norm_out: norm_of(&u.norm_out, "norm_out")?,

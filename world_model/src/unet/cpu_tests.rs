@@ -76,3 +76,18 @@ fn predicts_what_burn_predicts_with_a_timestep_and_three_levels() {
     let diff = compare(&unet, 3, 8, true);
     assert!(diff < 1e-4, "max relative difference {diff}");
 }
+
+#[test]
+fn predicts_what_burn_predicts_with_per_frame_attention_norm() {
+    // The official DriftWorld layout (imported models): attention GroupNorm per frame,
+    // 3-channel frames, every level at the base width, attention at rates 2 and 4.
+    let device = Device::flex();
+    let cfg = UNetConfig {
+        frame_attention_norm: Some(true),
+        groups: 8,
+        ..UNetConfig::new(3, 16, vec![1, 1, 1], vec![2, 4])
+    };
+    let unet = cfg.init(&device).map(&mut Jitter);
+    let diff = compare(&unet, 3, 8, false);
+    assert!(diff < 1e-4, "max relative difference {diff}");
+}

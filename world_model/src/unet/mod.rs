@@ -83,6 +83,12 @@ pub struct UNetConfig {
     /// the same reason (missing = no).
     #[config(default = "None")]
     pub accentuation: Option<bool>,
+    /// GroupNorm statistics of the attention blocks taken per frame, as the official
+    /// DriftWorld code does (its models imported by `evalharness import`), instead of over
+    /// the whole clip as evalharness's own models do. An option for the same reason
+    /// (missing = the whole clip).
+    #[config(default = "None")]
+    pub frame_attention_norm: Option<bool>,
 }
 
 impl UNetConfig {
@@ -99,6 +105,12 @@ impl UNetConfig {
     /// Whether the U-Net reads an accentuation strength α.
     pub fn uses_accentuation(&self) -> bool {
         self.accentuation == Some(true)
+    }
+
+    /// Whether the attention blocks normalise each frame alone
+    /// ([`UNetConfig::frame_attention_norm`]).
+    pub fn frame_attention_norm(&self) -> bool {
+        self.frame_attention_norm == Some(true)
     }
 
     /// Whether a run with this config can start from `source`'s weights: the same
@@ -207,6 +219,7 @@ impl UNetConfig {
             frame_channels: self.frame_channels,
             action_maps: self.uses_action_maps(),
             anchor: self.uses_anchor(),
+            frame_attention_norm: self.frame_attention_norm(),
         }
     }
 }
@@ -219,10 +232,10 @@ pub struct Level {
 }
 
 impl Level {
-    fn forward(&self, x: Tensor<5>, emb: Tensor<3>) -> Tensor<5> {
+    fn forward(&self, x: Tensor<5>, emb: Tensor<3>, per_frame: bool) -> Tensor<5> {
         let h = self.res.forward(x, emb);
         match &self.attn {
-            Some(a) => a.forward(h),
+            Some(a) => a.forward_normed(h, per_frame),
             None => h,
         }
     }
@@ -257,6 +270,7 @@ pub struct UNet {
     frame_channels: usize,
     action_maps: bool,
     anchor: bool,
+    frame_attention_norm: bool,
 }
 
 impl UNet {
@@ -295,12 +309,13 @@ impl UNet {
     ) -> Tensor<5> {
         let emb = self.embedding(actions.clone(), timestep, alpha); // [b, F, e]
         let x = self.inputs(noise, history, actions, anchor); // [b, c_in, F, h, w]
+        let per_frame = self.frame_attention_norm;
         let mut hcur = self.conv_in.forward(x); // [b, mc, F, h, w]
         let mut skips = vec![hcur.clone()];
         let levels = self.downs.len() + 1;
         for l in 0..levels {
             for i in 0..self.res_blocks {
-                hcur = self.enc[l * self.res_blocks + i].forward(hcur, emb.clone());
+                hcur = self.enc[l * self.res_blocks + i].forward(hcur, emb.clone(), per_frame);
                 skips.push(hcur.clone());
             }
             if l + 1 < levels {
@@ -309,13 +324,14 @@ impl UNet {
             }
         }
         hcur = self.mid[0].forward(hcur, emb.clone());
-        hcur = self.mid_attn.forward(hcur);
+        hcur = self.mid_attn.forward_normed(hcur, per_frame);
         hcur = self.mid[1].forward(hcur, emb.clone());
         let per = self.res_blocks + 1;
         for (k, _) in (0..levels).rev().enumerate() {
             for i in 0..per {
                 let skip = skips.pop().unwrap_or_else(|| hcur.clone());
-                hcur = self.dec[k * per + i].forward(Tensor::cat(vec![hcur, skip], 1), emb.clone());
+                hcur =
+                    self.dec[k * per + i].forward(Tensor::cat(vec![hcur, skip], 1), emb.clone(), per_frame);
             }
             if k + 1 < levels {
                 hcur = self.ups[k].forward(self.up2(hcur)); // spatial x 2

@@ -1,0 +1,67 @@
+//! `evalharness import` arguments: models trained by other code, converted once into
+//! evalharness's own folders.
+
+use std::path::PathBuf;
+
+use clap::{Args, Subcommand, ValueEnum};
+
+/// `evalharness import`.
+#[derive(Debug, Subcommand)]
+pub enum ImportCommand {
+    /// A world model from another codebase's checkpoint, as an evalharness world-model
+    /// folder (`config.json`, `ema.bpk`, `provenance.json`) that `rank`, `plan`, `wm eval`
+    /// and `simulate --replay-imagined` take with `--world-model`.
+    WorldModel(ImportWorldModelArgs),
+}
+
+/// The formats `import world-model` reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum WorldModelFormat {
+    /// The official DriftWorld code's `torch.save({step, model, optimizer, scheduler})`.
+    Driftworld,
+}
+
+/// Which copy of a checkpoint's weights to import.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ImportWeights {
+    /// The EMA copy (`model.ema_model.*`), what the official sampler uses.
+    Ema,
+    /// The trained weights before averaging (`model.inner_model.*`).
+    Inner,
+}
+
+/// What the file cannot tell: future frames per pass, frame size, head width, action scale.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ImportPreset {
+    /// Push-T: 4 future frames, 96² frames, actions in world units 0..511.
+    Pusht,
+    /// robomimic Lift: 2 future frames, 96² frames, 7-D actions in [-1, 1].
+    Lift,
+    /// robomimic Can: as Lift.
+    Can,
+}
+
+/// `evalharness import world-model`.
+#[derive(Debug, Args)]
+pub struct ImportWorldModelArgs {
+    /// The checkpoint (`ckpt-step*.pth`).
+    pub file: PathBuf,
+    /// The file's format.
+    #[arg(long, value_enum)]
+    pub format: WorldModelFormat,
+    /// The world-model folder to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Which weights to import.
+    #[arg(long, value_enum, default_value = "ema")]
+    pub weights: ImportWeights,
+    /// The official configuration the checkpoint was trained with.
+    #[arg(long, value_enum, default_value = "pusht")]
+    pub preset: ImportPreset,
+    /// Frames' side in pixels, when not the preset's 96 (a reduced model).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(8..=1024))]
+    pub image_size: Option<u16>,
+    /// Replace `--out` if it exists (only once the new folder is complete).
+    #[arg(long)]
+    pub force: bool,
+}

@@ -1,0 +1,69 @@
+//! `evalharness import world-model` on the committed DriftWorld fixtures
+//! (`world_model/tests/fixtures/driftworld/`, written by `scripts/fixtures/driftworld_wm.py`).
+
+use std::path::{Path, PathBuf};
+
+use crate::util::{expect_code, pusht_inputs, read_json, run, s, tiny_rank_args, tree_bytes, with_flag};
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("world_model/tests/fixtures/driftworld").join(name)
+}
+
+fn import(file: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args = vec!["import", "world-model", "--format", "driftworld", s(file), "--out", s(out)];
+    args.extend(extra);
+    run(&args)
+}
+
+#[test]
+fn a_driftworld_checkpoint_becomes_a_world_model_folder_that_rank_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("imported");
+    let (stdout, _) = expect_code(&import(&fixture("wm.pth"), &out, &["--image-size", "16"]), 0);
+    assert_eq!(stdout.trim(), out.display().to_string());
+    let cfg = read_json(&out.join("config.json"));
+    assert_eq!(cfg["model"]["unet"]["frame_attention_norm"], true);
+    assert_eq!(cfg["model"]["unet"]["model_channels"], 32);
+    assert_eq!(cfg["model"]["latents"]["size"], 16);
+    assert_eq!(cfg["model"]["future"], 4);
+    assert_eq!(cfg["import"]["step"], 4321);
+    assert_eq!(cfg["import"]["tensors"], 436);
+    let prov = read_json(&out.join("provenance.json"));
+    assert!(prov["import"]["sha256"].as_str().is_some_and(|h| h.starts_with("sha256:")), "{prov}");
+    assert!(out.join("ema.bpk").is_file());
+
+    // The same weights at Push-T's 96² frames (a convolutional network runs at any size) rank
+    // policies end to end.
+    let (set, _) = pusht_inputs(dir.path());
+    let at96 = dir.path().join("at96");
+    expect_code(&import(&fixture("wm.pth"), &at96, &[]), 0);
+    let rank_out = dir.path().join("rank");
+    let args = tiny_rank_args(&set, &at96, &rank_out);
+    let args = with_flag(&args, "--episodes", "2");
+    expect_code(&run(&args), 0);
+    let results = read_json(&rank_out.join("results.json"));
+    assert!(results["timing"]["world_model_ms_per_frame"].as_f64().is_some_and(|v| v > 0.0), "{results}");
+}
+
+#[test]
+fn a_damaged_checkpoint_is_refused_by_key_and_the_existing_folder_is_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("imported");
+    expect_code(&import(&fixture("micro.pth"), &out, &[]), 0);
+    let before = tree_bytes(&out);
+    // Without --force an existing folder is never replaced.
+    let (_, err) = expect_code(&import(&fixture("micro.pth"), &out, &[]), 2);
+    assert!(err.contains("--force"), "{err}");
+    for (file, key) in [
+        ("micro_missing_key.pth", "model.ema_model.middle_block.0.in_layers.0.weight"),
+        ("micro_wrong_shape.pth", "model.ema_model.middle_block.0.emb_layers.1.weight"),
+        ("micro_float64.pth", "model.ema_model.out.0.weight"),
+        ("micro_qkv_swapped.pth", "model.ema_model.middle_block.1.qkv.weight"),
+        ("micro_unexpected_key.pth", "model.ema_model.middle_block.1.extra.weight"),
+    ] {
+        let (_, err) = expect_code(&import(&fixture(file), &out, &["--force"]), 2);
+        assert!(err.contains(key) && err.contains(file), "{file}: {err}");
+        assert_eq!(tree_bytes(&out), before, "{file} changed the existing folder");
+    }
+    assert!(!dir.path().join("imported.partial").exists());
+}
