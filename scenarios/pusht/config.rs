@@ -82,6 +82,29 @@ pub struct ResetConfig {
     pub min_agent_block_distance: f64,
     pub fixed_goal: bool,
     pub fixed_goal_pose: [f64; 3],
+    /// The generator the reset draws from (absent: evalharness's own).
+    #[serde(default, skip_serializing_if = "ResetRng::is_own")]
+    pub rng: ResetRng,
+}
+
+/// The generator a Push-T reset draws from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ResetRng {
+    /// ChaCha8 seeded from (seed, "pusht/reset"); the agent is also redrawn while its
+    /// disk touches the T.
+    #[default]
+    Chacha,
+    /// numpy's legacy `RandomState(seed)` in GPC's draw order, without the touch rule and
+    /// with angles left unwrapped, so that seed s is GPC's episode s (seeds below 2^32).
+    GpcNumpy,
+}
+
+impl ResetRng {
+    /// Whether this is evalharness's own generator (the default, not written out).
+    pub fn is_own(&self) -> bool {
+        *self == Self::Chacha
+    }
 }
 
 /// Episode length and success rule.

@@ -15,6 +15,7 @@ pub mod frame_score;
 pub mod geometry;
 #[cfg(feature = "mujoco-render")]
 pub mod mj_render;
+pub mod numpy_rng;
 pub mod path;
 pub mod perceive;
 pub mod physics;
@@ -69,11 +70,15 @@ pub fn score(cfg: &PushTConfig, block: &Pose2, goal: &Pose2) -> Score {
 /// Draw order as GPC's reset: agent x, y; block x, y; block θ = N(0,1)·2π − π;
 /// goal x, y; goal θ; then the agent is redrawn while it is closer than
 /// `min_agent_block_distance` to the block's centre or its disk touches the T.
+/// With `reset.rng = "gpc-numpy"` the draws are GPC's own ([`numpy_rng::gpc_initial_state`]).
 ///
 /// # Errors
 /// [`ScenarioError::ImpossibleReset`] when [`MAX_RESET_DRAWS`] draws of the agent
 /// never satisfy those conditions (a scenario whose `reset` fields admit no state).
 pub fn initial_state(cfg: &PushTConfig, seed: u64) -> Result<(PushTState, Pose2), ScenarioError> {
+    if cfg.reset.rng == config::ResetRng::GpcNumpy {
+        return numpy_rng::gpc_initial_state(cfg, seed);
+    }
     let stream = harness::seed::derive(seed, &[harness::seed::fnv1a("pusht/reset")]);
     let mut rng = ChaCha8Rng::seed_from_u64(stream);
     let r = &cfg.reset;
