@@ -67,3 +67,40 @@ fn a_damaged_checkpoint_is_refused_by_key_and_the_existing_folder_is_kept() {
     }
     assert!(!dir.path().join("imported.partial").exists());
 }
+
+#[test]
+fn gpc_reward_predictors_become_a_judge_that_rank_uses_with_an_imported_world_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let reward = Path::new(env!("CARGO_MANIFEST_DIR")).join("policies/tests/fixtures/gpc_reward");
+    let judge = dir.path().join("judge");
+    let (xy, angle) = (reward.join("reward_predictor_xy.pth"), reward.join("reward_predictor_angle.pth"));
+    let args = ["import", "judge", "--format", "gpc-reward-predictor", "--xy", s(&xy), "--angle", s(&angle)];
+    let (stdout, _) = expect_code(&run(&[&args[..], &["--out", s(&judge)]].concat()), 0);
+    assert_eq!(stdout.trim(), judge.display().to_string());
+    let file = read_json(&judge.join("judge.json"));
+    assert_eq!((file["kind"].as_str(), file["pose_base"].as_u64()), (Some("gpc_pose"), Some(8)));
+    assert!(file["provenance"]["import"]["xy"]["sha256"].as_str().is_some_and(|h| h.starts_with("sha256:")));
+    // A missing key: refused by name, nothing written.
+    let bad = reward.join("reward_missing_key.pth");
+    let other = dir.path().join("other");
+    let bad_args =
+        ["import", "judge", "--format", "gpc-reward-predictor", "--xy", s(&bad), "--angle", s(&angle)];
+    let (_, err) = expect_code(&run(&[&bad_args[..], &["--out", s(&other)]].concat()), 2);
+    assert!(err.contains("resnet18.5.0.downsample.1.running_var"), "{err}");
+    assert!(!other.exists());
+
+    // rank with the imported world model and judge: every imagined and real frame judged by
+    // pose, the real frames' reading error against the exact coverage reported.
+    let (set, _) = pusht_inputs(dir.path());
+    let wm = dir.path().join("wm");
+    expect_code(&import(&fixture("wm.pth"), &wm, &[]), 0);
+    let rank_out = dir.path().join("rank");
+    let args = tiny_rank_args(&set, &wm, &rank_out);
+    let args = with_flag(&args, "--episodes", "2");
+    let args = [&args[..], &["--judge", s(&judge)]].concat();
+    expect_code(&run(&args), 0);
+    let rows = std::fs::read_to_string(rank_out.join("episodes.jsonl")).unwrap();
+    let first: serde_json::Value = serde_json::from_str(rows.lines().next().unwrap()).unwrap();
+    let err = first["scorer_abs_error"].as_f64();
+    assert!(err.is_some_and(|e| (0.0..=1.0).contains(&e)), "{first}");
+}

@@ -45,6 +45,20 @@ pub trait Judge: Send + Sync {
     fn persist(&self) -> usize {
         1
     }
+    /// For a judge that reads the manipulated object's pose rather than a score (GPC's
+    /// reward predictors): the pose the frame shows, in the task's units (Push-T: x, y, θ).
+    /// Its score then comes from the episode's own judge ([`Judge::score_pose`]), through
+    /// [`Replaced`]. `None`: the judge scores frames itself.
+    fn pose(&self, frame: &[u8]) -> Option<Vec<f64>> {
+        let _ = frame;
+        None
+    }
+    /// The raw score of the episode's scene with the manipulated object at `pose` (Push-T:
+    /// the exact goal coverage of a block there), for a task judge that can compute it.
+    fn score_pose(&self, pose: &[f64]) -> Option<f64> {
+        let _ = pose;
+        None
+    }
 }
 
 /// The episode's score so far under persistence `k`: each judged frame's raw value
@@ -84,8 +98,13 @@ pub struct Replaced {
 }
 
 impl Judge for Replaced {
+    /// The scorer's score; for a scorer that reads poses, the episode judge's score of that
+    /// pose (NaN where the task cannot score a pose: the engine then stops, naming the judge).
     fn score(&self, frame: &[u8]) -> f64 {
-        self.scorer.score(frame)
+        match self.scorer.pose(frame) {
+            Some(p) => self.checks.as_ref().and_then(|c| c.score_pose(&p)).unwrap_or(f64::NAN),
+            None => self.scorer.score(frame),
+        }
     }
     fn scene(&self, frame: &[u8]) -> Option<SceneCheck> {
         self.checks.as_ref().and_then(|c| c.scene(frame))

@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::cpu_encoder::CpuEncoder;
 use crate::diffusion::{frames_to_tensor, frames_to_vec};
 use crate::dir::{PolicyLoadError, load_weights, save_f16};
+use crate::judge_pose::{GpcPose, PoseNet};
 use crate::judge_rule::ColourHeight;
 use crate::net::{NetConfig, ObsEncoder};
 
@@ -137,8 +138,9 @@ impl EpisodeReading {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct JudgeFile {
-    /// `"learned"` (a network in `model.bpk`) or `"colour_height"` (the hand-written
-    /// [`ColourHeight`] rule in `rule`, no weights).
+    /// `"learned"` (a network in `model.bpk`), `"colour_height"` (the hand-written
+    /// [`ColourHeight`] rule in `rule`, no weights) or `"gpc_pose"` (GPC's reward
+    /// predictors in `xy.bpk` and `angle.bpk`, which read the block's pose).
     pub kind: String,
     /// The encoder's configuration (image size, width, feature size; the rest unused).
     /// A rule's folder uses only its image size.
@@ -146,6 +148,10 @@ pub struct JudgeFile {
     /// The hand-written rule of a `"colour_height"` judge.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rule: Option<ColourHeight>,
+    /// The backbones' base width of a `"gpc_pose"` judge (GPC's reward predictors,
+    /// [`crate::judge_pose`]; torchvision's 64).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_base: Option<usize>,
     /// What it estimates.
     pub label: Label,
     /// The raw value above which an episode succeeds (0.95 coverage, 0.5 success).
@@ -192,6 +198,8 @@ pub struct FrameJudge {
     net: Option<JudgeNet>,
     /// The encoder on direct CPU kernels (Flex device), with the head's weights.
     cpu: Option<(CpuEncoder, Vec<f32>, f32)>,
+    /// GPC's pose regressors (a `"gpc_pose"` judge).
+    pose: Option<GpcPose>,
     device: Device,
 }
 
@@ -213,21 +221,32 @@ impl FrameJudge {
                     .map_err(|e| err(format!("model.bpk: {e}")))?;
                 Ok(Self::new(file, net, device))
             }
+            ("gpc_pose", _) => {
+                let base = file
+                    .pose_base
+                    .ok_or_else(|| err("judge.json: kind \"gpc_pose\" without pose_base".into()))?;
+                let net = |name: &str| {
+                    load_weights(PoseNet::new(base, device), &dir.join(name))
+                        .map_err(|e| err(format!("{name}: {e}")))
+                };
+                let pose = GpcPose::new(net("xy.bpk")?, net("angle.bpk")?, device);
+                Ok(Self { file, net: None, cpu: None, pose: Some(pose), device: device.clone() })
+            }
             ("colour_height", Some(r)) if r.image_size == file.net.image_size => Ok(Self::rule(file)),
             ("colour_height", Some(r)) => Err(err(format!(
                 "judge.json: rule.image_size {} differs from net.image_size {}",
                 r.image_size, file.net.image_size
             ))),
             ("colour_height", None) => Err(err("judge.json: kind \"colour_height\" without a rule".into())),
-            (k, _) => {
-                Err(err(format!("judge.json: kind \"{k}\", expected \"learned\" or \"colour_height\"")))
-            }
+            (k, _) => Err(err(format!(
+                "judge.json: kind \"{k}\", expected \"learned\", \"colour_height\" or \"gpc_pose\""
+            ))),
         }
     }
 
     /// A hand-written rule's judge (`file.rule`; no network).
     pub fn rule(file: JudgeFile) -> Self {
-        Self { file, net: None, cpu: None, device: Device::flex() }
+        Self { file, net: None, cpu: None, pose: None, device: Device::flex() }
     }
 
     /// Wraps trained weights.
@@ -245,7 +264,7 @@ impl FrameJudge {
                 Some((enc, w, b))
             })
             .flatten();
-        Self { file, net: Some(net), cpu, device: device.clone() }
+        Self { file, net: Some(net), cpu, pose: None, device: device.clone() }
     }
 
     /// Its network (inference device); none for a rule.
@@ -258,9 +277,13 @@ impl FrameJudge {
         self.file.net.image_size
     }
 
-    /// Estimates for `frames` (each `s x s x 3` bytes), in [0, 1].
+    /// Estimates for `frames` (each `s x s x 3` bytes), in [0, 1]. A `"gpc_pose"` judge reads
+    /// poses, not scores ([`Judge::pose`]): its score needs the episode's goal, so here NaN.
     pub fn score_frames(&self, frames: &[&[u8]]) -> Vec<f64> {
         let s = self.image_size();
+        if self.pose.is_some() {
+            return vec![f64::NAN; frames.len()];
+        }
         // A rule's folder has no network (`load` checks that it has the rule).
         let Some(net) = &self.net else {
             return frames.iter().map(|f| self.file.rule.map_or(f64::NAN, |r| r.score(f))).collect();
@@ -300,6 +323,14 @@ impl Judge for FrameJudge {
     fn persist(&self) -> usize {
         self.file.persist_frames.max(1)
     }
+    fn pose(&self, frame: &[u8]) -> Option<Vec<f64>> {
+        let s = self.image_size();
+        let pose = self.pose.as_ref()?;
+        if frame.len() != s * s * 3 {
+            return Some(vec![f64::NAN; 3]);
+        }
+        pose.poses(&[frame], s).first().map(|p| p.to_vec())
+    }
 }
 
 #[cfg(test)]
@@ -312,6 +343,7 @@ mod tests {
             net,
             label: Label::Coverage,
             rule: None,
+            pose_base: None,
             threshold: 0.95,
             persist_frames: 1,
             steps: 0,

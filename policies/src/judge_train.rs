@@ -316,6 +316,7 @@ mod tests {
         };
         let net = NetConfig::new().with_image_size(size).with_encoder_width(4).with_feature_dim(4);
         let judge = JudgeFile {
+            pose_base: None,
             kind: "learned".into(),
             net,
             label: Label::Success,

@@ -11,7 +11,8 @@
 //! - [`train`]: the trainer, which saves a checkpoint every few epochs;
 //! - [`dir`]: the policy directory format and its validating loader;
 //! - [`judge`], [`judge_train`]: a learned judge of imagined frames (the same frame
-//!   encoder and one logit) and its trainer.
+//!   encoder and one logit) and its trainer; [`judge_pose`]: GPC's reward predictors
+//!   ([`resnet`]) imported as a judge that reads the block's pose.
 
 pub mod cpu_encoder;
 pub mod cpu_unet;
@@ -19,10 +20,12 @@ pub mod data;
 pub mod diffusion;
 pub mod dir;
 pub mod judge;
+pub mod judge_pose;
 pub mod judge_read;
 pub mod judge_rule;
 pub mod judge_train;
 pub mod net;
 pub mod pretrain;
+pub mod resnet;
 pub mod symmetry;
 pub mod train;

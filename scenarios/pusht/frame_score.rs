@@ -42,6 +42,9 @@ pub struct FrameScorer {
     agent_px: f64,
     size: usize,
     success_coverage: f64,
+    /// The T and the goal pose, for scoring a pose read by another judge exactly.
+    shape: TShape,
+    goal_pose: Pose2,
 }
 
 impl FrameScorer {
@@ -69,7 +72,8 @@ impl FrameScorer {
         }
         let goal_sum = mask.iter().sum();
         let agent_px = std::f64::consts::PI * (cfg.agent.radius / scale).powi(2);
-        Self { goal: mask, goal_sum, agent_px, size, success_coverage: cfg.task.success_coverage }
+        let success_coverage = cfg.task.success_coverage;
+        Self { goal: mask, goal_sum, agent_px, size, success_coverage, shape, goal_pose: *goal }
     }
 
     /// Whether `frame` is an HWC RGB frame of this scorer's size with a non-empty goal.
@@ -187,6 +191,13 @@ impl harness::judge::Judge for FrameScorer {
 
     fn scene(&self, frame: &[u8]) -> Option<SceneCheck> {
         Some(FrameScorer::scene(self, frame))
+    }
+
+    /// The exact coverage of the goal by a block at `pose` = [x, y, θ] (what GPC's
+    /// evaluation computes from its reward predictors' pose); NaN for another length.
+    fn score_pose(&self, pose: &[f64]) -> Option<f64> {
+        let &[x, y, theta] = pose else { return Some(f64::NAN) };
+        Some(super::geometry::coverage(&self.shape, &Pose2::new(x, y, theta), &self.goal_pose))
     }
 }
 

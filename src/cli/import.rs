@@ -12,6 +12,40 @@ pub enum ImportCommand {
     /// folder (`config.json`, `ema.bpk`, `provenance.json`) that `rank`, `plan`, `wm eval`
     /// and `simulate --replay-imagined` take with `--world-model`.
     WorldModel(ImportWorldModelArgs),
+    /// A judge of imagined frames from another codebase's files, as an evalharness judge
+    /// folder that `rank --judge` and `plan --judge` take.
+    Judge(ImportJudgeArgs),
+}
+
+/// The formats `import judge` reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum JudgeFormat {
+    /// GPC's Push-T reward predictors: two ResNet-18 `state_dict` files (`--xy`, `--angle`)
+    /// that read the T block's pose; the episode's goal turns it into the exact coverage.
+    GpcRewardPredictor,
+}
+
+/// `evalharness import judge`.
+#[derive(Debug, Args)]
+pub struct ImportJudgeArgs {
+    /// The files' format.
+    #[arg(long, value_enum)]
+    pub format: JudgeFormat,
+    /// The position predictor (`reward_predictor_xy.pth`).
+    #[arg(long)]
+    pub xy: PathBuf,
+    /// The orientation predictor (`reward_predictor_angle.pth`).
+    #[arg(long)]
+    pub angle: PathBuf,
+    /// The judge folder to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Frames' side in pixels the judge reads.
+    #[arg(long, default_value_t = 96, value_parser = clap::value_parser!(u16).range(32..=1024))]
+    pub image_size: u16,
+    /// Replace `--out` if it exists (only once the new folder is complete).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// The formats `import world-model` reads.

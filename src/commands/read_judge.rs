@@ -42,6 +42,7 @@ fn best_persist(readings: &[EpisodeReading]) -> Option<usize> {
 /// The folder file of a hand-written success rule (persistence 1 until chosen).
 fn rule_file(rule: ColourHeight) -> JudgeFile {
     JudgeFile {
+        pose_base: None,
         kind: "colour_height".into(),
         net: NetConfig::new().with_image_size(rule.image_size),
         rule: Some(rule),

@@ -70,6 +70,7 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     };
     let args: Vec<String> = crate::stdout::command_line();
     let mut file = JudgeFile {
+        pose_base: None,
         kind: "learned".into(),
         net,
         rule: None,

@@ -1,0 +1,106 @@
+//! ResNet-18 (He et al. 2016) as torchvision builds it, for networks imported from PyTorch,
+//! with its BatchNorms folded into the convolutions before them (inference only: a BatchNorm
+//! in eval mode is a per-channel affine map, so `bn(conv(x)) = conv'(x)` with
+//! `w' = w·γ/√(σ²+ε)` and `b' = β − μ·γ/√(σ²+ε)`).
+//!
+//! Stem: 7×7 stride-2 conv, ReLU, 3×3 stride-2 max-pool; four stages of two basic blocks
+//! (64, 128, 256, 512 channels; stages 2–4 start at stride 2 with a 1×1 projection on the
+//! skip); global average pool to 512 features (8× the base width). At 96² the map is 3×3 before the pool.
+
+use burn::module::Module;
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::{Conv2d, Conv2dConfig};
+use burn::nn::pool::{AdaptiveAvgPool2d, AdaptiveAvgPool2dConfig, MaxPool2d, MaxPool2dConfig};
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Tensor};
+
+/// torchvision's base width (stage widths 64, 128, 256, 512).
+pub const BASE: usize = 64;
+
+/// Stage widths for base width `base`: base·(1, 2, 4, 8).
+pub fn widths(base: usize) -> [usize; 4] {
+    [base, 2 * base, 4 * base, 8 * base]
+}
+
+fn conv(cin: usize, cout: usize, k: usize, stride: usize, device: &Device) -> Conv2d {
+    let p = k / 2;
+    Conv2dConfig::new([cin, cout], [k, k])
+        .with_stride([stride, stride])
+        .with_padding(PaddingConfig2d::Explicit(p, p, p, p))
+        .with_bias(true)
+        .init(device)
+}
+
+/// A basic block: conv-ReLU-conv plus the (projected) input, then ReLU.
+#[derive(Module, Debug)]
+pub struct Block {
+    /// 3×3, stride 1 or 2.
+    pub conv1: Conv2d,
+    /// 3×3.
+    pub conv2: Conv2d,
+    /// 1×1 projection of the skip where the shape changes.
+    pub down: Option<Conv2d>,
+}
+
+impl Block {
+    fn new(cin: usize, cout: usize, stride: usize, device: &Device) -> Self {
+        Self {
+            conv1: conv(cin, cout, 3, stride, device),
+            conv2: conv(cout, cout, 3, 1, device),
+            down: (stride != 1 || cin != cout).then(|| conv(cin, cout, 1, stride, device)),
+        }
+    }
+
+    fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        let h = self.conv2.forward(relu(self.conv1.forward(x.clone())));
+        let skip = match &self.down {
+            Some(d) => d.forward(x),
+            None => x,
+        };
+        relu(h + skip)
+    }
+}
+
+/// ResNet-18 without its classifier, BatchNorms folded.
+#[derive(Module, Debug)]
+pub struct ResNet18 {
+    /// The 7×7 stem convolution.
+    pub stem: Conv2d,
+    pool: MaxPool2d,
+    /// Stages 1–4, two blocks each (`blocks[2 s + i]`).
+    pub blocks: Vec<Block>,
+    avg: AdaptiveAvgPool2d,
+}
+
+impl ResNet18 {
+    /// Fresh weights at base width `base` ([`BASE`] for torchvision's; smaller for tests).
+    pub fn new(base: usize, device: &Device) -> Self {
+        let mut blocks = Vec::with_capacity(8);
+        let mut cin = base;
+        for (s, &w) in widths(base).iter().enumerate() {
+            blocks.push(Block::new(cin, w, if s == 0 { 1 } else { 2 }, device));
+            blocks.push(Block::new(w, w, 1, device));
+            cin = w;
+        }
+        Self {
+            stem: conv(3, base, 7, 2, device),
+            pool: MaxPool2dConfig::new([3, 3])
+                .with_strides([2, 2])
+                .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+                .init(),
+            blocks,
+            avg: AdaptiveAvgPool2dConfig::new([1, 1]).init(),
+        }
+    }
+
+    /// # Shapes
+    /// `[n, 3, h, w]` → `[n, 8 base]`
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<2> {
+        let mut h = self.pool.forward(relu(self.stem.forward(x)));
+        for b in &self.blocks {
+            h = b.forward(h);
+        }
+        let [n, c, _, _] = h.dims();
+        self.avg.forward(h).reshape([n, c])
+    }
+}

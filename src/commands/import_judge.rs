@@ -1,0 +1,57 @@
+//! `evalharness import judge`: another codebase's judge of frames as an evalharness judge
+//! folder. GPC's Push-T reward predictors become a `"gpc_pose"` judge: `judge.json` (the source
+//! files' SHA-256, the command, the commit) with the two networks, BatchNorms folded, in
+//! `xy.bpk` and `angle.bpk`. The folder is staged, replaces `--out` only once complete, and
+//! must load before the command reports it.
+
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use policies::judge::{FrameJudge, JudgeFile, JudgeMetrics, Label};
+use policies::judge_pose::{import_gpc, write_pose_weights};
+use policies::net::NetConfig;
+use serde_json::json;
+
+use super::git_commit;
+use crate::cli::{ImportJudgeArgs, JudgeFormat};
+use crate::output::{Inputs, Staged};
+
+/// `evalharness import judge`.
+pub fn run(a: &ImportJudgeArgs) -> Result<ExitCode> {
+    let JudgeFormat::GpcRewardPredictor = a.format;
+    let inputs = Inputs::new().add("--xy", &a.xy).add("--angle", &a.angle);
+    let staged = Staged::new(&a.out, a.force, &inputs)?;
+    let sha = |p: &std::path::Path| harness::fingerprint::file(p).with_context(|| format!("{}", p.display()));
+    let (xy_sha, angle_sha) = (sha(&a.xy)?, sha(&a.angle)?);
+    let device = world_model::device::selected()?;
+    let (pose, base) = import_gpc(&a.xy, &a.angle, &device)?;
+    let file = JudgeFile {
+        kind: "gpc_pose".into(),
+        net: NetConfig::new().with_image_size(usize::from(a.image_size)),
+        rule: None,
+        pose_base: Some(base),
+        label: Label::Coverage,
+        // GPC's success: coverage above 0.95 (its reward is clip(coverage / 0.95, 0, 1)).
+        threshold: 0.95,
+        persist_frames: 1,
+        steps: 0,
+        heldout: JudgeMetrics::default(),
+        provenance: json!({
+            "import": {
+                "format": "gpc-reward-predictor",
+                "xy": {"source": a.xy.display().to_string(), "sha256": xy_sha},
+                "angle": {"source": a.angle.display().to_string(), "sha256": angle_sha},
+                "batchnorm": "folded into the convolutions (eps 1e-5)",
+            },
+            "command": crate::stdout::command_line().join(" "),
+            "commit": git_commit(),
+        }),
+    };
+    write_pose_weights(staged.dir(), &pose).map_err(anyhow::Error::msg)?;
+    policies::judge::write_judge(staged.dir(), None, &file)?;
+    let out = staged.commit()?;
+    FrameJudge::load(&out, &device)
+        .with_context(|| format!("{}: the imported judge does not load", out.display()))?;
+    outln!("{}", out.display());
+    Ok(ExitCode::SUCCESS)
+}
