@@ -27,6 +27,8 @@ const PAGES: &[(&str, &[&str])] = &[
     ("agreement.md", &["agreement"]),
     ("tasks.md", &["tasks"]),
     ("plan.md", &["plan"]),
+    ("import-world-model.md", &["import", "world-model"]),
+    ("import-judge.md", &["import", "judge"]),
 ];
 
 /// Flags every command has, documented once in `docs/cli/README.md`.

@@ -249,7 +249,7 @@ fn pipeline_end_to_end() {
     assert_eq!(rows.lines().count(), 2 * 3 * 2); // policies x seeds x branches
     // The parquet table holds the same rows, typed.
     let table = reports::episodes::read_episodes_parquet(&out.join("episodes.parquet")).unwrap();
-    assert_eq!(table.height(), 12);
+    assert_eq!(table.len(), 12);
     let parquet = std::fs::read(out.join("episodes.parquet")).unwrap();
 
     // --resume redoes nothing: the rows stay exactly the same.

@@ -2,7 +2,7 @@
 //!
 //! `episodes.jsonl` is the run's source of truth (appended as batches finish,
 //! read back by `--resume`); this is the same rows, sorted by (policy, seed,
-//! branch), typed and compressed, for analysis with polars, pandas or DuckDB
+//! branch), typed and compressed, for analysis with polars, pandas, pyarrow or DuckDB
 //! without parsing JSON. Columns:
 //!
 //! | column | type | meaning |
@@ -21,12 +21,20 @@
 //! | `goal_kept` | f64, null in runs written before it existed | fraction of the (static) goal T that frame still shows (≈ 0.94–0.99 in MuJoCo) |
 //! | `agent_kept` | f64, null in runs written before it existed | agent pixels in that frame as a fraction of the agent disk's area, capped at 1 (≈ 1 in MuJoCo; near 0 when a world-model rollout lost the agent) |
 //!
-//! Written single-threaded with fixed options, so the same rows give the same bytes.
+//! Written with the parquet crate's column writers (snappy pages, fixed options, no
+//! timestamps), so the same rows give the same bytes.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use harness::results::EpisodeRow;
-use polars::prelude::*;
+use parquet::basic::Compression;
+use parquet::data_type::{BoolType, ByteArray, ByteArrayType, DoubleType, Int32Type, Int64Type};
+use parquet::file::properties::WriterProperties;
+use parquet::file::reader::{FileReader, SerializedFileReader};
+use parquet::file::writer::SerializedFileWriter;
+use parquet::record::{Field, Row};
+use parquet::schema::parser::parse_message_type;
 
 /// A problem writing or reading the table, naming the file.
 #[derive(Debug, thiserror::Error)]
@@ -38,62 +46,127 @@ pub struct TableError {
     pub message: String,
 }
 
-/// The rows as a data frame (in the given order).
-///
-/// # Errors
-/// A polars error if the columns cannot be assembled (not expected for any rows).
-pub fn episodes_frame(rows: &[&EpisodeRow]) -> PolarsResult<DataFrame> {
-    let f = |g: fn(&EpisodeRow) -> f64| rows.iter().map(|r| g(r)).collect::<Vec<f64>>();
-    let block = |k: usize| rows.iter().map(|r| r.final_block.map(|b| b[k])).collect::<Vec<Option<f64>>>();
-    let goal = |k: usize| rows.iter().map(|r| r.goal[k]).collect::<Vec<f64>>();
-    DataFrame::new(
-        rows.len(),
-        vec![
-            Column::new("policy".into(), rows.iter().map(|r| r.policy.as_str()).collect::<Vec<_>>()),
-            Column::new("seed".into(), rows.iter().map(|r| r.seed).collect::<Vec<u64>>()),
-            Column::new("branch".into(), rows.iter().map(|r| r.branch.as_str()).collect::<Vec<_>>()),
-            Column::new("score".into(), f(|r| r.score)),
-            Column::new("max_coverage".into(), f(|r| r.max_coverage)),
-            Column::new("final_coverage".into(), f(|r| r.final_coverage)),
-            Column::new("success".into(), rows.iter().map(|r| r.success).collect::<Vec<bool>>()),
-            Column::new("steps".into(), rows.iter().map(|r| r.steps as u32).collect::<Vec<u32>>()),
-            Column::new("final_block_x".into(), block(0)),
-            Column::new("final_block_y".into(), block(1)),
-            Column::new("final_block_theta".into(), block(2)),
-            Column::new("goal_x".into(), goal(0)),
-            Column::new("goal_y".into(), goal(1)),
-            Column::new("goal_theta".into(), goal(2)),
-            Column::new(
-                "scorer_abs_error".into(),
-                rows.iter().map(|r| r.scorer_abs_error).collect::<Vec<_>>(),
-            ),
-            Column::new("block_area".into(), rows.iter().map(|r| r.block_area).collect::<Vec<_>>()),
-            Column::new("goal_kept".into(), rows.iter().map(|r| r.goal_kept).collect::<Vec<_>>()),
-            Column::new("agent_kept".into(), rows.iter().map(|r| r.agent_kept).collect::<Vec<_>>()),
-        ],
-    )
+/// The table's schema, in the column order of the module's table.
+const SCHEMA: &str = "message episodes {
+    REQUIRED BYTE_ARRAY policy (STRING);
+    REQUIRED INT64 seed (INTEGER(64, false));
+    REQUIRED BYTE_ARRAY branch (STRING);
+    REQUIRED DOUBLE score;
+    REQUIRED DOUBLE max_coverage;
+    REQUIRED DOUBLE final_coverage;
+    REQUIRED BOOLEAN success;
+    REQUIRED INT32 steps (INTEGER(32, false));
+    OPTIONAL DOUBLE final_block_x;
+    OPTIONAL DOUBLE final_block_y;
+    OPTIONAL DOUBLE final_block_theta;
+    REQUIRED DOUBLE goal_x;
+    REQUIRED DOUBLE goal_y;
+    REQUIRED DOUBLE goal_theta;
+    OPTIONAL DOUBLE scorer_abs_error;
+    OPTIONAL DOUBLE block_area;
+    OPTIONAL DOUBLE goal_kept;
+    OPTIONAL DOUBLE agent_kept;
+}";
+
+/// Columns of [`SCHEMA`].
+pub const COLUMNS: usize = 18;
+
+/// One column's values: the present ones, and for an optional column its definition
+/// levels (1 present, 0 null).
+enum Values {
+    Str(Vec<ByteArray>),
+    U64(Vec<i64>),
+    U32(Vec<i32>),
+    Bool(Vec<bool>),
+    F64(Vec<f64>),
+    Opt(Vec<f64>, Vec<i16>),
 }
 
-/// Writes `rows` to `path` (zstd-compressed parquet).
+fn optional(v: impl Iterator<Item = Option<f64>>) -> Values {
+    let v: Vec<Option<f64>> = v.collect();
+    Values::Opt(v.iter().flatten().copied().collect(), v.iter().map(|x| i16::from(x.is_some())).collect())
+}
+
+/// The columns of `rows`, in [`SCHEMA`]'s order.
+fn columns(rows: &[&EpisodeRow]) -> Vec<Values> {
+    let f = |g: fn(&EpisodeRow) -> f64| Values::F64(rows.iter().map(|r| g(r)).collect());
+    let block = |k: usize| optional(rows.iter().map(|r| r.final_block.map(|b| b[k])));
+    let goal = |k: usize| Values::F64(rows.iter().map(|r| r.goal[k]).collect());
+    let text = |g: fn(&EpisodeRow) -> &str| Values::Str(rows.iter().map(|r| ByteArray::from(g(r))).collect());
+    vec![
+        text(|r| r.policy.as_str()),
+        // The parquet type is INT64 annotated unsigned: the bits of the u64.
+        Values::U64(rows.iter().map(|r| r.seed as i64).collect()),
+        text(|r| r.branch.as_str()),
+        f(|r| r.score),
+        f(|r| r.max_coverage),
+        f(|r| r.final_coverage),
+        Values::Bool(rows.iter().map(|r| r.success).collect()),
+        Values::U32(rows.iter().map(|r| r.steps as i32).collect()),
+        block(0),
+        block(1),
+        block(2),
+        goal(0),
+        goal(1),
+        goal(2),
+        optional(rows.iter().map(|r| r.scorer_abs_error)),
+        optional(rows.iter().map(|r| r.block_area)),
+        optional(rows.iter().map(|r| r.goal_kept)),
+        optional(rows.iter().map(|r| r.agent_kept)),
+    ]
+}
+
+/// Writes `rows` to `path` (one row group, snappy-compressed pages).
 ///
 /// # Errors
 /// [`TableError`] naming `path` if it cannot be created or written.
 pub fn write_episodes_parquet(path: &Path, rows: &[&EpisodeRow]) -> Result<(), TableError> {
     let err = |m: String| TableError { path: path.to_path_buf(), message: m };
-    let mut df = episodes_frame(rows).map_err(|e| err(e.to_string()))?;
+    let schema = Arc::new(parse_message_type(SCHEMA).map_err(|e| err(e.to_string()))?);
+    let props = Arc::new(
+        WriterProperties::builder()
+            .set_compression(Compression::SNAPPY)
+            .set_created_by("evalharness".into())
+            .build(),
+    );
     let file = std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
-    ParquetWriter::new(file).set_parallel(false).finish(&mut df).map_err(|e| err(e.to_string()))?;
+    let mut writer = SerializedFileWriter::new(file, schema, props).map_err(|e| err(e.to_string()))?;
+    let mut group = writer.next_row_group().map_err(|e| err(e.to_string()))?;
+    for values in columns(rows) {
+        let Some(mut col) = group.next_column().map_err(|e| err(e.to_string()))? else {
+            return Err(err("fewer columns in the schema than in the table".into()));
+        };
+        let written = match &values {
+            Values::Str(v) => col.typed::<ByteArrayType>().write_batch(v, None, None),
+            Values::U64(v) => col.typed::<Int64Type>().write_batch(v, None, None),
+            Values::U32(v) => col.typed::<Int32Type>().write_batch(v, None, None),
+            Values::Bool(v) => col.typed::<BoolType>().write_batch(v, None, None),
+            Values::F64(v) => col.typed::<DoubleType>().write_batch(v, None, None),
+            Values::Opt(v, def) => col.typed::<DoubleType>().write_batch(v, Some(def), None),
+        };
+        written.map_err(|e| err(e.to_string()))?;
+        col.close().map_err(|e| err(e.to_string()))?;
+    }
+    group.close().map_err(|e| err(e.to_string()))?;
+    writer.close().map_err(|e| err(e.to_string()))?;
     Ok(())
 }
 
-/// Reads a table written by [`write_episodes_parquet`].
+/// Reads a table written by [`write_episodes_parquet`]: its rows, each with its named fields.
 ///
 /// # Errors
 /// [`TableError`] naming `path` if it is missing or not parquet.
-pub fn read_episodes_parquet(path: &Path) -> Result<DataFrame, TableError> {
+pub fn read_episodes_parquet(path: &Path) -> Result<Vec<Row>, TableError> {
     let err = |m: String| TableError { path: path.to_path_buf(), message: m };
     let file = std::fs::File::open(path).map_err(|e| err(e.to_string()))?;
-    ParquetReader::new(file).finish().map_err(|e| err(e.to_string()))
+    let reader = SerializedFileReader::new(file).map_err(|e| err(e.to_string()))?;
+    let rows = reader.get_row_iter(None).map_err(|e| err(e.to_string()))?;
+    rows.map(|r| r.map_err(|e| err(e.to_string()))).collect()
+}
+
+/// The field `name` of a row read by [`read_episodes_parquet`].
+pub fn field<'a>(row: &'a Row, name: &str) -> Option<&'a Field> {
+    row.get_column_iter().find(|(n, _)| n.as_str() == name).map(|(_, f)| f)
 }
 
 #[cfg(test)]
@@ -119,20 +192,27 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("episodes.parquet");
         write_episodes_parquet(&path, &rows().iter().collect::<Vec<_>>()).unwrap();
-        let df = read_episodes_parquet(&path).unwrap();
-        assert_eq!(df.height(), 2);
-        assert_eq!(df.width(), 18);
-        let seed = df.column("seed").unwrap();
-        assert_eq!(seed.dtype(), &DataType::UInt64);
-        assert_eq!(seed.u64().unwrap().get(1), Some(100_000));
-        let x = df.column("final_block_x").unwrap().f64().unwrap();
-        assert_eq!((x.get(0), x.get(1)), (Some(250.0), None));
-        let area = df.column("block_area").unwrap().f64().unwrap();
-        assert_eq!((area.get(0), area.get(1)), (Some(0.98), None));
-        let agent = df.column("agent_kept").unwrap().f64().unwrap();
-        assert_eq!((agent.get(0), agent.get(1)), (Some(0.99), Some(0.02)));
-        assert_eq!(df.column("branch").unwrap().str().unwrap().get(1), Some("world_model"));
-        assert_eq!(df.column("success").unwrap().bool().unwrap().get(0), Some(false));
+        let t = read_episodes_parquet(&path).unwrap();
+        assert_eq!(t.len(), 2);
+        assert_eq!(t[0].len(), COLUMNS);
+        let get = |r: usize, name: &str| field(&t[r], name).cloned();
+        // Unsigned 64-bit seeds come back as such.
+        assert_eq!(get(1, "seed"), Some(Field::ULong(100_000)));
+        assert_eq!(get(0, "steps"), Some(Field::UInt(300)));
+        assert_eq!(
+            (get(0, "final_block_x"), get(1, "final_block_x")),
+            (Some(Field::Double(250.0)), Some(Field::Null))
+        );
+        assert_eq!(
+            (get(0, "block_area"), get(1, "block_area")),
+            (Some(Field::Double(0.98)), Some(Field::Null))
+        );
+        assert_eq!(
+            (get(0, "agent_kept"), get(1, "agent_kept")),
+            (Some(Field::Double(0.99)), Some(Field::Double(0.02)))
+        );
+        assert_eq!(get(1, "branch"), Some(Field::Str("world_model".into())));
+        assert_eq!(get(0, "success"), Some(Field::Bool(false)));
         // Same rows, same bytes.
         let again = dir.path().join("again.parquet");
         write_episodes_parquet(&again, &rows().iter().collect::<Vec<_>>()).unwrap();

@@ -1,7 +1,7 @@
 //! evalharness media and reports.
 //!
 //! - [`gif`], [`png`]: animated GIFs and filmstrips of episodes;
-//! - [`episodes`]: the per-episode table as parquet (polars);
+//! - [`episodes`]: the per-episode table as parquet;
 //! - [`summary`]: what a `rank` report shows, read from `results.json`;
 //! - [`plots`]: scatter, bar and bump charts (PNG + SVG, bundled font);
 //! - [`labels`]: scatter-label placement without overprinting;

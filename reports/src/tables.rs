@@ -1,8 +1,6 @@
 //! The paper table (`table.tex`, booktabs) and `summary.csv`.
 
-use polars::prelude::*;
-
-use crate::summary::{Est, PolicyScores, Summary};
+use crate::summary::{Est, Summary};
 
 /// Escapes LaTeX special characters in a name.
 pub fn latex_escape(s: &str) -> String {
@@ -75,47 +73,38 @@ pub fn latex_table(s: &Summary) -> String {
     t
 }
 
-/// The per-policy table as a polars frame: one row per policy with the means,
-/// CI bounds (null when a branch has no interval) and success rates of both
-/// branches — `summary.csv`'s columns, and a frame a user can join or filter.
-///
-/// # Errors
-/// A polars error if the columns cannot be assembled (not expected for any summary).
-pub fn summary_frame(s: &Summary) -> PolarsResult<DataFrame> {
-    let ps = &s.policies;
-    let num = |name: &str, f: fn(&PolicyScores) -> f64| {
-        Column::new(name.into(), ps.iter().map(f).collect::<Vec<f64>>())
-    };
-    let ci = |name: &str, e: fn(&PolicyScores) -> &Est, k: usize| {
-        Column::new(name.into(), ps.iter().map(|p| e(p).ci.map(|c| c[k])).collect::<Vec<Option<f64>>>())
-    };
-    DataFrame::new(
-        ps.len(),
-        vec![
-            Column::new("policy".into(), ps.iter().map(|p| p.name.as_str()).collect::<Vec<_>>()),
-            Column::new("episodes".into(), ps.iter().map(|p| p.episodes).collect::<Vec<u64>>()),
-            num("sim_mean", |p| p.sim.mean.value),
-            ci("sim_ci_lo", |p| &p.sim.mean, 0),
-            ci("sim_ci_hi", |p| &p.sim.mean, 1),
-            num("sim_success", |p| p.sim.success.value),
-            num("wm_mean", |p| p.world_model.mean.value),
-            ci("wm_ci_lo", |p| &p.world_model.mean, 0),
-            ci("wm_ci_hi", |p| &p.world_model.mean, 1),
-            num("wm_success", |p| p.world_model.success.value),
-        ],
-    )
-}
-
-/// `summary.csv`: [`summary_frame`] written by polars' CSV writer, floats with 6
-/// decimals, names quoted where they need it, an empty field for a missing CI.
-///
-/// # Errors
-/// A polars error if the frame cannot be built or written.
-pub fn summary_csv(s: &Summary) -> PolarsResult<String> {
-    let mut df = summary_frame(s)?;
-    let mut buf = Vec::new();
-    CsvWriter::new(&mut buf).with_float_precision(Some(6)).finish(&mut df)?;
-    String::from_utf8(buf).map_err(|e| PolarsError::ComputeError(e.to_string().into()))
+/// `summary.csv`: one row per policy with the means, CI bounds (an empty field when a
+/// branch has no interval) and success rates of both branches; floats with 6 decimals,
+/// a name quoted (RFC 4180) where it holds a comma, a quote or a line break.
+pub fn summary_csv(s: &Summary) -> String {
+    let mut out = String::from(
+        "policy,episodes,sim_mean,sim_ci_lo,sim_ci_hi,sim_success,wm_mean,wm_ci_lo,wm_ci_hi,wm_success\n",
+    );
+    let num = |v: f64| format!("{v:.6}");
+    let ci = |e: &Est, k: usize| e.ci.map_or(String::new(), |c| num(c[k]));
+    for p in &s.policies {
+        let name = if p.name.contains([',', '"', '\n', '\r']) {
+            format!("\"{}\"", p.name.replace('"', "\"\""))
+        } else {
+            p.name.clone()
+        };
+        let (sim, wm) = (&p.sim, &p.world_model);
+        let fields = [
+            name,
+            p.episodes.to_string(),
+            num(sim.mean.value),
+            ci(&sim.mean, 0),
+            ci(&sim.mean, 1),
+            num(sim.success.value),
+            num(wm.mean.value),
+            ci(&wm.mean, 0),
+            ci(&wm.mean, 1),
+            num(wm.success.value),
+        ];
+        out.push_str(&fields.join(","));
+        out.push('\n');
+    }
+    out
 }
 
 #[cfg(test)]
@@ -147,7 +136,7 @@ mod tests {
         ] {
             assert!(t.contains(needle), "missing {needle} in\n{t}");
         }
-        let csv = summary_csv(&s).unwrap();
+        let csv = summary_csv(&s);
         assert_eq!(
             csv.lines().next(),
             Some(
@@ -169,7 +158,7 @@ mod tests {
                 "world_model": {"mean": 0.125, "ci95": null, "success_rate": 1.0, "success_ci95": null}}],
             "agreement": {},
         });
-        let csv = summary_csv(&Summary::from_results(&crate::summary::fixture(r))).unwrap();
+        let csv = summary_csv(&Summary::from_results(&crate::summary::fixture(r)));
         // RFC 4180: a field with a comma or quote is quoted, inner quotes doubled.
         assert_eq!(
             csv.lines().nth(1),
