@@ -1,7 +1,8 @@
 //! Model throughput benchmarks (criterion): a policy decision and a world-model
 //! chunk at batch 1 and batch 100 (`BENCH_WM_BATCHES=1,25,50,100` for others), on
 //! the shipped checkpoints; and one chunk of
-//! the paper's pixel-space U-Net (random weights: the cost does not depend on them).
+//! the paper's pixel-space U-Net (random weights: the cost does not depend on them; or an
+//! imported model, `BENCH_PIXEL_WORLD_MODEL=DIR`).
 //!
 //! `cargo bench --bench models`; results are recorded in BENCHMARKS.md. The
 //! checkpoints are read from `checkpoints/pusht/` (override with
@@ -74,16 +75,24 @@ fn world_model(c: &mut Criterion) {
     chunk(c, "world_model_chunk", &wm, &env_batches("BENCH_WM_BATCHES", &BATCHES));
 }
 
-/// The paper's pixel-space Push-T model (8,375,201 parameters), drifting, one pass per chunk.
+/// The paper's pixel-space Push-T model (8,375,201 parameters), drifting, one pass per chunk,
+/// in the layout of an imported official checkpoint (attention norms per frame); or the
+/// world-model folder `BENCH_PIXEL_WORLD_MODEL` names (`evalharness import world-model`).
 fn pixel_world_model(c: &mut Criterion) {
-    let device = world_model::device::selected().expect("EVALHARNESS_DEVICE");
-    let unet = UNetConfig::pusht_pixel();
-    let cfg = WorldModelConfig::pixels(unet.clone(), 96);
-    let wm = WorldModel::from_parts(cfg, FrameCodec::pixels(96), unet.init(&device), &device);
+    let device = world_model::device::selected().expect("device");
+    let wm = match std::env::var("BENCH_PIXEL_WORLD_MODEL") {
+        Ok(dir) => {
+            WorldModel::load(std::path::Path::new(&dir), &device).expect("BENCH_PIXEL_WORLD_MODEL loads")
+        }
+        Err(_) => {
+            let unet = UNetConfig::pusht_pixel().with_frame_attention_norm(Some(true));
+            let cfg = WorldModelConfig::pixels(unet.clone(), 96);
+            WorldModel::from_parts(cfg, FrameCodec::pixels(96), unet.init(&device), &device)
+        }
+    };
     chunk(c, "world_model_pixel_chunk", &wm, &env_batches("BENCH_PIXEL_BATCHES", &[1]));
 }
 
-/// Batch sizes from a comma-separated environment variable, else `default`.
 fn env_batches(var: &str, default: &[usize]) -> Vec<usize> {
     std::env::var(var)
         .ok()

@@ -289,6 +289,11 @@ pub struct RankArgs {
     /// [default: the judge's `persist_frames`].
     #[arg(long, value_name = "K")]
     pub judge_persist: Option<usize>,
+    /// Judge every imagined frame, as the official DriftWorld evaluation does, not only the
+    /// frames the policy sees (the last 2 of every chunk): every generated frame is decoded
+    /// and scored, and the episode's score is the best of them.
+    #[arg(long)]
+    pub judge_every_frame: bool,
     /// Action-accentuation strength α, for a world model trained with
     /// `--accentuation` (default: its configured α).
     #[arg(long)]

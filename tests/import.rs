@@ -104,3 +104,40 @@ fn gpc_reward_predictors_become_a_judge_that_rank_uses_with_an_imported_world_mo
     let err = first["scorer_abs_error"].as_f64();
     assert!(err.is_some_and(|e| (0.0..=1.0).contains(&e)), "{first}");
 }
+
+#[test]
+fn judging_every_imagined_frame_reads_a_superset_of_the_frames_and_is_part_of_the_run() {
+    // The same episodes with the frames the policy sees judged, and with every generated frame
+    // judged (the official loop): the generated frames are the same (same noise streams), so
+    // each imagined episode's best score can only rise; the MuJoCo rows are the same.
+    let dir = tempfile::tempdir().unwrap();
+    let (set, wm) = pusht_inputs(dir.path());
+    let (seen, every) = (dir.path().join("seen"), dir.path().join("every"));
+    expect_code(&run(&tiny_rank_args(&set, &wm, &seen)), 0);
+    let args = [&tiny_rank_args(&set, &wm, &every)[..], &["--judge-every-frame"]].concat();
+    expect_code(&run(&args), 0);
+    let rows = |d: &Path| -> Vec<serde_json::Value> {
+        let text = std::fs::read_to_string(d.join("episodes.jsonl")).unwrap();
+        text.lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+    };
+    let (a, b) = (rows(&seen), rows(&every));
+    assert_eq!(a.len(), b.len());
+    let mut rose = 0;
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!((&x["policy"], &x["seed"], &x["branch"]), (&y["policy"], &y["seed"], &y["branch"]));
+        let (sx, sy) = (x["score"].as_f64().unwrap(), y["score"].as_f64().unwrap());
+        if x["branch"] == "sim" {
+            assert_eq!(x, y, "the MuJoCo branch does not depend on the flag");
+        } else {
+            assert!(sy >= sx, "{x}\n{y}");
+            rose += usize::from(sy > sx);
+        }
+    }
+    eprintln!("{rose} imagined episodes scored higher with every frame judged");
+    assert_eq!(read_json(&every.join("config.json"))["judge_every_frame"], true);
+    assert!(read_json(&seen.join("config.json")).get("judge_every_frame").is_none());
+    // A resume without the flag would mix two ways of judging: refused.
+    let resume = [&tiny_rank_args(&set, &wm, &every)[..], &["--resume"]].concat();
+    let (_, err) = expect_code(&run(&resume), 2);
+    assert!(err.contains("judge_every_frame"), "{err}");
+}

@@ -6,7 +6,9 @@
 //! commanded actions (Push-T: the last commanded target standing in for the agent
 //! position, as in DriftWorld's evaluation). Only the frames the policy sees (the
 //! last `obs_horizon` of each chunk) are decoded to pixels, and those are scored by
-//! the episode's [`Judge`](harness::judge::Judge). A goal-free world model
+//! the episode's [`Judge`](harness::judge::Judge); with `Setup::judge_every_frame` every
+//! generated frame is decoded and scored, as the official evaluation does. The model's own
+//! history is its raw predictions (unclamped, unquantised), as there; the policy sees bytes. A goal-free world model
 //! (`train world-model --goal-free`) starts from the first frame in its view and
 //! each decoded frame gets the goal drawn back before the policy, the judge or a
 //! recording sees it. Nothing here reads the simulator after the reset.
@@ -99,11 +101,13 @@ pub fn wm_branch(
                     }
                 })?; // [a, f, C, s, s]
             // Decode only the frames the policy will see (the chunk's last `o`): decoding
-            // is the most expensive part of the branch. They are also the frames judged.
+            // is the most expensive part of the branch. They are also the frames judged,
+            // unless every generated frame is (`Setup::judge_every_frame`).
             let first_seen = len.saturating_sub(o).max(done).min(done + f) - done; // <= f
-            let m = f - first_seen;
+            let first = if s.judge_every_frame { 0 } else { first_seen };
+            let m = f - first;
             let mut frames = if m > 0 {
-                let seen = pred.narrow(1, first_seen, m).reshape([a * m, c, ls, ls]);
+                let seen = pred.narrow(1, first, m).reshape([a * m, c, ls, ls]);
                 tensor_to_frames(wm.decode(seen))
             } else {
                 Vec::new()
@@ -111,12 +115,14 @@ pub fn wm_branch(
             for (p, &i) in active.iter().enumerate() {
                 for j in 0..f {
                     imagine[i].advance(&chunks[p][done + j]);
-                    if j >= first_seen {
-                        let fr = &mut frames[p * m + j - first_seen];
+                    if j >= first {
+                        let fr = &mut frames[p * m + j - first];
                         imagine[i].to_observation(fr);
                         track[i].add(judged(judges[i].score(fr), &name, start.seeds[i])?, &kind);
-                        let seen = Seen { frame: std::mem::take(fr), proprio: imagine[i].proprio() };
-                        push(&mut hist[i], seen, o);
+                        if j >= first_seen {
+                            let seen = Seen { frame: std::mem::take(fr), proprio: imagine[i].proprio() };
+                            push(&mut hist[i], seen, o);
+                        }
                     }
                 }
             }

@@ -51,6 +51,22 @@ pub struct Setup<'a> {
     /// A judge of every episode's frames in place of the task's (`rank --judge`);
     /// the task's judge still makes the scene checks.
     pub judge: Option<&'a std::sync::Arc<dyn Judge>>,
+    /// World-model branch: judge every generated frame (the official DriftWorld loop), not
+    /// only the frames the policy sees.
+    pub judge_every_frame: bool,
+}
+
+impl<'a> Setup<'a> {
+    /// `task`'s episodes with policy noise from `master_seed`, `max_steps` long, judged by
+    /// `judge` (else the task's own), the world-model branch judging the frames the policy sees.
+    pub fn new(
+        task: &'a dyn Task,
+        master_seed: u64,
+        max_steps: usize,
+        judge: Option<&'a std::sync::Arc<dyn Judge>>,
+    ) -> Self {
+        Self { task, master_seed, max_steps, judge, judge_every_frame: false }
+    }
 }
 
 /// What both branches start from: episodes reset to the seeds, their judges, the

@@ -193,6 +193,10 @@ pub struct PolicyResult {
 pub struct AgreementSummary {
     /// Pearson r.
     pub pearson: Option<f64>,
+    /// r², the coefficient of determination of the linear fit (what the official DriftWorld
+    /// evaluation logs); absent in results written before it was reported.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pearson_r2: Option<f64>,
     /// Spearman ρ.
     pub spearman: Option<f64>,
     /// Kendall τ_b.
@@ -328,6 +332,7 @@ impl Agreement {
         let ranked = names.len() >= 2;
         AgreementSummary {
             pearson: self.pearson,
+            pearson_r2: self.pearson.map(|r| r * r),
             spearman: self.spearman,
             kendall_tau_b: self.kendall_tau_b,
             rank_inversions: ranked.then_some(self.rank_inversions.count),

@@ -20,6 +20,16 @@ impl Est {
         Self { value, ci }
     }
 
+    /// The square of a correlation estimate (Pearson r → r²): the point squared, and the
+    /// interval's image under x ↦ x² (from 0 when the interval spans 0).
+    pub fn squared(self) -> Self {
+        let ci = self.ci.map(|[a, b]| {
+            let (lo, hi) = (a.abs().min(b.abs()), a.abs().max(b.abs()));
+            [if a <= 0.0 && b >= 0.0 { 0.0 } else { lo * lo }, hi * hi]
+        });
+        Self { value: self.value * self.value, ci }
+    }
+
     /// `0.812 [0.78, 0.84]`.
     pub fn fmt(&self, digits: usize) -> String {
         match self.ci {
@@ -131,6 +141,7 @@ impl Summary {
     pub fn metrics(&self) -> Vec<(&'static str, Option<Est>, usize)> {
         vec![
             ("Pearson r", self.pearson, 3),
+            ("Pearson r²", self.pearson.map(Est::squared), 3),
             ("Spearman ρ", self.spearman, 3),
             ("Kendall τ_b", self.kendall, 3),
             ("Rank inversions", self.inversions, 0),
@@ -142,6 +153,25 @@ impl Summary {
 
 /// Test fixtures: a `results.json` given in part (policies, agreement and a few
 /// top-level fields), completed with neutral values, as the typed results.
+#[cfg(test)]
+mod squared_tests {
+    use super::Est;
+
+    #[test]
+    fn a_squared_interval_starts_at_zero_when_it_spans_zero() {
+        // 0.9² = 0.81 with [0.8, 0.95] → [0.64, 0.9025]; r = 0.5 in [−0.6, 0.9] → [0, 0.81];
+        // r = −0.7 in [−0.9, −0.2] → 0.49 in [0.04, 0.81].
+        let sq = |v: f64, a: f64, b: f64| Est::new(v, Some([a, b])).squared();
+        let near = |e: Est, v: f64, a: f64, b: f64| {
+            let c = e.ci.unwrap_or([f64::NAN; 2]);
+            (e.value - v).abs() < 1e-12 && (c[0] - a).abs() < 1e-12 && (c[1] - b).abs() < 1e-12
+        };
+        assert!(near(sq(0.9, 0.8, 0.95), 0.81, 0.64, 0.9025));
+        assert!(near(sq(0.5, -0.6, 0.9), 0.25, 0.0, 0.81));
+        assert!(near(sq(-0.7, -0.9, -0.2), 0.49, 0.04, 0.81));
+    }
+}
+
 #[cfg(test)]
 pub(crate) fn fixture(partial: serde_json::Value) -> RankResults {
     let mut v = serde_json::json!({

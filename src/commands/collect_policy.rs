@@ -80,7 +80,7 @@ fn roll_out(
     quiet: bool,
 ) -> Result<(Vec<Value>, Vec<Value>)> {
     let c = &args.common;
-    let setup = Setup { task, master_seed: 0, max_steps, judge: None };
+    let setup = Setup::new(task, 0, max_steps, None);
     let device = world_model::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
     let expect = expectations(task);

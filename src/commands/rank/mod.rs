@@ -142,6 +142,10 @@ fn run_with(
         config["judge"] = json!({"path": dir, "label": j.file.label, "threshold": j.file.threshold,
             "persist_frames": j.file.persist_frames, "heldout": j.file.heldout});
     }
+    if a.judge_every_frame {
+        // Written only when set, so runs written before the flag existed resume as they were.
+        config["judge_every_frame"] = json!(true);
+    }
     if a.resume {
         resume::check_config(&a.out.join("config.json"), &config)?;
     }
@@ -155,8 +159,10 @@ fn run_with(
         .build()
         .context("starting worker threads")?;
     let judge = judge.map(|j| std::sync::Arc::new(j) as std::sync::Arc<dyn harness::judge::Judge>);
-    let setup =
-        Setup { task: task.as_ref(), master_seed: a.seed, max_steps: r.max_steps, judge: judge.as_ref() };
+    let setup = Setup {
+        judge_every_frame: a.judge_every_frame,
+        ..Setup::new(task.as_ref(), a.seed, r.max_steps, judge.as_ref())
+    };
     let expect = expectations(task.as_ref());
     let pb = progress::bar((dirs.len() * r.episodes) as u64, "rank", quiet);
     let mut failed: Vec<FailedPolicy> = Vec::new();

@@ -322,6 +322,9 @@ fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> Vec
     // A shard renders its own frames: the processes are the parallelism.
     let mut all: Vec<OsString> = vec!["-q".into(), "--render-workers".into(), "0".into(), "rank".into()];
     all.extend(v);
+    if a.judge_every_frame {
+        all.push("--judge-every-frame".into());
+    }
     all.push("--no-report".into());
     all.push(if resume { "--resume" } else { "--force" }.into());
     all
@@ -355,6 +358,7 @@ mod tests {
                 "j",
                 "--judge-persist",
                 "2",
+                "--judge-every-frame",
                 "--alpha",
                 "0.5",
                 "--noise-scale",
@@ -390,7 +394,7 @@ mod tests {
         assert_eq!(cli.render_workers, Some(0), "a shard renders its own frames");
         let s = parse(&args);
         assert_eq!((&s.policies, &s.world_model, &s.judge), (&a.policies, &a.world_model, &a.judge));
-        assert_eq!(s.noise_scale, Some(0.25));
+        assert_eq!((s.noise_scale, s.judge_every_frame), (Some(0.25), true));
         assert_eq!(
             (s.judge_persist, s.alpha, s.episodes, s.max_steps),
             (Some(2), Some(0.5), Some(20), Some(30))

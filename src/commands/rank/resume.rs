@@ -10,9 +10,10 @@ use serde_json::Value;
 use crate::output::read_json;
 use harness::results::{Branch, EpisodeRow};
 
-/// Settings a resumed run may change: the command line itself, and the bootstrap
-/// count (the statistics are recomputed from all rows).
-const FREE_ON_RESUME: [&str; 2] = ["command", "bootstrap"];
+/// Settings a resumed run may change: the command line itself, the bootstrap count (the
+/// statistics are recomputed from all rows), and `merged_from`, the provenance `merge` adds
+/// (which shards a run was joined from).
+const FREE_ON_RESUME: [&str; 3] = ["command", "bootstrap", "merged_from"];
 
 /// Refuses to resume a run under different settings (seeds, policies, world model and
 /// its α, batch size, ...). The batch size counts because the kernels' float rounding
@@ -34,22 +35,20 @@ pub(crate) fn check_config(path: &Path, config: &Value) -> Result<()> {
     }
     let saved = read_json(path)?;
     check_fingerprints(path, &saved, config)?;
-    let differs: Vec<String> = config
-        .as_object()
+    // Every setting either side has: one the saved run recorded and this one lacks (a
+    // `--judge` left out, say) differs as much as one with another value.
+    let keys: std::collections::BTreeSet<&str> = [config, &saved]
         .into_iter()
-        .flatten()
-        .filter(|(k, v)| {
-            !FREE_ON_RESUME.contains(&k.as_str())
-                && k.as_str() != "episodes"
-                && k.as_str() != "fingerprints"
-                && saved.get(k.as_str()) != Some(*v)
-        })
-        .map(|(k, v)| {
-            format!(
-                "{k} (saved: {}, now: {})",
-                short(saved.get(k.as_str()).unwrap_or(&Value::Null)),
-                short(v)
-            )
+        .filter_map(Value::as_object)
+        .flat_map(|m| m.keys().map(String::as_str))
+        .collect();
+    let differs: Vec<String> = keys
+        .into_iter()
+        .filter(|k| !FREE_ON_RESUME.contains(k) && *k != "episodes" && *k != "fingerprints")
+        .filter(|k| saved.get(*k) != config.get(*k))
+        .map(|k| {
+            let show = |v: Option<&Value>| v.map_or("absent".to_string(), short);
+            format!("{k} (saved: {}, now: {})", show(saved.get(k)), show(config.get(k)))
         })
         .collect();
     if !differs.is_empty() {

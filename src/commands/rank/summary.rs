@@ -167,8 +167,9 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
     let ag = &res.agreement;
     let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.3}"));
     outln!(
-        "Pearson {}  Spearman {}  Kendall tau_b {}  inversions {}  MMRV {}  regret@1 {}  MAE {}",
+        "Pearson {}  r² {}  Spearman {}  Kendall tau_b {}  inversions {}  MMRV {}  regret@1 {}  MAE {}",
         f(ag.pearson),
+        f(ag.pearson.map(|r| r * r)),
         f(ag.spearman),
         f(ag.kendall_tau_b),
         ag.rank_inversions.map_or("n/a".to_string(), |k| k.to_string()),
