@@ -13,7 +13,7 @@ pub enum ImportCommand {
     /// and `simulate --replay-imagined` take with `--world-model`.
     WorldModel(ImportWorldModelArgs),
     /// A judge of imagined frames from another codebase's files, as an evalharness judge
-    /// folder that `rank --judge` and `plan --judge` take.
+    /// folder that `rank --judge` takes.
     Judge(ImportJudgeArgs),
 }
 
