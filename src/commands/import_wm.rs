@@ -53,10 +53,7 @@ pub fn run(a: &ImportWorldModelArgs) -> Result<ExitCode> {
     let inputs = Inputs::new().add("FILE", &a.file);
     let staged = Staged::new(&a.out, a.force, &inputs)?;
     let sha256 = harness::fingerprint::file(&a.file).with_context(|| format!("{}", a.file.display()))?;
-    let mut m = driftworld::import(&a.file, weights, preset, sha256)?;
-    if let Some(side) = a.image_size {
-        m.config.latents.size = usize::from(side);
-    }
+    let m = driftworld::import(&a.file, weights, preset, a.image_size.map(usize::from), sha256)?;
     write(&staged.file("config.json"), &Config { model: &m.config, import: &m.record })?;
     let weights_path = staged.file("ema.bpk");
     m.unet

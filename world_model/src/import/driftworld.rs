@@ -362,19 +362,40 @@ pub struct Imported {
     pub record: ImportRecord,
 }
 
-/// Imports `path`'s `weights` copy with what `preset` supplies.
+/// Imports `path`'s `weights` copy with what `preset` supplies, for frames of `image_size`²
+/// (`None`: the preset's).
 ///
 /// # Errors
-/// [`ImportError`] naming the file and the key at fault.
+/// [`ImportError`] naming the file and the key at fault; [`ImportError::Layout`] when the
+/// preset's action size differs from the file's or the frames cannot be downsampled evenly.
 pub fn import(
     path: &Path,
     weights: Weights,
     preset: Preset,
+    image_size: Option<usize>,
     sha256: String,
 ) -> Result<Imported, ImportError> {
     let source = Source::open(path, Some("model"), weights.prefix())?;
     let shapes = source.shapes();
     let plan = plan(&shapes, preset, path)?;
+    let layout = |what: String| ImportError::Layout { path: path.into(), what };
+    // What the preset assumes must fit what the file holds.
+    let actions = preset.actions().dim();
+    if plan.unet.action_dim != actions {
+        return Err(layout(format!(
+            "key `{}` reads {}-D actions, but the {preset:?} preset's are {actions}-D (another --preset?)",
+            source.shown("action_embed.0.weight"),
+            plan.unet.action_dim
+        )));
+    }
+    let side = image_size.unwrap_or(preset.image_size());
+    let halvings = 1 << (plan.unet.channel_mult.len() - 1);
+    if side == 0 || !side.is_multiple_of(halvings) {
+        return Err(layout(format!(
+            "frames of {side}² cannot be halved {} times by the U-Net's downsamplings (a multiple of {halvings})",
+            plan.unet.channel_mult.len() - 1
+        )));
+    }
     let mapped: BTreeSet<&str> = plan.entries.iter().map(|e| e.key.as_str()).collect();
     let unexpected: Vec<String> =
         source.names().filter(|n| !mapped.contains(n)).map(|n| source.shown(n)).collect();
@@ -405,7 +426,7 @@ pub fn import(
         let unused: Vec<&String> = values.keys().collect();
         return Err(apply(format!("parameters left unset {unset:?}, values unused {unused:?}")));
     }
-    let mut config = WorldModelConfig::pixels(plan.unet, preset.image_size());
+    let mut config = WorldModelConfig::pixels(plan.unet, side);
     config.future = preset.future();
     config.actions = (preset != Preset::Pusht).then(|| preset.actions());
     let record = ImportRecord {

@@ -38,7 +38,7 @@ fn max_abs(a: &[f32], b: &[f32]) -> f32 {
 #[test]
 fn the_fixture_predicts_what_pytorch_predicts() {
     for (weights, want) in [(Weights::Ema, "ema"), (Weights::Inner, "inner")] {
-        let m = import(&fixture("wm.pth"), weights, Preset::Pusht, "test".into())
+        let m = import(&fixture("wm.pth"), weights, Preset::Pusht, Some(16), "test".into())
             .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(m.record.tensors, 436);
         assert_eq!(m.record.step, Some(4321));
@@ -64,7 +64,7 @@ fn the_fixture_predicts_what_pytorch_predicts() {
 
 /// The error of importing a refused fixture, as text.
 fn refused(name: &str) -> String {
-    match import(&fixture(name), Weights::Ema, Preset::Pusht, "test".into()) {
+    match import(&fixture(name), Weights::Ema, Preset::Pusht, None, "test".into()) {
         Ok(_) => panic!("{name} was imported"),
         Err(e) => e.to_string(),
     }
@@ -72,7 +72,7 @@ fn refused(name: &str) -> String {
 
 #[test]
 fn a_good_small_file_imports() {
-    let m = import(&fixture("micro.pth"), Weights::Ema, Preset::Pusht, "test".into())
+    let m = import(&fixture("micro.pth"), Weights::Ema, Preset::Pusht, None, "test".into())
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(m.config.unet.channel_mult, vec![1]);
     assert_eq!(m.config.unet.res_blocks, 1);
@@ -96,11 +96,29 @@ fn damaged_files_are_refused_naming_the_key() {
     let e = refused("micro_unexpected_key.pth");
     assert!(e.contains("unexpected key(s) model.ema_model.middle_block.1.extra.weight"), "{e}");
     // The micro files hold no inner copy.
-    let e = match import(&fixture("micro.pth"), Weights::Inner, Preset::Pusht, "test".into()) {
+    let e = match import(&fixture("micro.pth"), Weights::Inner, Preset::Pusht, None, "test".into()) {
         Err(e @ ImportError::Missing { .. }) => e.to_string(),
         other => panic!("{:?}", other.err()),
     };
     assert!(e.contains("`model.inner_model.*` is missing"), "{e}");
+}
+
+#[test]
+fn a_preset_or_frame_size_that_does_not_fit_the_file_is_refused() {
+    // The fixture reads 2-D actions (Push-T's); Lift's preset has 7.
+    let e = import(&fixture("wm.pth"), Weights::Ema, Preset::Lift, None, "test".into())
+        .err()
+        .map(|e| e.to_string());
+    let e = e.unwrap_or_default();
+    assert!(
+        e.contains("`model.ema_model.action_embed.0.weight` reads 2-D actions") && e.contains("7-D"),
+        "{e}"
+    );
+    // 4 levels halve the frame 3 times: 20 is not a multiple of 8.
+    let e = import(&fixture("wm.pth"), Weights::Ema, Preset::Pusht, Some(20), "test".into())
+        .err()
+        .map(|e| e.to_string());
+    assert!(e.unwrap_or_default().contains("a multiple of 8"));
 }
 
 #[test]
@@ -109,7 +127,7 @@ fn a_file_that_is_not_a_checkpoint_is_refused() {
     std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
     let path = dir.join("not.pth");
     std::fs::write(&path, b"not a zip").unwrap_or_else(|e| panic!("{e}"));
-    let e = match import(&path, Weights::Ema, Preset::Pusht, "test".into()) {
+    let e = match import(&path, Weights::Ema, Preset::Pusht, None, "test".into()) {
         Err(e @ ImportError::Read { .. }) => e.to_string(),
         other => panic!("{:?}", other.err()),
     };
