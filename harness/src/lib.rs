@@ -3,7 +3,8 @@
 //! - [`task`] and [`judge`]: the task interface (seeded episodes, action and observation
 //!   specs, exact scores) and the judge of imagined frames, which the paired engine drives;
 //! - [`policy`] + [`rng`]: the batched policy interface and the caller-owned noise streams;
-//! - [`image`]: PSNR and SSIM as scikit-image computes them on 8-bit frames;
+//! - [`image`]: PSNR and SSIM as scikit-image computes them on 8-bit frames; [`resize`]:
+//!   OpenCV's INTER_LINEAR resize of 8-bit images (bit for bit on reductions);
 //! - [`seed`]: deterministic seed derivation (episode RNGs never depend on thread order),
 //!   and checked seed ranges;
 //! - [`fingerprint`]: content hashes of model folders, checked on resume;
@@ -29,6 +30,7 @@ pub mod metrics;
 pub mod paired_success;
 pub mod policy;
 pub mod replay;
+pub mod resize;
 pub mod results;
 pub mod rng;
 pub mod rows;
