@@ -15,6 +15,19 @@ fn import(file: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
     run(&args)
 }
 
+/// The 32-channel fixture imported at Push-T's 96² frames (a convolutional network runs at any
+/// size), then a tiny `rank` of two scripted policies with it, `extra` flags added: exit 0.
+fn rank_with_imported_model(dir: &Path, extra: &[&str]) -> PathBuf {
+    let (set, _) = pusht_inputs(dir);
+    let wm = dir.join("wm");
+    expect_code(&import(&fixture("wm.pth"), &wm, &[]), 0);
+    let rank_out = dir.join("rank");
+    let args = tiny_rank_args(&set, &wm, &rank_out);
+    let args = with_flag(&args, "--episodes", "2");
+    expect_code(&run(&[&args[..], extra].concat()), 0);
+    rank_out
+}
+
 #[test]
 fn a_driftworld_checkpoint_becomes_a_world_model_folder_that_rank_runs() {
     let dir = tempfile::tempdir().unwrap();
@@ -32,15 +45,8 @@ fn a_driftworld_checkpoint_becomes_a_world_model_folder_that_rank_runs() {
     assert!(prov["import"]["sha256"].as_str().is_some_and(|h| h.starts_with("sha256:")), "{prov}");
     assert!(out.join("ema.bpk").is_file());
 
-    // The same weights at Push-T's 96² frames (a convolutional network runs at any size) rank
-    // policies end to end.
-    let (set, _) = pusht_inputs(dir.path());
-    let at96 = dir.path().join("at96");
-    expect_code(&import(&fixture("wm.pth"), &at96, &[]), 0);
-    let rank_out = dir.path().join("rank");
-    let args = tiny_rank_args(&set, &at96, &rank_out);
-    let args = with_flag(&args, "--episodes", "2");
-    expect_code(&run(&args), 0);
+    // The same weights at Push-T's 96² frames rank policies end to end.
+    let rank_out = rank_with_imported_model(dir.path(), &[]);
     let results = read_json(&rank_out.join("results.json"));
     assert!(results["timing"]["world_model_ms_per_frame"].as_f64().is_some_and(|v| v > 0.0), "{results}");
 }
@@ -91,14 +97,7 @@ fn gpc_reward_predictors_become_a_judge_that_rank_uses_with_an_imported_world_mo
 
     // rank with the imported world model and judge: every imagined and real frame judged by
     // pose, the real frames' reading error against the exact coverage reported.
-    let (set, _) = pusht_inputs(dir.path());
-    let wm = dir.path().join("wm");
-    expect_code(&import(&fixture("wm.pth"), &wm, &[]), 0);
-    let rank_out = dir.path().join("rank");
-    let args = tiny_rank_args(&set, &wm, &rank_out);
-    let args = with_flag(&args, "--episodes", "2");
-    let args = [&args[..], &["--judge", s(&judge)]].concat();
-    expect_code(&run(&args), 0);
+    let rank_out = rank_with_imported_model(dir.path(), &["--judge", s(&judge)]);
     let rows = std::fs::read_to_string(rank_out.join("episodes.jsonl")).unwrap();
     let first: serde_json::Value = serde_json::from_str(rows.lines().next().unwrap()).unwrap();
     let err = first["scorer_abs_error"].as_f64();

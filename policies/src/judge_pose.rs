@@ -18,7 +18,7 @@ use burn::nn::{Linear, LinearConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 use world_model::import::ImportError;
-use world_model::import::place::{place, shapes};
+use world_model::import::place::{place, shapes, transpose};
 use world_model::import::tensors::Source;
 
 use crate::resnet::ResNet18;
@@ -162,8 +162,7 @@ pub fn import_pose_net(path: &Path, device: &Device) -> Result<(PoseNet, usize),
         let shape = ours[&format!("{l}.weight")].clone(); // burn [in, out]
         let (din, dout) = (shape[0], shape[1]);
         let w = take(&format!("mlp.{i}.weight"), &[dout, din])?;
-        let t: Vec<f32> = (0..din * dout).map(|n| w[(n % dout) * din + n / dout]).collect();
-        values.insert(format!("{l}.weight"), TensorData::new(t, shape));
+        values.insert(format!("{l}.weight"), TensorData::new(transpose(&w, din, dout), shape));
         values.insert(format!("{l}.bias"), TensorData::new(take(&format!("mlp.{i}.bias"), &[dout])?, [dout]));
     }
     // A BatchNorm's step counter (int64) is expected beside its statistics, and not read.

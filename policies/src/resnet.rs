@@ -9,10 +9,11 @@
 
 use burn::module::Module;
 use burn::nn::PaddingConfig2d;
-use burn::nn::conv::{Conv2d, Conv2dConfig};
+use burn::nn::conv::Conv2d;
 use burn::nn::pool::{AdaptiveAvgPool2d, AdaptiveAvgPool2dConfig, MaxPool2d, MaxPool2dConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
+use world_model::autoencoder::conv;
 
 /// torchvision's base width (stage widths 64, 128, 256, 512).
 pub const BASE: usize = 64;
@@ -20,15 +21,6 @@ pub const BASE: usize = 64;
 /// Stage widths for base width `base`: base·(1, 2, 4, 8).
 pub fn widths(base: usize) -> [usize; 4] {
     [base, 2 * base, 4 * base, 8 * base]
-}
-
-fn conv(cin: usize, cout: usize, k: usize, stride: usize, device: &Device) -> Conv2d {
-    let p = k / 2;
-    Conv2dConfig::new([cin, cout], [k, k])
-        .with_stride([stride, stride])
-        .with_padding(PaddingConfig2d::Explicit(p, p, p, p))
-        .with_bias(true)
-        .init(device)
 }
 
 /// A basic block: conv-ReLU-conv plus the (projected) input, then ReLU.

@@ -16,7 +16,7 @@ use world_model::model::{WorldModel, WorldModelConfig};
 
 use super::git_commit;
 use crate::cli::{ImportPreset, ImportWeights, ImportWorldModelArgs, WorldModelFormat};
-use crate::output::{Inputs, Staged};
+use crate::output::{Inputs, Staged, write_json};
 
 /// An imported model's `config.json`.
 #[derive(Serialize)]
@@ -31,11 +31,6 @@ struct Provenance<'a> {
     command: String,
     commit: String,
     import: &'a ImportRecord,
-}
-
-fn write<T: Serialize>(path: &std::path::Path, value: &T) -> Result<()> {
-    let text = serde_json::to_string_pretty(value)?;
-    std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))
 }
 
 /// `evalharness import world-model`.
@@ -54,13 +49,16 @@ pub fn run(a: &ImportWorldModelArgs) -> Result<ExitCode> {
     let staged = Staged::new(&a.out, a.force, &inputs)?;
     let sha256 = harness::fingerprint::file(&a.file).with_context(|| format!("{}", a.file.display()))?;
     let m = driftworld::import(&a.file, weights, preset, a.image_size.map(usize::from), sha256)?;
-    write(&staged.file("config.json"), &Config { model: &m.config, import: &m.record })?;
+    write_json(&staged.file("config.json"), &Config { model: &m.config, import: &m.record })?;
     let weights_path = staged.file("ema.bpk");
     m.unet
         .save_file(&weights_path)
         .map_err(|e| anyhow::anyhow!("writing {}: {e}", weights_path.display()))?;
     let command = crate::stdout::command_line().join(" ");
-    write(&staged.file("provenance.json"), &Provenance { command, commit: git_commit(), import: &m.record })?;
+    write_json(
+        &staged.file("provenance.json"),
+        &Provenance { command, commit: git_commit(), import: &m.record },
+    )?;
     let out = staged.commit()?;
     let device = world_model::device::selected()?;
     WorldModel::load(&out, &device)

@@ -292,7 +292,7 @@ pub fn read_json(path: &Path) -> Result<serde_json::Value> {
 }
 
 /// Writes pretty JSON to a file.
-pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+pub fn write_json<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<()> {
     let mut text = serde_json::to_string_pretty(value)?;
     text.push('\n');
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))

@@ -89,7 +89,8 @@ impl AutoencoderConfig {
     }
 }
 
-fn conv(cin: usize, cout: usize, k: usize, stride: usize, device: &Device) -> Conv2d {
+/// A k×k convolution `cin → cout` with "same" padding (k / 2), the given stride and a bias.
+pub fn conv(cin: usize, cout: usize, k: usize, stride: usize, device: &Device) -> Conv2d {
     let p = k / 2;
     Conv2dConfig::new([cin, cout], [k, k])
         .with_stride([stride, stride])

@@ -169,7 +169,7 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
     outln!(
         "Pearson {}  r² {}  Spearman {}  Kendall tau_b {}  inversions {}  MMRV {}  regret@1 {}  MAE {}",
         f(ag.pearson),
-        f(ag.pearson.map(|r| r * r)),
+        f(ag.pearson_r2),
         f(ag.spearman),
         f(ag.kendall_tau_b),
         ag.rank_inversions.map_or("n/a".to_string(), |k| k.to_string()),

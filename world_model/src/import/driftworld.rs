@@ -22,7 +22,7 @@ use burn::tensor::{Device, TensorData};
 use serde::{Deserialize, Serialize};
 
 use super::ImportError;
-use super::place::{place, shapes as module_shapes};
+use super::place::{place, shapes as module_shapes, transpose};
 use super::tensors::{Source, top_level_int};
 use crate::action::ActionScale;
 use crate::model::WorldModelConfig;
@@ -414,7 +414,7 @@ pub fn import(
         let mut v = source.f32s(&e.key, &official_shape(our_shape, e.transform))?;
         v = match (e.transform, our_shape.as_slice()) {
             (Transform::Same, _) => v,
-            (Transform::Transpose, &[i, o]) => (0..i * o).map(|n| v[(n % o) * i + n / o]).collect(),
+            (Transform::Transpose, &[i, o]) => transpose(&v, i, o),
             (Transform::Qkv { heads }, s) => permute_qkv(&v, heads, s[1..].iter().product()),
             (Transform::Transpose, s) => return Err(apply(format!("`{}` is not a matrix: {s:?}", e.ours))),
         };

@@ -32,6 +32,11 @@ impl ModuleVisitor for Shapes {
     }
 }
 
+/// A PyTorch Linear weight (`[out, in]`, row-major) in burn's layout (`[in, out]`).
+pub fn transpose(w: &[f32], din: usize, dout: usize) -> Vec<f32> {
+    (0..din * dout).map(|n| w[(n % dout) * din + n / dout]).collect()
+}
+
 /// Sets `module`'s float parameters from `values` by path. Returns the module and the paths
 /// of its parameters `values` had nothing for; `values` keeps what matched no parameter.
 /// The caller has checked the shapes ([`shapes`]).
