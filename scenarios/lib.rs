@@ -17,8 +17,8 @@ pub use error::ScenarioError;
 
 use harness::task::Task;
 
-/// The task `--scenario` names: a scenario name (`pusht`, `lift`, `can`: the shipped
-/// parameters) or a scenario .toml file. The only place that maps a scenario to its
+/// The task `--scenario` names: a scenario name (`pusht`, `pusht-gpc`, `lift`, `can`: the
+/// shipped parameters) or a scenario .toml file. The only place that maps a scenario to its
 /// implementation: adding a task adds its line here.
 ///
 /// # Errors
@@ -41,6 +41,9 @@ pub fn pusht_config(spec: &str) -> Result<pusht::PushTConfig, ScenarioError> {
     if spec == "pusht" {
         return Ok(pusht::PushTConfig::default());
     }
+    if spec == "pusht-gpc" {
+        return pusht::PushTConfig::gpc();
+    }
     let path = std::path::Path::new(spec);
     let file = spec.ends_with(".toml") || path.exists();
     let named = if file { file_names(path)? } else { Some(spec.to_string()) };
@@ -57,7 +60,7 @@ pub fn pusht_config(spec: &str) -> Result<pusht::PushTConfig, ScenarioError> {
 }
 
 /// Names of the scenarios this build can simulate.
-pub const SCENARIOS: &[&str] = &["pusht", "lift", "can"];
+pub const SCENARIOS: &[&str] = &["pusht", "pusht-gpc", "lift", "can"];
 
 /// A resolved `--scenario`: which simulator, with its parameters.
 #[derive(Clone, Debug)]
@@ -82,7 +85,7 @@ pub fn scenario(spec: &str) -> Result<Scenario, ScenarioError> {
         _ => {}
     }
     let path = std::path::Path::new(spec);
-    if spec != "pusht" && (spec.ends_with(".toml") || path.exists()) {
+    if !matches!(spec, "pusht" | "pusht-gpc") && (spec.ends_with(".toml") || path.exists()) {
         match file_names(path)?.as_deref() {
             Some("lift") => return Ok(Scenario::Lift(lift::LiftConfig::from_file(path)?)),
             Some("can") => return Ok(Scenario::Can(can::CanConfig::from_file(path)?)),

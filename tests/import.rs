@@ -95,9 +95,12 @@ fn gpc_reward_predictors_become_a_judge_that_rank_uses_with_an_imported_world_mo
     assert!(err.contains("resnet18.5.0.downsample.1.running_var"), "{err}");
     assert!(!other.exists());
 
-    // rank with the imported world model and judge: every imagined and real frame judged by
-    // pose, the real frames' reading error against the exact coverage reported.
-    let rank_out = rank_with_imported_model(dir.path(), &["--judge", s(&judge)]);
+    // rank with the imported world model and judge on GPC's Push-T (its resets and frames):
+    // every imagined and real frame judged by pose, the real frames' reading error against
+    // the exact coverage reported.
+    let rank_out = rank_with_imported_model(dir.path(), &["--judge", s(&judge), "--scenario", "pusht-gpc"]);
+    let cfg = read_json(&rank_out.join("config.json"));
+    assert_eq!(cfg["scenario"], "pusht-gpc", "{cfg}");
     let rows = std::fs::read_to_string(rank_out.join("episodes.jsonl")).unwrap();
     let first: serde_json::Value = serde_json::from_str(rows.lines().next().unwrap()).unwrap();
     let err = first["scorer_abs_error"].as_f64();

@@ -13,6 +13,10 @@ use crate::error::ScenarioError;
 /// The shipped default parameters (`scenarios/pusht.toml`).
 pub const DEFAULT_TOML: &str = include_str!("../pusht.toml");
 
+/// The shipped GPC-faithful scene (`scenarios/pusht_gpc.toml`, `--scenario pusht-gpc`):
+/// GPC's resets and frames.
+pub const GPC_TOML: &str = include_str!("../pusht_gpc.toml");
+
 /// All Push-T parameters. See `scenarios/pusht.toml` for units and meaning.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -123,6 +127,30 @@ pub struct TaskConfig {
 pub struct RenderConfig {
     pub size: u32,
     pub supersample: u32,
+    /// How frames are drawn (absent: evalharness's own).
+    #[serde(default, skip_serializing_if = "RenderStyle::is_own")]
+    pub style: RenderStyle,
+}
+
+/// How Push-T frames are drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RenderStyle {
+    /// evalharness's anti-aliased rasteriser ([`super::render`]): `supersample²` samples a
+    /// pixel, a (237, 39, 68) block with its outline around the whole T.
+    #[default]
+    Supersample,
+    /// GPC's frames ([`super::gpc_render`]): pygame's aliased drawing on a canvas of the
+    /// world's size, then OpenCV's bilinear resize; a (198, 34, 58) block with each of its
+    /// two rectangles outlined. `supersample` is not used.
+    Gpc,
+}
+
+impl RenderStyle {
+    /// Whether this is evalharness's own style (the default, not written out).
+    pub fn is_own(&self) -> bool {
+        *self == Self::Supersample
+    }
 }
 
 impl Default for PushTConfig {
@@ -134,6 +162,14 @@ impl Default for PushTConfig {
 }
 
 impl PushTConfig {
+    /// The shipped GPC-faithful scene ([`GPC_TOML`]).
+    ///
+    /// # Errors
+    /// Never for the shipped file (a unit test parses it); typed for the caller's `?`.
+    pub fn gpc() -> Result<Self, ScenarioError> {
+        Self::from_toml_str(GPC_TOML, Path::new("scenarios/pusht_gpc.toml"))
+    }
+
     /// Parses and validates a Push-T config; `origin` names the file in errors.
     ///
     /// # Errors
@@ -264,6 +300,15 @@ impl PushTConfig {
         if !(8..=1024).contains(&self.render.size) || !(1..=8).contains(&self.render.supersample) {
             return Err(bad("render", "size in 8..=1024, supersample in 1..=8".into()));
         }
+        let w = self.world.size;
+        if self.render.style == RenderStyle::Gpc && !(w.fract() == 0.0 && (8.0..=4096.0).contains(&w)) {
+            return Err(bad(
+                "render.style",
+                format!(
+                    "\"gpc\" draws on a canvas of the world's size, which must be a whole number of pixels in [8, 4096], got {w}"
+                ),
+            ));
+        }
         Ok(())
     }
 }
@@ -306,6 +351,28 @@ mod tests {
         assert_ne!(text, DEFAULT_TOML);
         let err = PushTConfig::from_toml_str(&text, Path::new("z.toml")).unwrap_err().to_string();
         assert!(err.contains("mujoco_substeps (4000000000)"), "{err}");
+    }
+
+    #[test]
+    fn the_shipped_gpc_scene_differs_from_the_default_only_in_reset_and_frames() {
+        let (gpc, own) = (PushTConfig::gpc().unwrap(), PushTConfig::default());
+        assert_eq!((gpc.render.style, gpc.reset.rng), (RenderStyle::Gpc, ResetRng::GpcNumpy));
+        let mut back = gpc.clone();
+        (back.render.style, back.reset.rng) = (own.render.style, own.reset.rng);
+        assert_eq!(back, own);
+    }
+
+    #[test]
+    fn the_gpc_style_is_read_and_needs_a_whole_pixel_world() {
+        let text = DEFAULT_TOML.replace("[render]", "[render]\nstyle = \"gpc\"");
+        let cfg = PushTConfig::from_toml_str(&text, Path::new("g.toml")).unwrap();
+        assert_eq!(cfg.render.style, RenderStyle::Gpc);
+        // The default style is not written out, so existing config.json files are unchanged.
+        let own = toml::to_string(&PushTConfig::default()).unwrap();
+        assert!(!own.contains("style"), "{own}");
+        let text = text.replace("size = 512.0", "size = 512.5");
+        let err = PushTConfig::from_toml_str(&text, Path::new("g.toml")).unwrap_err().to_string();
+        assert!(err.contains("render.style") && err.contains("512.5"), "{err}");
     }
 
     #[test]

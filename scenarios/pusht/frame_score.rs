@@ -15,11 +15,13 @@
 //! frames by `rank` and reported with every run.
 
 use super::PushTConfig;
+use super::colors::BlockPalette;
 use super::geometry::{Pose2, TShape};
 
-/// Block fraction of an RGB pixel (see the module docs).
+/// Block fraction of an RGB pixel of evalharness's own rendering (see the module docs and
+/// [`BlockPalette::fraction`]).
 pub fn block_fraction(px: &[u8]) -> f64 {
-    ((f64::from(px[0]) - f64::from(px[1])) / 198.0).clamp(0.0, 1.0)
+    BlockPalette::OWN.fraction(px)
 }
 
 /// Agent fraction of an RGB pixel: `(B − R) / 160`, clamped to [0, 1]. The agent's
@@ -45,6 +47,8 @@ pub struct FrameScorer {
     /// The T and the goal pose, for scoring a pose read by another judge exactly.
     shape: TShape,
     goal_pose: Pose2,
+    /// The block's colours in the frames this scorer reads (`[render] style`).
+    palette: BlockPalette,
 }
 
 impl FrameScorer {
@@ -73,7 +77,8 @@ impl FrameScorer {
         let goal_sum = mask.iter().sum();
         let agent_px = std::f64::consts::PI * (cfg.agent.radius / scale).powi(2);
         let success_coverage = cfg.task.success_coverage;
-        Self { goal: mask, goal_sum, agent_px, size, success_coverage, shape, goal_pose: *goal }
+        let palette = BlockPalette::of(cfg.render.style);
+        Self { goal: mask, goal_sum, agent_px, size, success_coverage, shape, goal_pose: *goal, palette }
     }
 
     /// Whether `frame` is an HWC RGB frame of this scorer's size with a non-empty goal.
@@ -108,7 +113,7 @@ impl FrameScorer {
 
     /// Estimated coverage of an HWC RGB frame.
     pub fn coverage(&self, frame: &[u8]) -> f64 {
-        self.over_goal(frame, block_fraction).clamp(0.0, 1.0)
+        self.over_goal(frame, |px| self.palette.fraction(px)).clamp(0.0, 1.0)
     }
 
     /// Block pixels in the whole frame (Σ block fraction) as a fraction of the T's area
@@ -117,7 +122,7 @@ impl FrameScorer {
     /// floor), far below 1 when an imagined frame has lost the block, above 1 when it
     /// smears it. A health check of world-model frames, not a score.
     pub fn block_area(&self, frame: &[u8]) -> f64 {
-        self.over_frame(frame, block_fraction, self.goal_sum)
+        self.over_frame(frame, |px| self.palette.fraction(px), self.goal_sum)
     }
 
     /// How much of the goal T the frame still shows: Σ_p goal(p)·min(1, dark(p) +
@@ -128,7 +133,7 @@ impl FrameScorer {
     /// scene. A health check of world-model frames, not a score.
     pub fn goal_kept(&self, frame: &[u8]) -> f64 {
         let dark = |px: &[u8]| 1.0 - f64::from(px[0].max(px[1]).max(px[2])) / 255.0;
-        self.over_goal(frame, |px| (dark(px) + block_fraction(px)).min(1.0))
+        self.over_goal(frame, |px| (dark(px) + self.palette.fraction(px)).min(1.0))
     }
 
     /// Agent pixels in the whole frame (Σ agent fraction) as a fraction of the agent
@@ -160,8 +165,9 @@ impl FrameScorer {
     /// Draws the goal T onto a frame rendered (or generated) without it, under the
     /// block and the agent as the renderer layers them: each pixel loses the white of
     /// its visible floor inside the goal, `out = px − 255·goal(p)·floor(p)`, where
-    /// `floor(p) = min((G − 39)/216, (R − 65)/190)` clamped to [0, 1] is the white part
-    /// of a mix of floor with block red (G = 39) or agent blue (R = 65). Exact on pixels
+    /// `floor(p) = min((G − g)/(255 − g), (R − 65)/190)` clamped to [0, 1] is the white part
+    /// of a mix of floor with block red (fill green g: 39, or GPC's 34) or agent blue
+    /// (R = 65). Exact on pixels
     /// fully inside or outside the goal; on the goal's anti-aliased rim where the block
     /// also passes it assumes the two cover independent parts of the pixel. A frame
     /// that does not fit is left as it is.
@@ -172,7 +178,8 @@ impl FrameScorer {
         for (g, px) in self.goal.iter().zip(frame.chunks_exact_mut(3)) {
             if *g > 0.0 {
                 let white = |v: u8, base: f64, span: f64| ((f64::from(v) - base) / span).clamp(0.0, 1.0);
-                let floor = white(px[1], 39.0, 216.0).min(white(px[0], 65.0, 190.0));
+                let g0 = f64::from(self.palette.fill[1]);
+                let floor = white(px[1], g0, 255.0 - g0).min(white(px[0], 65.0, 190.0));
                 let cut = 255.0 * g * floor;
                 for c in px.iter_mut() {
                     *c = (f64::from(*c) - cut).clamp(0.0, 255.0).round() as u8;
@@ -228,35 +235,47 @@ mod tests {
         assert!((block_fraction(&[118, 19, 34]) - 0.5).abs() < 0.01);
     }
 
+    /// The shipped scene in each rendering style.
+    fn styles() -> [PushTConfig; 2] {
+        let mut gpc = cfg();
+        gpc.render.style = crate::pusht::config::RenderStyle::Gpc;
+        [cfg(), gpc]
+    }
+
     #[test]
     fn drawing_the_goal_onto_a_goal_free_frame_gives_the_rendered_frame() {
-        let cfg = cfg();
-        let raster = Rasterizer::new(&cfg);
-        for seed in 0..8 {
-            let (mut state, goal) = initial_state(&cfg, seed).unwrap();
-            // Half the scenes with the block half over the goal (edges crossing its rim).
-            if seed % 2 == 0 {
-                state.block = Pose2 { x: goal.x + 25.0, y: goal.y - 15.0, theta: goal.theta + 0.4 };
-            }
-            let scorer = FrameScorer::new(&cfg, &goal, raster.size());
-            let with = raster.render(&state, &goal);
-            let without = raster.render_without_goal(&state);
-            assert!(!without.chunks_exact(3).any(|p| p == [0, 0, 0]), "seed {seed}: goal pixels left");
-            let mut drawn = without.clone();
-            scorer.draw_goal(&mut drawn);
-            // Outside the goal's supersampled mask nothing changes, and the goal-free
-            // render equals the full one there.
-            let diffs: Vec<u8> = with.iter().zip(&drawn).map(|(a, b)| a.abs_diff(*b)).collect();
-            for (i, g) in scorer.goal.iter().enumerate() {
-                if *g == 0.0 {
-                    assert_eq!(&drawn[i * 3..i * 3 + 3], &with[i * 3..i * 3 + 3], "seed {seed} pixel {i}");
+        for cfg in styles() {
+            let raster = Rasterizer::new(&cfg);
+            for seed in 0..8 {
+                let (mut state, goal) = initial_state(&cfg, seed).unwrap();
+                // Half the scenes with the block half over the goal (edges crossing its rim).
+                if seed % 2 == 0 {
+                    state.block = Pose2 { x: goal.x + 25.0, y: goal.y - 15.0, theta: goal.theta + 0.4 };
                 }
+                let scorer = FrameScorer::new(&cfg, &goal, raster.size());
+                let with = raster.render(&state, &goal);
+                let without = raster.render_without_goal(&state);
+                assert!(!without.chunks_exact(3).any(|p| p == [0, 0, 0]), "seed {seed}: goal pixels left");
+                let mut drawn = without.clone();
+                scorer.draw_goal(&mut drawn);
+                // Outside the goal's supersampled mask nothing changes, and the goal-free
+                // render equals the full one there.
+                let diffs: Vec<u8> = with.iter().zip(&drawn).map(|(a, b)| a.abs_diff(*b)).collect();
+                for (i, g) in scorer.goal.iter().enumerate() {
+                    if *g == 0.0 {
+                        assert_eq!(
+                            &drawn[i * 3..i * 3 + 3],
+                            &with[i * 3..i * 3 + 3],
+                            "seed {seed} pixel {i}"
+                        );
+                    }
+                }
+                // Inside, only rim pixels shared with the block or agent are approximate:
+                // mean error below one grey level, coverage read the same.
+                let mean = diffs.iter().map(|&d| f64::from(d)).sum::<f64>() / diffs.len() as f64;
+                assert!(mean < 1.0, "seed {seed}: mean |difference| {mean:.3}");
+                assert!((scorer.coverage(&drawn) - scorer.coverage(&with)).abs() < 1e-3, "seed {seed}");
             }
-            // Inside, only rim pixels shared with the block or agent are approximate:
-            // mean error below one grey level, coverage read the same.
-            let mean = diffs.iter().map(|&d| f64::from(d)).sum::<f64>() / diffs.len() as f64;
-            assert!(mean < 1.0, "seed {seed}: mean |difference| {mean:.3}");
-            assert!((scorer.coverage(&drawn) - scorer.coverage(&with)).abs() < 1e-3, "seed {seed}");
         }
     }
 
@@ -281,32 +300,41 @@ mod tests {
 
     #[test]
     fn estimate_tracks_exact_coverage_on_rendered_frames() {
-        let cfg = cfg();
-        let raster = Rasterizer::new(&cfg);
-        let (mut state, goal) = initial_state(&cfg, 3).unwrap();
-        let scorer = FrameScorer::new(&cfg, &goal, raster.size());
-        // Slide the block onto the goal in steps: coverage goes from ~0 to 1.
-        let start = state.block;
-        for k in 0..=10 {
-            let t = f64::from(k) / 10.0;
-            state.block = Pose2 {
-                x: start.x + (goal.x - start.x) * t,
-                y: start.y + (goal.y - start.y) * t,
-                theta: start.theta + (goal.theta - start.theta) * t,
-            };
-            state.agent = [20.0, 20.0];
-            let exact = score(&cfg, &state.block, &goal).coverage;
-            let frame = raster.render(&state, &goal);
-            let est = scorer.coverage(&frame);
-            assert!((est - exact).abs() < 0.06, "step {k}: estimate {est:.3} vs exact {exact:.3}");
-            // The whole block is in view (the agent is in a corner): its pixels add up
-            // to the T's area, plus the anti-aliased rim (measured 1.060–1.062 here).
-            let area = scorer.block_area(&frame);
-            assert!((1.0..1.1).contains(&area), "step {k}: block area {area:.3}");
-            // The goal shows wherever the block does not cover it (measured 0.937–0.989:
-            // its anti-aliased rim mixes with the white floor).
-            let goal_kept = scorer.goal_kept(&frame);
-            assert!((0.9..=1.0).contains(&goal_kept), "step {k}: goal kept {goal_kept:.3}");
+        for cfg in styles() {
+            let style = cfg.render.style;
+            let raster = Rasterizer::new(&cfg);
+            let (mut state, goal) = initial_state(&cfg, 3).unwrap();
+            let scorer = FrameScorer::new(&cfg, &goal, raster.size());
+            // Slide the block onto the goal in steps: coverage goes from ~0 to 1.
+            let start = state.block;
+            for k in 0..=10 {
+                let t = f64::from(k) / 10.0;
+                state.block = Pose2 {
+                    x: start.x + (goal.x - start.x) * t,
+                    y: start.y + (goal.y - start.y) * t,
+                    theta: start.theta + (goal.theta - start.theta) * t,
+                };
+                state.agent = [20.0, 20.0];
+                let exact = score(&cfg, &state.block, &goal).coverage;
+                let frame = raster.render(&state, &goal);
+                let est = scorer.coverage(&frame);
+                assert!(
+                    (est - exact).abs() < 0.06,
+                    "{style:?} step {k}: estimate {est:.3} vs exact {exact:.3}"
+                );
+                // The whole block is in view (the agent is in a corner): its pixels add up
+                // to the T's area, plus the anti-aliased rim (measured 1.060–1.062 here).
+                let area = scorer.block_area(&frame);
+                // GPC's outlines are drawn outside the T as well as inside it, and its outline
+                // reads 137/164 of the fill against 137/198 here (measured 1.081–1.131).
+                let range =
+                    if style == crate::pusht::config::RenderStyle::Gpc { 1.05..1.15 } else { 1.0..1.1 };
+                assert!(range.contains(&area), "{style:?} step {k}: block area {area:.3}");
+                // The goal shows wherever the block does not cover it (measured 0.937–0.989:
+                // its anti-aliased rim mixes with the white floor).
+                let goal_kept = scorer.goal_kept(&frame);
+                assert!((0.9..=1.0).contains(&goal_kept), "{style:?} step {k}: goal kept {goal_kept:.3}");
+            }
         }
     }
 

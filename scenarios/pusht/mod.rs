@@ -13,6 +13,7 @@ pub mod expert;
 pub mod explore;
 pub mod frame_score;
 pub mod geometry;
+pub mod gpc_render;
 #[cfg(feature = "mujoco-render")]
 pub mod mj_render;
 pub mod numpy_rng;
@@ -20,6 +21,7 @@ pub mod path;
 pub mod perceive;
 pub mod physics;
 pub mod plan_cost;
+pub mod pygame_raster;
 pub mod render;
 pub mod rollout;
 pub mod scripted;

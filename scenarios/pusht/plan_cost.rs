@@ -17,7 +17,7 @@
 //! pixels) has no cost.
 
 use super::PushTConfig;
-use super::frame_score::block_fraction;
+use super::colors::BlockPalette;
 use super::geometry::{Pose2, TShape};
 
 /// Below this fraction of the T's area in block pixels, a frame shows no block to score.
@@ -31,6 +31,8 @@ pub struct GoalDistance {
     /// The T's area in pixels.
     t_px: f64,
     size: usize,
+    /// The block's colours in the frames read (`[render] style`).
+    palette: BlockPalette,
 }
 
 impl GoalDistance {
@@ -44,7 +46,7 @@ impl GoalDistance {
                 shape.distance(goal.inverse_apply(w))
             })
             .collect();
-        Self { dist, t_px: shape.area() / (scale * scale), size }
+        Self { dist, t_px: shape.area() / (scale * scale), size, palette: BlockPalette::of(cfg.render.style) }
     }
 
     /// The mean distance (world units) of the frame's block pixels from the goal T;
@@ -55,7 +57,7 @@ impl GoalDistance {
         }
         let (mut mass, mut moment) = (0.0, 0.0);
         for (px, d) in frame.chunks_exact(3).zip(&self.dist) {
-            let b = block_fraction(px);
+            let b = self.palette.fraction(px);
             mass += b;
             moment += b * d;
         }

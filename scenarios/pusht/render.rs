@@ -8,14 +8,17 @@
 //! Colours follow the GPC renderer: white background, black goal T, red block
 //! (1.2 x (198,33,57)) with a (165,28,48) 4-unit outline, a RoyalBlue agent disk
 //! with a (78,126,255) inner disk, light-gray walls. y points down in the image.
+//!
+//! With `[render] style = "gpc"` the frames are GPC's own instead
+//! ([`super::gpc_render`]); the rasteriser only dispatches.
 
-use super::config::PushTConfig;
+use super::config::{PushTConfig, RenderStyle};
 use super::geometry::{Pose2, TShape};
 use super::physics::PushTState;
 
 type Rgb = [u8; 3];
 
-use super::colors::{AGENT, AGENT_INNER, AGENT_INNER_RADIUS, BACKGROUND, BLOCK, BLOCK_EDGE, GOAL, WALL};
+use super::colors::{AGENT, AGENT_INNER, AGENT_INNER_RADIUS, BACKGROUND, BlockPalette, GOAL, WALL};
 
 /// Half width of the block's outline, world units (a 4-unit line centred on the edge).
 const EDGE_HALF: f64 = 2.0;
@@ -31,6 +34,8 @@ pub struct Rasterizer {
     wall_lo: f64,
     wall_hi: f64,
     wall_half: f64,
+    /// The scene, when frames are drawn as GPC draws them.
+    gpc: Option<std::sync::Arc<PushTConfig>>,
 }
 
 /// A body pose with its rotation precomputed.
@@ -99,6 +104,7 @@ impl Rasterizer {
             wall_lo: cfg.world.wall_inset,
             wall_hi: cfg.world.size - 1.0 - cfg.world.wall_inset,
             wall_half: cfg.world.wall_radius,
+            gpc: (cfg.render.style == RenderStyle::Gpc).then(|| std::sync::Arc::new(cfg.clone())),
         }
     }
 
@@ -146,6 +152,10 @@ impl Rasterizer {
     /// If `out` has the wrong length (a programming error).
     fn render_layers(&self, state: &PushTState, goal: Option<&Pose2>, out: &mut [u8]) {
         assert_eq!(out.len(), self.frame_len(), "render buffer has the wrong size");
+        if let Some(cfg) = &self.gpc {
+            super::gpc_render::render_into(cfg, state, goal, self.size, out);
+            return;
+        }
         let n = self.supersample;
         let scale = self.world / self.size as f64;
         // Half diagonal of a pixel, in world units: the reach of an edge into it.
@@ -248,7 +258,7 @@ impl Rasterizer {
         if d <= self.agent_radius {
             return AGENT;
         }
-        if let Some(c) = block_colour(&self.shape, block.to_body(wx, wy)) {
+        if let Some(c) = block_colour(&self.shape, block.to_body(wx, wy), &BlockPalette::OWN) {
             return c;
         }
         if goal.is_some_and(|g| self.shape.contains(g.to_body(wx, wy))) {
@@ -269,13 +279,14 @@ impl Rasterizer {
     }
 }
 
-/// The colour of the block (fill or outline) at a body-frame point, `None` off
-/// the block. The outline is [`EDGE_HALF`] wide on either side of the boundary.
-pub fn block_colour(shape: &TShape, b: [f64; 2]) -> Option<Rgb> {
+/// The colour of the block (fill or outline, in `palette`) at a body-frame point, `None`
+/// off the block. The outline is [`EDGE_HALF`] wide on either side of the boundary (GPC's
+/// frames also outline the line where bar and stem meet; this is the union's outline).
+pub fn block_colour(shape: &TShape, b: [f64; 2], palette: &BlockPalette) -> Option<Rgb> {
     if shape.contains(b) {
-        return Some(if within_inside(shape, b, EDGE_HALF) { BLOCK_EDGE } else { BLOCK });
+        return Some(if within_inside(shape, b, EDGE_HALF) { palette.edge } else { palette.fill });
     }
-    (shape.distance(b) <= EDGE_HALF).then_some(BLOCK_EDGE)
+    (shape.distance(b) <= EDGE_HALF).then_some(palette.edge)
 }
 
 /// Whether an inside body-frame point lies within `e` of the T's boundary: a point
@@ -295,6 +306,7 @@ pub(crate) fn dist(dx: f64, dy: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pusht::colors::BLOCK;
 
     fn pixel(img: &[u8], size: usize, x: usize, y: usize) -> [u8; 3] {
         let o = (y * size + x) * 3;
