@@ -155,3 +155,59 @@ fn collect_policy_records_the_rollouts_that_simulate_scores() {
     assert!(err.contains("--noise"), "{err}");
     expect_code(&run(&["collect", "--policy", s, "--mix", "expert=1", "--out", o]), 2);
 }
+
+/// Rewrites evalharness dataset `src` as GPC stores world-model data: a group without
+/// evalharness's attributes, float32 images in [0, 255] and a 5-wide state (agent, block).
+fn as_gpc_group(src: &std::path::Path, out: &std::path::Path, episodes: std::ops::Range<usize>) {
+    use harness::zarr::{ArrayWriter, DType, write_group};
+    let r = harness::replay::ReplayReader::open(src).unwrap();
+    let rows = r.episode_range(episodes.start).start..r.episode_range(episodes.end - 1).end;
+    let f32s = |v: Vec<f64>| v.into_iter().flat_map(|x| (x as f32).to_le_bytes()).collect::<Vec<u8>>();
+    for g in ["", "data", "meta"] {
+        write_group(&out.join(g), None).unwrap();
+    }
+    let write = |name: &str, dtype, row: &[usize], bytes: Vec<u8>| {
+        let mut w = ArrayWriter::create(&out.join(name), dtype, row, 64).unwrap();
+        w.append(&bytes).unwrap();
+        w.finish().unwrap();
+    };
+    let img = r.img.read_rows(rows.start, rows.end).unwrap();
+    write("data/img", DType::F32, &[96, 96, 3], f32s(img.into_iter().map(f64::from).collect()));
+    write("data/action", DType::F32, &[2], f32s(r.action.read_rows_f64(rows.start, rows.end).unwrap()));
+    let state = r.state.read_rows_f64(rows.start, rows.end).unwrap();
+    write("data/state", DType::F32, &[5], f32s(state.chunks(8).flat_map(|s| s[..5].to_vec()).collect()));
+    let ends: Vec<u8> =
+        episodes.map(|i| (r.episode_range(i).end - rows.start) as i64).flat_map(i64::to_le_bytes).collect();
+    write("meta/episode_ends", DType::I64, &[], ends);
+}
+
+#[test]
+fn a_gpc_data_folder_opens_as_one_dataset_and_evaluates_as_the_original() {
+    // GPC's world-model data is a folder of zarr groups with float32 images. The same four
+    // 70-step episodes as one evalharness dataset and as such a folder (two groups) must read
+    // the same: `dataset info` counts them, `wm eval` of the shipped model scores them alike.
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("src.zarr");
+    let args = ["collect", "--episodes", "4", "--max-steps", "70", "--mix", "explore=1", "--out"];
+    expect_code(&run(&[&args[..], &[src.to_str().unwrap()]].concat()), 0);
+    let folder = dir.path().join("gpc");
+    as_gpc_group(&src, &folder.join("episodes_00.zarr"), 0..1);
+    as_gpc_group(&src, &folder.join("episodes_01.zarr"), 1..4);
+    let (stdout, _) = expect_code(&run(&["dataset", "info", "--json", folder.to_str().unwrap()]), 0);
+    let info: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!((info["episodes"].as_u64(), info["state_dim"].as_u64()), (Some(4), Some(5)), "{info}");
+    assert_eq!(info["steps"].as_u64(), Some(280));
+
+    // A world model that predicts the whole frame (the shipped default draws the goal back from
+    // the state, which GPC data does not record).
+    let wm = std::path::Path::new(crate::util::PUSHT).join("world_model_mse");
+    let eval = |data: &std::path::Path, out: &std::path::Path| {
+        let a = ["wm", "eval", "--world-model", wm.to_str().unwrap(), "--data", data.to_str().unwrap()];
+        let b = ["--all-episodes", "--episodes", "2", "--full-episodes", "0", "--out", out.to_str().unwrap()];
+        expect_code(&run(&[&a[..], &b[..]].concat()), 0);
+        read_json(&out.join("eval.json"))["models"][0].clone()
+    };
+    let (from_src, from_folder) = (eval(&src, &dir.path().join("e1")), eval(&folder, &dir.path().join("e2")));
+    assert_eq!(from_src["frames"], from_folder["frames"]);
+    assert_eq!(from_src["psnr"], from_folder["psnr"], "{from_src} vs {from_folder}");
+}

@@ -82,7 +82,7 @@ pub fn copy_dir(from: &Path, to: &Path) {
 }
 
 /// The shipped Push-T checkpoints.
-const PUSHT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/checkpoints/pusht");
+pub const PUSHT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/checkpoints/pusht");
 
 /// Two scripted checkpoints (no training needed) and a copy of the shipped world
 /// model with its autoencoder, in `dir`; returns (policy set, world model).

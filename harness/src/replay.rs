@@ -10,13 +10,15 @@
 //! ```
 //! [`ReplayWriter`] writes into `DIR.partial/` and renames it to `DIR` only when
 //! everything is on disk, so an interrupted collection never looks complete.
+//! [`ReplayReader`] also opens a folder of such groups (`*.zarr`, in name order) as one
+//! dataset, as GPC stores its world-model data, with float32 images in [0, 255].
 
 use std::fs;
 use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use crate::zarr::{ArrayReader, ArrayWriter, DType, ZarrError, bytes_to_f64, read_attrs, write_group};
+use crate::zarr::{ArrayWriter, DType, ZarrError, write_group};
 
 /// Errors of dataset reading and writing, naming the dataset.
 #[derive(Debug, thiserror::Error)]
@@ -199,171 +201,11 @@ impl ReplayWriter {
     }
 }
 
-/// A dataset opened for reading; arrays are read lazily.
-pub struct ReplayReader {
-    /// The dataset folder.
-    pub path: PathBuf,
-    /// `data/img`.
-    pub img: ArrayReader,
-    /// `data/action`.
-    pub action: ArrayReader,
-    /// `data/state`.
-    pub state: ArrayReader,
-    /// Exclusive cumulative episode ends.
-    pub episode_ends: Vec<usize>,
-    /// The root `.zattrs`.
-    pub attrs: Value,
-}
+mod column;
+mod reader;
 
-/// Opens array `dir` of a dataset whose root attributes are `attrs`. A dataset written
-/// by evalharness (an `evalharness` attribute) never omits a chunk, so a missing one
-/// is an error even where its older files declare fill value 0.
-fn open_array(dir: &Path, attrs: &Value) -> Result<ArrayReader, ZarrError> {
-    let a = ArrayReader::open(dir)?;
-    Ok(if attrs.get("evalharness").is_some() { a.all_chunks_written() } else { a })
-}
-
-impl ReplayReader {
-    /// Opens and validates a dataset.
-    ///
-    /// # Errors
-    /// [`ReplayError::Layout`] naming the first missing or inconsistent part.
-    pub fn open(path: &Path) -> Result<Self, ReplayError> {
-        let layout = |reason: String| ReplayError::Layout { path: path.to_path_buf(), reason };
-        if !path.join(".zgroup").is_file() {
-            return Err(layout("no .zgroup (not a zarr v2 group)".into()));
-        }
-        let attrs = read_attrs(path)?;
-        let open = |name: &str| {
-            let p = path.join(name);
-            if !p.join(".zarray").is_file() {
-                return Err(layout(format!("missing array {name}")));
-            }
-            Ok(open_array(&p, &attrs)?)
-        };
-        let img = open("data/img")?;
-        let action = open("data/action")?;
-        let state = open("data/state")?;
-        let ends_arr = open("meta/episode_ends")?;
-        let s = &img.meta.shape;
-        if s.len() != 4 || s[3] != 3 || img.dtype != DType::U8 {
-            return Err(layout(format!(
-                "data/img must be N x H x W x 3 uint8, got {:?} {}",
-                s, img.meta.dtype
-            )));
-        }
-        let n = img.rows();
-        for (name, a) in [("data/action", &action), ("data/state", &state)] {
-            if a.rows() != n || a.meta.shape.len() != 2 {
-                return Err(layout(format!("{name} has shape {:?}, expected [{n}, d]", a.meta.shape)));
-            }
-        }
-        let ends: Vec<usize> = ends_arr.read_f64()?.into_iter().map(|e| e as usize).collect();
-        let monotone = ends.windows(2).all(|w| w[0] < w[1]) && ends.first().is_none_or(|&e| e > 0);
-        if !monotone || ends.last().copied().unwrap_or(0) != n {
-            return Err(layout(format!(
-                "meta/episode_ends must increase strictly and end at {n} steps, ends at {:?}",
-                ends.last()
-            )));
-        }
-        Ok(Self { path: path.to_path_buf(), img, action, state, episode_ends: ends, attrs })
-    }
-
-    /// Number of episodes.
-    pub fn episodes(&self) -> usize {
-        self.episode_ends.len()
-    }
-
-    /// Total steps.
-    pub fn steps(&self) -> usize {
-        self.img.rows()
-    }
-
-    /// Step range `[start, end)` of episode `i`.
-    pub fn episode_range(&self, i: usize) -> std::ops::Range<usize> {
-        let start = if i == 0 { 0 } else { self.episode_ends[i - 1] };
-        start..self.episode_ends[i]
-    }
-
-    /// An optional per-step scalar array `data/<name>`, if present.
-    ///
-    /// # Errors
-    /// [`ReplayError`] if it exists but cannot be read or has the wrong length.
-    pub fn extra(&self, name: &str) -> Result<Option<Vec<f64>>, ReplayError> {
-        let p = self.path.join("data").join(name);
-        if !p.join(".zarray").is_file() {
-            return Ok(None);
-        }
-        let a = open_array(&p, &self.attrs)?;
-        let v = a.read_f64()?;
-        if v.len() != self.steps() {
-            return Err(ReplayError::Layout {
-                path: self.path.clone(),
-                reason: format!("data/{name} has {} values for {} steps", v.len(), self.steps()),
-            });
-        }
-        Ok(Some(v))
-    }
-
-    /// The names of the optional per-step arrays under `data/` (sorted).
-    ///
-    /// # Errors
-    /// [`ReplayError::Io`] if `data/` cannot be listed.
-    pub fn extra_names(&self) -> Result<Vec<String>, ReplayError> {
-        let dir = self.path.join("data");
-        let entries = fs::read_dir(&dir).map_err(|source| ReplayError::Io { path: dir.clone(), source })?;
-        let mut names: Vec<String> = entries
-            .filter_map(Result::ok)
-            .filter(|e| e.path().join(".zarray").is_file())
-            .filter_map(|e| e.file_name().into_string().ok())
-            .filter(|n| !["img", "action", "state"].contains(&n.as_str()))
-            .collect();
-        names.sort();
-        Ok(names)
-    }
-
-    /// The shapes of this dataset's arrays, its extras included.
-    ///
-    /// # Errors
-    /// As [`Self::extra_names`].
-    pub fn spec(&self) -> Result<ReplaySpec, ReplayError> {
-        let s = &self.img.meta.shape;
-        Ok(ReplaySpec {
-            image_hw: [s[1], s[2]],
-            action_dim: self.action.row_len(),
-            state_dim: self.state.row_len(),
-            extras: self.extra_names()?,
-        })
-    }
-
-    /// Episode `i`'s arrays, with the named extras in the given order.
-    ///
-    /// # Errors
-    /// [`ReplayError`] for unreadable chunks or a missing extra.
-    pub fn read_episode(&self, i: usize, extras: &[String]) -> Result<EpisodeArrays, ReplayError> {
-        let rg = self.episode_range(i);
-        let floats = |a: &ArrayReader| -> Result<Vec<f32>, ReplayError> {
-            Ok(bytes_to_f64(&a.read_rows(rg.start, rg.end)?, a.dtype).into_iter().map(|v| v as f32).collect())
-        };
-        let mut ep = EpisodeArrays {
-            img: self.img.read_rows(rg.start, rg.end)?,
-            action: floats(&self.action)?,
-            state: floats(&self.state)?,
-            extras: Vec::with_capacity(extras.len()),
-        };
-        for name in extras {
-            let p = self.path.join("data").join(name);
-            if !p.join(".zarray").is_file() {
-                return Err(ReplayError::Layout {
-                    path: self.path.clone(),
-                    reason: format!("missing array data/{name}"),
-                });
-            }
-            ep.extras.push(floats(&open_array(&p, &self.attrs)?)?);
-        }
-        Ok(ep)
-    }
-}
+pub use column::Column;
+pub use reader::ReplayReader;
 
 #[cfg(test)]
 mod tests;

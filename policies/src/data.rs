@@ -87,7 +87,7 @@ impl Demos {
     ) -> Result<Self, DataError> {
         let err = |m: String| DataError { path: path.to_path_buf(), message: m };
         let r = ReplayReader::open(path).map_err(|e| err(e.to_string()))?;
-        let shape = &r.img.meta.shape;
+        let shape = r.img.shape();
         if shape[1] != size || shape[2] != size {
             return Err(err(format!("images are {}x{}, the policy takes {size}x{size}", shape[1], shape[2])));
         }

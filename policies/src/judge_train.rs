@@ -78,7 +78,7 @@ impl JudgeData {
         let end = episodes.last().map_or(0, |e| e.end);
         let frames = r.img.read_rows(0, end).map_err(|e| err(e.to_string()))?;
         let labels = all[..end].iter().map(|&v| v as f32).collect();
-        Ok(Self { frames, labels, size: r.img.meta.shape[1], episodes })
+        Ok(Self { frames, labels, size: r.img.shape()[1], episodes })
     }
 
     /// Frame `i`.

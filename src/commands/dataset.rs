@@ -62,7 +62,7 @@ pub fn info(path: &Path, as_json: bool) -> Result<ExitCode> {
         ("unavailable (no data/coverage, no goal in data/state)", None)
     };
     let lengths: Vec<f64> = (0..r.episodes()).map(|i| r.episode_range(i).len() as f64).collect();
-    let shape = &r.img.meta.shape;
+    let shape = r.img.shape();
     let mut out = json!({
         "path": path.display().to_string(),
         "episodes": r.episodes(),

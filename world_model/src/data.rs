@@ -54,7 +54,7 @@ impl EpisodeData {
     pub fn load(path: &Path, expected_size: usize) -> Result<Self, WorldModelError> {
         let err = |m: String| WorldModelError::Data { path: path.to_path_buf(), message: m };
         let r = ReplayReader::open(path).map_err(|e| err(e.to_string()))?;
-        let shape = &r.img.meta.shape;
+        let shape = r.img.shape();
         if shape[1] != expected_size || shape[2] != expected_size {
             return Err(err(format!(
                 "images are {}x{}, the model expects {expected_size}x{expected_size}",

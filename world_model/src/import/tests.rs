@@ -178,3 +178,32 @@ fn qkv_rows_move_from_head_major_to_qkv_major() {
     let new = permute_qkv(&old, 2, 2);
     assert_eq!(new, vec![10., 11., 40., 41., 20., 21., 50., 51., 30., 31., 60., 61.]);
 }
+
+/// Built with `--features wgpu` only, where a Vulkan driver is (lavapipe on a CPU:
+/// `apt-get install mesa-vulkan-drivers`): the imported fixture gives on burn's wgpu backend
+/// what it gives on the CPU and what PyTorch gave (the GPU path a paper-scale user takes).
+#[cfg(feature = "wgpu")]
+#[test]
+fn the_imported_model_predicts_on_wgpu_what_it_predicts_on_the_cpu() {
+    let m = import(&fixture("wm.pth"), Weights::Ema, Preset::Pusht, Some(16), "test".into())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let gpu = crate::device::parse("wgpu").expect("built with wgpu");
+    let (noise, history, actions) = (tensor::<5>("noise"), tensor::<5>("history"), tensor::<3>("actions"));
+    let cpu_out = m.unet.forward(noise.clone(), history.clone(), actions.clone(), None, None);
+    let cpu_out = cpu_out.into_data().try_to_vec::<f32>().unwrap_or_default();
+    let gpu_out = m.unet.fork(&gpu).forward(
+        noise.to_device(&gpu),
+        history.to_device(&gpu),
+        actions.to_device(&gpu),
+        None,
+        None,
+    );
+    let gpu_out = gpu_out.into_data().try_to_vec::<f32>().unwrap_or_default();
+    let (want, _) = io("ema");
+    let (d_cpu, d_torch) = (max_abs(&gpu_out, &cpu_out), max_abs(&gpu_out, &want));
+    println!("wgpu against the CPU build: {d_cpu:e}; against PyTorch: {d_torch:e}");
+    assert!(
+        d_cpu <= 1e-4 && d_torch <= 1e-4,
+        "wgpu differs: {d_cpu} from the CPU build, {d_torch} from PyTorch"
+    );
+}
