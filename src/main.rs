@@ -42,13 +42,15 @@ fn main() -> ExitCode {
     }
     // Results go through `out!`/`outln!` (`stdout.rs`), which stay quiet once the
     // reader of a pipe is gone: the command finishes and exits as it would have.
-    match commands::run(&args) {
+    let code = match commands::run(&args) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {}", chain(&e));
             ExitCode::from(2)
         }
-    }
+    };
+    render_workers::stop();
+    code
 }
 
 /// An error and its causes, each said once: an I/O error wrapped by a context that

@@ -12,3 +12,12 @@ pub fn start(n: usize) -> Result<()> {
     scenarios::robosuite::render_pool::start(&exe, &["-q", "render-worker"], n)
         .with_context(|| format!("--render-workers {n}"))
 }
+
+/// Ends the render workers, if any were started: each is waited for, so none outlives this
+/// process and their CPU time counts as this process's children's (what `/usr/bin/time`
+/// reports). A worker that failed is a warning: the results are already written.
+pub fn stop() {
+    if let Err(e) = scenarios::robosuite::render_pool::stop() {
+        tracing::warn!("{e}");
+    }
+}

@@ -381,6 +381,15 @@ fn pixel_space_world_model_trains_resumes_and_rolls_out() {
     let (_, err) = expect_code(&run(&[&args[..6], &["--out", f, "--autoencoder", d]].concat()), 2);
     assert!(err.contains("takes no --autoencoder"), "{err}");
 
+    // A width the U-Net cannot be built with is an error naming the setting, not a panic
+    // (burn's GroupNorm asserted at 1951e7c).
+    let narrow = dir.path().join("narrow");
+    let (_, err) = expect_code(
+        &run(&[&args[..6], &["--out", narrow.to_str().unwrap(), "--base-channels", "16"]].concat()),
+        2,
+    );
+    assert!(err.contains("--base-channels 16") && err.contains("groups (32)"), "{err}");
+
     // A pixel model rolls out like a latent one: wm eval on one held-out episode.
     let ev = dir.path().join("eval");
     let eval = ["wm", "eval", "--world-model", o, "--data", d, "--episodes", "1", "--full-episodes", "0"];

@@ -60,7 +60,8 @@ fn err(message: impl Into<String>) -> ScenarioError {
 /// One worker process.
 struct Worker {
     child: Child,
-    to: BufWriter<ChildStdin>,
+    /// Requests; `None` once [`stop`] closed them.
+    to: Option<BufWriter<ChildStdin>>,
     from: BufReader<ChildStdout>,
 }
 
@@ -92,7 +93,7 @@ pub fn start(exe: &Path, args: &[&str], n: usize) -> Result<(), ScenarioError> {
         let (Some(to), Some(from)) = (child.stdin.take(), child.stdout.take()) else {
             return Err(err("a render worker without pipes"));
         };
-        workers.push(Mutex::new(Worker { child, to: BufWriter::new(to), from: BufReader::new(from) }));
+        workers.push(Mutex::new(Worker { child, to: Some(BufWriter::new(to)), from: BufReader::new(from) }));
     }
     POOL.set(Pool { workers, next: AtomicUsize::new(0) })
         .map_err(|_| err("the render workers were started twice"))
@@ -101,6 +102,34 @@ pub fn start(exe: &Path, args: &[&str], n: usize) -> Result<(), ScenarioError> {
 /// Whether frames go to render workers.
 pub fn active() -> bool {
     POOL.get().is_some()
+}
+
+/// Ends the workers: closes each one's requests (a worker exits at the end of its input)
+/// and waits for it, so that none outlives the process and their CPU time is counted as
+/// this process's children's (`/usr/bin/time`, `getrusage`). Call once, when no more
+/// frames will be asked for; a later frame is an error naming the closed pipe.
+///
+/// # Errors
+/// A worker that could not be waited for, or that exited with a failure.
+pub fn stop() -> Result<(), ScenarioError> {
+    let Some(pool) = POOL.get() else { return Ok(()) };
+    let mut first_err = None;
+    for w in &pool.workers {
+        let mut w = w.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let pid = w.child.id();
+        if let Some(mut to) = w.to.take() {
+            // Whatever is buffered goes out, then dropping the pipe closes it.
+            let _ = to.flush();
+        }
+        match w.child.wait() {
+            Ok(status) if status.success() => {}
+            Ok(status) => first_err = first_err.or(Some(err(format!("render worker (pid {pid}) {status}")))),
+            Err(e) => {
+                first_err = first_err.or(Some(err(format!("waiting for render worker (pid {pid}): {e}"))))
+            }
+        }
+    }
+    first_err.map_or(Ok(()), Err)
 }
 
 impl ModelKey {
@@ -135,15 +164,16 @@ pub fn render(text: &str, qpos: &[f64], size: usize) -> Result<Vec<u8>, Scenario
 fn ask(w: &mut Worker, key: &str, qpos: &[f64], size: usize) -> Result<Vec<u8>, ScenarioError> {
     let pid = w.child.id();
     let io = |e: std::io::Error| err(format!("render worker (pid {pid}): {e}"));
-    w.to.write_all(b"F").map_err(io)?;
-    w.to.write_all(&(key.len() as u32).to_le_bytes()).map_err(io)?;
-    w.to.write_all(key.as_bytes()).map_err(io)?;
-    w.to.write_all(&(size as u32).to_le_bytes()).map_err(io)?;
-    w.to.write_all(&(qpos.len() as u32).to_le_bytes()).map_err(io)?;
+    let to = w.to.as_mut().ok_or_else(|| err(format!("render worker (pid {pid}) was stopped")))?;
+    to.write_all(b"F").map_err(io)?;
+    to.write_all(&(key.len() as u32).to_le_bytes()).map_err(io)?;
+    to.write_all(key.as_bytes()).map_err(io)?;
+    to.write_all(&(size as u32).to_le_bytes()).map_err(io)?;
+    to.write_all(&(qpos.len() as u32).to_le_bytes()).map_err(io)?;
     for q in qpos {
-        w.to.write_all(&q.to_le_bytes()).map_err(io)?;
+        to.write_all(&q.to_le_bytes()).map_err(io)?;
     }
-    w.to.flush().map_err(io)?;
+    to.flush().map_err(io)?;
     let mut tag = [0u8; 1];
     w.from.read_exact(&mut tag).map_err(io)?;
     match &tag {

@@ -184,6 +184,9 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
                 action_dim: data.action_dim,
                 ..family
             };
+            if let Err(e) = unet.check() {
+                bail!("--base-channels {}: {e}", unet.model_channels);
+            }
             let stats = match &a.init_from {
                 Some(dir) => warm_start_stats(dir, &unet, a.autoencoder.as_deref())?,
                 None => {

@@ -137,7 +137,10 @@ impl WorldModelConfig {
         let path = dir.join("config.json");
         let text = std::fs::read_to_string(&path).map_err(|e| ckpt(&path, e))?;
         let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| ckpt(&path, e))?;
-        serde_json::from_value(v["model"].clone()).map_err(|e| ckpt(&path, format!("\"model\": {e}")))
+        let cfg: Self =
+            serde_json::from_value(v["model"].clone()).map_err(|e| ckpt(&path, format!("\"model\": {e}")))?;
+        cfg.unet.check().map_err(|e| ckpt(&path, format!("\"model.unet\": {e}")))?;
+        Ok(cfg)
     }
 
     /// The frame codec of a model stored in `dir`: its autoencoder (a path relative

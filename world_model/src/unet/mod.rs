@@ -144,6 +144,51 @@ impl UNetConfig {
         Self::new(latent_channels, 64, vec![1, 2], vec![2]).with_groups(16)
     }
 
+    /// Whether a U-Net can be built from these numbers: every size positive, every level's
+    /// channels (`model_channels` × its multiplier) divisible by the GroupNorm groups, and
+    /// those of every level with attention (and the middle block's) by the head width.
+    /// burn asserts the same inside `init` (a panic); this says which setting is wrong.
+    ///
+    /// # Errors
+    /// The first setting that does not fit, by its config name.
+    pub fn check(&self) -> Result<(), String> {
+        let sizes = [
+            ("frame_channels", self.frame_channels),
+            ("model_channels", self.model_channels),
+            ("res_blocks", self.res_blocks),
+            ("head_dim", self.head_dim),
+            ("groups", self.groups),
+            ("action_dim", self.action_dim),
+            ("emb_dim", self.emb_dim),
+        ];
+        if let Some((name, _)) = sizes.iter().find(|(_, v)| *v == 0) {
+            return Err(format!("{name} must be at least 1"));
+        }
+        if self.channel_mult.is_empty() || self.channel_mult.contains(&0) {
+            return Err(format!(
+                "channel_mult {:?} needs one multiplier of at least 1 per level",
+                self.channel_mult
+            ));
+        }
+        let (mc, g, h) = (self.model_channels, self.groups, self.head_dim);
+        let deepest = mc * self.channel_mult.last().copied().unwrap_or(1);
+        for (l, m) in self.channel_mult.iter().enumerate() {
+            let c = m * mc;
+            if c % g != 0 || mc % g != 0 {
+                return Err(format!(
+                    "model_channels {mc} x channel_mult {m} = {c} channels at level {l}: GroupNorm needs a multiple of groups ({g})"
+                ));
+            }
+            let attended = self.attention_rates.contains(&(1 << l)) || c == deepest;
+            if attended && c % h != 0 {
+                return Err(format!(
+                    "{c} channels at level {l} have attention: they must be a multiple of head_dim ({h})"
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Builds the module.
     pub fn init(&self, device: &Device) -> UNet {
         let (e, g) = (self.emb_dim, self.groups);
