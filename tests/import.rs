@@ -105,6 +105,19 @@ fn gpc_reward_predictors_become_a_judge_that_rank_uses_with_an_imported_world_mo
     let first: serde_json::Value = serde_json::from_str(rows.lines().next().unwrap()).unwrap();
     let err = first["scorer_abs_error"].as_f64();
     assert!(err.is_some_and(|e| (0.0..=1.0).contains(&e)), "{first}");
+
+    // plan ranks proposals by the imported judge (GPC-RANK's reward predictors), with the
+    // imported world model imagining them.
+    let (planned, wm) = (dir.path().join("plan"), dir.path().join("wm"));
+    let args = ["plan", "--scenario", "pusht-gpc", "--world-model", s(&wm), "--judge", s(&judge)];
+    let tiny = ["--planners", "world-model", "--episodes", "1", "--max-steps", "4", "--proposals", "2"];
+    let tiny = [&tiny[..], &["--imagine", "4", "--execute", "4"]].concat();
+    expect_code(&run(&[&args[..], &tiny[..], &["--bootstrap", "20", "--out", s(&planned)]].concat()), 0);
+    let cfg = read_json(&planned.join("config.json"));
+    assert_eq!(cfg["cost"], "1 - the judge's score of the last imagined frame", "{cfg}");
+    assert!(cfg["fingerprints"]["judge"].is_string(), "{cfg}");
+    let res = read_json(&planned.join("results.json"));
+    assert_eq!(res["planners"]["world-model"]["episodes"], 1, "{res}");
 }
 
 #[test]

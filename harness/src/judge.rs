@@ -114,6 +114,19 @@ impl Judge for Replaced {
     }
 }
 
+/// A planner's cost from a judge: `1 − score` of the frame (lower is better, as every
+/// [`crate::task::PlanCost`]), `None` where the judge's score is not a number in [0, 1]
+/// (a pose it cannot place, say). What `plan --judge` ranks proposals by, as GPC-RANK
+/// ranks them by its reward predictors.
+pub struct JudgedCost(pub Box<dyn Judge>);
+
+impl crate::task::PlanCost for JudgedCost {
+    fn cost(&self, frame: &[u8]) -> Option<f64> {
+        let s = self.0.score(frame);
+        (0.0..=1.0).contains(&s).then(|| 1.0 - s)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -122,6 +135,28 @@ mod tests {
     impl Judge for Mean {
         fn score(&self, frame: &[u8]) -> f64 {
             frame.iter().map(|&b| f64::from(b)).sum::<f64>() / frame.len() as f64 / 255.0
+        }
+    }
+
+    #[test]
+    fn a_judged_cost_is_one_minus_the_score_and_none_off_the_unit_interval() {
+        use crate::task::PlanCost;
+        let c = JudgedCost(Box::new(Mean));
+        // Mean of [255, 0] over 255 = 0.5; cost 1 - 0.5.
+        assert_eq!(c.cost(&[255, 0]), Some(0.5));
+        assert_eq!(c.cost(&[255, 255]), Some(0.0));
+        let nan = JudgedCost(Box::new(Replaced { scorer: std::sync::Arc::new(Poser), checks: None }));
+        assert_eq!(nan.cost(&[1]), None);
+    }
+
+    /// Reads a pose, and cannot score one.
+    struct Poser;
+    impl Judge for Poser {
+        fn score(&self, _: &[u8]) -> f64 {
+            0.0
+        }
+        fn pose(&self, _: &[u8]) -> Option<Vec<f64>> {
+            Some(vec![1.0, 2.0, 3.0])
         }
     }
 

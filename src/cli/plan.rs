@@ -92,6 +92,12 @@ pub struct PlanArgs {
     /// and what the world model and the simulator imagined of the picked proposal's outcome.
     #[arg(long, default_value_t = 2)]
     pub record: usize,
+    /// A judge of frames (from `train judge` or `import judge`) whose score ranks the
+    /// proposals, `cost = 1 − score` of the last imagined frame, as GPC-RANK ranks them by its
+    /// reward predictors [default: the task's planning cost, Push-T's mean distance of the
+    /// block's pixels from the goal]. `--margin` is then in units of that score.
+    #[arg(long)]
+    pub judge: Option<PathBuf>,
     /// Output folder.
     #[arg(long, default_value = "results/plan")]
     pub out: PathBuf,

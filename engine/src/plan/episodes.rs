@@ -89,7 +89,14 @@ pub fn run_batch(ctx: &PlanCtx, planner: Planner, seeds: &[u64]) -> Result<PlanO
     for &seed in seeds {
         let env = ctx.task.reset(seed)?;
         let cannot = || EngineError::CannotPlan { task: ctx.task.name().to_string() };
-        let cost = env.plan_cost().ok_or_else(cannot)?;
+        let cost: Box<dyn harness::task::PlanCost> = match &ctx.judge {
+            // The judge's score of a frame, a pose judge's through the episode's own judge.
+            Some(j) => Box::new(harness::judge::JudgedCost(Box::new(harness::judge::Replaced {
+                scorer: j.clone(),
+                checks: env.judge(),
+            }))),
+            None => env.plan_cost().ok_or_else(cannot)?,
+        };
         let first = env.observe();
         let wm_first = if wm.is_some() { env.model_frame(view) } else { first.frame.clone() };
         let raw = env.score();
@@ -304,6 +311,7 @@ mod tests {
             max_steps: 10,
             pool: &pool,
             record: &[11],
+            judge: None,
         };
         run_batch(&ctx, planner, &[11, 12]).unwrap()
     }

@@ -59,6 +59,9 @@ pub struct PlanCtx<'a> {
     pub pool: &'a rayon::ThreadPool,
     /// Episode seeds whose decisions are recorded for filmstrips.
     pub record: &'a [u64],
+    /// A judge of frames whose score ranks the proposals (`plan --judge`; GPC-RANK ranks
+    /// by its reward predictors), in place of the task's own planning cost.
+    pub judge: Option<std::sync::Arc<dyn harness::judge::Judge>>,
 }
 
 /// A finished batch.

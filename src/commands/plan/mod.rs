@@ -105,7 +105,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     let size = task.observation_spec().image_size;
     // Refused before anything is loaded or written: the task must be one to plan in.
     let probe = task.reset(seeds[0]).with_context(|| format!("resetting seed {}", seeds[0]))?;
-    if probe.plan_cost().is_none() || probe.fork().is_none() {
+    if (a.judge.is_none() && probe.plan_cost().is_none()) || probe.fork().is_none() {
         return Err(engine::EngineError::CannotPlan { task: task.name().to_string() }.into());
     }
     let device = world_model::device::selected()?;
@@ -123,13 +123,26 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         None
     };
     let (policy, imagine, execute) = load_proposer(a, task.as_ref(), &device)?;
+    let judge = match &a.judge {
+        Some(dir) => {
+            let j = crate::commands::rank::load_judge(dir, task.as_ref(), &device)?;
+            Some(std::sync::Arc::new(j) as std::sync::Arc<dyn harness::judge::Judge>)
+        }
+        None => None,
+    };
     // Every input is checked; only now is the output folder touched.
     let mut inputs = crate::commands::rank::model_inputs(
         wm.as_ref().map(|w| (a.world_model.as_path(), w)),
         std::slice::from_ref(&a.policy),
     )?;
     inputs.extend(crate::commands::rank::scenario_input(&a.scenario)?);
+    if let Some(dir) = &a.judge {
+        inputs.push(("judge".to_string(), dir.clone(), harness::fingerprint::folder(dir)?));
+    }
     let mut listed = crate::output::Inputs::new().scenario(&a.scenario).add("--policy", &a.policy);
+    if let Some(dir) = &a.judge {
+        listed = listed.add("--judge", dir);
+    }
     if wm.is_some() {
         listed = listed.world_model("--world-model", &a.world_model);
     }
@@ -141,7 +154,11 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         "world_model_config": wm.as_ref().map(|w| serde_json::to_value(&w.cfg)).transpose()?,
         "planners": planners.iter().map(|p| p.name()).collect::<Vec<_>>(),
         "proposals": a.proposals, "imagine": imagine, "execute": execute, "spread": a.spread, "margin": a.margin,
-        "cost": "mean distance (world units) of the last imagined frame's block pixels from the goal T",
+        "judge": a.judge,
+        "cost": match &a.judge {
+            Some(_) => "1 - the judge's score of the last imagined frame",
+            None => "mean distance (world units) of the last imagined frame's block pixels from the goal T",
+        },
         "episodes": a.episodes, "seed_start": a.seed_start, "max_steps": a.max_steps,
         "batch": a.batch, "seed": a.seed, "bootstrap": a.bootstrap, "record": a.record,
         "fingerprints": inputs.iter().map(|(k, _, f)| (k.clone(), json!(f))).collect::<serde_json::Map<_, _>>(),
@@ -167,6 +184,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         max_steps: a.max_steps,
         pool: &pool,
         record: &seeds[..a.record.min(seeds.len())],
+        judge,
     };
     let filmstrips = a.out.join("filmstrips");
     if a.record > 0 {
