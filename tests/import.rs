@@ -156,3 +156,47 @@ fn judging_every_imagined_frame_reads_a_superset_of_the_frames_and_is_part_of_th
     let (_, err) = expect_code(&run(&resume), 2);
     assert!(err.contains("judge_every_frame"), "{err}");
 }
+
+#[test]
+fn a_gpc_policy_checkpoint_becomes_a_checkpoint_that_rank_runs() {
+    // policies/tests/fixtures/gpc_policy/policy.pth: GPC's checkpoint layout at a reduced size
+    // (scripts/fixtures/gpc_policy.py). Imported, it ranks beside a scripted policy on GPC's
+    // Push-T with the imported world model; a file that is not a policy is refused by key.
+    let dir = tempfile::tempdir().unwrap();
+    // Named as GPC names its checkpoints, which is where the epoch is read from.
+    let file = dir.path().join("ckpt-ep50.pth");
+    let fixture_file =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("policies/tests/fixtures/gpc_policy/policy.pth");
+    std::fs::copy(fixture_file, &file).unwrap();
+    let (set, _) = pusht_inputs(dir.path());
+    let pol = set.join("ckpt-ep50");
+    let args = ["import", "policy", "--format", "gpc", s(&file), "--out", s(&pol)];
+    let (stdout, _) = expect_code(&run(&args), 0);
+    assert_eq!(stdout.trim(), pol.display().to_string());
+    let p = read_json(&pol.join("policy.json"));
+    assert_eq!(
+        (p["kind"].as_str(), p["step"].as_u64(), p["epoch"].as_u64()),
+        (Some("gpc-diffusion"), Some(4242), Some(50))
+    );
+    assert!(p["provenance"]["import"]["sha256"].as_str().is_some_and(|h| h.starts_with("sha256:")), "{p}");
+    assert!(p.get("train_loss").is_none(), "an imported checkpoint states no loss: {p}");
+    // Refused without --force, and a world-model file is refused naming what it lacks.
+    let (_, err) = expect_code(&run(&args), 2);
+    assert!(err.contains("--force"), "{err}");
+    let wm_file = fixture("micro.pth");
+    let other = dir.path().join("other");
+    let (_, err) =
+        expect_code(&run(&["import", "policy", "--format", "gpc", s(&wm_file), "--out", s(&other)]), 2);
+    assert!(err.contains("micro.pth") && err.contains("model."), "{err}");
+    assert!(!other.exists());
+
+    let wm = dir.path().join("wm");
+    expect_code(&import(&fixture("wm.pth"), &wm, &[]), 0);
+    let out = dir.path().join("rank");
+    let args = tiny_rank_args(&set, &wm, &out);
+    let args = with_flag(&with_flag(&args, "--episodes", "2"), "--max-steps", "4");
+    expect_code(&run(&[&args[..], &["--scenario", "pusht-gpc"]].concat()), 0);
+    let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
+    let ours = rows.lines().filter(|l| l.contains("\"ckpt-ep50\"")).count();
+    assert_eq!(ours, 4, "two episodes in each branch:\n{rows}");
+}

@@ -123,7 +123,7 @@ pub struct JudgedCost(pub Box<dyn Judge>);
 impl crate::task::PlanCost for JudgedCost {
     fn cost(&self, frame: &[u8]) -> Option<f64> {
         let s = self.0.score(frame);
-        (0.0..=1.0).contains(&s).then(|| 1.0 - s)
+        (0.0..=1.0).contains(&s).then_some(1.0 - s)
     }
 }
 

@@ -205,6 +205,42 @@ fn sample_cpu(
     x
 }
 
+/// The frames and normalised proprioception of a batch of observations, checked: each has
+/// `o` frames of `s`² RGB and `o` proprioceptive vectors of `p` entries. Frames are
+/// episode-major, oldest first; positions `[b, o, p]` flat.
+///
+/// # Errors
+/// [`PolicyError::Input`] naming the policy and the episode that does not fit.
+pub(crate) fn gather<'a>(
+    policy: &str,
+    obs: &'a [Observation],
+    o: usize,
+    s: usize,
+    p: usize,
+    norm: &Normalisation,
+) -> Result<(Vec<&'a [u8]>, Vec<f32>), PolicyError> {
+    let bad = |m: String| PolicyError::Input { policy: policy.to_string(), message: m };
+    let mut frames = Vec::with_capacity(obs.len() * o);
+    let mut pos = Vec::with_capacity(obs.len() * o * p);
+    for (i, ob) in obs.iter().enumerate() {
+        if ob.frames.len() != o || ob.proprio.len() != o {
+            return Err(bad(format!("episode {i}: {} frames, the policy takes {o}", ob.frames.len())));
+        }
+        if ob.size != s || ob.frames.iter().any(|f| f.len() != s * s * 3) {
+            return Err(bad(format!("episode {i}: frames are {0}x{0}, the policy takes {s}x{s}", ob.size)));
+        }
+        if let Some(v) = ob.proprio.iter().find(|v| v.len() != p) {
+            return Err(bad(format!(
+                "episode {i}: a proprioceptive vector of {} entries, the policy reads {p}",
+                v.len()
+            )));
+        }
+        frames.extend(ob.frames.iter().map(Vec::as_slice));
+        pos.extend(ob.proprio.iter().flat_map(|v| norm.agent_pos.normalise(v)));
+    }
+    Ok((frames, pos))
+}
+
 /// A loaded diffusion policy (inference).
 pub struct DiffusionPolicy {
     /// Checkpoint name.
@@ -275,27 +311,7 @@ impl Policy for DiffusionPolicy {
         let (o, s, h) = (self.cfg.net.obs_horizon, self.cfg.net.image_size, self.cfg.horizon);
         let (p, ad) = (self.norm.agent_pos.dim(), self.norm.action.dim());
         let bad = |m: String| PolicyError::Input { policy: self.name.clone(), message: m };
-        let mut frames = Vec::with_capacity(obs.len() * o);
-        let mut pos = Vec::with_capacity(obs.len() * o * p);
-        for (i, ob) in obs.iter().enumerate() {
-            if ob.frames.len() != o || ob.proprio.len() != o {
-                return Err(bad(format!("episode {i}: {} frames, the policy takes {o}", ob.frames.len())));
-            }
-            if ob.size != s || ob.frames.iter().any(|f| f.len() != s * s * 3) {
-                return Err(bad(format!(
-                    "episode {i}: frames are {0}x{0}, the policy takes {s}x{s}",
-                    ob.size
-                )));
-            }
-            if let Some(v) = ob.proprio.iter().find(|v| v.len() != p) {
-                return Err(bad(format!(
-                    "episode {i}: a proprioceptive vector of {} entries, the policy reads {p}",
-                    v.len()
-                )));
-            }
-            frames.extend(ob.frames.iter().map(Vec::as_slice));
-            pos.extend(ob.proprio.iter().flat_map(|v| self.norm.agent_pos.normalise(v)));
-        }
+        let (frames, pos) = gather(&self.name, obs, o, s, p, &self.norm)?;
         let b = obs.len();
         // Conditioning [b, o·(features + p)]: per observed frame, its features and proprioception.
         let cond: Vec<f32> = match &self.cpu_encoder {

@@ -51,8 +51,9 @@ pub struct PolicyFile {
     pub normalisation: Normalisation,
     /// How it was made (command, data, seed, commit).
     pub provenance: Value,
-    /// Training loss at the checkpoint.
-    pub train_loss: f64,
+    /// Training loss at the checkpoint (absent for an imported one, which does not say).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub train_loss: Option<f64>,
     /// The task its demonstrations came from (`pusht`, `lift`, `can`): a checkpoint of
     /// one arm task reads and acts like one of the other, so only this tells them apart.
     /// Absent in checkpoints written before 2026-11-29, which are not checked.
@@ -78,7 +79,7 @@ impl PolicyFile {
             config: serde_json::to_value(cfg).unwrap_or(Value::Null),
             normalisation: norm.clone(),
             provenance: provenance.clone(),
-            train_loss,
+            train_loss: Some(train_loss),
             task: task.map(str::to_owned),
         }
     }
@@ -114,9 +115,26 @@ pub fn load_weights<M: Module>(module: M, path: &Path) -> Result<M, String> {
 /// # Errors
 /// [`PolicyLoadError`] naming the file that could not be written.
 pub fn write_policy(dir: &Path, file: &PolicyFile, net: &DiffusionNet) -> Result<(), PolicyLoadError> {
+    write_policy_with(dir, file, |w| save_f16(net, w))
+}
+
+/// Writes an imported checkpoint folder (`policy.json` + `model.bpk`, weights in f32 as
+/// they were trained: no rounding of someone else's weights).
+///
+/// # Errors
+/// [`PolicyLoadError`] naming the file that could not be written.
+pub fn write_policy_f32<M: Module>(dir: &Path, file: &PolicyFile, net: &M) -> Result<(), PolicyLoadError> {
+    write_policy_with(dir, file, |w| net.clone().save_file(w).map_err(|e| e.to_string()))
+}
+
+fn write_policy_with(
+    dir: &Path,
+    file: &PolicyFile,
+    save: impl FnOnce(&Path) -> Result<(), String>,
+) -> Result<(), PolicyLoadError> {
     std::fs::create_dir_all(dir).map_err(|e| PolicyLoadError::new(dir, e.to_string()))?;
     let weights = dir.join("model.bpk");
-    save_f16(net, &weights).map_err(|e| PolicyLoadError::new(&weights, e))?;
+    save(&weights).map_err(|e| PolicyLoadError::new(&weights, e))?;
     let json = dir.join("policy.json");
     let text = serde_json::to_string_pretty(file).unwrap_or_default();
     std::fs::write(&json, text + "\n").map_err(|e| PolicyLoadError::new(&json, e.to_string()))
@@ -217,7 +235,10 @@ pub fn load_policy(
             let bounds = (expect.action_low.clone(), expect.action_high.clone());
             Ok(Box::new(DiffusionPolicy::new(name, cfg, file.normalisation, bounds, net, device)))
         }
-        other => Err(err(format!("unknown policy kind \"{other}\" (known: diffusion, scripted)"))),
+        "gpc-diffusion" => crate::gpc_policy::load(dir, file, expect, device),
+        other => {
+            Err(err(format!("unknown policy kind \"{other}\" (known: diffusion, gpc-diffusion, scripted)")))
+        }
     }
 }
 

@@ -10,6 +10,8 @@
 //! - [`symmetry`]: the 8 symmetries of Push-T's square world, exact augmentations;
 //! - [`train`]: the trainer, which saves a checkpoint every few epochs;
 //! - [`dir`]: the policy directory format and its validating loader;
+//! - [`gpc_policy`], [`import_gpc`], [`resnet_gn`]: DriftWorld/GPC's Push-T diffusion
+//!   policies imported from PyTorch (the `gpc-diffusion` kind, DDPM sampling);
 //! - [`judge`], [`judge_train`]: a learned judge of imagined frames (the same frame
 //!   encoder and one logit) and its trainer; [`judge_pose`]: GPC's reward predictors
 //!   ([`resnet`]) imported as a judge that reads the block's pose.
@@ -19,6 +21,8 @@ pub mod cpu_unet;
 pub mod data;
 pub mod diffusion;
 pub mod dir;
+pub mod gpc_policy;
+pub mod import_gpc;
 pub mod judge;
 pub mod judge_pose;
 pub mod judge_read;
@@ -27,5 +31,6 @@ pub mod judge_train;
 pub mod net;
 pub mod pretrain;
 pub mod resnet;
+pub mod resnet_gn;
 pub mod symmetry;
 pub mod train;

@@ -15,6 +15,49 @@ pub enum ImportCommand {
     /// A judge of imagined frames from another codebase's files, as an evalharness judge
     /// folder that `rank --judge` takes.
     Judge(ImportJudgeArgs),
+    /// A policy checkpoint from another codebase, as an evalharness checkpoint folder
+    /// (`policy.json`, `model.bpk`) that `rank --policies`, `simulate --policy` and `plan`
+    /// take.
+    Policy(ImportPolicyArgs),
+}
+
+/// The formats `import policy` reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PolicyFormat {
+    /// DriftWorld/GPC's Push-T diffusion policies (`ckpt-ep{N}.pth`:
+    /// `torch.save({step, model, ema, optimizer, scheduler, cfg})`).
+    Gpc,
+}
+
+/// Which copy of a policy checkpoint's weights to import.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum PolicyWeights {
+    /// `ema.shadow_params`, what GPC's evaluation runs.
+    Ema,
+    /// `model`, the weights before averaging.
+    Model,
+}
+
+/// `evalharness import policy`.
+#[derive(Debug, Args)]
+pub struct ImportPolicyArgs {
+    /// The checkpoint (`ckpt-ep50.pth`, say).
+    pub file: PathBuf,
+    /// The file's format.
+    #[arg(long, value_enum)]
+    pub format: PolicyFormat,
+    /// The checkpoint folder to write (its name is the policy's name in every table).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Which weights to import.
+    #[arg(long, value_enum, default_value = "ema")]
+    pub weights: PolicyWeights,
+    /// Frames' side in pixels the policy reads.
+    #[arg(long, default_value_t = 96, value_parser = clap::value_parser!(u16).range(32..=1024))]
+    pub image_size: u16,
+    /// Replace `--out` if it exists (only once the new folder is complete).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// The formats `import judge` reads.

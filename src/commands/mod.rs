@@ -10,6 +10,7 @@ mod episodes;
 mod export_policies;
 mod goal_free;
 mod import_judge;
+mod import_policy;
 mod import_wm;
 pub(crate) mod plan;
 pub(crate) mod rank;
@@ -84,6 +85,7 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Wm(WmCommand::Export(a)) => wm_export::run(a),
         Command::Import(ImportCommand::WorldModel(a)) => import_wm::run(a),
         Command::Import(ImportCommand::Judge(a)) => import_judge::run(a),
+        Command::Import(ImportCommand::Policy(a)) => import_policy::run(a),
         Command::Scripted(a) => scripted::run(a),
         Command::ExportPolicies(a) => export_policies::run(a),
         Command::ReadJudge(a) => read_judge::run(a),

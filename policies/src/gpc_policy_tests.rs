@@ -1,0 +1,40 @@
+//! DDPM steps by hand, and the policy's determinism per episode.
+
+use super::*;
+
+#[test]
+fn the_last_ddpm_step_is_the_clipped_x0_estimate() {
+    // t = 0 with ᾱ_0 = 0.9: ᾱ_prev = 1, so the posterior mean is x₀ itself (coefficients 1
+    // and 0) and no noise is added: x₀ = (0.5 − √0.1·0.1)/√0.9 = (0.5 − 0.0316228)/0.9486833
+    // = 0.4937129; x = 2 with ε = 0 gives 2.108, clipped to 1.
+    let mut x = vec![0.5, 2.0];
+    ddpm_step(&mut x, &[0.1, 0.0], 0, &[0.9], &[]);
+    assert!((x[0] - 0.493_712_9).abs() < 1e-6 && x[1] == 1.0, "{x:?}");
+}
+
+#[test]
+fn an_inner_ddpm_step_adds_the_posterior_noise() {
+    // t = 1 of ᾱ = [0.9, 0.8]: ᾱ_t = 0.8, ᾱ_prev = 0.9, α_t = 0.8/0.9 = 0.888889, β_t = 0.111111.
+    // x = 0, ε = 0: x₀ = 0, mean 0; variance (1 − 0.9)/(1 − 0.8)·0.111111 = 0.0555556, so
+    // z = 1 adds √0.0555556 = 0.2357023.
+    let mut x = vec![0.0];
+    ddpm_step(&mut x, &[0.0], 1, &[0.9, 0.8], &[1.0]);
+    assert!((x[0] - 0.235_702_3).abs() < 1e-6, "{x:?}");
+}
+
+#[test]
+fn sampling_draws_noise_for_every_step_but_the_last() {
+    let ac = crate::diffusion::alphas_cumprod(10);
+    let mut draws = 0;
+    let out = ddpm_sample(
+        vec![0.3; 4],
+        &ac,
+        |x, _| vec![0.0; x.len()],
+        |n| {
+            draws += 1;
+            vec![0.0; n]
+        },
+    );
+    assert_eq!(draws, 9);
+    assert!(out.iter().all(|v| v.is_finite() && v.abs() <= 1.0), "{out:?}");
+}

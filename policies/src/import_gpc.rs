@@ -1,0 +1,325 @@
+//! DriftWorld/GPC's Push-T diffusion-policy checkpoints (`ckpt-ep{N}.pth`) as `gpc-diffusion`
+//! policies.
+//!
+//! The file is `torch.save({step, model, ema, optimizer, scheduler, cfg})`: `model` the state
+//! dict of `{vision_encoder, invariant}` (a ResNet-18 with GroupNorm, diffusion_policy's
+//! `ConditionalUnet1D`), `ema` diffusers' EMA state whose `shadow_params` is a **list** of the
+//! same parameters in `parameters()` order, which inference uses. The reader loses the pickle's
+//! dict order, so the order is rebuilt here from the architecture ([`official_names`], checked
+//! against the official module's own list by a test) and each EMA tensor must have the shape of
+//! the model tensor of its place. `cfg` (a pickled OmegaConf object) is not read. The sizes are
+//! read from the shapes; every key is mapped by [`burn_path`]; anything missing, unexpected,
+//! mis-shaped, not float32 or not finite is refused naming the key.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+use burn::tensor::{Device, TensorData};
+use world_model::import::ImportError;
+use world_model::import::place::{place, shapes, transpose};
+use world_model::import::tensors::{Source, top_level_int};
+
+use crate::gpc_policy::{GpcConfig, GpcNet};
+use crate::net::NetConfig;
+
+/// Which copy of the weights to import.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GpcWeights {
+    /// `ema.shadow_params` (what GPC's evaluation runs).
+    Ema,
+    /// `model` (the raw training weights).
+    Model,
+}
+
+/// An imported policy: its networks, config and what was read.
+pub struct ImportedPolicy {
+    /// The networks.
+    pub net: GpcNet,
+    /// Their sizes.
+    pub cfg: GpcConfig,
+    /// The training step (the file's `step`), if it has one.
+    pub step: Option<i64>,
+    /// Parameters read.
+    pub tensors: usize,
+}
+
+/// A conditional residual block's parameters, in registration order, and whether it has a
+/// 1×1 skip convolution (`cin != cout`).
+fn cond_res(prefix: &str, skip: bool) -> Vec<String> {
+    let mut v: Vec<String> =
+        ["blocks.0.block.0", "blocks.0.block.1", "blocks.1.block.0", "blocks.1.block.1", "cond_encoder.1"]
+            .iter()
+            .flat_map(|m| [format!("{prefix}.{m}.weight"), format!("{prefix}.{m}.bias")])
+            .collect();
+    if skip {
+        v.extend([format!("{prefix}.residual_conv.weight"), format!("{prefix}.residual_conv.bias")]);
+    }
+    v
+}
+
+/// The official parameter names in `parameters()` order (the order of `ema.shadow_params`),
+/// for U-Net levels of `dims` channels after an `action`-wide input.
+pub fn official_names(dims: &[usize], action: usize) -> Vec<String> {
+    let mut v = vec!["vision_encoder.conv1.weight".into()];
+    v.extend(["vision_encoder.bn1.weight".into(), "vision_encoder.bn1.bias".into()]);
+    for s in 1..=4 {
+        for i in 0..2 {
+            let k = format!("vision_encoder.layer{s}.{i}");
+            for p in ["conv1.weight", "bn1.weight", "bn1.bias", "conv2.weight", "bn2.weight", "bn2.bias"] {
+                v.push(format!("{k}.{p}"));
+            }
+            if s > 1 && i == 0 {
+                v.extend(
+                    [".downsample.0.weight", ".downsample.1.weight", ".downsample.1.bias"]
+                        .map(|p| format!("{k}{p}")),
+                );
+            }
+        }
+    }
+    let u = "invariant";
+    for j in 0..2 {
+        v.extend(cond_res(&format!("{u}.mid_modules.{j}"), false));
+    }
+    for l in [1, 3] {
+        v.extend(["weight", "bias"].map(|p| format!("{u}.diffusion_step_encoder.{l}.{p}")));
+    }
+    let ins: Vec<usize> = std::iter::once(action).chain(dims.iter().copied()).collect();
+    let pairs: Vec<(usize, usize)> = ins.windows(2).map(|w| (w[0], w[1])).collect();
+    for (i, &(a, b)) in pairs[1..].iter().rev().enumerate() {
+        v.extend(cond_res(&format!("{u}.up_modules.{i}.0"), 2 * b != a));
+        v.extend(cond_res(&format!("{u}.up_modules.{i}.1"), false));
+        v.extend(["weight", "bias"].map(|p| format!("{u}.up_modules.{i}.2.conv.{p}")));
+    }
+    for (i, &(a, b)) in pairs.iter().enumerate() {
+        v.extend(cond_res(&format!("{u}.down_modules.{i}.0"), a != b));
+        v.extend(cond_res(&format!("{u}.down_modules.{i}.1"), false));
+        if i + 1 < pairs.len() {
+            v.extend(["weight", "bias"].map(|p| format!("{u}.down_modules.{i}.2.conv.{p}")));
+        }
+    }
+    for m in ["final_conv.0.block.0", "final_conv.0.block.1", "final_conv.1"] {
+        v.extend(["weight", "bias"].map(|p| format!("{u}.{m}.{p}")));
+    }
+    v
+}
+
+/// evalharness's path of an official parameter, and whether it is a Linear weight (transposed).
+pub fn burn_path(name: &str) -> Option<(String, bool)> {
+    let norm = |s: &str| s.replace(".weight", ".gamma").replace(".bias", ".beta");
+    if let Some(r) = name.strip_prefix("vision_encoder.") {
+        if let Some(p) = r.strip_prefix("conv1.") {
+            return Some((format!("encoder.stem.conv.{p}"), false));
+        }
+        if let Some(p) = r.strip_prefix("bn1.") {
+            return Some((norm(&format!("encoder.stem.norm.{p}")), false));
+        }
+        let (stage, rest) = r.strip_prefix("layer")?.split_once('.')?;
+        let (i, rest) = rest.split_once('.')?;
+        let b = 2 * (stage.parse::<usize>().ok()?.checked_sub(1)?) + i.parse::<usize>().ok()?;
+        let o = format!("encoder.blocks.{b}");
+        let (sub, p) = rest.rsplit_once('.')?;
+        return Some(match sub {
+            "conv1" => (format!("{o}.c1.conv.{p}"), false),
+            "bn1" => (norm(&format!("{o}.c1.norm.{p}")), false),
+            "conv2" => (format!("{o}.c2.conv.{p}"), false),
+            "bn2" => (norm(&format!("{o}.c2.norm.{p}")), false),
+            "downsample.0" => (format!("{o}.down.conv.{p}"), false),
+            "downsample.1" => (norm(&format!("{o}.down.norm.{p}")), false),
+            _ => return None,
+        });
+    }
+    let r = name.strip_prefix("invariant.")?;
+    let block = |o: &str, rest: &str| -> Option<(String, bool)> {
+        let (sub, p) = rest.rsplit_once('.')?;
+        Some(match sub {
+            "blocks.0.block.0" => (format!("{o}.b0.conv.{p}"), false),
+            "blocks.0.block.1" => (norm(&format!("{o}.b0.norm.{p}")), false),
+            "blocks.1.block.0" => (format!("{o}.b1.conv.{p}"), false),
+            "blocks.1.block.1" => (norm(&format!("{o}.b1.norm.{p}")), false),
+            "cond_encoder.1" => (format!("{o}.film.{p}"), p == "weight"),
+            "residual_conv" => (format!("{o}.skip.{p}"), false),
+            _ => return None,
+        })
+    };
+    if let Some(p) = r.strip_prefix("diffusion_step_encoder.1.") {
+        return Some((format!("unet.step1.{p}"), p == "weight"));
+    }
+    if let Some(p) = r.strip_prefix("diffusion_step_encoder.3.") {
+        return Some((format!("unet.step2.{p}"), p == "weight"));
+    }
+    if let Some(p) = r.strip_prefix("final_conv.0.block.0.") {
+        return Some((format!("unet.final_block.conv.{p}"), false));
+    }
+    if let Some(p) = r.strip_prefix("final_conv.0.block.1.") {
+        return Some((norm(&format!("unet.final_block.norm.{p}")), false));
+    }
+    if let Some(p) = r.strip_prefix("final_conv.1.") {
+        return Some((format!("unet.final_conv.{p}"), false));
+    }
+    if let Some(rest) = r.strip_prefix("mid_modules.") {
+        let (j, rest) = rest.split_once('.')?;
+        return block(&format!("unet.mids.{j}"), rest);
+    }
+    for (theirs, ours, resample) in [("down_modules.", "downs", "down"), ("up_modules.", "ups", "up")] {
+        if let Some(rest) = r.strip_prefix(theirs) {
+            let (i, rest) = rest.split_once('.')?;
+            let (j, rest) = rest.split_once('.')?;
+            let o = format!("unet.{ours}.{i}");
+            return match j {
+                "0" | "1" => block(&format!("{o}.r{j}"), rest),
+                "2" => rest.strip_prefix("conv.").map(|p| (format!("{o}.{resample}.{p}"), false)),
+                _ => None,
+            };
+        }
+    }
+    None
+}
+
+/// The sizes a checkpoint's shapes give (the ResNet base, the U-Net's levels, kernel and
+/// step embedding, the action and proprioception widths), for `obs_horizon` frames.
+fn config_from(src: &Source, image_size: usize, obs_horizon: usize) -> Result<GpcConfig, ImportError> {
+    let s = src.shapes();
+    let missing = |k: &str| ImportError::Missing { path: src.path().into(), key: src.shown(k) };
+    let get = |k: &str| s.get(k).cloned().ok_or_else(|| missing(k));
+    let layout = |what: String| ImportError::Layout { path: src.path().into(), what };
+    let base = match get("vision_encoder.conv1.weight")?.as_slice() {
+        &[b, 3, 7, 7] if b > 0 && b % 16 == 0 => b,
+        other => {
+            return Err(layout(format!(
+                "key `vision_encoder.conv1.weight` has shape {other:?}, expected [64, 3, 7, 7]"
+            )));
+        }
+    };
+    let mut dims = Vec::new();
+    let (mut action, mut kernel) = (0, 0);
+    while let Some(w) = s.get(&format!("invariant.down_modules.{}.0.blocks.0.block.0.weight", dims.len())) {
+        if dims.is_empty() {
+            (action, kernel) = (w[1], w[2]);
+        }
+        dims.push(w[0]);
+    }
+    if dims.is_empty() {
+        return Err(missing("invariant.down_modules.0.0.blocks.0.block.0.weight"));
+    }
+    let step = get("invariant.diffusion_step_encoder.1.weight")?; // [4e, e]
+    let e = step[1];
+    let film = get("invariant.down_modules.0.0.cond_encoder.1.weight")?; // [2 out, e + cond]
+    let cond = film[1]
+        .checked_sub(e)
+        .ok_or_else(|| layout(format!("FiLM input {} narrower than the step embedding {e}", film[1])))?;
+    let features = 8 * base;
+    let proprio =
+        (cond / obs_horizon.max(1)).checked_sub(features).filter(|_| cond % obs_horizon.max(1) == 0);
+    let Some(proprio) = proprio else {
+        return Err(layout(format!(
+            "conditioning of {cond} entries is not {obs_horizon} frames of {features} features plus a position"
+        )));
+    };
+    let net = NetConfig {
+        image_size,
+        encoder_width: base,
+        feature_dim: features,
+        down_dims: dims,
+        kernel,
+        step_embed: e,
+        obs_horizon,
+        action_dim: action,
+        proprio_dim: Some(proprio),
+    };
+    Ok(GpcConfig { resnet_base: base, net, horizon: 16, action_horizon: 8, train_steps: 100 })
+}
+
+/// Imports a GPC policy checkpoint.
+///
+/// # Errors
+/// [`ImportError`] naming the file and key for anything missing, unexpected, mis-shaped,
+/// non-float32 or non-finite, an EMA list of another length than the parameters, or sizes
+/// that do not make GPC's networks.
+pub fn import(
+    path: &Path,
+    weights: GpcWeights,
+    image_size: usize,
+    device: &Device,
+) -> Result<ImportedPolicy, ImportError> {
+    let model = Source::open(path, Some("model"), "")?;
+    let cfg = config_from(&model, image_size, 2)?;
+    let names = official_names(&cfg.net.down_dims, cfg.net.action_dim);
+    let shapes_of = model.shapes();
+    // Every key of `model` is one of the official names, and every name is there.
+    let known: BTreeSet<&str> = names.iter().map(String::as_str).collect();
+    let unexpected: Vec<String> =
+        shapes_of.keys().filter(|k| !known.contains(k.as_str())).map(|k| model.shown(k)).collect();
+    if !unexpected.is_empty() {
+        return Err(ImportError::Unexpected { path: path.into(), keys: unexpected });
+    }
+    if let Some(n) = names.iter().find(|n| !shapes_of.contains_key(*n)) {
+        return Err(ImportError::Missing { path: path.into(), key: model.shown(n) });
+    }
+    let ema = match weights {
+        GpcWeights::Ema => Some(Source::open(path, Some("ema"), "shadow_params.")?),
+        GpcWeights::Model => None,
+    };
+    if let Some(ema) = &ema {
+        let count = ema.names().count();
+        if count != names.len() || ema.names().any(|n| n.parse::<usize>().map_or(true, |i| i >= names.len()))
+        {
+            return Err(ImportError::Layout {
+                path: path.into(),
+                what: format!(
+                    "`ema.shadow_params` holds {count} tensors, the networks have {} parameters",
+                    names.len()
+                ),
+            });
+        }
+    }
+    let net = GpcNet::new(&cfg, device);
+    let ours = shapes(&net);
+    let mut values = BTreeMap::new();
+    for (i, name) in names.iter().enumerate() {
+        let theirs = &shapes_of[name];
+        let (to, linear) = burn_path(name).ok_or_else(|| ImportError::Layout {
+            path: path.into(),
+            what: format!("no place for key `{}`", model.shown(name)),
+        })?;
+        let want = ours.get(&to).ok_or_else(|| ImportError::Layout {
+            path: path.into(),
+            what: format!("key `{}` maps to `{to}`, which the networks lack", model.shown(name)),
+        })?;
+        let v = match &ema {
+            Some(e) => e.f32s(&i.to_string(), theirs).map_err(|err| match err {
+                ImportError::Shape { path, key, found, expected } => ImportError::Layout {
+                    path,
+                    what: format!("`{key}` has shape {found:?}, but parameter {i} (`{name}`) has {expected:?}: the EMA list is not in the networks' order"),
+                },
+                other => other,
+            })?,
+            None => model.f32s(name, theirs)?,
+        };
+        let v = if linear { transpose(&v, theirs[1], theirs[0]) } else { v };
+        if v.len() != want.iter().product::<usize>() {
+            return Err(ImportError::Shape {
+                path: path.into(),
+                key: model.shown(name),
+                found: theirs.clone(),
+                expected: want.clone(),
+            });
+        }
+        values.insert(to, TensorData::new(v, want.clone()));
+    }
+    let (net, unset) = place(net, &mut values);
+    if !unset.is_empty() || !values.is_empty() {
+        return Err(ImportError::Apply {
+            path: path.into(),
+            what: format!(
+                "parameters left unset {unset:?}, values unused {:?}",
+                values.keys().collect::<Vec<_>>()
+            ),
+        });
+    }
+    let tensors = names.len();
+    Ok(ImportedPolicy { net, cfg, step: top_level_int(path, "step"), tensors })
+}
+
+#[cfg(test)]
+#[path = "import_gpc_tests.rs"]
+mod tests;

@@ -1,0 +1,162 @@
+//! The GPC policy import against PyTorch: fixtures written by `scripts/fixtures/gpc_policy.py`
+//! (evalharness's own re-implementation, checked there against the official `ConditionalUnet1D`
+//! and torchvision's ResNet-18 with GroupNorm: the same 208 parameters in the same order and
+//! identical outputs), reduced to ResNet base 16 and U-Net levels 16/32/64.
+
+use std::path::{Path, PathBuf};
+
+use burn::tensor::{Device, Tensor, TensorData};
+
+use super::*;
+use crate::gpc_policy::{GpcNet, ddpm_sample};
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/gpc_policy").join(name)
+}
+
+fn io() -> Source {
+    Source::open(&fixture("policy_io.pth"), None, "").unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn read(src: &Source, k: &str) -> Vec<f32> {
+    let s = src.shapes()[k].clone();
+    src.f32s(k, &s).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn max_abs(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+}
+
+fn vec2(t: Tensor<2>) -> Vec<f32> {
+    t.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+}
+
+/// The fixture's observation conditioning, computed by the imported networks.
+fn cond_of(net: &GpcNet, device: &Device) -> Vec<f32> {
+    let r = pytorch_reader::PytorchReader::new(fixture("policy_io.pth")).unwrap_or_else(|e| panic!("{e}"));
+    let bytes = r.get("frames").and_then(|t| t.read().ok()).unwrap_or_default(); // [2, 2, 96, 96, 3] u8
+    let frames: Vec<&[u8]> = bytes.chunks(96 * 96 * 3).collect();
+    let x01 = world_model::data::frames_to_tensor(&frames, 96, device) * 0.5 + 0.5;
+    let pos = Tensor::from_data(TensorData::new(read(&io(), "pos"), [2, 2, 2]), device);
+    vec2(net.obs_cond(x01, pos))
+}
+
+#[test]
+fn the_ema_weights_predict_what_pytorch_predicts() {
+    let device = Device::flex();
+    let p = import(&fixture("policy.pth"), GpcWeights::Ema, 96, &device).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((p.tensors, p.step), (208, Some(4242)));
+    assert_eq!(
+        (p.cfg.resnet_base, p.cfg.net.down_dims.clone(), p.cfg.net.step_embed),
+        (16, vec![16, 32, 64], 16)
+    );
+    assert_eq!((p.cfg.net.kernel, p.cfg.net.action_dim, p.cfg.net.proprio()), (5, 2, 2));
+    let src = io();
+    // Conditioning: ResNet features of the frames in [0, 1] and the positions, per frame.
+    let cond = cond_of(&p.net, &device);
+    let d = max_abs(&cond, &read(&src, "cond"));
+    assert!(d <= 1e-5, "conditioning differs from PyTorch by {d}");
+    // The noise prediction at steps 3 and 77.
+    let x = Tensor::from_data(TensorData::new(read(&src, "x"), [2, 16, 2]), &device);
+    let c = Tensor::from_data(TensorData::new(read(&src, "cond"), [2, cond.len() / 2]), &device);
+    let eps = p.net.unet.forward(x, Tensor::from_floats([3.0, 77.0], &device), c);
+    let eps = eps.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+    let d = max_abs(&eps, &read(&src, "eps"));
+    assert!(d <= 1e-5, "noise prediction differs from PyTorch by {d}");
+}
+
+#[test]
+fn ddpm_with_pytorchs_noise_gives_pytorchs_actions() {
+    // The fixture's 100-step DDPM run (diffusers' DDPMScheduler as GPC configures it), with
+    // its initial and per-step noise handed in: the same normalised action sequence.
+    let device = Device::flex();
+    let p = import(&fixture("policy.pth"), GpcWeights::Ema, 96, &device).unwrap_or_else(|e| panic!("{e}"));
+    let src = io();
+    let (cond, x, noises) = (read(&src, "cond"), read(&src, "x"), read(&src, "noises")); // noises [100, 2, 16, 2]
+    let c = cond.len() / 2;
+    let ac = crate::diffusion::alphas_cumprod(100);
+    let mut j = 0;
+    let got = ddpm_sample(
+        x,
+        &ac,
+        |x, t| {
+            let xt = Tensor::from_data(TensorData::new(x.to_vec(), [2, 16, 2]), &device);
+            let ct = Tensor::from_data(TensorData::new(cond.clone(), [2, c]), &device);
+            let out = p.net.unet.forward(xt, Tensor::from_floats([t as f32, t as f32], &device), ct);
+            out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+        },
+        |n| {
+            j += 1;
+            noises[(j - 1) * n..j * n].to_vec()
+        },
+    );
+    let d = max_abs(&got, &read(&src, "actions"));
+    assert!(d <= 1e-4, "DDPM differs from PyTorch's by {d}");
+}
+
+#[test]
+fn the_model_copy_differs_from_the_ema_copy() {
+    let device = Device::flex();
+    let ema = import(&fixture("policy.pth"), GpcWeights::Ema, 96, &device).unwrap_or_else(|e| panic!("{e}"));
+    let raw =
+        import(&fixture("policy.pth"), GpcWeights::Model, 96, &device).unwrap_or_else(|e| panic!("{e}"));
+    let d = max_abs(&cond_of(&ema.net, &device), &cond_of(&raw.net, &device));
+    assert!(d > 1e-4, "the two copies read the same ({d})");
+}
+
+#[test]
+fn the_official_pusht_manifest_is_the_parameter_order() {
+    // The released policies' 208 parameters, names and shapes in `parameters()` order, as the
+    // official module lists them (read outside the project); our list and our networks at the
+    // full size must match it name for name and place for place.
+    let text = std::fs::read_to_string(fixture("pusht_policy_model_keys.tsv")).unwrap_or_default();
+    let rows: Vec<(&str, &str)> = text.lines().filter_map(|l| l.split_once('\t')).collect();
+    assert_eq!(rows.len(), 208);
+    let names = official_names(&[256, 512, 1024], 2);
+    assert_eq!(names, rows.iter().map(|r| r.0.to_string()).collect::<Vec<_>>());
+    let cfg = GpcConfig {
+        resnet_base: 64,
+        net: NetConfig {
+            image_size: 96,
+            encoder_width: 64,
+            feature_dim: 512,
+            down_dims: vec![256, 512, 1024],
+            kernel: 5,
+            step_embed: 256,
+            obs_horizon: 2,
+            action_dim: 2,
+            proprio_dim: Some(2),
+        },
+        horizon: 16,
+        action_horizon: 8,
+        train_steps: 100,
+    };
+    let ours = shapes(&GpcNet::new(&cfg, &Device::flex()));
+    let mut mapped = BTreeSet::new();
+    for (name, shape) in &rows {
+        let (to, linear) = burn_path(name).unwrap_or_else(|| panic!("no place for {name}"));
+        let dims: Vec<usize> = shape
+            .trim_matches(|c| c == '(' || c == ')')
+            .split(',')
+            .filter_map(|d| d.trim().parse().ok())
+            .collect();
+        let want = if linear { vec![dims[1], dims[0]] } else { dims };
+        assert_eq!(ours.get(&to), Some(&want), "{name} -> {to}");
+        assert!(mapped.insert(to.clone()), "{to} mapped twice");
+    }
+    assert_eq!(mapped.len(), ours.len(), "every parameter of ours is mapped");
+}
+
+#[test]
+fn a_file_that_is_not_a_policy_is_refused_by_key() {
+    let device = Device::flex();
+    let wm = Path::new(env!("CARGO_MANIFEST_DIR")).join("../world_model/tests/fixtures/driftworld/micro.pth");
+    let err = import(&wm, GpcWeights::Ema, 96, &device).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("model.vision_encoder.conv1.weight") || err.contains("model."), "{err}");
+    let err = import(&fixture("policy_io.pth"), GpcWeights::Ema, 96, &device)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(err.contains("policy_io.pth") && err.contains("model"), "{err}");
+}

@@ -1,0 +1,85 @@
+//! `evalharness import policy`: another codebase's policy checkpoint as an evalharness
+//! checkpoint folder. A DriftWorld/GPC Push-T diffusion policy becomes a `"gpc-diffusion"`
+//! checkpoint: `policy.json` (sizes read from the file, GPC's sampling, the normalisation
+//! statistics GPC's evaluation script uses, the source's SHA-256 and step, the command, the
+//! commit) and `model.bpk` (f32, as trained). The folder is staged, replaces `--out` only once
+//! complete, and must load before the command reports it.
+
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use policies::diffusion::{Normalisation, Range};
+use policies::dir::{Expectations, PolicyFile, load_policy, write_policy_f32};
+use policies::import_gpc::{GpcWeights, import};
+use serde_json::json;
+
+use super::git_commit;
+use crate::cli::{ImportPolicyArgs, PolicyFormat, PolicyWeights};
+use crate::output::{Inputs, Staged};
+
+/// The statistics GPC's Push-T evaluation normalises with (not stored in its checkpoints;
+/// `policy_eval.py` sets them): the agent position's and the action's range.
+fn gpc_pusht_normalisation() -> Normalisation {
+    Normalisation {
+        agent_pos: Range { min: vec![9.897_889, 9.635_92], max: vec![499.517, 499.004_88] },
+        action: Range { min: vec![2.0, 2.0], max: vec![511.0, 511.0] },
+    }
+}
+
+/// `evalharness import policy`.
+pub fn run(a: &ImportPolicyArgs) -> Result<ExitCode> {
+    let PolicyFormat::Gpc = a.format;
+    let staged = Staged::new(&a.out, a.force, &Inputs::new().add("FILE", &a.file))?;
+    let sha = harness::fingerprint::file(&a.file).with_context(|| format!("{}", a.file.display()))?;
+    let device = world_model::device::selected()?;
+    let weights = match a.weights {
+        PolicyWeights::Ema => GpcWeights::Ema,
+        PolicyWeights::Model => GpcWeights::Model,
+    };
+    let p = import(&a.file, weights, usize::from(a.image_size), &device)?;
+    let file = PolicyFile {
+        kind: "gpc-diffusion".into(),
+        epoch: epoch_of(&a.file).unwrap_or(0),
+        step: p.step.and_then(|s| u64::try_from(s).ok()).unwrap_or(0),
+        config: serde_json::to_value(&p.cfg)?,
+        normalisation: gpc_pusht_normalisation(),
+        provenance: json!({
+            "import": {
+                "format": "gpc",
+                "source": a.file.display().to_string(),
+                "sha256": sha,
+                "step": p.step,
+                "epoch": if epoch_of(&a.file).is_some() { "from the file name" } else { "unknown (the file name has no ep<N>): 0" },
+                "weights": match a.weights { PolicyWeights::Ema => "ema.shadow_params", PolicyWeights::Model => "model" },
+                "tensors": p.tensors,
+                "normalisation": "GPC's Push-T evaluation script's agent-position and action ranges (not stored in the checkpoint)",
+                "sampling": "DDPM, every one of the 100 training steps, squared-cosine betas, x0 clipped",
+            },
+            "command": crate::stdout::command_line().join(" "),
+            "commit": git_commit(),
+        }),
+        train_loss: None,
+        task: Some("pusht".into()),
+    };
+    write_policy_f32(staged.dir(), &file, &p.net)?;
+    let out = staged.commit()?;
+    load_policy(&out, &Expectations::pusht(usize::from(a.image_size)), &device)
+        .with_context(|| format!("{}: the imported policy does not load", out.display()))?;
+    outln!("{}", out.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The epoch in a GPC checkpoint's name (`ckpt-ep50.pth` → 50).
+fn epoch_of(path: &std::path::Path) -> Option<u64> {
+    let stem = path.file_stem()?.to_str()?;
+    stem.rsplit_once("ep")?.1.parse().ok()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_epoch_is_read_from_gpcs_file_names() {
+        assert_eq!(super::epoch_of(std::path::Path::new("dir/ckpt-ep650.pth")), Some(650));
+        assert_eq!(super::epoch_of(std::path::Path::new("policy.pth")), None);
+    }
+}
