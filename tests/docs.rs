@@ -29,6 +29,7 @@ const PAGES: &[(&str, &[&str])] = &[
     ("plan.md", &["plan"]),
     ("import-world-model.md", &["import", "world-model"]),
     ("import-judge.md", &["import", "judge"]),
+    ("import-policy.md", &["import", "policy"]),
 ];
 
 /// Flags every command has, documented once in `docs/cli/README.md`.
