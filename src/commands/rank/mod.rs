@@ -410,7 +410,9 @@ pub(crate) fn load_world_model(
     Ok(wm)
 }
 
-/// Replays each policy's best- and worst-agreeing episodes with frame recording.
+/// Replays each policy's best- and worst-agreeing episodes with frame recording, the
+/// policies on the pool's threads at once (a policy's replay alone is two episodes: its
+/// batched calls leave a core idle); the files and the index are the same in any order.
 fn rollouts(
     a: &RankArgs,
     dirs: &[std::path::PathBuf],
@@ -420,22 +422,27 @@ fn rollouts(
     wm: &WorldModel,
     pool: &rayon::ThreadPool,
 ) -> Result<()> {
+    use rayon::prelude::*;
     let dir = a.out.join("filmstrips");
     let device = wm.device().clone();
     let expect = expectations(setup.task);
+    let strips: Vec<Vec<(std::path::PathBuf, String)>> = pool.install(|| {
+        dirs.par_iter()
+            .map(|d| {
+                let name = checkpoint_name(d);
+                if failed.contains(&name.as_str()) {
+                    return Ok(Vec::new());
+                }
+                let Ok(policy) = load_any(d, &expect, &device, setup.task) else { return Ok(Vec::new()) };
+                let picks = media::pick_seeds(rows, &name);
+                media::write_rollouts(&dir, policy.as_ref(), &picks, setup, wm, 4)
+            })
+            .collect::<Result<_>>()
+    })?;
     let mut index = Vec::new();
-    for d in dirs {
-        let name = checkpoint_name(d);
-        if failed.contains(&name.as_str()) {
-            continue;
-        }
-        let Ok(policy) = load_any(d, &expect, &device, setup.task) else { continue };
-        let picks = media::pick_seeds(rows, &name);
-        let strips = pool.install(|| media::write_rollouts(&dir, policy.as_ref(), &picks, setup, wm, 4))?;
-        for (png, caption) in strips {
-            let file = png.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
-            index.push(json!({"png": file, "caption": caption}));
-        }
+    for (png, caption) in strips.into_iter().flatten() {
+        let file = png.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+        index.push(json!({"png": file, "caption": caption}));
     }
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     write_json(&dir.join("index.json"), &Value::Array(index))
