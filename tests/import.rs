@@ -158,7 +158,7 @@ fn judging_every_imagined_frame_reads_a_superset_of_the_frames_and_is_part_of_th
 }
 
 #[test]
-fn a_gpc_policy_checkpoint_becomes_a_checkpoint_that_rank_runs() {
+fn gpc_and_lerobot_policies_become_checkpoints_that_rank_runs() {
     // policies/tests/fixtures/gpc_policy/policy.pth: GPC's checkpoint layout at a reduced size
     // (scripts/fixtures/gpc_policy.py). Imported, it ranks beside a scripted policy on GPC's
     // Push-T with the imported world model; a file that is not a policy is refused by key.
@@ -190,6 +190,19 @@ fn a_gpc_policy_checkpoint_becomes_a_checkpoint_that_rank_runs() {
     assert!(err.contains("micro.pth") && err.contains("model."), "{err}");
     assert!(!other.exists());
 
+    // A LeRobot policy folder (its statistics in the preprocessor's file) beside it.
+    let lerobot = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("policies/tests/fixtures/lerobot_policy/pretrained_model_processors");
+    let lr = set.join("lerobot-pusht");
+    expect_code(&run(&["import", "policy", "--format", "lerobot", s(&lerobot), "--out", s(&lr)]), 0);
+    let p = read_json(&lr.join("policy.json"));
+    assert_eq!(p["kind"], "lerobot-diffusion", "{p}");
+    assert_eq!(p["config"]["pool"]["spatial-softmax"]["keypoints"], 4, "{p}");
+    assert!(
+        p["provenance"]["import"]["statistics"]["source"].as_str().is_some_and(|s| s.contains("normalizer")),
+        "{p}"
+    );
+
     let wm = dir.path().join("wm");
     expect_code(&import(&fixture("wm.pth"), &wm, &[]), 0);
     let out = dir.path().join("rank");
@@ -197,6 +210,8 @@ fn a_gpc_policy_checkpoint_becomes_a_checkpoint_that_rank_runs() {
     let args = with_flag(&with_flag(&args, "--episodes", "2"), "--max-steps", "4");
     expect_code(&run(&[&args[..], &["--scenario", "pusht-gpc"]].concat()), 0);
     let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
-    let ours = rows.lines().filter(|l| l.contains("\"ckpt-ep50\"")).count();
-    assert_eq!(ours, 4, "two episodes in each branch:\n{rows}");
+    for name in ["\"ckpt-ep50\"", "\"lerobot-pusht\""] {
+        let n = rows.lines().filter(|l| l.contains(name)).count();
+        assert_eq!(n, 4, "{name}: two episodes in each branch:\n{rows}");
+    }
 }

@@ -235,10 +235,10 @@ pub fn load_policy(
             let bounds = (expect.action_low.clone(), expect.action_high.clone());
             Ok(Box::new(DiffusionPolicy::new(name, cfg, file.normalisation, bounds, net, device)))
         }
-        "gpc-diffusion" => crate::gpc_policy::load(dir, file, expect, device),
-        other => {
-            Err(err(format!("unknown policy kind \"{other}\" (known: diffusion, gpc-diffusion, scripted)")))
-        }
+        "gpc-diffusion" | "lerobot-diffusion" => crate::imported_policy::load(dir, file, expect, device),
+        other => Err(err(format!(
+            "unknown policy kind \"{other}\" (known: diffusion, gpc-diffusion, lerobot-diffusion, scripted)"
+        ))),
     }
 }
 

@@ -19,7 +19,7 @@ use world_model::import::ImportError;
 use world_model::import::place::{place, shapes, transpose};
 use world_model::import::tensors::{Source, top_level_int};
 
-use crate::gpc_policy::{GpcConfig, GpcNet};
+use crate::imported_policy::{ImportedConfig, ImportedNet, Pool};
 use crate::net::NetConfig;
 
 /// Which copy of the weights to import.
@@ -34,9 +34,9 @@ pub enum GpcWeights {
 /// An imported policy: its networks, config and what was read.
 pub struct ImportedPolicy {
     /// The networks.
-    pub net: GpcNet,
+    pub net: ImportedNet,
     /// Their sizes.
-    pub cfg: GpcConfig,
+    pub cfg: ImportedConfig,
     /// The training step (the file's `step`), if it has one.
     pub step: Option<i64>,
     /// Parameters read.
@@ -177,7 +177,7 @@ pub fn burn_path(name: &str) -> Option<(String, bool)> {
 
 /// The sizes a checkpoint's shapes give (the ResNet base, the U-Net's levels, kernel and
 /// step embedding, the action and proprioception widths), for `obs_horizon` frames.
-fn config_from(src: &Source, image_size: usize, obs_horizon: usize) -> Result<GpcConfig, ImportError> {
+fn config_from(src: &Source, image_size: usize, obs_horizon: usize) -> Result<ImportedConfig, ImportError> {
     let s = src.shapes();
     let missing = |k: &str| ImportError::Missing { path: src.path().into(), key: src.shown(k) };
     let get = |k: &str| s.get(k).cloned().ok_or_else(|| missing(k));
@@ -226,7 +226,18 @@ fn config_from(src: &Source, image_size: usize, obs_horizon: usize) -> Result<Gp
         action_dim: action,
         proprio_dim: Some(proprio),
     };
-    Ok(GpcConfig { resnet_base: base, net, horizon: 16, action_horizon: 8, train_steps: 100 })
+    Ok(ImportedConfig {
+        resnet_base: base,
+        pool: Pool::Average,
+        crop: None,
+        image_norm: None,
+        position_first: false,
+        inference_steps: None,
+        net,
+        horizon: 16,
+        action_horizon: 8,
+        train_steps: 100,
+    })
 }
 
 /// Imports a GPC policy checkpoint.
@@ -272,7 +283,7 @@ pub fn import(
             });
         }
     }
-    let net = GpcNet::new(&cfg, device);
+    let net = ImportedNet::new(&cfg, device);
     let ours = shapes(&net);
     let mut values = BTreeMap::new();
     for (i, name) in names.iter().enumerate() {

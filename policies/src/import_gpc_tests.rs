@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::*;
-use crate::gpc_policy::{GpcNet, ddpm_sample};
+use crate::imported_policy::{ImportedNet, ddpm_sample};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/gpc_policy").join(name)
@@ -33,7 +33,7 @@ fn vec2(t: Tensor<2>) -> Vec<f32> {
 }
 
 /// The fixture's observation conditioning, computed by the imported networks.
-fn cond_of(net: &GpcNet, device: &Device) -> Vec<f32> {
+fn cond_of(net: &ImportedNet, device: &Device) -> Vec<f32> {
     let r = pytorch_reader::PytorchReader::new(fixture("policy_io.pth")).unwrap_or_else(|e| panic!("{e}"));
     let bytes = r.get("frames").and_then(|t| t.read().ok()).unwrap_or_default(); // [2, 2, 96, 96, 3] u8
     let frames: Vec<&[u8]> = bytes.chunks(96 * 96 * 3).collect();
@@ -77,9 +77,11 @@ fn ddpm_with_pytorchs_noise_gives_pytorchs_actions() {
     let c = cond.len() / 2;
     let ac = crate::diffusion::alphas_cumprod(100);
     let mut j = 0;
+    let steps: Vec<usize> = (0..100).rev().collect();
     let got = ddpm_sample(
         x,
         &ac,
+        &steps,
         |x, t| {
             let xt = Tensor::from_data(TensorData::new(x.to_vec(), [2, 16, 2]), &device);
             let ct = Tensor::from_data(TensorData::new(cond.clone(), [2, c]), &device);
@@ -115,8 +117,13 @@ fn the_official_pusht_manifest_is_the_parameter_order() {
     assert_eq!(rows.len(), 208);
     let names = official_names(&[256, 512, 1024], 2);
     assert_eq!(names, rows.iter().map(|r| r.0.to_string()).collect::<Vec<_>>());
-    let cfg = GpcConfig {
+    let cfg = ImportedConfig {
         resnet_base: 64,
+        pool: crate::imported_policy::Pool::Average,
+        crop: None,
+        image_norm: None,
+        position_first: false,
+        inference_steps: None,
         net: NetConfig {
             image_size: 96,
             encoder_width: 64,
@@ -132,7 +139,7 @@ fn the_official_pusht_manifest_is_the_parameter_order() {
         action_horizon: 8,
         train_steps: 100,
     };
-    let ours = shapes(&GpcNet::new(&cfg, &Device::flex()));
+    let ours = shapes(&ImportedNet::new(&cfg, &Device::flex()));
     let mut mapped = BTreeSet::new();
     for (name, shape) in &rows {
         let (to, linear) = burn_path(name).unwrap_or_else(|| panic!("no place for {name}"));

@@ -10,8 +10,9 @@
 //! - [`symmetry`]: the 8 symmetries of Push-T's square world, exact augmentations;
 //! - [`train`]: the trainer, which saves a checkpoint every few epochs;
 //! - [`dir`]: the policy directory format and its validating loader;
-//! - [`gpc_policy`], [`import_gpc`], [`resnet_gn`]: DriftWorld/GPC's Push-T diffusion
-//!   policies imported from PyTorch (the `gpc-diffusion` kind, DDPM sampling);
+//! - [`imported_policy`], [`import_gpc`], [`import_lerobot`], [`resnet_gn`]: diffusion policies
+//!   trained elsewhere (DriftWorld/GPC's Push-T policies, LeRobot's), imported once: the
+//!   `gpc-diffusion` and `lerobot-diffusion` kinds, DDPM sampling;
 //! - [`judge`], [`judge_train`]: a learned judge of imagined frames (the same frame
 //!   encoder and one logit) and its trainer; [`judge_pose`]: GPC's reward predictors
 //!   ([`resnet`]) imported as a judge that reads the block's pose.
@@ -21,8 +22,9 @@ pub mod cpu_unet;
 pub mod data;
 pub mod diffusion;
 pub mod dir;
-pub mod gpc_policy;
 pub mod import_gpc;
+pub mod import_lerobot;
+pub mod imported_policy;
 pub mod judge;
 pub mod judge_pose;
 pub mod judge_read;

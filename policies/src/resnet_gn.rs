@@ -114,13 +114,22 @@ impl ResNet18Gn {
         }
     }
 
+    /// The last map, before the pool.
+    ///
     /// # Shapes
-    /// `[n, 3, h, w]` in [0, 1] → `[n, 8 base]`
-    pub fn forward(&self, x: Tensor<4>) -> Tensor<2> {
+    /// `[n, 3, h, w]` → `[n, 8 base, ⌈h/32⌉, ⌈w/32⌉]`
+    pub fn features(&self, x: Tensor<4>) -> Tensor<4> {
         let mut h = self.pool.forward(relu(self.stem.forward(x)));
         for b in &self.blocks {
             h = b.forward(h);
         }
+        h
+    }
+
+    /// # Shapes
+    /// `[n, 3, h, w]` in [0, 1] → `[n, 8 base]`
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<2> {
+        let h = self.features(x);
         let [n, c, _, _] = h.dims();
         self.avg.forward(h).reshape([n, c])
     }

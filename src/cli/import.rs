@@ -27,6 +27,9 @@ pub enum PolicyFormat {
     /// DriftWorld/GPC's Push-T diffusion policies (`ckpt-ep{N}.pth`:
     /// `torch.save({step, model, ema, optimizer, scheduler, cfg})`).
     Gpc,
+    /// LeRobot's diffusion policies: a `pretrained_model/` folder (`config.json`,
+    /// `model.safetensors`, and from LeRobot 0.4 the preprocessor's statistics).
+    Lerobot,
 }
 
 /// Which copy of a policy checkpoint's weights to import.
@@ -41,7 +44,7 @@ pub enum PolicyWeights {
 /// `evalharness import policy`.
 #[derive(Debug, Args)]
 pub struct ImportPolicyArgs {
-    /// The checkpoint (`ckpt-ep50.pth`, say).
+    /// The checkpoint: a file (`ckpt-ep50.pth`) or, for LeRobot, the `pretrained_model` folder.
     pub file: PathBuf,
     /// The file's format.
     #[arg(long, value_enum)]
@@ -49,7 +52,7 @@ pub struct ImportPolicyArgs {
     /// The checkpoint folder to write (its name is the policy's name in every table).
     #[arg(long)]
     pub out: PathBuf,
-    /// Which weights to import.
+    /// Which weights to import (GPC's files hold two copies; LeRobot's one).
     #[arg(long, value_enum, default_value = "ema")]
     pub weights: PolicyWeights,
     /// Frames' side in pixels the policy reads.

@@ -1,9 +1,10 @@
 //! `evalharness import policy`: another codebase's policy checkpoint as an evalharness
 //! checkpoint folder. A DriftWorld/GPC Push-T diffusion policy becomes a `"gpc-diffusion"`
-//! checkpoint: `policy.json` (sizes read from the file, GPC's sampling, the normalisation
-//! statistics GPC's evaluation script uses, the source's SHA-256 and step, the command, the
-//! commit) and `model.bpk` (f32, as trained). The folder is staged, replaces `--out` only once
-//! complete, and must load before the command reports it.
+//! checkpoint (sizes read from the file, GPC's sampling, the normalisation statistics GPC's
+//! evaluation script uses), a LeRobot diffusion policy a `"lerobot-diffusion"` one (settings
+//! from its `config.json`, statistics from its files): `policy.json` (with the sources'
+//! SHA-256, the command, the commit) and `model.bpk` (f32, as trained). The folder is staged,
+//! replaces `--out` only once complete, and must load before the command reports it.
 
 use std::process::ExitCode;
 
@@ -28,7 +29,68 @@ fn gpc_pusht_normalisation() -> Normalisation {
 
 /// `evalharness import policy`.
 pub fn run(a: &ImportPolicyArgs) -> Result<ExitCode> {
-    let PolicyFormat::Gpc = a.format;
+    match a.format {
+        PolicyFormat::Gpc => gpc(a),
+        PolicyFormat::Lerobot => lerobot(a),
+    }
+}
+
+/// A LeRobot `pretrained_model` folder.
+fn lerobot(a: &ImportPolicyArgs) -> Result<ExitCode> {
+    if a.weights == PolicyWeights::Model {
+        anyhow::bail!(
+            "--weights model: a LeRobot folder holds one copy of the weights (leave --weights out)"
+        );
+    }
+    let staged = Staged::new(&a.out, a.force, &Inputs::new().add("FILE", &a.file))?;
+    let sha = |name: &str| {
+        let p = a.file.join(name);
+        harness::fingerprint::file(&p).with_context(|| format!("{}", p.display()))
+    };
+    let (cfg_sha, model_sha) = (sha("config.json")?, sha("model.safetensors")?);
+    let device = world_model::device::selected()?;
+    let p = policies::import_lerobot::import(&a.file, &device)?;
+    let stats_sha = harness::fingerprint::file(&p.stats_from)?;
+    let file = PolicyFile {
+        kind: "lerobot-diffusion".into(),
+        epoch: 0,
+        step: 0,
+        config: serde_json::to_value(&p.cfg)?,
+        normalisation: p.norm.clone(),
+        provenance: json!({
+            "import": {
+                "format": "lerobot",
+                "source": a.file.display().to_string(),
+                "config_sha256": cfg_sha,
+                "model_sha256": model_sha,
+                "statistics": {"source": p.stats_from.display().to_string(), "sha256": stats_sha},
+                "tensors": p.tensors,
+                "epoch_and_step": "not in a LeRobot folder: 0",
+            },
+            "command": crate::stdout::command_line().join(" "),
+            "commit": git_commit(),
+        }),
+        train_loss: None,
+        task: None,
+    };
+    write_policy_f32(staged.dir(), &file, &p.net)?;
+    let out = staged.commit()?;
+    let n = &p.cfg.net;
+    let expect = Expectations {
+        image_size: n.image_size,
+        proprio_dim: n.proprio(),
+        action_low: p.norm.action.min.clone(),
+        action_high: p.norm.action.max.clone(),
+        task: None,
+    };
+    load_policy(&out, &expect, &device)
+        .with_context(|| format!("{}: the imported policy does not load", out.display()))?;
+    outln!("{}", out.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A GPC checkpoint file.
+fn gpc(a: &ImportPolicyArgs) -> Result<ExitCode> {
     let staged = Staged::new(&a.out, a.force, &Inputs::new().add("FILE", &a.file))?;
     let sha = harness::fingerprint::file(&a.file).with_context(|| format!("{}", a.file.display()))?;
     let device = world_model::device::selected()?;

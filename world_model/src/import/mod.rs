@@ -4,13 +4,15 @@
 //! - [`driftworld`]: the official DriftWorld code's `torch.save` checkpoints (its U-Net is
 //!   evalharness's [`crate::unet::UNet`] with per-frame attention norms and head-major qkv rows).
 //! - [`tensors`]: reading a `.pth` file's tensors by name with `pytorch-reader` (a zip and
-//!   pickle reader that runs no code), checking each one's type, shape and values.
+//!   pickle reader that runs no code), checking each one's type, shape and values;
+//!   [`safe`]: the same for `.safetensors` files (LeRobot's), with the `safetensors` crate.
 //!
 //! An import refuses a missing, unexpected or mis-shaped key, a tensor that is not float32 and
 //! a non-finite value, naming the key; nothing is written then (the binary stages the output).
 
 pub mod driftworld;
 pub mod place;
+pub mod safe;
 pub mod tensors;
 
 use std::path::PathBuf;

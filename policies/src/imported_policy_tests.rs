@@ -8,7 +8,7 @@ fn the_last_ddpm_step_is_the_clipped_x0_estimate() {
     // and 0) and no noise is added: x₀ = (0.5 − √0.1·0.1)/√0.9 = (0.5 − 0.0316228)/0.9486833
     // = 0.4937129; x = 2 with ε = 0 gives 2.108, clipped to 1.
     let mut x = vec![0.5, 2.0];
-    ddpm_step(&mut x, &[0.1, 0.0], 0, &[0.9], &[]);
+    ddpm_step(&mut x, &[0.1, 0.0], 0, None, &[0.9], &[]);
     assert!((x[0] - 0.493_712_9).abs() < 1e-6 && x[1] == 1.0, "{x:?}");
 }
 
@@ -18,7 +18,7 @@ fn an_inner_ddpm_step_adds_the_posterior_noise() {
     // x = 0, ε = 0: x₀ = 0, mean 0; variance (1 − 0.9)/(1 − 0.8)·0.111111 = 0.0555556, so
     // z = 1 adds √0.0555556 = 0.2357023.
     let mut x = vec![0.0];
-    ddpm_step(&mut x, &[0.0], 1, &[0.9, 0.8], &[1.0]);
+    ddpm_step(&mut x, &[0.0], 1, Some(0), &[0.9, 0.8], &[1.0]);
     assert!((x[0] - 0.235_702_3).abs() < 1e-6, "{x:?}");
 }
 
@@ -26,10 +26,12 @@ fn an_inner_ddpm_step_adds_the_posterior_noise() {
 fn sampling_draws_noise_for_every_step_but_the_last() {
     let ac = crate::diffusion::alphas_cumprod(10);
     let mut draws = 0;
+    let steps: Vec<usize> = (0..10).rev().collect();
     let out = ddpm_sample(
         vec![0.3; 4],
         &ac,
-        |x, _| vec![0.0; x.len()],
+        &steps,
+        |x: &[f32], _| vec![0.0; x.len()],
         |n| {
             draws += 1;
             vec![0.0; n]
@@ -37,4 +39,24 @@ fn sampling_draws_noise_for_every_step_but_the_last() {
     );
     assert_eq!(draws, 9);
     assert!(out.iter().all(|v| v.is_finite() && v.abs() <= 1.0), "{out:?}");
+}
+
+#[test]
+fn leading_spacing_steps_from_the_last_multiple_down_to_zero() {
+    // 100 training steps sampled in 10: t = j · ⌊100 / 10⌋, j = 9 … 0 (diffusers' "leading").
+    let cfg = |n: Option<usize>| ImportedConfig {
+        resnet_base: 16,
+        pool: Pool::Average,
+        crop: None,
+        image_norm: None,
+        position_first: false,
+        inference_steps: n,
+        net: crate::net::NetConfig::new(),
+        horizon: 16,
+        action_horizon: 8,
+        train_steps: 100,
+    };
+    assert_eq!(cfg(Some(10)).timesteps(), [90, 80, 70, 60, 50, 40, 30, 20, 10, 0]);
+    assert_eq!(cfg(None).timesteps().len(), 100);
+    assert_eq!(cfg(None).timesteps()[..3], [99, 98, 97]);
 }

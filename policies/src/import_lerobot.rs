@@ -1,0 +1,503 @@
+//! LeRobot's diffusion policies (`type: diffusion`, a `pretrained_model/` folder) as
+//! `lerobot-diffusion` policies ([`crate::imported_policy`]).
+//!
+//! The folder holds `config.json` (LeRobot's 2025 format with `input_features` and
+//! `normalization_mapping`, or its 2024 one with `input_shapes` and `*_normalization_modes`) and
+//! `model.safetensors` (`diffusion.rgb_encoder.*`, `diffusion.unet.*`). The normalisation
+//! statistics are in `model.safetensors` (`normalize_inputs.buffer_*`, LeRobot before 0.4) or
+//! in the preprocessor's `policy_preprocessor_step_*_normalizer_processor.safetensors` (0.4 and
+//! later). Supported: one camera with LeRobot's Push-T settings (a ResNet-18 with GroupNorm
+//! trained from scratch, a spatial softmax, a centre crop, FiLM with scale, DDPM on the
+//! squared-cosine schedule, ε-prediction, clipped samples); anything else is refused naming the
+//! `config.json` field. Weights are mapped key by key ([`burn_path`]); a missing, unexpected,
+//! mis-shaped, non-float32 or non-finite tensor is refused naming the file and key.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use burn::tensor::{Device, TensorData};
+use serde::Deserialize;
+use world_model::import::ImportError;
+use world_model::import::place::{place, shapes, transpose};
+use world_model::import::safe::SafeSource;
+
+use crate::diffusion::{Normalisation, Range};
+use crate::imported_policy::{ImportedConfig, ImportedNet, MeanStd, Pool};
+use crate::net::NetConfig;
+
+/// A feature of LeRobot's 2025 config (`{"type": "VISUAL", "shape": [3, 96, 96]}`).
+#[derive(Clone, Debug, Deserialize)]
+struct Feature {
+    #[serde(rename = "type")]
+    kind: String,
+    shape: Vec<usize>,
+}
+
+/// The `config.json` fields inference depends on (other fields are LeRobot's training settings).
+#[derive(Clone, Debug, Deserialize)]
+struct LeRobotConfig {
+    n_obs_steps: usize,
+    horizon: usize,
+    n_action_steps: usize,
+    #[serde(default)]
+    input_features: Option<BTreeMap<String, Feature>>,
+    #[serde(default)]
+    output_features: Option<BTreeMap<String, Feature>>,
+    #[serde(default)]
+    input_shapes: Option<BTreeMap<String, Vec<usize>>>,
+    #[serde(default)]
+    output_shapes: Option<BTreeMap<String, Vec<usize>>>,
+    #[serde(default)]
+    normalization_mapping: Option<BTreeMap<String, String>>,
+    #[serde(default)]
+    input_normalization_modes: Option<BTreeMap<String, String>>,
+    #[serde(default)]
+    output_normalization_modes: Option<BTreeMap<String, String>>,
+    vision_backbone: String,
+    #[serde(default)]
+    crop_shape: Option<[usize; 2]>,
+    #[serde(default)]
+    resize_shape: Option<Vec<usize>>,
+    use_group_norm: bool,
+    spatial_softmax_num_keypoints: usize,
+    #[serde(default)]
+    use_separate_rgb_encoder_per_camera: bool,
+    down_dims: Vec<usize>,
+    kernel_size: usize,
+    n_groups: usize,
+    diffusion_step_embed_dim: usize,
+    use_film_scale_modulation: bool,
+    #[serde(default = "ddpm")]
+    noise_scheduler_type: String,
+    num_train_timesteps: usize,
+    beta_schedule: String,
+    prediction_type: String,
+    clip_sample: bool,
+    clip_sample_range: f64,
+    #[serde(default)]
+    num_inference_steps: Option<usize>,
+}
+
+fn ddpm() -> String {
+    "DDPM".into()
+}
+
+/// An imported LeRobot policy: networks, config, statistics and what was read.
+pub struct LeRobotPolicy {
+    /// The networks.
+    pub net: ImportedNet,
+    /// Their sizes and settings.
+    pub cfg: ImportedConfig,
+    /// The state's and the action's ranges.
+    pub norm: Normalisation,
+    /// Weight tensors read.
+    pub tensors: usize,
+    /// Where the statistics came from.
+    pub stats_from: PathBuf,
+}
+
+/// Inputs by name (type, shape) and outputs by name (shape).
+type Features = (BTreeMap<String, (String, Vec<usize>)>, BTreeMap<String, Vec<usize>>);
+
+/// The image, state and action features: (image name, [c, h, w]), state width, action width.
+fn features(c: &LeRobotConfig, path: &Path) -> Result<(String, Vec<usize>, usize, usize), ImportError> {
+    let bad = |what: String| ImportError::Layout { path: path.into(), what };
+    let (inputs, outputs): Features =
+        match (&c.input_features, &c.output_features, &c.input_shapes, &c.output_shapes) {
+            (Some(i), Some(o), _, _) => (
+                i.iter().map(|(k, f)| (k.clone(), (f.kind.clone(), f.shape.clone()))).collect(),
+                o.iter().map(|(k, f)| (k.clone(), f.shape.clone())).collect(),
+            ),
+            (_, _, Some(i), Some(o)) => (
+                i.iter()
+                    .map(|(k, s)| {
+                        let kind = if k.starts_with("observation.image") { "VISUAL" } else { "STATE" };
+                        (k.clone(), (kind.to_string(), s.clone()))
+                    })
+                    .collect(),
+                o.clone(),
+            ),
+            _ => {
+                return Err(bad(
+                    "config.json has neither input_features/output_features nor input_shapes/output_shapes"
+                        .into(),
+                ));
+            }
+        };
+    let images: Vec<(&String, &Vec<usize>)> =
+        inputs.iter().filter(|(_, (k, _))| k == "VISUAL").map(|(n, (_, s))| (n, s)).collect();
+    let [(image, shape)] = images.as_slice() else {
+        return Err(bad(format!("config.json: {} camera inputs; one is supported", images.len())));
+    };
+    if shape.len() != 3 || shape[0] != 3 || shape[1] != shape[2] {
+        return Err(bad(format!(
+            "config.json: input `{image}` has shape {shape:?}; square RGB frames are supported"
+        )));
+    }
+    let state = match inputs.get("observation.state") {
+        Some((_, s)) if s.len() == 1 => s[0],
+        _ => return Err(bad("config.json: no 1-D input `observation.state`".into())),
+    };
+    if let Some(other) = inputs.keys().find(|k| *k != *image && k.as_str() != "observation.state") {
+        return Err(bad(format!(
+            "config.json: input `{other}` is not supported (one camera and the state are)"
+        )));
+    }
+    let action = match outputs.get("action") {
+        Some(s) if s.len() == 1 => s[0],
+        _ => return Err(bad("config.json: no 1-D output `action`".into())),
+    };
+    Ok(((*image).clone(), (*shape).clone(), state, action))
+}
+
+/// Refuses settings this importer does not implement, naming the `config.json` field.
+fn check(c: &LeRobotConfig, path: &Path) -> Result<(), ImportError> {
+    let refuse = |field: &str, value: String, supported: &str| {
+        Err(ImportError::Layout {
+            path: path.into(),
+            what: format!("config.json `{field}` is {value}; supported: {supported}"),
+        })
+    };
+    if c.vision_backbone != "resnet18" {
+        return refuse("vision_backbone", c.vision_backbone.clone(), "resnet18");
+    }
+    if !c.use_group_norm {
+        return refuse("use_group_norm", "false".into(), "true (BatchNorm backbones are not imported yet)");
+    }
+    if c.use_separate_rgb_encoder_per_camera {
+        return refuse("use_separate_rgb_encoder_per_camera", "true".into(), "false");
+    }
+    if c.resize_shape.is_some() {
+        return refuse("resize_shape", format!("{:?}", c.resize_shape), "none");
+    }
+    if !c.use_film_scale_modulation {
+        return refuse("use_film_scale_modulation", "false".into(), "true");
+    }
+    if c.n_groups != 8 {
+        return refuse("n_groups", c.n_groups.to_string(), "8");
+    }
+    if c.noise_scheduler_type != "DDPM" {
+        return refuse("noise_scheduler_type", c.noise_scheduler_type.clone(), "DDPM");
+    }
+    if c.beta_schedule != "squaredcos_cap_v2" {
+        return refuse("beta_schedule", c.beta_schedule.clone(), "squaredcos_cap_v2");
+    }
+    if c.prediction_type != "epsilon" {
+        return refuse("prediction_type", c.prediction_type.clone(), "epsilon");
+    }
+    if !c.clip_sample || c.clip_sample_range != 1.0 {
+        return refuse(
+            "clip_sample_range",
+            format!("{} (clip_sample {})", c.clip_sample_range, c.clip_sample),
+            "1.0 with clip_sample",
+        );
+    }
+    if c.crop_shape.is_some_and(|[h, w]| h != w) {
+        return refuse("crop_shape", format!("{:?}", c.crop_shape), "a square");
+    }
+    let modes: BTreeMap<String, String> = match (&c.normalization_mapping, &c.input_normalization_modes) {
+        (Some(m), _) => m.clone(),
+        (None, Some(i)) => {
+            let mut m = BTreeMap::new();
+            for (k, v) in i.iter().chain(c.output_normalization_modes.iter().flatten()) {
+                let kind = if k.starts_with("observation.image") {
+                    "VISUAL"
+                } else if k == "action" {
+                    "ACTION"
+                } else {
+                    "STATE"
+                };
+                m.insert(kind.to_string(), v.to_uppercase());
+            }
+            m
+        }
+        _ => BTreeMap::new(),
+    };
+    for (kind, want) in [("VISUAL", "MEAN_STD"), ("STATE", "MIN_MAX"), ("ACTION", "MIN_MAX")] {
+        let got = modes.get(kind).map(String::as_str).unwrap_or("(absent)");
+        if got != want {
+            return refuse(&format!("normalization_mapping.{kind}"), got.into(), want);
+        }
+    }
+    Ok(())
+}
+
+/// evalharness's path of a LeRobot key (without `diffusion.`), and whether it is a Linear
+/// weight (transposed); `None` for a key with no place.
+pub fn burn_path(key: &str) -> Option<(String, bool)> {
+    let norm = |s: String| s.replace(".weight", ".gamma").replace(".bias", ".beta");
+    if let Some(r) = key.strip_prefix("rgb_encoder.") {
+        if let Some(p) = r.strip_prefix("backbone.0.") {
+            return Some((format!("encoder.stem.conv.{p}"), false));
+        }
+        if let Some(p) = r.strip_prefix("backbone.1.") {
+            return Some((norm(format!("encoder.stem.norm.{p}")), false));
+        }
+        if let Some(p) = r.strip_prefix("pool.nets.") {
+            return Some((format!("head.nets.{p}"), false));
+        }
+        if let Some(p) = r.strip_prefix("out.") {
+            return Some((format!("head.out.{p}"), p == "weight"));
+        }
+        let rest = r.strip_prefix("backbone.")?;
+        let (layer, rest) = rest.split_once('.')?;
+        let (b, rest) = rest.split_once('.')?;
+        let block =
+            2 * layer.parse::<usize>().ok()?.checked_sub(4).filter(|l| *l < 4)? + b.parse::<usize>().ok()?;
+        let o = format!("encoder.blocks.{block}");
+        let (sub, p) = rest.rsplit_once('.')?;
+        return Some(match sub {
+            "conv1" => (format!("{o}.c1.conv.{p}"), false),
+            "bn1" => (norm(format!("{o}.c1.norm.{p}")), false),
+            "conv2" => (format!("{o}.c2.conv.{p}"), false),
+            "bn2" => (norm(format!("{o}.c2.norm.{p}")), false),
+            "downsample.0" => (format!("{o}.down.conv.{p}"), false),
+            "downsample.1" => (norm(format!("{o}.down.norm.{p}")), false),
+            _ => return None,
+        });
+    }
+    let r = key.strip_prefix("unet.")?;
+    let res = |o: String, rest: &str| -> Option<(String, bool)> {
+        let (sub, p) = rest.rsplit_once('.')?;
+        Some(match sub {
+            "conv1.block.0" => (format!("{o}.b0.conv.{p}"), false),
+            "conv1.block.1" => (norm(format!("{o}.b0.norm.{p}")), false),
+            "conv2.block.0" => (format!("{o}.b1.conv.{p}"), false),
+            "conv2.block.1" => (norm(format!("{o}.b1.norm.{p}")), false),
+            "cond_encoder.1" => (format!("{o}.film.{p}"), p == "weight"),
+            "residual_conv" => (format!("{o}.skip.{p}"), false),
+            _ => return None,
+        })
+    };
+    for (from, to) in
+        [("diffusion_step_encoder.1.", "unet.step1."), ("diffusion_step_encoder.3.", "unet.step2.")]
+    {
+        if let Some(p) = r.strip_prefix(from) {
+            return Some((format!("{to}{p}"), p == "weight"));
+        }
+    }
+    if let Some(p) = r.strip_prefix("final_conv.0.block.0.") {
+        return Some((format!("unet.final_block.conv.{p}"), false));
+    }
+    if let Some(p) = r.strip_prefix("final_conv.0.block.1.") {
+        return Some((norm(format!("unet.final_block.norm.{p}")), false));
+    }
+    if let Some(p) = r.strip_prefix("final_conv.1.") {
+        return Some((format!("unet.final_conv.{p}"), false));
+    }
+    if let Some(rest) = r.strip_prefix("mid_modules.") {
+        let (j, rest) = rest.split_once('.')?;
+        return res(format!("unet.mids.{j}"), rest);
+    }
+    for (theirs, ours, resample) in [("down_modules.", "downs", "down"), ("up_modules.", "ups", "up")] {
+        if let Some(rest) = r.strip_prefix(theirs) {
+            let (i, rest) = rest.split_once('.')?;
+            let (j, rest) = rest.split_once('.')?;
+            let o = format!("unet.{ours}.{i}");
+            return match j {
+                "0" | "1" => res(format!("{o}.r{j}"), rest),
+                "2" => Some((format!("{o}.{resample}.{rest}"), false)),
+                _ => None,
+            };
+        }
+    }
+    None
+}
+
+/// Keys LeRobot stores beside the weights: the spatial softmax's grid (recomputed here) and,
+/// before 0.4, the normalisation statistics.
+fn is_extra(key: &str) -> bool {
+    key == "diffusion.rgb_encoder.pool.pos_grid"
+        || ["normalize_inputs.", "normalize_targets.", "unnormalize_outputs."]
+            .iter()
+            .any(|p| key.starts_with(p))
+}
+
+/// The statistics: from `model.safetensors`'s legacy entries, else from the preprocessor's file.
+fn statistics(
+    dir: &Path,
+    model: &SafeSource,
+    image: &str,
+) -> Result<(MeanStd, Normalisation, PathBuf), ImportError> {
+    let legacy = |k: &str| format!("normalize_inputs.buffer_{}", k.replace('.', "_"));
+    let processor;
+    let (src, names): (&SafeSource, [String; 6]) = if model.has(&format!("{}.mean", legacy(image))) {
+        (
+            model,
+            [
+                format!("{}.mean", legacy(image)),
+                format!("{}.std", legacy(image)),
+                format!("{}.min", legacy("observation.state")),
+                format!("{}.max", legacy("observation.state")),
+                "unnormalize_outputs.buffer_action.min".into(),
+                "unnormalize_outputs.buffer_action.max".into(),
+            ],
+        )
+    } else {
+        let found = std::fs::read_dir(dir)
+            .map_err(|source| ImportError::Io { path: dir.into(), key: "(the folder)".into(), source })?
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .find(|p| {
+                p.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
+                    n.starts_with("policy_preprocessor") && n.contains("normalizer") && n.ends_with(".safetensors")
+                })
+            })
+            .ok_or_else(|| ImportError::Missing {
+                path: dir.into(),
+                key: "normalisation statistics (normalize_inputs.* in model.safetensors, or a policy_preprocessor_*normalizer*.safetensors)".into(),
+            })?;
+        processor = SafeSource::open(&found)?;
+        (
+            &processor,
+            [
+                format!("{image}.mean"),
+                format!("{image}.std"),
+                "observation.state.min".into(),
+                "observation.state.max".into(),
+                "action.min".into(),
+                "action.max".into(),
+            ],
+        )
+    };
+    let three = |k: &str| -> Result<[f32; 3], ImportError> {
+        let v = src.f32s(k, &[3], true)?;
+        Ok([v[0], v[1], v[2]])
+    };
+    let range = |lo: &str, hi: &str| -> Result<Range, ImportError> {
+        let n = src.shapes().get(lo).map_or(0, |s| s.iter().product());
+        Ok(Range { min: src.f32s(lo, &[n], true)?, max: src.f32s(hi, &[n], true)? })
+    };
+    let image_norm = MeanStd { mean: three(&names[0])?, std: three(&names[1])? };
+    let norm =
+        Normalisation { agent_pos: range(&names[2], &names[3])?, action: range(&names[4], &names[5])? };
+    Ok((image_norm, norm, src.path().to_path_buf()))
+}
+
+/// Imports a LeRobot `pretrained_model/` folder.
+///
+/// # Errors
+/// [`ImportError`] naming the file and the `config.json` field or key at fault.
+pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError> {
+    let cfg_path = dir.join("config.json");
+    let text = std::fs::read_to_string(&cfg_path).map_err(|source| ImportError::Io {
+        path: cfg_path.clone(),
+        key: "(the file)".into(),
+        source,
+    })?;
+    let c: LeRobotConfig = serde_json::from_str(&text).map_err(|e| ImportError::Layout {
+        path: cfg_path.clone(),
+        what: format!("not a LeRobot diffusion config: {e}"),
+    })?;
+    check(&c, &cfg_path)?;
+    let (image, shape, state, action) = features(&c, &cfg_path)?;
+    let model = SafeSource::open(&dir.join("model.safetensors"))?;
+    let base = match model.shapes().get("diffusion.rgb_encoder.backbone.0.weight").map(Vec::as_slice) {
+        Some(&[b, 3, 7, 7]) if b > 0 && b % 16 == 0 => b,
+        Some(s) => {
+            return Err(ImportError::Shape {
+                path: model.path().into(),
+                key: "diffusion.rgb_encoder.backbone.0.weight".into(),
+                found: s.to_vec(),
+                expected: vec![64, 3, 7, 7],
+            });
+        }
+        None => {
+            return Err(ImportError::Missing {
+                path: model.path().into(),
+                key: "diffusion.rgb_encoder.backbone.0.weight".into(),
+            });
+        }
+    };
+    let k = c.spatial_softmax_num_keypoints;
+    let (image_norm, norm, stats_from) = statistics(dir, &model, &image)?;
+    if norm.agent_pos.dim() != state || norm.action.dim() != action {
+        return Err(ImportError::Layout {
+            path: stats_from,
+            what: format!(
+                "statistics of {} state and {} action entries; config.json says {state} and {action}",
+                norm.agent_pos.dim(),
+                norm.action.dim()
+            ),
+        });
+    }
+    let cfg = ImportedConfig {
+        resnet_base: base,
+        pool: Pool::SpatialSoftmax { keypoints: k },
+        crop: c.crop_shape.map(|[h, _]| h),
+        image_norm: Some(image_norm),
+        position_first: true,
+        inference_steps: c.num_inference_steps,
+        net: NetConfig {
+            image_size: shape[1],
+            encoder_width: base,
+            feature_dim: 2 * k,
+            down_dims: c.down_dims.clone(),
+            kernel: c.kernel_size,
+            step_embed: c.diffusion_step_embed_dim,
+            obs_horizon: c.n_obs_steps,
+            action_dim: action,
+            proprio_dim: Some(state),
+        },
+        horizon: c.horizon,
+        action_horizon: c.n_action_steps,
+        train_steps: c.num_train_timesteps,
+    };
+    if cfg.action_horizon == 0 || cfg.action_horizon > cfg.max_action_horizon() {
+        return Err(ImportError::Layout {
+            path: cfg_path,
+            what: format!(
+                "n_action_steps {} does not fit horizon {} with {} observations",
+                c.n_action_steps, c.horizon, c.n_obs_steps
+            ),
+        });
+    }
+    let net = ImportedNet::new(&cfg, device);
+    let ours = shapes(&net);
+    let mut values = BTreeMap::new();
+    let mut unexpected = Vec::new();
+    let mut read = BTreeSet::new();
+    for (key, theirs) in model.shapes() {
+        if is_extra(&key) {
+            continue;
+        }
+        let short = key.replace("._orig_mod", "");
+        let mapped =
+            short.strip_prefix("diffusion.").and_then(burn_path).filter(|(to, _)| ours.contains_key(to));
+        let Some((to, linear)) = mapped else {
+            unexpected.push(key.clone());
+            continue;
+        };
+        let want = &ours[&to];
+        let expect = if linear { vec![want[1], want[0]] } else { want.clone() };
+        let v = model.f32s(&key, &expect, false)?;
+        let v = if linear { transpose(&v, theirs[1], theirs[0]) } else { v };
+        values.insert(to.clone(), TensorData::new(v, want.clone()));
+        read.insert(to);
+    }
+    if !unexpected.is_empty() {
+        return Err(ImportError::Unexpected { path: model.path().into(), keys: unexpected });
+    }
+    if let Some(missing) = ours.keys().find(|p| !read.contains(*p)) {
+        return Err(ImportError::Missing {
+            path: model.path().into(),
+            key: format!("the weights of `{missing}`"),
+        });
+    }
+    let tensors = values.len();
+    let (net, unset) = place(net, &mut values);
+    if !unset.is_empty() || !values.is_empty() {
+        return Err(ImportError::Apply {
+            path: model.path().into(),
+            what: format!(
+                "parameters left unset {unset:?}, values unused {:?}",
+                values.keys().collect::<Vec<_>>()
+            ),
+        });
+    }
+    Ok(LeRobotPolicy { net, cfg, norm, tensors, stats_from })
+}
+
+#[cfg(test)]
+#[path = "import_lerobot_tests.rs"]
+mod tests;

@@ -1,0 +1,127 @@
+//! The LeRobot import against PyTorch: fixtures written by `scripts/fixtures/lerobot_policy.py`
+//! (evalharness's own re-implementation; checked outside the project against LeRobot 0.6.2's own
+//! `DiffusionModel` at ResNet base 64: the same 213 names and shapes, identical conditioning and
+//! noise prediction), reduced to ResNet base 16, 4 keypoints and U-Net levels 16/32/64, in both
+//! of LeRobot's layouts (statistics in `model.safetensors`, or in the preprocessor's file).
+
+use std::path::{Path, PathBuf};
+
+use burn::tensor::{Device, Tensor, TensorData};
+
+use super::*;
+use crate::imported_policy::ddpm_sample;
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/lerobot_policy").join(name)
+}
+
+fn io(k: &str) -> Vec<f32> {
+    let src = SafeSource::open(&fixture("io.safetensors")).unwrap_or_else(|e| panic!("{e}"));
+    let n = src.shapes()[k].iter().product();
+    src.f32s(k, &[n], true).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn max_abs(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+}
+
+/// The fixture's frames (uint8 `[2, 2, 96, 96, 3]`) as `[4, 3, 96, 96]` in [0, 1].
+fn frames01(device: &Device) -> Tensor<4> {
+    let src = SafeSource::open(&fixture("io.safetensors")).unwrap_or_else(|e| panic!("{e}"));
+    let f = src.u8s("frames").unwrap_or_else(|e| panic!("{e}"));
+    let frames: Vec<&[u8]> = f.chunks(96 * 96 * 3).collect();
+    world_model::data::frames_to_tensor(&frames, 96, device) * 0.5 + 0.5
+}
+
+#[test]
+fn both_layouts_import_and_predict_what_pytorch_predicts() {
+    let device = Device::flex();
+    for folder in ["pretrained_model", "pretrained_model_processors"] {
+        let p = import(&fixture(folder), &device).unwrap_or_else(|e| panic!("{folder}: {e}"));
+        assert_eq!(p.tensors, 212, "{folder}: every weight but the grid");
+        assert_eq!(
+            (p.cfg.resnet_base, p.cfg.pool, p.cfg.crop),
+            (16, Pool::SpatialSoftmax { keypoints: 4 }, Some(84))
+        );
+        assert_eq!((p.cfg.inference_steps, p.cfg.net.feature_dim, p.cfg.position_first), (Some(10), 8, true));
+        // State min-max normalised as LeRobot does, with its statistics.
+        let state = io("state"); // [2, 2, 2] raw
+        let pos: Vec<f32> =
+            state.chunks(2).flat_map(|s| p.norm.agent_pos.normalise(s).collect::<Vec<_>>()).collect();
+        let pos = Tensor::from_data(TensorData::new(pos, [2, 2, 2]), &device);
+        let cond = p.net.obs_cond(frames01(&device), pos);
+        let cond = cond.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+        let d = max_abs(&cond, &io("cond"));
+        assert!(d <= 1e-5, "{folder}: conditioning differs from PyTorch by {d}");
+        let x = Tensor::from_data(TensorData::new(io("x"), [2, 16, 2]), &device);
+        let c = Tensor::from_data(TensorData::new(io("cond"), [2, cond.len() / 2]), &device);
+        let eps = p.net.unet.forward(x, Tensor::from_floats([3.0, 77.0], &device), c);
+        let eps = eps.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+        let d = max_abs(&eps, &io("eps"));
+        assert!(d <= 1e-5, "{folder}: noise prediction differs from PyTorch by {d}");
+    }
+}
+
+#[test]
+fn ten_leading_ddpm_steps_with_pytorchs_noise_give_pytorchs_actions() {
+    let device = Device::flex();
+    let p = import(&fixture("pretrained_model"), &device).unwrap_or_else(|e| panic!("{e}"));
+    let (cond, noises) = (io("cond"), io("noises")); // noises [10, 2, 16, 2]
+    let c = cond.len() / 2;
+    let ac = crate::diffusion::alphas_cumprod(100);
+    let mut j = 0;
+    let got = ddpm_sample(
+        io("x"),
+        &ac,
+        &p.cfg.timesteps(),
+        |x, t| {
+            let xt = Tensor::from_data(TensorData::new(x.to_vec(), [2, 16, 2]), &device);
+            let ct = Tensor::from_data(TensorData::new(cond.clone(), [2, c]), &device);
+            let out = p.net.unet.forward(xt, Tensor::from_floats([t as f32, t as f32], &device), ct);
+            out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+        },
+        |n| {
+            j += 1;
+            noises[(j - 1) * n..j * n].to_vec()
+        },
+    );
+    let d = max_abs(&got, &io("actions"));
+    assert!(d <= 1e-4, "DDPM differs from PyTorch's by {d}");
+}
+
+/// A copy of the legacy fixture folder with `config.json` edited by `edit`.
+fn edited(dir: &Path, edit: impl Fn(&mut serde_json::Value)) -> PathBuf {
+    let out = dir.join("pm");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::copy(fixture("pretrained_model/model.safetensors"), out.join("model.safetensors")).unwrap();
+    let text = std::fs::read_to_string(fixture("pretrained_model/config.json")).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    edit(&mut v);
+    std::fs::write(out.join("config.json"), v.to_string()).unwrap();
+    out
+}
+
+#[test]
+fn unsupported_settings_and_missing_statistics_are_refused_by_name() {
+    let device = Device::flex();
+    let tmp = tempfile::tempdir().unwrap();
+    for (field, value) in [
+        ("use_group_norm", serde_json::json!(false)),
+        ("noise_scheduler_type", serde_json::json!("DDIM")),
+        ("prediction_type", serde_json::json!("sample")),
+        ("vision_backbone", serde_json::json!("resnet34")),
+    ] {
+        let dir = edited(tmp.path(), |v| v[field] = value.clone());
+        let err = import(&dir, &device).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(err.contains(field) && err.contains("config.json"), "{field}: {err}");
+    }
+    // The processor layout without its statistics file.
+    let dir = tmp.path().join("nostats");
+    std::fs::create_dir_all(&dir).unwrap();
+    for f in ["config.json", "model.safetensors"] {
+        std::fs::copy(fixture("pretrained_model_processors").join(f), dir.join(f)).unwrap();
+    }
+    let err = import(&dir, &device).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("normalisation statistics"), "{err}");
+}

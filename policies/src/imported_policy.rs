@@ -1,0 +1,415 @@
+//! Diffusion policies imported from other codebases (Chi et al.'s diffusion policy as they train
+//! it): the `gpc-diffusion` kind (DriftWorld/GPC's Push-T policies, [`crate::import_gpc`]) and
+//! the `lerobot-diffusion` kind (LeRobot's, [`crate::import_lerobot`]), one network family with
+//! the few settings in which they differ.
+//!
+//! - Each of the last `obs_horizon` frames, in [0, 1] (LeRobot: then normalised by its image mean
+//!   and std, and centre-cropped), goes through a ResNet-18 with GroupNorm ([`ResNet18Gn`]) and
+//!   either its global average pool (GPC: 512 features) or a spatial softmax over K keypoints, a
+//!   linear layer and a ReLU (LeRobot: 2K features, [`SpatialHead`]). The conditioning is, per
+//!   frame, oldest first, its features and the agent position min-max normalised to [-1, 1]
+//!   (LeRobot: the position first).
+//! - [`CondUnet1d`] (diffusion_policy's conditional 1-D U-Net, 1:1) predicts the noise of the
+//!   `horizon`-step action sequence.
+//! - Sampling is DDPM (diffusers' `DDPMScheduler`: squared-cosine betas, ε-prediction, x₀
+//!   clipped to [-1, 1], "fixed small" variance) over every training step or over
+//!   `inference_steps` of them with "leading" spacing, stochastic: the initial noise and each
+//!   step's noise come from the episode's own generator, so a run is reproducible and
+//!   independent of batching, not equal to PyTorch's draws.
+//! - Actions `obs_horizon − 1 ..` `+ action_horizon` of the sequence are executed.
+
+use burn::module::Module;
+use burn::nn::conv::{Conv2d, Conv2dConfig};
+use burn::nn::{Linear, LinearConfig};
+use burn::tensor::activation::{relu, softmax};
+use burn::tensor::{Device, Tensor, TensorData};
+use harness::policy::{ActionChunk, Observation, Policy, PolicyError, sanitize};
+use harness::rng::Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::cpu_unet::CpuUnet1d;
+use crate::diffusion::{Normalisation, alphas_cumprod};
+use crate::net::{CondUnet1d, NetConfig};
+use crate::resnet_gn::ResNet18Gn;
+
+/// How the ResNet's last map becomes a frame's features.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Pool {
+    /// Global average pool (GPC: 8 × base features).
+    #[default]
+    Average,
+    /// A spatial softmax over `keypoints` keypoints, a linear layer and a ReLU (LeRobot:
+    /// 2 × keypoints features).
+    SpatialSoftmax {
+        /// Keypoints K.
+        keypoints: usize,
+    },
+}
+
+impl Pool {
+    fn is_average(&self) -> bool {
+        *self == Self::Average
+    }
+}
+
+/// Per-channel image normalisation, `(x − mean) / (std + 1e-8)` of frames in [0, 1].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeanStd {
+    /// Per-channel mean.
+    pub mean: [f32; 3],
+    /// Per-channel standard deviation.
+    pub std: [f32; 3],
+}
+
+/// An imported policy's configuration (`policy.json` "config").
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImportedConfig {
+    /// The ResNet's base width (64 in the released policies).
+    pub resnet_base: usize,
+    /// How the ResNet's map becomes features (absent: GPC's average pool).
+    #[serde(default, skip_serializing_if = "Pool::is_average")]
+    pub pool: Pool,
+    /// The side of the centre crop of each frame before the ResNet (absent: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crop: Option<usize>,
+    /// Image normalisation (absent: frames in [0, 1] as they are).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub image_norm: Option<MeanStd>,
+    /// Whether each frame's conditioning starts with the position (LeRobot) rather than the
+    /// features (GPC).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub position_first: bool,
+    /// Denoising steps at sampling, spaced evenly from the last (absent: every training step).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inference_steps: Option<usize>,
+    /// The U-Net's sizes (`feature_dim` as the pool gives; `encoder_width` unused).
+    pub net: NetConfig,
+    /// Predicted actions per decision.
+    pub horizon: usize,
+    /// Executed actions per decision.
+    pub action_horizon: usize,
+    /// DDPM steps (training and sampling).
+    pub train_steps: usize,
+}
+
+impl ImportedConfig {
+    /// The most actions a decision can execute (from the current observation's step on).
+    pub fn max_action_horizon(&self) -> usize {
+        (self.horizon + 1).saturating_sub(self.net.obs_horizon)
+    }
+
+    /// The denoising steps, noisiest first: `j · ⌊T / n⌋` for j = n − 1 … 0 (diffusers'
+    /// "leading" spacing; every step when `inference_steps` is absent).
+    pub fn timesteps(&self) -> Vec<usize> {
+        let t = self.train_steps;
+        let n = self.inference_steps.unwrap_or(t).clamp(1, t.max(1));
+        (0..n).rev().map(|j| j * (t / n)).collect()
+    }
+}
+
+/// LeRobot's spatial softmax head: a 1×1 conv to K keypoint maps, a softmax over each map's
+/// positions, the expected (x, y) on a grid spanning [-1, 1], then a linear layer and a ReLU.
+#[derive(Module, Debug)]
+pub struct SpatialHead {
+    /// The 1×1 conv to the keypoint maps (with bias).
+    pub nets: Conv2d,
+    /// The linear layer after it.
+    pub out: Linear,
+}
+
+impl SpatialHead {
+    fn new(c: usize, k: usize, device: &Device) -> Self {
+        Self {
+            nets: Conv2dConfig::new([c, k], [1, 1]).init(device),
+            out: LinearConfig::new(2 * k, 2 * k).init(device),
+        }
+    }
+
+    /// # Shapes
+    /// `[n, c, h, w]` → `[n, 2k]` (x then y of each keypoint, keypoint by keypoint)
+    fn forward(&self, x: Tensor<4>) -> Tensor<2> {
+        let a = self.nets.forward(x); // [n, k, h, w]
+        let [n, k, h, w] = a.dims();
+        let a = softmax(a.reshape([n, k, h * w]), 2);
+        // The grid: position i = (row, col) row-major, x = linspace(-1, 1, w)[col], y = linspace(-1, 1, h)[row].
+        let lin = |m: usize, i: usize| if m > 1 { -1.0 + 2.0 * i as f64 / (m - 1) as f64 } else { 0.0 };
+        let grid: Vec<f32> = (0..h * w).flat_map(|i| [lin(w, i % w) as f32, lin(h, i / w) as f32]).collect();
+        let grid = Tensor::<2>::from_data(TensorData::new(grid, [h * w, 2]), &a.device());
+        let kp = a.matmul(grid.unsqueeze::<3>().expand([n, h * w, 2])); // [n, k, 2]
+        relu(self.out.forward(kp.reshape([n, 2 * k])))
+    }
+}
+
+/// The networks of an imported policy.
+#[derive(Module, Debug)]
+pub struct ImportedNet {
+    /// Frame encoder.
+    pub encoder: ResNet18Gn,
+    /// LeRobot's spatial-softmax head (none: the average pool).
+    pub head: Option<SpatialHead>,
+    /// Noise predictor.
+    pub unet: CondUnet1d,
+    /// Centre crop, image normalisation and the order of each frame's conditioning.
+    crop: Option<usize>,
+    image_norm: Option<([f32; 3], [f32; 3])>,
+    position_first: bool,
+}
+
+impl ImportedNet {
+    /// Fresh networks of `cfg`'s sizes.
+    pub fn new(cfg: &ImportedConfig, device: &Device) -> Self {
+        let head = match cfg.pool {
+            Pool::Average => None,
+            Pool::SpatialSoftmax { keypoints } => {
+                Some(SpatialHead::new(8 * cfg.resnet_base, keypoints, device))
+            }
+        };
+        Self {
+            encoder: ResNet18Gn::new(cfg.resnet_base, device),
+            head,
+            unet: CondUnet1d::new(&cfg.net, device),
+            crop: cfg.crop,
+            image_norm: cfg.image_norm.as_ref().map(|m| (m.mean, m.std)),
+            position_first: cfg.position_first,
+        }
+    }
+
+    /// Observation conditioning.
+    ///
+    /// # Shapes
+    /// - `frames`: `[b·o, 3, h, w]` in [0, 1] (episode-major, oldest first)
+    /// - `pos`: `[b, o, p]` normalised proprioception
+    /// - returns `[b, o·(features + p)]`
+    pub fn obs_cond(&self, frames: Tensor<4>, pos: Tensor<3>) -> Tensor<2> {
+        let [b, o, p] = pos.dims();
+        let mut x = frames;
+        if let Some((mean, std)) = &self.image_norm {
+            let dev = x.device();
+            let m = Tensor::<1>::from_floats(mean.as_slice(), &dev).reshape([1, 3, 1, 1]);
+            let s = Tensor::<1>::from_floats(std.map(|v| v + 1e-8).as_slice(), &dev).reshape([1, 3, 1, 1]);
+            x = (x - m) / s;
+        }
+        if let Some(c) = self.crop {
+            let [_, _, h, w] = x.dims();
+            // torchvision's CenterCrop: offset round((side − c) / 2), halves to even.
+            let offset = |d: usize| if d % 2 == 1 && (d / 2) % 2 == 1 { d / 2 + 1 } else { d / 2 };
+            let (top, left) = (offset(h.saturating_sub(c)), offset(w.saturating_sub(c)));
+            x = x.narrow(2, top, c.min(h)).narrow(3, left, c.min(w));
+        }
+        let feat = match &self.head {
+            Some(head) => head.forward(self.encoder.features(x)),
+            None => self.encoder.forward(x),
+        }; // [b o, f]
+        let f = feat.dims()[1];
+        let feat = feat.reshape([b, o, f]);
+        let parts = if self.position_first { vec![pos, feat] } else { vec![feat, pos] };
+        Tensor::cat(parts, 2).reshape([b, o * (f + p)])
+    }
+}
+
+/// One DDPM step from `x` at step `t` to step `prev` (`None`: the end, ᾱ = 1) given the
+/// predicted noise `eps`: the posterior mean of x₀ clipped to [-1, 1], plus `√variance · z`
+/// for `t > 0` (`z` standard normal). `ac` is ᾱ over the schedule.
+pub fn ddpm_step(x: &mut [f32], eps: &[f32], t: usize, prev: Option<usize>, ac: &[f64], z: &[f32]) {
+    let (a, ap) = (ac[t], prev.map_or(1.0, |p| ac[p]));
+    let cur = a / ap;
+    let (sa, s1a) = (a.sqrt(), (1.0 - a).sqrt());
+    let c0 = (ap.sqrt() * (1.0 - cur) / (1.0 - a)) as f32;
+    let ct = (cur.sqrt() * (1.0 - ap) / (1.0 - a)) as f32;
+    let sd = if t > 0 { ((1.0 - ap) / (1.0 - a) * (1.0 - cur)).max(1e-20).sqrt() as f32 } else { 0.0 };
+    for (i, (v, e)) in x.iter_mut().zip(eps).enumerate() {
+        let x0 = ((f64::from(*v) - s1a * f64::from(*e)) / sa).clamp(-1.0, 1.0) as f32;
+        *v = c0 * x0 + ct * *v + if t > 0 { sd * z[i] } else { 0.0 };
+    }
+}
+
+/// DDPM sampling of `x` (`[b, horizon, action_dim]`, flat) over `timesteps` (noisiest first)
+/// of the schedule `ac`, with the noise predictor `eps(x, t)` and step noise from `noise(len)`.
+pub fn ddpm_sample(
+    mut x: Vec<f32>,
+    ac: &[f64],
+    timesteps: &[usize],
+    mut eps: impl FnMut(&[f32], usize) -> Vec<f32>,
+    mut noise: impl FnMut(usize) -> Vec<f32>,
+) -> Vec<f32> {
+    for (j, &t) in timesteps.iter().enumerate() {
+        let e = eps(&x, t);
+        let z = if t > 0 { noise(x.len()) } else { Vec::new() };
+        ddpm_step(&mut x, &e, t, timesteps.get(j + 1).copied(), ac, &z);
+    }
+    x
+}
+
+/// A loaded GPC policy (inference).
+pub struct ImportedDiffusion {
+    /// Checkpoint name.
+    pub name: String,
+    /// Configuration.
+    pub cfg: ImportedConfig,
+    /// Normalisation (recorded at import).
+    pub norm: Normalisation,
+    /// Each action entry's bounds in the task: outputs are clamped into them.
+    pub bounds: (Vec<f32>, Vec<f32>),
+    net: ImportedNet,
+    /// The U-Net on plain CPU loops (on the CPU device).
+    cpu_unet: Option<CpuUnet1d>,
+    ac: Vec<f64>,
+    device: Device,
+}
+
+impl ImportedDiffusion {
+    /// Wraps imported networks; `bounds` are the task's action bounds (low, high).
+    pub fn new(
+        name: String,
+        cfg: ImportedConfig,
+        norm: Normalisation,
+        bounds: (Vec<f32>, Vec<f32>),
+        net: ImportedNet,
+        device: &Device,
+    ) -> Self {
+        let ac = alphas_cumprod(cfg.train_steps);
+        let cpu_unet = (*device == Device::flex())
+            .then(|| {
+                CpuUnet1d::new(&net.unet)
+                    .inspect_err(|e| tracing::warn!(policy = %name, "burn's U-Net kept: {e}"))
+            })
+            .and_then(Result::ok);
+        Self { name, cfg, norm, bounds, net, cpu_unet, ac, device: device.clone() }
+    }
+
+    /// The noise prediction for `x` (`[b, horizon, action_dim]`) at step `t` under `cond`.
+    fn eps(&self, cond: &[f32], x: &[f32], b: usize, t: usize) -> Vec<f32> {
+        let (h, ad) = (self.cfg.horizon, self.cfg.net.action_dim);
+        if let Some(unet) = &self.cpu_unet {
+            let prep = unet.prepare(cond, b);
+            return unet.forward(&prep, x, h, t as f32);
+        }
+        let c = cond.len() / b.max(1);
+        let cond = Tensor::from_data(TensorData::new(cond.to_vec(), [b, c]), &self.device);
+        let x = Tensor::from_data(TensorData::new(x.to_vec(), [b, h, ad]), &self.device);
+        let tt = Tensor::<1>::from_floats(vec![t as f32; b].as_slice(), &self.device);
+        self.net
+            .unet
+            .forward(x, tt, cond)
+            .into_data()
+            .convert::<f32>()
+            .try_into_vec::<f32>()
+            .unwrap_or_default()
+    }
+}
+
+impl Policy for ImportedDiffusion {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn obs_horizon(&self) -> usize {
+        self.cfg.net.obs_horizon
+    }
+
+    fn action_horizon(&self) -> usize {
+        self.cfg.action_horizon
+    }
+
+    fn act(&self, obs: &[Observation], rngs: &mut [Rng]) -> Result<Vec<ActionChunk>, PolicyError> {
+        let (o, s, h) = (self.cfg.net.obs_horizon, self.cfg.net.image_size, self.cfg.horizon);
+        let (p, ad) = (self.norm.agent_pos.dim(), self.norm.action.dim());
+        let (frames, pos) = crate::diffusion::gather(&self.name, obs, o, s, p, &self.norm)?;
+        let bad = |m: String| PolicyError::Input { policy: self.name.clone(), message: m };
+        let b = obs.len();
+        let x01 = world_model::data::frames_to_tensor(&frames, s, &self.device) * 0.5 + 0.5;
+        let pos = Tensor::from_data(TensorData::new(pos, [b, o, p]), &self.device);
+        let cond = self
+            .net
+            .obs_cond(x01, pos)
+            .into_data()
+            .convert::<f32>()
+            .try_into_vec::<f32>()
+            .unwrap_or_default();
+        // Each episode's initial noise, then each step's, from its own generator.
+        let x: Vec<f32> = rngs.iter_mut().flat_map(|r| r.normals_f32(h * ad)).collect();
+        let per = h * ad;
+        let v = ddpm_sample(
+            x,
+            &self.ac,
+            &self.cfg.timesteps(),
+            |x, t| self.eps(&cond, x, b, t),
+            |_| rngs.iter_mut().flat_map(|r| r.normals_f32(per)).collect(),
+        );
+        if v.len() != b * h * ad || v.iter().any(|x| !x.is_finite()) {
+            return Err(bad(format!(
+                "the network returned {} values (finite?), expected {}",
+                v.len(),
+                b * h * ad
+            )));
+        }
+        let start = o - 1;
+        let mut chunks: Vec<ActionChunk> = (0..b)
+            .map(|i| {
+                (start..(start + self.cfg.action_horizon).min(h))
+                    .map(|t| self.norm.action.denormalise(&v[(i * h + t) * ad..(i * h + t + 1) * ad]))
+                    .collect()
+            })
+            .collect();
+        let clamped = sanitize(&self.name, &mut chunks, &self.bounds.0, &self.bounds.1)?;
+        if clamped > 0 {
+            tracing::warn!(policy = %self.name, clamped, "actions outside the task's bounds clamped");
+        }
+        Ok(chunks)
+    }
+}
+
+/// Loads a `gpc-diffusion` checkpoint folder (`policy.json` + `model.bpk`), checked against
+/// what the scenario gives.
+///
+/// # Errors
+/// [`PolicyLoadError`] naming the folder for a config that does not fit the scenario or
+/// weights that are missing, truncated or do not match it.
+pub fn load(
+    dir: &std::path::Path,
+    file: crate::dir::PolicyFile,
+    expect: &crate::dir::Expectations,
+    device: &Device,
+) -> Result<Box<dyn Policy>, crate::dir::PolicyLoadError> {
+    let err = |m: String| crate::dir::PolicyLoadError::new(dir, m);
+    let cfg: ImportedConfig = serde_json::from_value(file.config.clone())
+        .map_err(|e| err(format!("policy.json \"config\": {e}")))?;
+    let n = &cfg.net;
+    if n.image_size != expect.image_size {
+        return Err(err(format!(
+            "takes {0}x{0} frames, the scenario renders {1}x{1}",
+            n.image_size, expect.image_size
+        )));
+    }
+    if n.action_dim != expect.action_dim() || n.proprio() != expect.proprio_dim {
+        return Err(err(format!(
+            "acts in {}-D and reads {} proprioceptive entries, the scenario takes {}-D and gives {}",
+            n.action_dim,
+            n.proprio(),
+            expect.action_dim(),
+            expect.proprio_dim
+        )));
+    }
+    let norm = &file.normalisation;
+    if norm.agent_pos.dim() != n.proprio() || norm.action.dim() != n.action_dim {
+        return Err(err("policy.json \"normalisation\" does not fit the config".into()));
+    }
+    if cfg.action_horizon == 0 || cfg.action_horizon > cfg.max_action_horizon() || cfg.train_steps == 0 {
+        return Err(err(format!(
+            "action horizon {} does not fit horizon {}",
+            cfg.action_horizon, cfg.horizon
+        )));
+    }
+    let net = crate::dir::load_weights(ImportedNet::new(&cfg, device), &dir.join("model.bpk"))
+        .map_err(|e| err(format!("model.bpk: {e}")))?;
+    let bounds = (expect.action_low.clone(), expect.action_high.clone());
+    let name = crate::dir::checkpoint_name(dir);
+    Ok(Box::new(ImportedDiffusion::new(name, cfg, file.normalisation, bounds, net, device)))
+}
+
+#[cfg(test)]
+#[path = "imported_policy_tests.rs"]
+mod tests;
