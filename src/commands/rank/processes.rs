@@ -278,7 +278,9 @@ fn tail(log: &Path) -> String {
 
 /// The command line of shard `i` of `n` into `dir`: every setting of the run
 /// (the finishing `--resume` refuses the joined rows if one differed), one worker, no
-/// report and no gates (they belong to the whole run); `--resume` or `--force`.
+/// report and no gates (they belong to the whole run); `--resume` or `--force`. A test
+/// (`every_flag_of_rank_is_either_passed_to_the_shards_or_set_by_them`) fails when `rank` gains
+/// a flag this function is not told about.
 fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> Vec<OsString> {
     let mut v: Vec<OsString> = Vec::new();
     let mut flag = |name: &str, value: OsString| {
@@ -406,6 +408,63 @@ mod tests {
         assert_eq!(s.claims, Some(PathBuf::from("o.shards/claims")), "the shards share one claims folder");
         let r = parse(&shard_args(&a, 0, 3, Path::new("d"), true));
         assert!(r.resume && !r.force);
+    }
+
+    /// The flags of `rank` a shard is given with the run's value (`shard_args`); every other flag
+    /// is in [`SHARD_SETS_ITSELF`]. A test checks that every flag of `rank` is in one of the two,
+    /// so a new flag cannot be dropped from the shards unnoticed.
+    const SHARD_GETS: &[&str] = &[
+        "policies",
+        "world_model",
+        "judge",
+        "judge_persist",
+        "judge_every_frame",
+        "alpha",
+        "noise_scale",
+        "scenario",
+        "episodes",
+        "seed_start",
+        "max_steps",
+        "batch",
+        "seed",
+        "bootstrap",
+    ];
+
+    /// The flags a shard sets for itself: one worker, its own shard, claims folder and output,
+    /// `--force` or `--resume`, no processes of its own, no report and no gates (the whole run's).
+    const SHARD_SETS_ITSELF: &[&str] = &[
+        "jobs",
+        "shard",
+        "claims",
+        "out",
+        "force",
+        "resume",
+        "processes",
+        "min_pearson",
+        "max_inversions",
+        "no_report",
+    ];
+
+    #[test]
+    fn every_flag_of_rank_is_either_passed_to_the_shards_or_set_by_them() {
+        use clap::CommandFactory;
+        let cli = crate::cli::Cli::command();
+        let rank = cli.find_subcommand("rank").expect("a rank subcommand");
+        let ids: Vec<String> = rank
+            .get_arguments()
+            .map(|a| a.get_id().to_string())
+            .filter(|id| !["help", "version"].contains(&id.as_str()))
+            .collect();
+        for id in &ids {
+            let known = SHARD_GETS.contains(&id.as_str()) || SHARD_SETS_ITSELF.contains(&id.as_str());
+            assert!(
+                known,
+                "rank's --{id} is neither passed to shards (SHARD_GETS) nor set by them (SHARD_SETS_ITSELF)"
+            );
+        }
+        for id in SHARD_GETS.iter().chain(SHARD_SETS_ITSELF) {
+            assert!(ids.iter().any(|i| i == id), "{id} is not a flag of rank");
+        }
     }
 
     #[test]
