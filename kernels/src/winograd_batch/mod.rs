@@ -73,7 +73,10 @@ impl BatchWinograd {
         let per_img = (h / 2) * (w / 2);
         // Images per chunk: a whole number of 8-lane runs where the budget allows.
         let fit = (CHUNK / (16 * cin.max(cout) * per_img)).max(1);
-        let per = if fit >= LANES { fit / LANES * LANES } else { fit }.min(imgs.div_ceil(LANES) * LANES);
+        // Never fewer images than fill the lanes there are (up to 8): a chunk is padded to
+        // whole 8-lane runs anyway, so a chunk of one image transformed and multiplied 8
+        // lanes of which 7 were zeros (96 channels at 96²: 3.5 M floats a buffer per image).
+        let per = if fit >= LANES { fit / LANES * LANES } else { imgs.min(LANES) }.min(imgs.div_ceil(LANES) * LANES);
         let lanes = per.div_ceil(LANES) * LANES;
         // Every value a chunk reads from these is written first in that chunk (`buf`'s
         // border and padding lanes are zeroed by the input transform), so stale values
@@ -233,6 +236,10 @@ mod tests {
             (5, 6, 2, 4, 10),
             (4, 3, 19, 12, 12),
             (2, 3, 17, 6, 6),
+            // Wide and large: 16 · 96 · 24² floats per image, so the budget fits 2 images
+            // (2,097,152 / 884,736); a chunk takes all 3 regardless, as many as it has lanes
+            // for (at 96² the budget fitted none, and each chunk ran one image in 8 lanes).
+            (96, 96, 3, 48, 48),
         ] {
             let wt = values(cout * cin * 9, 7);
             let x = values(cin * imgs * h * w, 3);
