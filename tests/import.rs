@@ -214,4 +214,13 @@ fn gpc_and_lerobot_policies_become_checkpoints_that_rank_runs() {
         let n = rows.lines().filter(|l| l.contains(name)).count();
         assert_eq!(n, 4, "{name}: two episodes in each branch:\n{rows}");
     }
+
+    // GPC-RANK with GPC's own proposer: plan takes the imported policy.
+    let planned = dir.path().join("plan");
+    let args = ["plan", "--scenario", "pusht-gpc", "--policy", s(&pol), "--world-model", s(&wm)];
+    let tiny = ["--planners", "world-model", "--episodes", "1", "--max-steps", "4", "--proposals", "2"];
+    let more = ["--imagine", "4", "--execute", "4", "--bootstrap", "20", "--out", s(&planned)];
+    expect_code(&run(&[&args[..], &tiny[..], &more[..]].concat()), 0);
+    let res = read_json(&planned.join("results.json"));
+    assert_eq!(res["planners"]["world-model"]["episodes"], 1, "{res}");
 }

@@ -374,9 +374,28 @@ pub fn load(
     expect: &crate::dir::Expectations,
     device: &Device,
 ) -> Result<Box<dyn Policy>, crate::dir::PolicyLoadError> {
+    load_returning(dir, file, expect, device, None)
+}
+
+/// [`load`], the policy returning `returns` actions a decision instead of its own action
+/// horizon (`plan` imagines and executes slices of other lengths; the policy still predicts
+/// its whole horizon). `returns` must fit ([`ImportedConfig::max_action_horizon`]).
+///
+/// # Errors
+/// As [`load`], and a `returns` that does not fit.
+pub fn load_returning(
+    dir: &std::path::Path,
+    file: crate::dir::PolicyFile,
+    expect: &crate::dir::Expectations,
+    device: &Device,
+    returns: Option<usize>,
+) -> Result<Box<dyn Policy>, crate::dir::PolicyLoadError> {
     let err = |m: String| crate::dir::PolicyLoadError::new(dir, m);
-    let cfg: ImportedConfig = serde_json::from_value(file.config.clone())
+    let mut cfg: ImportedConfig = serde_json::from_value(file.config.clone())
         .map_err(|e| err(format!("policy.json \"config\": {e}")))?;
+    if let Some(r) = returns {
+        cfg.action_horizon = r;
+    }
     let n = &cfg.net;
     if n.image_size != expect.image_size {
         return Err(err(format!(

@@ -30,8 +30,8 @@ impl From<Planner> for engine::plan::Planner {
 /// `evalharness plan`.
 #[derive(Debug, Args)]
 pub struct PlanArgs {
-    /// The policy checkpoint that proposes action chunks (a `diffusion` policy: its
-    /// sampling noise makes the proposals differ).
+    /// The policy checkpoint that proposes action chunks (a diffusion policy, evalharness's or
+    /// one imported with `import policy`: its sampling noise makes the proposals differ).
     #[arg(long, default_value = "checkpoints/pusht/policies/ft-epoch-0012")]
     pub policy: PathBuf,
     /// The world model that imagines the proposals (from `train world-model`).

@@ -76,7 +76,8 @@ impl BatchWinograd {
         // Never fewer images than fill the lanes there are (up to 8): a chunk is padded to
         // whole 8-lane runs anyway, so a chunk of one image transformed and multiplied 8
         // lanes of which 7 were zeros (96 channels at 96²: 3.5 M floats a buffer per image).
-        let per = if fit >= LANES { fit / LANES * LANES } else { imgs.min(LANES) }.min(imgs.div_ceil(LANES) * LANES);
+        let per = if fit >= LANES { fit / LANES * LANES } else { imgs.min(LANES) }
+            .min(imgs.div_ceil(LANES) * LANES);
         let lanes = per.div_ceil(LANES) * LANES;
         // Every value a chunk reads from these is written first in that chunk (`buf`'s
         // border and padding lanes are zeroed by the input transform), so stale values

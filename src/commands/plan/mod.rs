@@ -33,12 +33,13 @@ use engine::plan::{PlanCtx, PlanRow, Planner, plan_key, run_batch};
 
 /// Loads the proposing policy, returning chunks of max(imagine, execute) actions (it
 /// still predicts its whole horizon; only the slice it returns is longer), with the
-/// resolved `--imagine` and `--execute`.
+/// resolved `--imagine` and `--execute`. Evalharness's own diffusion policies and imported
+/// ones (`gpc-diffusion`, `lerobot-diffusion`: GPC-RANK's own proposers) propose.
 fn load_proposer(
     a: &PlanArgs,
     task: &dyn harness::task::Task,
     device: &burn::tensor::Device,
-) -> Result<(DiffusionPolicy, usize, usize)> {
+) -> Result<(Box<dyn Policy>, usize, usize)> {
     let image_size = task.observation_spec().image_size;
     let dir = &a.policy;
     // The kind first: other kinds' policy.json has other fields.
@@ -47,40 +48,51 @@ fn load_proposer(
         .as_str()
         .unwrap_or("?")
         .to_string();
-    if kind != "diffusion" {
-        bail!(
+    let file = match kind.as_str() {
+        "diffusion" | "gpc-diffusion" | "lerobot-diffusion" => read_policy_file(dir)?,
+        _ => bail!(
             "{}: plan needs a diffusion policy (its sampling noise makes the proposals), this one is kind \"{kind}\"",
+            dir.display()
+        ),
+    };
+    // (frame side, most actions ahead, own action horizon, horizon, observations)
+    let (size, max, own, horizon, obs) = if kind == "diffusion" {
+        let c = diffusion_config(dir, &file)?;
+        (c.net.image_size, c.max_action_horizon(), c.action_horizon, c.horizon, c.net.obs_horizon)
+    } else {
+        let c: policies::imported_policy::ImportedConfig = serde_json::from_value(file.config.clone())
+            .with_context(|| format!("policy {}: policy.json \"config\"", dir.display()))?;
+        (c.net.image_size, c.max_action_horizon(), c.action_horizon, c.horizon, c.net.obs_horizon)
+    };
+    if size != image_size {
+        bail!(
+            "{}: takes {size}x{size} frames, the scenario renders {image_size}x{image_size}",
             dir.display()
         );
     }
-    let file = read_policy_file(dir)?;
-    let mut cfg = diffusion_config(dir, &file)?;
-    if cfg.net.image_size != image_size {
-        bail!(
-            "{}: takes {1}x{1} frames, the scenario renders {image_size}x{image_size}",
-            dir.display(),
-            cfg.net.image_size
-        );
-    }
-    let max = cfg.max_action_horizon();
     let imagine = a.imagine.unwrap_or(max);
-    let execute = a.execute.unwrap_or(cfg.action_horizon);
+    let execute = a.execute.unwrap_or(own);
     for (flag, v) in [("--imagine", imagine), ("--execute", execute)] {
         if v == 0 || v > max {
             bail!(
-                "{flag} {v}: policy {} predicts {max} actions from the current step (horizon {}, {} observations)",
+                "{flag} {v}: policy {} predicts {max} actions from the current step (horizon {horizon}, {obs} observations)",
                 dir.display(),
-                cfg.horizon,
-                cfg.net.obs_horizon
             );
         }
     }
+    let returns = imagine.max(execute);
+    if kind != "diffusion" {
+        let expect = crate::policy_kinds::expectations(task);
+        let p = policies::imported_policy::load_returning(dir, file, &expect, device, Some(returns))?;
+        return Ok((p, imagine, execute));
+    }
+    let mut cfg = diffusion_config(dir, &file)?;
     let net = diffusion_weights(dir, &cfg, device)?;
-    cfg.action_horizon = imagine.max(execute);
+    cfg.action_horizon = returns;
     let name = checkpoint_name(dir);
     let spec = task.action_spec();
     let bounds = (spec.low, spec.high);
-    Ok((DiffusionPolicy::new(name, cfg, file.normalisation, bounds, net, device), imagine, execute))
+    Ok((Box::new(DiffusionPolicy::new(name, cfg, file.normalisation, bounds, net, device)), imagine, execute))
 }
 
 /// `evalharness plan`.
@@ -173,7 +185,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         .context("starting worker threads")?;
     let ctx = PlanCtx {
         task: task.as_ref(),
-        policy: &policy,
+        policy: policy.as_ref(),
         wm: wm.as_ref(),
         proposals: a.proposals,
         imagine,
