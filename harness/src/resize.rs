@@ -56,6 +56,49 @@ pub fn resize_linear_u8(img: &[u8], h: usize, w: usize, c: usize, oh: usize, ow:
     Some(out)
 }
 
+/// Resizes an `h × w × c` 8-bit image to `oh × ow × c` as PyTorch's
+/// `F.interpolate(mode="bilinear", align_corners=False)` does on its float values, then
+/// `round()` (half to even) and clamp to bytes: how DriftWorld's robomimic data brought 84²
+/// frames to 96². Source coordinate `(x + 0.5)·w/ow − 0.5`, clamped below at 0, in single
+/// precision. Returns `None` when `img` is not `h·w·c` bytes or a side is 0.
+pub fn resize_bilinear_torch_u8(
+    img: &[u8],
+    h: usize,
+    w: usize,
+    c: usize,
+    oh: usize,
+    ow: usize,
+) -> Option<Vec<u8>> {
+    if img.len() != h * w * c || [h, w, c, oh, ow].contains(&0) {
+        return None;
+    }
+    // Per output index: the two source indices and the weight of the second.
+    let taps = |src: usize, dst: usize| -> Vec<(usize, usize, f32)> {
+        let scale = src as f32 / dst as f32;
+        (0..dst)
+            .map(|x| {
+                let s = ((x as f32 + 0.5) * scale - 0.5).max(0.0);
+                let i0 = (s as usize).min(src - 1);
+                let i1 = (i0 + 1).min(src - 1);
+                (i0, i1, s - i0 as f32)
+            })
+            .collect()
+    };
+    let (tx, ty) = (taps(w, ow), taps(h, oh));
+    let mut out = vec![0u8; oh * ow * c];
+    for (dy, &(y0, y1, ly)) in ty.iter().enumerate() {
+        for (dx, &(x0, x1, lx)) in tx.iter().enumerate() {
+            for ch in 0..c {
+                let p = |y: usize, x: usize| f32::from(img[(y * w + x) * c + ch]);
+                let v = (1.0 - ly) * ((1.0 - lx) * p(y0, x0) + lx * p(y0, x1))
+                    + ly * ((1.0 - lx) * p(y1, x0) + lx * p(y1, x1));
+                out[(dy * ow + dx) * c + ch] = v.round_ties_even().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    Some(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -101,5 +144,27 @@ mod tests {
         assert_eq!(resize_linear_u8(&[0; 11], 2, 2, 3, 1, 1), None);
         // Weights sum to 2048 in each pass, so a constant survives: 200 → 200.
         assert_eq!(resize_linear_u8(&[200; 5 * 7 * 3], 5, 7, 3, 3, 4), Some(vec![200; 3 * 4 * 3]));
+    }
+
+    #[test]
+    fn pytorchs_bilinear_upsampling_of_84_to_96_is_reproduced() {
+        // torch_bilinear_84_to_96.bin: scripts/fixtures/torch_resize.py (torch 2.5.1), the
+        // same pattern image upsampled with F.interpolate(bilinear, align_corners=False),
+        // rounded to bytes.
+        let want =
+            std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/torch_bilinear_84_to_96.bin"))
+                .unwrap_or_default();
+        let got = resize_bilinear_torch_u8(&pattern(84), 84, 84, 3, 96, 96).unwrap_or_default();
+        assert_eq!(got.len(), want.len());
+        let differ: Vec<usize> =
+            got.iter().zip(&want).enumerate().filter(|(_, (a, b))| a != b).map(|(i, _)| i).collect();
+        assert!(
+            differ.is_empty(),
+            "{} of {} bytes differ, first at {:?}",
+            differ.len(),
+            want.len(),
+            differ.first()
+        );
+        assert_eq!(resize_bilinear_torch_u8(&[0; 5], 2, 2, 3, 4, 4), None);
     }
 }

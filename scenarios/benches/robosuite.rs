@@ -76,7 +76,16 @@ fn settings() -> Vec<(&'static str, Visual)> {
         ("samples_0", Visual { samples: 0, ..base }),
         ("shadow_256", Visual { shadow_size: 256, ..base }),
         ("no_reflections", Visual { reflections: false, ..base }),
-        ("all", Visual { offscreen: [96, 96], samples: 0, shadow_size: 256, reflections: false }),
+        (
+            "all",
+            Visual {
+                offscreen: [96, 96],
+                samples: 0,
+                shadow_size: 256,
+                reflections: false,
+                render_size: None,
+            },
+        ),
     ]
 }
 

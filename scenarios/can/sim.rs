@@ -156,7 +156,8 @@ impl CanSim {
             object_half: None,
         };
         let arm = ArmEpisode::start("can", seed, model, &names, init.arm_q, [x, y, z, qw, qx, qy, qz])?
-            .with_model_key(&key)?;
+            .with_model_key(&key)?
+            .with_render_size(self.cfg.visual.render_size.map(|r| r as usize));
         Ok(CanEpisode { arm, cfg: self.cfg.clone(), init })
     }
 }

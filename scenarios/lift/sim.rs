@@ -139,7 +139,8 @@ impl LiftSim {
             object_half: Some(init.cube_half),
         };
         let arm = ArmEpisode::start("lift", seed, model, &names, init.arm_q, [x, y, z, qw, qx, qy, qz])?
-            .with_model_key(&key)?;
+            .with_model_key(&key)?
+            .with_render_size(self.cfg.visual.render_size.map(|r| r as usize));
         Ok(LiftEpisode {
             arm,
             table_top: self.cfg.table_offset[2],

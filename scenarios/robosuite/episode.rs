@@ -62,6 +62,8 @@ pub struct ArmEpisode {
     /// The recipe of the model as a render request names it, for a render worker to
     /// build the same one.
     key: Option<Arc<str>>,
+    /// Render at this side, then upsample to the asked size ([`super::visual::Visual::render_size`]).
+    render_from: Option<usize>,
 }
 
 impl ArmEpisode {
@@ -101,7 +103,7 @@ impl ArmEpisode {
         data.forward();
         let osc = Osc::new(&data, index);
         let shown = data.qpos().to_vec();
-        Ok(Self { scenario, seed, step: 0, data, osc, object: body, shown, key: None })
+        Ok(Self { scenario, seed, step: 0, data, osc, object: body, shown, key: None, render_from: None })
     }
 
     /// Names the recipe of this episode's model, so that render workers
@@ -210,11 +212,28 @@ impl ArmEpisode {
     ///
     /// With render workers running ([`super::render_pool::start`]) a worker renders
     /// it, the same bytes, so that several threads render at once.
+    ///
+    /// With a render size ([`ArmEpisode::with_render_size`]) the camera renders at that side
+    /// and the frame is upsampled to `size` as PyTorch's bilinear interpolation does.
     pub fn render(&mut self, size: usize) -> Result<Vec<u8>, ScenarioError> {
-        if let (true, Some(key)) = (super::render_pool::active(), &self.key) {
-            return super::render_pool::render(key, &self.shown, size);
+        let side = self.render_from.unwrap_or(size);
+        let raw = match (super::render_pool::active(), &self.key) {
+            (true, Some(key)) => super::render_pool::render(key, &self.shown, side)?,
+            _ => render_agentview(&mut self.data, side)?,
+        };
+        if side == size {
+            return Ok(raw);
         }
-        render_agentview(&mut self.data, size)
+        harness::resize::resize_bilinear_torch_u8(&raw, side, side, 3, size, size).ok_or_else(|| {
+            ScenarioError::Render { message: format!("a {side}² frame that is not {side}² RGB") }
+        })
+    }
+
+    /// Renders frames at `side` and upsamples them to the asked size (`None`: render at it).
+    #[must_use]
+    pub fn with_render_size(mut self, side: Option<usize>) -> Self {
+        self.render_from = side;
+        self
     }
 }
 

@@ -27,11 +27,17 @@ pub struct Visual {
     /// sets every arena material's reflectance to 0, which skips MuJoCo's mirrored
     /// second pass over the scene.
     pub reflections: bool,
+    /// Render frames at this side and upsample them to the observation size with PyTorch's
+    /// bilinear interpolation (`align_corners=False`, rounded to bytes), as DriftWorld's
+    /// robomimic data brought robomimic's 84² frames to 96² (`render_size = 84`). Absent: render
+    /// at the observation size.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub render_size: Option<u32>,
 }
 
 impl Default for Visual {
     fn default() -> Self {
-        Self { offscreen: [640, 480], samples: 4, shadow_size: 4096, reflections: true }
+        Self { offscreen: [640, 480], samples: 4, shadow_size: 4096, reflections: true, render_size: None }
     }
 }
 
@@ -59,6 +65,9 @@ impl Visual {
         }
         if !(1..=16384).contains(&self.shadow_size) {
             return Err(bad("shadow_size", "must be in [1, 16384]"));
+        }
+        if self.render_size.is_some_and(|r| !(16..=1024).contains(&r)) {
+            return Err(bad("render_size", "must be in [16, 1024]"));
         }
         Ok(())
     }
@@ -128,5 +137,10 @@ mod tests {
                 .contains("visual.offscreen")
         );
         v.validate(p).unwrap();
+        let small = Visual { render_size: Some(8), ..v };
+        assert!(small.validate(p).unwrap_err().to_string().contains("visual.render_size"));
+        // The default is not written out: configs from before the setting read the same.
+        let text = toml::to_string(&v).unwrap();
+        assert!(!text.contains("render_size"), "{text}");
     }
 }
