@@ -189,6 +189,13 @@ fn gpc_and_lerobot_policies_become_checkpoints_that_rank_runs() {
         expect_code(&run(&["import", "policy", "--format", "gpc", s(&wm_file), "--out", s(&other)]), 2);
     assert!(err.contains("micro.pth") && err.contains("model."), "{err}");
     assert!(!other.exists());
+    // Each format says what it reads when given the other kind of path.
+    let (_, err) =
+        expect_code(&run(&["import", "policy", "--format", "gpc", s(dir.path()), "--out", s(&other)]), 2);
+    assert!(err.contains("reads a checkpoint file"), "{err}");
+    let (_, err) =
+        expect_code(&run(&["import", "policy", "--format", "lerobot", s(&file), "--out", s(&other)]), 2);
+    assert!(err.contains("reads a pretrained_model folder"), "{err}");
 
     // A LeRobot policy folder (its statistics in the preprocessor's file) beside it.
     let lerobot = Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -37,6 +37,12 @@ pub fn run(a: &ImportPolicyArgs) -> Result<ExitCode> {
 
 /// A LeRobot `pretrained_model` folder.
 fn lerobot(a: &ImportPolicyArgs) -> Result<ExitCode> {
+    if !a.file.join("config.json").is_file() {
+        anyhow::bail!(
+            "{}: --format lerobot reads a pretrained_model folder (config.json, model.safetensors); this has no config.json",
+            a.file.display()
+        );
+    }
     if a.weights == PolicyWeights::Model {
         anyhow::bail!(
             "--weights model: a LeRobot folder holds one copy of the weights (leave --weights out)"
@@ -91,6 +97,12 @@ fn lerobot(a: &ImportPolicyArgs) -> Result<ExitCode> {
 
 /// A GPC checkpoint file.
 fn gpc(a: &ImportPolicyArgs) -> Result<ExitCode> {
+    if a.file.is_dir() {
+        anyhow::bail!(
+            "{}: --format gpc reads a checkpoint file (ckpt-epN.pth), not a folder",
+            a.file.display()
+        );
+    }
     let staged = Staged::new(&a.out, a.force, &Inputs::new().add("FILE", &a.file))?;
     let sha = harness::fingerprint::file(&a.file).with_context(|| format!("{}", a.file.display()))?;
     let device = world_model::device::selected()?;
