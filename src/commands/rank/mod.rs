@@ -281,7 +281,13 @@ fn run_with(
         None
     } else {
         if shards == 1 {
-            rollouts(a, &dirs, &rows, &failed_names, &setup, &wm, &pool)?;
+            // The policies that loaded and ran without failing, as the run loaded them.
+            let named: Vec<(String, &dyn harness::policy::Policy)> = loaded
+                .iter()
+                .map(|(pi, p)| (names[*pi].clone(), p.as_ref()))
+                .filter(|(n, _)| !failed_names.contains(&n.as_str()))
+                .collect();
+            rollouts(a, &named, &rows, &setup, &wm, &pool)?;
         }
         Some(report::write_report(&a.out)?)
     };
@@ -411,31 +417,25 @@ pub(crate) fn load_world_model(
 }
 
 /// Replays each policy's best- and worst-agreeing episodes with frame recording, the
-/// policies on the pool's threads at once (a policy's replay alone is two episodes: its
-/// batched calls leave a core idle); the files and the index are the same in any order.
+/// policies (those that loaded, as the run loaded them) on the pool's threads at once (a
+/// policy's replay alone is two episodes: its batched calls leave a core idle); the files
+/// and the index are the same in any order.
 fn rollouts(
     a: &RankArgs,
-    dirs: &[std::path::PathBuf],
+    policies: &[(String, &dyn harness::policy::Policy)],
     rows: &[EpisodeRow],
-    failed: &[&str],
     setup: &Setup,
     wm: &WorldModel,
     pool: &rayon::ThreadPool,
 ) -> Result<()> {
     use rayon::prelude::*;
     let dir = a.out.join("filmstrips");
-    let device = wm.device().clone();
-    let expect = expectations(setup.task);
     let strips: Vec<Vec<(std::path::PathBuf, String)>> = pool.install(|| {
-        dirs.par_iter()
-            .map(|d| {
-                let name = checkpoint_name(d);
-                if failed.contains(&name.as_str()) {
-                    return Ok(Vec::new());
-                }
-                let Ok(policy) = load_any(d, &expect, &device, setup.task) else { return Ok(Vec::new()) };
-                let picks = media::pick_seeds(rows, &name);
-                media::write_rollouts(&dir, policy.as_ref(), &picks, setup, wm, 4)
+        policies
+            .par_iter()
+            .map(|(name, policy)| {
+                let picks = media::pick_seeds(rows, name);
+                media::write_rollouts(&dir, *policy, &picks, setup, wm, 4)
             })
             .collect::<Result<_>>()
     })?;
