@@ -30,6 +30,7 @@ pub mod judge_pose;
 pub mod judge_read;
 pub mod judge_rule;
 pub mod judge_train;
+mod lerobot_config;
 pub mod net;
 pub mod pretrain;
 pub mod resnet;
