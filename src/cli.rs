@@ -414,7 +414,7 @@ pub struct TasksArgs {
 /// Options shared by commands that run a scenario.
 #[derive(Debug, Args)]
 pub struct ScenarioArgs {
-    /// Scenario name (pusht, lift, can) or path to a scenario .toml file.
+    /// Scenario name (pusht, pusht-gpc, lift, can) or path to a scenario .toml file.
     #[arg(long, default_value = "pusht")]
     pub scenario: String,
     /// Number of episodes.
