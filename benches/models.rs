@@ -46,7 +46,12 @@ fn path(var: &str, default: &str) -> PathBuf {
 
 /// A grey 96 × 96 observation history of two frames.
 fn observation() -> Observation {
-    Observation { frames: vec![vec![200u8; 96 * 96 * 3]; 2], proprio: vec![vec![256.0, 256.0]; 2], size: 96 }
+    Observation {
+        frames: vec![vec![200u8; 96 * 96 * 3]; 2],
+        proprio: vec![vec![256.0, 256.0]; 2],
+        size: 96,
+        exact: None,
+    }
 }
 
 fn policy(c: &mut Criterion) {

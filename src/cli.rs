@@ -294,6 +294,11 @@ pub struct RankArgs {
     /// and scored, and the episode's score is the best of them.
     #[arg(long)]
     pub judge_every_frame: bool,
+    /// Hand policies the world model's frames unrounded (values in [0, 1] before the bytes),
+    /// as the official DriftWorld loop feeds them: imported policies read them; evalharness's
+    /// own read the bytes either way. Needs a world model of whole frames (not goal-free).
+    #[arg(long)]
+    pub float_frames: bool,
     /// Action-accentuation strength α, for a world model trained with
     /// `--accentuation` (default: its configured α).
     #[arg(long)]

@@ -222,6 +222,28 @@ fn gpc_and_lerobot_policies_become_checkpoints_that_rank_runs() {
         assert_eq!(n, 4, "{name}: two episodes in each branch:\n{rows}");
     }
 
+    // The official loop's float frames: the imported policies read the world model's frames
+    // before rounding; the run records it.
+    let floats = dir.path().join("rank_floats");
+    let args = tiny_rank_args(&set, &wm, &floats);
+    let args = with_flag(&with_flag(&args, "--episodes", "2"), "--max-steps", "4");
+    expect_code(&run(&[&args[..], &["--scenario", "pusht-gpc", "--float-frames"]].concat()), 0);
+    assert_eq!(read_json(&floats.join("config.json"))["float_frames"], true);
+    // A goal-free world model draws the goal back onto bytes: refused with the flag.
+    let (_, err) = expect_code(
+        &run(&[
+            &tiny_rank_args(
+                &set,
+                Path::new(crate::util::PUSHT).join("world_model").as_path(),
+                &dir.path().join("gf"),
+            )[..],
+            &["--float-frames"],
+        ]
+        .concat()),
+        2,
+    );
+    assert!(err.contains("--float-frames") && err.contains("goal-free"), "{err}");
+
     // GPC-RANK with GPC's own proposer: plan takes the imported policy.
     let planned = dir.path().join("plan");
     let args = ["plan", "--scenario", "pusht-gpc", "--policy", s(&pol), "--world-model", s(&wm)];

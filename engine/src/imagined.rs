@@ -22,7 +22,7 @@ use harness::results::Branch;
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
 use harness::task::{Imagination, ModelView, Seen};
-use world_model::data::{frames_to_tensor, tensor_to_frames};
+use world_model::data::{frames_to_tensor, tensor_to_frames, tensor_to_unit_floats};
 use world_model::model::WorldModel;
 use world_model::rollout::Rollout;
 
@@ -106,11 +106,13 @@ pub fn wm_branch(
             let first_seen = len.saturating_sub(o).max(done).min(done + f) - done; // <= f
             let first = if s.judge_every_frame { 0 } else { first_seen };
             let m = f - first;
-            let mut frames = if m > 0 {
+            let (mut frames, mut exact) = if m > 0 {
                 let seen = pred.narrow(1, first, m).reshape([a * m, c, ls, ls]);
-                tensor_to_frames(wm.decode(seen))
+                let decoded = wm.decode(seen);
+                let exact = s.float_frames.then(|| tensor_to_unit_floats(decoded.clone()));
+                (tensor_to_frames(decoded), exact)
             } else {
-                Vec::new()
+                (Vec::new(), None)
             };
             for (p, &i) in active.iter().enumerate() {
                 for j in 0..f {
@@ -120,7 +122,9 @@ pub fn wm_branch(
                         imagine[i].to_observation(fr);
                         track[i].add(judged(judges[i].score(fr), &name, start.seeds[i])?, &kind);
                         if j >= first_seen {
-                            let seen = Seen { frame: std::mem::take(fr), proprio: imagine[i].proprio() };
+                            let x = exact.as_mut().map(|e| std::mem::take(&mut e[p * m + j - first]));
+                            let seen =
+                                Seen { frame: std::mem::take(fr), proprio: imagine[i].proprio(), exact: x };
                             push(&mut hist[i], seen, o);
                         }
                     }

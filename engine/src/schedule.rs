@@ -245,6 +245,7 @@ mod tests {
             max_steps: 4,
             judge: None,
             judge_every_frame: false,
+            float_frames: false,
         };
         // A tiny pixel-space world model with random weights: the rows only need to be
         // a deterministic function of the batch.

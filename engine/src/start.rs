@@ -54,6 +54,9 @@ pub struct Setup<'a> {
     /// World-model branch: judge every generated frame (the official DriftWorld loop), not
     /// only the frames the policy sees.
     pub judge_every_frame: bool,
+    /// World-model branch: hand policies each generated frame's values before rounding to
+    /// bytes as well ([`harness::task::Seen::exact`]; the official loop feeds floats).
+    pub float_frames: bool,
 }
 
 impl<'a> Setup<'a> {
@@ -65,7 +68,7 @@ impl<'a> Setup<'a> {
         max_steps: usize,
         judge: Option<&'a std::sync::Arc<dyn Judge>>,
     ) -> Self {
-        Self { task, master_seed, max_steps, judge, judge_every_frame: false }
+        Self { task, master_seed, max_steps, judge, judge_every_frame: false, float_frames: false }
     }
 }
 
@@ -222,6 +225,15 @@ pub fn obs_of(hist: &VecDeque<Seen>, size: usize) -> Observation {
         frames: hist.iter().map(|s| s.frame.clone()).collect(),
         proprio: hist.iter().map(|s| s.proprio.clone()).collect(),
         size,
+        // Where any frame has its unrounded values, every frame does: a real frame's are its
+        // bytes / 255.
+        exact: hist.iter().any(|s| s.exact.is_some()).then(|| {
+            hist.iter()
+                .map(|s| {
+                    s.exact.clone().unwrap_or_else(|| s.frame.iter().map(|&b| f32::from(b) / 255.0).collect())
+                })
+                .collect()
+        }),
     }
 }
 
@@ -346,7 +358,7 @@ mod tests {
 
     #[test]
     fn observations_carry_the_proprioception_of_any_size() {
-        let seen = |p: Vec<f32>| Seen { frame: vec![0; 3], proprio: p };
+        let seen = |p: Vec<f32>| Seen { frame: vec![0; 3], proprio: p, exact: None };
         let hist: VecDeque<Seen> = [seen(vec![1.0, 2.0]), seen(vec![3.0, 4.0])].into();
         let obs = obs_of(&hist, 1);
         assert_eq!(obs.proprio, vec![vec![1.0, 2.0], vec![3.0, 4.0]]);

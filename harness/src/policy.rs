@@ -19,6 +19,10 @@ pub struct Observation {
     pub proprio: Vec<Vec<f32>>,
     /// Frame side in pixels.
     pub size: usize,
+    /// Every frame's values before rounding to bytes (HWC, [0, 1], unclamped), when the
+    /// frames are a world model's and the run keeps them (`rank --float-frames`); policies
+    /// that read floats use them, the others read `frames`.
+    pub exact: Option<Vec<Vec<f32>>>,
 }
 
 /// Actions to execute in order, each with the task's action dimension (Push-T: a

@@ -114,6 +114,9 @@ pub struct Seen {
     pub frame: Vec<u8>,
     /// The entries [`ObservationSpec::proprio`] names (Push-T: the agent's position).
     pub proprio: Vec<f32>,
+    /// A generated frame's values before rounding to bytes (HWC, [0, 1], unclamped), where
+    /// the run feeds a world model's frames to policies as floats (`rank --float-frames`).
+    pub exact: Option<Vec<f32>>,
 }
 
 /// An error of a task's simulator (a diverging step, a bad action, an impossible

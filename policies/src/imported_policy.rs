@@ -320,7 +320,17 @@ impl Policy for ImportedDiffusion {
         let (frames, pos) = crate::diffusion::gather(&self.name, obs, o, s, p, &self.norm)?;
         let bad = |m: String| PolicyError::Input { policy: self.name.clone(), message: m };
         let b = obs.len();
-        let x01 = world_model::data::frames_to_tensor(&frames, s, &self.device) * 0.5 + 0.5;
+        // Frames in [0, 1]: a world model's unrounded values where the run keeps them
+        // (`rank --float-frames`, as the official loop feeds them), else the bytes.
+        let exact: Option<Vec<&[f32]>> = obs
+            .iter()
+            .map(|ob| ob.exact.as_ref().map(|e| e.iter().map(Vec::as_slice).collect::<Vec<_>>()))
+            .collect::<Option<Vec<_>>>()
+            .map(|v| v.into_iter().flatten().collect());
+        let x01 = match exact.filter(|e| e.len() == frames.len() && e.iter().all(|f| f.len() == s * s * 3)) {
+            Some(e) => world_model::data::unit_floats_to_tensor(&e, s, &self.device),
+            None => world_model::data::frames_to_tensor(&frames, s, &self.device) * 0.5 + 0.5,
+        };
         let pos = Tensor::from_data(TensorData::new(pos, [b, o, p]), &self.device);
         let cond = self
             .net

@@ -60,3 +60,43 @@ fn leading_spacing_steps_from_the_last_multiple_down_to_zero() {
     assert_eq!(cfg(None).timesteps().len(), 100);
     assert_eq!(cfg(None).timesteps()[..3], [99, 98, 97]);
 }
+
+#[test]
+fn unrounded_frames_are_read_when_the_observation_has_them() {
+    // The GPC fixture policy: an observation whose exact values are its bytes / 255 acts as
+    // the bytes alone do (same noise streams); shifted exact values change the actions, so the
+    // floats, not the bytes, were read.
+    use harness::policy::{Observation, Policy};
+    use harness::rng::Rng;
+    let device = Device::flex();
+    let fixture =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/gpc_policy/policy.pth");
+    let p = crate::import_gpc::import(&fixture, crate::import_gpc::GpcWeights::Ema, 96, &device)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let norm = crate::diffusion::Normalisation {
+        agent_pos: crate::diffusion::Range { min: vec![0.0; 2], max: vec![512.0; 2] },
+        action: crate::diffusion::Range { min: vec![0.0; 2], max: vec![512.0; 2] },
+    };
+    let policy =
+        ImportedDiffusion::new("p".into(), p.cfg, norm, (vec![0.0; 2], vec![512.0; 2]), p.net, &device);
+    let frame: Vec<u8> = (0..96 * 96 * 3).map(|i| (i * 7 % 251) as u8).collect();
+    let bytes = Observation {
+        frames: vec![frame.clone(); 2],
+        proprio: vec![vec![100.0, 200.0]; 2],
+        size: 96,
+        exact: None,
+    };
+    let unit: Vec<f32> = frame.iter().map(|&b| f32::from(b) / 255.0).collect();
+    let same = Observation { exact: Some(vec![unit.clone(); 2]), ..bytes.clone() };
+    let shifted: Vec<f32> = unit.iter().map(|v| v + 0.05).collect();
+    let other = Observation { exact: Some(vec![shifted; 2]), ..bytes.clone() };
+    let act = |o: &Observation| {
+        policy.act(std::slice::from_ref(o), &mut [Rng::new(9)]).unwrap_or_else(|e| panic!("{e}"))
+    };
+    let (a, b, c) = (act(&bytes), act(&same), act(&other));
+    let d = |x: &[Vec<f32>], y: &[Vec<f32>]| {
+        x.iter().flatten().zip(y.iter().flatten()).map(|(u, v)| (u - v).abs()).fold(0.0f32, f32::max)
+    };
+    assert!(d(&a[0], &b[0]) < 1e-3, "bytes and their exact values act alike");
+    assert!(d(&a[0], &c[0]) > 1e-3, "shifted exact values were not read");
+}

@@ -127,6 +127,7 @@ impl Env for PushTEpisode {
         Seen {
             frame: self.raster.render(&st, &self.env.goal()),
             proprio: st.agent.map(|v| v as f32).to_vec(),
+            exact: None,
         }
     }
 

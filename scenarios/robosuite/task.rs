@@ -194,7 +194,7 @@ impl<E: TaskEpisode + Send + 'static> Env for ArmEnv<E> {
             tracing::error!(seed = self.seed, "rendering: {e}");
             Vec::new()
         });
-        Seen { frame, proprio: self.cmd.vector() }
+        Seen { frame, proprio: self.cmd.vector(), exact: None }
     }
 
     fn step(&mut self, action: &[f32]) -> Result<f64, TaskError> {

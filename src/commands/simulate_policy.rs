@@ -36,6 +36,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
         max_steps,
         judge: None,
         judge_every_frame: false,
+        float_frames: false,
     };
     let device = world_model::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;

@@ -72,6 +72,7 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
         max_steps,
         judge: judge.as_ref(),
         judge_every_frame: false,
+        float_frames: false,
     };
     let dirs = checkpoint_dirs(Path::new(&args.policy))?;
     let inputs = super::simulate::inputs(args).maybe("--judge", judge_dir.as_deref());

@@ -124,6 +124,20 @@ pub fn frames_to_tensor(frames: &[&[u8]], s: usize, device: &Device) -> Tensor<4
     Tensor::from_data(TensorData::new(frames_to_vec(frames, s), [frames.len(), 3, s, s]), device)
 }
 
+/// Frames of HWC values in [0, 1] ([`tensor_to_unit_floats`]) to `[n, 3, s, s]`, as they are.
+pub fn unit_floats_to_tensor(frames: &[&[f32]], s: usize, device: &Device) -> Tensor<4> {
+    let plane = s * s;
+    let mut v = vec![0f32; frames.len() * 3 * plane];
+    for (k, f) in frames.iter().enumerate() {
+        for p in 0..plane {
+            for c in 0..3 {
+                v[(k * 3 + c) * plane + p] = f[p * 3 + c];
+            }
+        }
+    }
+    Tensor::from_data(TensorData::new(v, [frames.len(), 3, s, s]), device)
+}
+
 /// Byte frames (HWC) to `[n, 3, s, s]` values in [-1, 1].
 pub fn frames_to_vec(frames: &[&[u8]], s: usize) -> Vec<f32> {
     let plane = s * s;
@@ -150,6 +164,25 @@ pub fn tensor_to_frames(t: Tensor<4>) -> Vec<Vec<u8>> {
                 for ch in 0..c.min(3) {
                     let x = v[k * c * plane + ch * plane + p];
                     img[p * 3 + ch] = ((x.clamp(-1.0, 1.0) + 1.0) * 127.5).round() as u8;
+                }
+            }
+            img
+        })
+        .collect()
+}
+
+/// Decoded frames `[b, 3, h, w]` in [-1, 1] as HWC values in [0, 1], unclamped and unrounded:
+/// what [`tensor_to_frames`] rounds to bytes (`x·0.5 + 0.5`).
+pub fn tensor_to_unit_floats(t: Tensor<4>) -> Vec<Vec<f32>> {
+    let [b, c, h, w] = t.dims();
+    let v: Vec<f32> = t.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+    let plane = h * w;
+    (0..b)
+        .map(|k| {
+            let mut img = vec![0.0f32; plane * 3];
+            for p in 0..plane {
+                for ch in 0..c.min(3) {
+                    img[p * 3 + ch] = v[k * c * plane + ch * plane + p] * 0.5 + 0.5;
                 }
             }
             img

@@ -146,6 +146,15 @@ fn run_with(
         // Written only when set, so runs written before the flag existed resume as they were.
         config["judge_every_frame"] = json!(true);
     }
+    if a.float_frames {
+        if wm.cfg.is_goal_free() {
+            bail!(
+                "--float-frames: world model {} is goal-free (its frames get the goal drawn back as bytes); use a world model of whole frames",
+                r.world_model.display()
+            );
+        }
+        config["float_frames"] = json!(true);
+    }
     if a.resume {
         resume::check_config(&a.out.join("config.json"), &config)?;
     }
@@ -161,6 +170,7 @@ fn run_with(
     let judge = judge.map(|j| std::sync::Arc::new(j) as std::sync::Arc<dyn harness::judge::Judge>);
     let setup = Setup {
         judge_every_frame: a.judge_every_frame,
+        float_frames: a.float_frames,
         ..Setup::new(task.as_ref(), a.seed, r.max_steps, judge.as_ref())
     };
     let expect = expectations(task.as_ref());

@@ -327,6 +327,9 @@ fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> Vec
     if a.judge_every_frame {
         all.push("--judge-every-frame".into());
     }
+    if a.float_frames {
+        all.push("--float-frames".into());
+    }
     all.push("--no-report".into());
     all.push(if resume { "--resume" } else { "--force" }.into());
     all
@@ -361,6 +364,7 @@ mod tests {
                 "--judge-persist",
                 "2",
                 "--judge-every-frame",
+                "--float-frames",
                 "--alpha",
                 "0.5",
                 "--noise-scale",
@@ -396,7 +400,7 @@ mod tests {
         assert_eq!(cli.render_workers, Some(0), "a shard renders its own frames");
         let s = parse(&args);
         assert_eq!((&s.policies, &s.world_model, &s.judge), (&a.policies, &a.world_model, &a.judge));
-        assert_eq!((s.noise_scale, s.judge_every_frame), (Some(0.25), true));
+        assert_eq!((s.noise_scale, s.judge_every_frame, s.float_frames), (Some(0.25), true, true));
         assert_eq!(
             (s.judge_persist, s.alpha, s.episodes, s.max_steps),
             (Some(2), Some(0.5), Some(20), Some(30))
@@ -419,6 +423,7 @@ mod tests {
         "judge",
         "judge_persist",
         "judge_every_frame",
+        "float_frames",
         "alpha",
         "noise_scale",
         "scenario",
