@@ -241,6 +241,35 @@ pub(crate) fn gather<'a>(
     Ok((frames, pos))
 }
 
+/// The executed actions of sampled sequences `v` (`[b, h, ad]` flat, normalised): steps
+/// `start .. start + n` of each (as many as the horizon holds), denormalised and clamped into
+/// the task's `bounds` (a warning says how many were clamped).
+///
+/// # Errors
+/// [`PolicyError`] from [`sanitize`] (a non-finite action).
+pub(crate) fn executed(
+    policy: &str,
+    v: &[f32],
+    [b, h, ad]: [usize; 3],
+    start: usize,
+    n: usize,
+    norm: &Normalisation,
+    bounds: &(Vec<f32>, Vec<f32>),
+) -> Result<Vec<ActionChunk>, PolicyError> {
+    let mut chunks: Vec<ActionChunk> = (0..b)
+        .map(|i| {
+            (start..(start + n).min(h))
+                .map(|t| norm.action.denormalise(&v[(i * h + t) * ad..(i * h + t + 1) * ad]))
+                .collect()
+        })
+        .collect();
+    let clamped = sanitize(policy, &mut chunks, &bounds.0, &bounds.1)?;
+    if clamped > 0 {
+        tracing::warn!(policy = %policy, clamped, "actions outside the task's bounds clamped");
+    }
+    Ok(chunks)
+}
+
 /// A loaded diffusion policy (inference).
 pub struct DiffusionPolicy {
     /// Checkpoint name.
@@ -345,19 +374,7 @@ impl Policy for DiffusionPolicy {
         if v.len() != b * h * ad {
             return Err(bad(format!("the network returned {} values, expected {}", v.len(), b * h * ad)));
         }
-        let start = o - 1;
-        let mut chunks: Vec<ActionChunk> = (0..b)
-            .map(|i| {
-                (start..(start + self.cfg.action_horizon).min(h))
-                    .map(|t| self.norm.action.denormalise(&v[(i * h + t) * ad..(i * h + t + 1) * ad]))
-                    .collect()
-            })
-            .collect();
-        let clamped = sanitize(&self.name, &mut chunks, &self.bounds.0, &self.bounds.1)?;
-        if clamped > 0 {
-            tracing::warn!(policy = %self.name, clamped, "actions outside the task's bounds clamped");
-        }
-        Ok(chunks)
+        executed(&self.name, &v, [b, h, ad], o - 1, self.cfg.action_horizon, &self.norm, &self.bounds)
     }
 }
 

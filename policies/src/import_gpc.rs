@@ -16,7 +16,7 @@ use std::path::Path;
 
 use burn::tensor::{Device, TensorData};
 use world_model::import::ImportError;
-use world_model::import::place::{place, shapes, transpose};
+use world_model::import::place::{place_all, shapes, transpose};
 use world_model::import::tensors::{Source, top_level_int};
 
 use crate::imported_policy::{ImportedConfig, ImportedNet, Pool};
@@ -317,16 +317,7 @@ pub fn import(
         }
         values.insert(to, TensorData::new(v, want.clone()));
     }
-    let (net, unset) = place(net, &mut values);
-    if !unset.is_empty() || !values.is_empty() {
-        return Err(ImportError::Apply {
-            path: path.into(),
-            what: format!(
-                "parameters left unset {unset:?}, values unused {:?}",
-                values.keys().collect::<Vec<_>>()
-            ),
-        });
-    }
+    let net = place_all(net, values, path)?;
     let tensors = names.len();
     Ok(ImportedPolicy { net, cfg, step: top_level_int(path, "step"), tensors })
 }

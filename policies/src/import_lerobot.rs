@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::{Device, TensorData};
 use world_model::import::ImportError;
-use world_model::import::place::{place, shapes, transpose};
+use world_model::import::place::{place_all, shapes, transpose};
 use world_model::import::safe::SafeSource;
 
 use crate::diffusion::{Normalisation, Range};
@@ -302,16 +302,7 @@ pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError>
         });
     }
     let tensors = values.len();
-    let (net, unset) = place(net, &mut values);
-    if !unset.is_empty() || !values.is_empty() {
-        return Err(ImportError::Apply {
-            path: model.path().into(),
-            what: format!(
-                "parameters left unset {unset:?}, values unused {:?}",
-                values.keys().collect::<Vec<_>>()
-            ),
-        });
-    }
+    let net = place_all(net, values, model.path())?;
     Ok(LeRobotPolicy { net, cfg, norm, tensors, stats_from })
 }
 

@@ -23,12 +23,12 @@ use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{Linear, LinearConfig};
 use burn::tensor::activation::{relu, softmax};
 use burn::tensor::{Device, Tensor, TensorData};
-use harness::policy::{ActionChunk, Observation, Policy, PolicyError, sanitize};
+use harness::policy::{ActionChunk, Observation, Policy, PolicyError};
 use harness::rng::Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::cpu_unet::CpuUnet1d;
-use crate::diffusion::{Normalisation, alphas_cumprod};
+use crate::diffusion::{Normalisation, alphas_cumprod, executed};
 use crate::net::{CondUnet1d, NetConfig};
 use crate::resnet_gn::ResNet18Gn;
 
@@ -356,19 +356,7 @@ impl Policy for ImportedDiffusion {
                 b * h * ad
             )));
         }
-        let start = o - 1;
-        let mut chunks: Vec<ActionChunk> = (0..b)
-            .map(|i| {
-                (start..(start + self.cfg.action_horizon).min(h))
-                    .map(|t| self.norm.action.denormalise(&v[(i * h + t) * ad..(i * h + t + 1) * ad]))
-                    .collect()
-            })
-            .collect();
-        let clamped = sanitize(&self.name, &mut chunks, &self.bounds.0, &self.bounds.1)?;
-        if clamped > 0 {
-            tracing::warn!(policy = %self.name, clamped, "actions outside the task's bounds clamped");
-        }
-        Ok(chunks)
+        executed(&self.name, &v, [b, h, ad], o - 1, self.cfg.action_horizon, &self.norm, &self.bounds)
     }
 }
 

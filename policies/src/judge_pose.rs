@@ -18,7 +18,7 @@ use burn::nn::{Linear, LinearConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 use world_model::import::ImportError;
-use world_model::import::place::{place, shapes, transpose};
+use world_model::import::place::{place_all, shapes, transpose};
 use world_model::import::tensors::Source;
 
 use crate::resnet::ResNet18;
@@ -175,16 +175,7 @@ pub fn import_pose_net(path: &Path, device: &Device) -> Result<(PoseNet, usize),
     if !unexpected.is_empty() {
         return Err(ImportError::Unexpected { path: path.into(), keys: unexpected });
     }
-    let (net, unset) = place(net, &mut values);
-    if !unset.is_empty() || !values.is_empty() {
-        return Err(ImportError::Apply {
-            path: path.into(),
-            what: format!(
-                "parameters left unset {unset:?}, values unused {:?}",
-                values.keys().collect::<Vec<_>>()
-            ),
-        });
-    }
+    let net = place_all(net, values, path)?;
     Ok((net, base))
 }
 

@@ -22,7 +22,7 @@ use burn::tensor::{Device, TensorData};
 use serde::{Deserialize, Serialize};
 
 use super::ImportError;
-use super::place::{place, shapes as module_shapes, transpose};
+use super::place::{place_all, shapes as module_shapes, transpose};
 use super::tensors::{Source, top_level_int};
 use crate::action::ActionScale;
 use crate::model::WorldModelConfig;
@@ -421,11 +421,7 @@ pub fn import(
         parameters += v.len();
         values.insert(e.ours.clone(), TensorData::new(v, our_shape.clone()));
     }
-    let (unet, unset) = place(unet, &mut values);
-    if !unset.is_empty() || !values.is_empty() {
-        let unused: Vec<&String> = values.keys().collect();
-        return Err(apply(format!("parameters left unset {unset:?}, values unused {unused:?}")));
-    }
+    let unet = place_all(unet, values, path)?;
     let mut config = WorldModelConfig::pixels(plan.unet, side);
     config.future = preset.future();
     config.actions = (preset != Preset::Pusht).then(|| preset.actions());

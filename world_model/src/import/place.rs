@@ -47,6 +47,27 @@ pub fn place<M: Module>(module: M, values: &mut BTreeMap<String, TensorData>) ->
     (module, m.unset)
 }
 
+/// [`place`] every value into `module`, for the importer of `path`: a parameter left unset or a
+/// value matching no parameter is [`ImportError::Apply`] (a mapping bug, not a bad file).
+///
+/// # Errors
+/// [`ImportError::Apply`] naming the unset parameters and the unused values.
+pub fn place_all<M: Module>(
+    module: M,
+    mut values: BTreeMap<String, TensorData>,
+    path: &std::path::Path,
+) -> Result<M, super::ImportError> {
+    let (module, unset) = place(module, &mut values);
+    if unset.is_empty() && values.is_empty() {
+        return Ok(module);
+    }
+    let unused: Vec<&String> = values.keys().collect();
+    Err(super::ImportError::Apply {
+        path: path.into(),
+        what: format!("parameters left unset {unset:?}, values unused {unused:?}"),
+    })
+}
+
 struct Place {
     path: Vec<String>,
     values: BTreeMap<String, TensorData>,

@@ -52,6 +52,31 @@ impl SafeSource {
         self.index.contains_key(key)
     }
 
+    /// The shape of `key`, which must be of type `want`.
+    fn typed(&self, key: &str, want: Dtype) -> Result<&[usize], ImportError> {
+        let (dtype, shape) = self
+            .index
+            .get(key)
+            .ok_or_else(|| ImportError::Missing { path: self.path.clone(), key: key.into() })?;
+        if *dtype != want {
+            return Err(ImportError::DType {
+                path: self.path.clone(),
+                key: key.into(),
+                found: format!("{dtype:?}").to_lowercase(),
+            });
+        }
+        Ok(shape)
+    }
+
+    /// The raw little-endian bytes of `key`.
+    fn bytes_of(&self, key: &str) -> Result<Vec<u8>, ImportError> {
+        let layout = |what: String| ImportError::Layout { path: self.path.clone(), what };
+        let st = SafeTensors::deserialize(&self.bytes)
+            .map_err(|e| layout(format!("not a safetensors file: {e}")))?;
+        let view = st.tensor(key).map_err(|e| layout(format!("key `{key}`: {e}")))?;
+        Ok(view.data().to_vec())
+    }
+
     /// The values of `key`, which must be float32 holding `expected.iter().product()` values
     /// (any shape of that size when `flat`; else exactly `expected`), all finite.
     ///
@@ -59,18 +84,7 @@ impl SafeSource {
     /// [`ImportError::Missing`], [`ImportError::DType`], [`ImportError::Shape`] or
     /// [`ImportError::NonFinite`], naming the key.
     pub fn f32s(&self, key: &str, expected: &[usize], flat: bool) -> Result<Vec<f32>, ImportError> {
-        let path = self.path.clone();
-        let (dtype, shape) = self
-            .index
-            .get(key)
-            .ok_or_else(|| ImportError::Missing { path: path.clone(), key: key.into() })?;
-        if *dtype != Dtype::F32 {
-            return Err(ImportError::DType {
-                path,
-                key: key.into(),
-                found: format!("{dtype:?}").to_lowercase(),
-            });
-        }
+        let shape = self.typed(key, Dtype::F32)?;
         let fits = if flat {
             shape.iter().product::<usize>() == expected.iter().product::<usize>()
         } else {
@@ -78,23 +92,19 @@ impl SafeSource {
         };
         if !fits {
             return Err(ImportError::Shape {
-                path,
+                path: self.path.clone(),
                 key: key.into(),
-                found: shape.clone(),
+                found: shape.to_vec(),
                 expected: expected.to_vec(),
             });
         }
-        let st = SafeTensors::deserialize(&self.bytes).map_err(|e| ImportError::Layout {
-            path: path.clone(),
-            what: format!("not a safetensors file: {e}"),
-        })?;
-        let view = st
-            .tensor(key)
-            .map_err(|e| ImportError::Layout { path: path.clone(), what: format!("key `{key}`: {e}") })?;
-        let values: Vec<f32> =
-            view.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        let values: Vec<f32> = self
+            .bytes_of(key)?
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
         if values.iter().any(|v| !v.is_finite()) {
-            return Err(ImportError::NonFinite { path, key: key.into() });
+            return Err(ImportError::NonFinite { path: self.path.clone(), key: key.into() });
         }
         Ok(values)
     }
@@ -104,24 +114,7 @@ impl SafeSource {
     /// # Errors
     /// [`ImportError::Missing`] or [`ImportError::DType`], naming the key.
     pub fn u8s(&self, key: &str) -> Result<Vec<u8>, ImportError> {
-        let path = self.path.clone();
-        let (dtype, _) = self
-            .index
-            .get(key)
-            .ok_or_else(|| ImportError::Missing { path: path.clone(), key: key.into() })?;
-        if *dtype != Dtype::U8 {
-            return Err(ImportError::DType {
-                path,
-                key: key.into(),
-                found: format!("{dtype:?}").to_lowercase(),
-            });
-        }
-        let st = SafeTensors::deserialize(&self.bytes).map_err(|e| ImportError::Layout {
-            path: path.clone(),
-            what: format!("not a safetensors file: {e}"),
-        })?;
-        let view =
-            st.tensor(key).map_err(|e| ImportError::Layout { path, what: format!("key `{key}`: {e}") })?;
-        Ok(view.data().to_vec())
+        self.typed(key, Dtype::U8)?;
+        self.bytes_of(key)
     }
 }
