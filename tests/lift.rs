@@ -1,5 +1,6 @@
 //! `simulate` and `collect` on robomimic Lift and Can: the experts succeed, outputs are
-//! byte-identical for any `--jobs`, and bad input is refused by name.
+//! byte-identical for any `--jobs`, and bad input is refused by name; `rank`'s
+//! filmstrips show the run's own episodes.
 
 use std::path::Path;
 
@@ -298,4 +299,26 @@ fn collect_writes_a_can_dataset_with_its_default_mix() {
     let (_, stderr) = expect_code(&res, 2);
     assert!(stderr.contains("unknown can behaviour 'teleop'"), "{stderr}");
     assert!(!bad.exists());
+}
+
+#[test]
+fn rank_filmstrips_show_the_runs_own_episodes_when_resumed_too() {
+    // A run takes its filmstrips from the frames it recorded; a resumed run, whose
+    // episodes were made by an earlier process, replays them. On Lift an episode's frames
+    // depend on the episodes beside it in its batch (these 4 seeds end at different
+    // steps, and replaying the two picked seeds alone drew another worst episode), so
+    // the replay runs the picked episode's whole batch and must give the same bytes.
+    let tmp = tempfile::tempdir().unwrap();
+    let (first, resumed) = (tmp.path().join("run"), tmp.path().join("resumed"));
+    let pol = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/lift/policies/epoch-0014");
+    let args = ["rank", "--scenario", "lift", "--policies", s(&pol), "--episodes", "4", "--batch", "4"];
+    let more = ["--max-steps", "150", "--bootstrap", "10"];
+    // One policy ranks nothing against another: exit 1, the run and its report complete.
+    expect_code(&run(&[&args[..], &more[..], &["--out", s(&first)]].concat()), 1);
+    crate::util::copy_dir(&first, &resumed);
+    std::fs::remove_dir_all(resumed.join("filmstrips")).unwrap();
+    expect_code(&run(&[&args[..], &more[..], &["--out", s(&resumed), "--resume"]].concat()), 1);
+    let strips = tree_bytes(&first.join("filmstrips"));
+    assert_eq!(strips.len(), 5, "best and worst, PNG and GIF, and the index");
+    assert_eq!(strips, tree_bytes(&resumed.join("filmstrips")));
 }

@@ -12,11 +12,12 @@ use harness::task::Seen;
 use crate::EngineError;
 use crate::start::{Timing, obs_of};
 
-/// Appends every episode's newest frame to its recording (an ended episode repeats its
-/// last one, so both branches' strips stay aligned); a no-op when not recording.
-pub(crate) fn record_chunk(rec: &mut [Vec<Vec<u8>>], hist: &[VecDeque<Seen>]) {
-    for (r, h) in rec.iter_mut().zip(hist) {
-        if let Some(last) = h.back() {
+/// Appends the newest frame of each episode that was `active` in this chunk to its
+/// recording, so that an episode's recording ends where the episode ended, whichever
+/// others ran with it; a no-op when not recording.
+pub(crate) fn record_chunk(rec: &mut [Vec<Vec<u8>>], hist: &[VecDeque<Seen>], active: &[usize]) {
+    for &i in active {
+        if let (Some(r), Some(last)) = (rec.get_mut(i), hist[i].back()) {
             r.push(last.frame.clone());
         }
     }
@@ -50,4 +51,22 @@ pub(crate) fn decide(
         return Err(EngineError::EmptyChunk { policy: policy.name().to_string() });
     }
     Ok((chunks, len))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_chunks_active_episodes_are_recorded() {
+        let seen = |v: u8| Seen { frame: vec![v], proprio: Vec::new(), exact: None };
+        let hist: Vec<VecDeque<Seen>> = vec![[seen(1)].into(), [seen(2)].into(), [seen(3)].into()];
+        let mut rec = vec![vec![vec![0]]; 3];
+        record_chunk(&mut rec, &hist, &[0, 2]);
+        // Episode 1 ended before this chunk: its recording ends with its episode.
+        assert_eq!(rec, vec![vec![vec![0], vec![1]], vec![vec![0]], vec![vec![0], vec![3]]]);
+        let mut none: Vec<Vec<Vec<u8>>> = Vec::new();
+        record_chunk(&mut none, &hist, &[0]);
+        assert!(none.is_empty(), "not recording: nothing kept");
+    }
 }

@@ -141,7 +141,7 @@ pub fn wm_branch(
                 track[i].scene = judges[i].scene(&f.frame);
             }
         }
-        record_chunk(&mut rec, &hist);
+        record_chunk(&mut rec, &hist, &active);
         track.iter_mut().for_each(Track::end_chunk);
         steps += len;
         let next = still_active(&active, &track);

@@ -37,9 +37,29 @@ pub struct Batch {
     pub seeds: Vec<u64>,
 }
 
-/// What a finished batch hands on: its rows (MuJoCo and world model alternating, by
-/// seed) or the policy's error.
-pub type BatchResult = Result<Vec<EpisodeRow>, EngineError>;
+/// What a finished batch hands on: its rows and, with [`Setup::record`], its frames.
+#[derive(Debug, Default)]
+pub struct BatchOut {
+    /// The rows, MuJoCo and world model alternating, by seed.
+    pub rows: Vec<EpisodeRow>,
+    /// Each episode's recorded frames, by seed (empty unless [`Setup::record`]).
+    pub frames: Vec<EpisodeFrames>,
+}
+
+/// One episode's frames at the end of every action chunk it ran, in both branches
+/// (the first frame first; [`crate::start::BranchOut::frames`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct EpisodeFrames {
+    /// Episode seed.
+    pub seed: u64,
+    /// The MuJoCo branch's frames.
+    pub real: Vec<Vec<u8>>,
+    /// The world model's frames, as the policy saw them.
+    pub imagined: Vec<Vec<u8>>,
+}
+
+/// A finished batch, or the policy's error.
+pub type BatchResult = Result<BatchOut, EngineError>;
 
 type TaskOut = Option<Result<BranchOut, EngineError>>;
 
@@ -51,7 +71,8 @@ fn run_task(
     wm: &WorldModel,
     t: &mut Timing,
 ) -> Result<BranchOut, EngineError> {
-    let start = Start::new(policy.name(), &batch.seeds, s)?;
+    let mut start = Start::new(policy.name(), &batch.seeds, s)?;
+    start.record = s.record;
     if world { wm_branch(policy, &start, s, wm, t) } else { sim_branch(policy, start, s, t) }
 }
 
@@ -116,7 +137,7 @@ pub fn run_batches<E: From<EngineError>>(
                 let Some([Some(w), Some(m)]) = parts.remove(&handed) else { break };
                 let p = batches[handed].policy;
                 if !dead[p] {
-                    let result = pair(w, m, policies[p].name());
+                    let result = pair(w, m, policies[p].name(), &batches[handed].seeds);
                     dead[p] = result.is_err();
                     if let Err(e) = done(handed, result) {
                         // The run stops: workers take no further task.
@@ -189,12 +210,19 @@ fn one_thread_pool() -> Result<rayon::ThreadPool, EngineError> {
     rayon::ThreadPoolBuilder::new().num_threads(1).build().map_err(|e| EngineError::Threads(e.to_string()))
 }
 
-/// The batch's rows from its two halves, or its error (the world model's first). A
-/// skipped half only occurs in a batch after one of the policy's that failed, which
-/// is never handed on.
-fn pair(world: TaskOut, sim: TaskOut, name: &str) -> BatchResult {
+/// The batch's rows (and frames) from its two halves, or its error (the world model's
+/// first). A skipped half only occurs in a batch after one of the policy's that failed,
+/// which is never handed on.
+fn pair(world: TaskOut, sim: TaskOut, name: &str, seeds: &[u64]) -> BatchResult {
     match (world, sim) {
-        (Some(Ok(w)), Some(Ok(m))) => Ok(m.rows.into_iter().zip(w.rows).flat_map(|(a, b)| [a, b]).collect()),
+        (Some(Ok(w)), Some(Ok(m))) => {
+            let frames = seeds
+                .iter()
+                .zip(m.frames.into_iter().zip(w.frames))
+                .map(|(&seed, (real, imagined))| EpisodeFrames { seed, real, imagined })
+                .collect();
+            Ok(BatchOut { rows: m.rows.into_iter().zip(w.rows).flat_map(|(a, b)| [a, b]).collect(), frames })
+        }
         (Some(Err(e)), _) | (_, Some(Err(e))) => Err(e),
         _ => Err(EngineError::Skipped { policy: name.to_string() }),
     }
@@ -246,6 +274,7 @@ mod tests {
             judge: None,
             judge_every_frame: false,
             float_frames: false,
+            record: false,
         };
         // A tiny pixel-space world model with random weights: the rows only need to be
         // a deterministic function of the batch.
@@ -264,7 +293,7 @@ mod tests {
             run_batches::<EngineError>(&policies, &batches, &setup, &wm, jobs, &mut |j, r| {
                 handed.push((
                     j,
-                    r.map(|rows| serde_json::to_string(&rows).unwrap()).map_err(|e| e.to_string()),
+                    r.map(|out| serde_json::to_string(&out.rows).unwrap()).map_err(|e| e.to_string()),
                 ));
                 Ok(())
             })
@@ -283,6 +312,44 @@ mod tests {
             assert_eq!((rows[0].branch, rows[1].branch), (Branch::Sim, Branch::WorldModel));
         }
         assert_eq!(run(3), one, "three workers hand on exactly what one does");
+    }
+
+    #[test]
+    fn an_episodes_recorded_frames_do_not_depend_on_its_batch() {
+        // `rank` keeps the filmstrip frames of its batches instead of replaying the picked
+        // episodes alone: the same episode must record the same frames either way.
+        let task = scenarios::load_task("pusht").unwrap();
+        let setup = Setup { record: true, ..Setup::new(task.as_ref(), 3, 12, None) };
+        let device = Device::flex();
+        let size = task.observation_spec().image_size;
+        let wm_cfg = WorldModelConfig::pixels(UNetConfig::new(3, 8, vec![1], vec![]).with_groups(4), size);
+        let unet = wm_cfg.unet.init(&device);
+        let wm = WorldModel::from_parts(wm_cfg, FrameCodec::pixels(size), unet, &device);
+        let good = Fake { name: "good", fail: false };
+        let policies: Vec<&dyn Policy> = vec![&good];
+        let frames = |seeds: Vec<u64>| {
+            let mut out = Vec::new();
+            run_batches::<EngineError>(
+                &policies,
+                &[Batch { policy: 0, seeds }],
+                &setup,
+                &wm,
+                2,
+                &mut |_, r| {
+                    out.extend(r.unwrap().frames);
+                    Ok(())
+                },
+            )
+            .unwrap();
+            out
+        };
+        let batch = frames(vec![100, 101, 102]);
+        let alone = frames(vec![101]);
+        assert_eq!(batch.iter().map(|f| f.seed).collect::<Vec<_>>(), [100, 101, 102]);
+        // The first frame and one per 4-action chunk: 1 + 12 / 4.
+        assert_eq!((alone[0].real.len(), alone[0].imagined.len()), (4, 4));
+        assert_eq!(batch[1], alone[0]);
+        assert_ne!(batch[0].real, batch[1].real, "another seed, another scene");
     }
 
     #[test]

@@ -128,7 +128,7 @@ pub fn sim_branch(
         for (i, frames) in seen {
             frames.into_iter().for_each(|f| push(&mut hist[i], f, o));
         }
-        record_chunk(&mut rec, &hist);
+        record_chunk(&mut rec, &hist, &active);
         track.iter_mut().for_each(Track::end_chunk);
         timing.sim_s += ts.elapsed().as_secs_f64();
         steps += len;

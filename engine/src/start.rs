@@ -57,6 +57,10 @@ pub struct Setup<'a> {
     /// World-model branch: hand policies each generated frame's values before rounding to
     /// bytes as well ([`harness::task::Seen::exact`]; the official loop feeds floats).
     pub float_frames: bool,
+    /// Keep each episode's frames at the end of every action chunk in both branches
+    /// ([`Start::record`]), handed on with a batch's rows ([`crate::schedule::BatchOut`]):
+    /// `rank` takes its filmstrips from the run instead of replaying them.
+    pub record: bool,
 }
 
 impl<'a> Setup<'a> {
@@ -68,7 +72,15 @@ impl<'a> Setup<'a> {
         max_steps: usize,
         judge: Option<&'a std::sync::Arc<dyn Judge>>,
     ) -> Self {
-        Self { task, master_seed, max_steps, judge, judge_every_frame: false, float_frames: false }
+        Self {
+            task,
+            master_seed,
+            max_steps,
+            judge,
+            judge_every_frame: false,
+            float_frames: false,
+            record: false,
+        }
     }
 }
 
@@ -126,11 +138,11 @@ pub struct Trajectory {
 }
 
 /// A branch's rows and, when recording, each episode's frames at the end of every
-/// action chunk (the first frame first).
+/// action chunk it ran (the first frame first; an episode that ended early has fewer).
 pub struct BranchOut {
     /// One row per episode.
     pub rows: Vec<EpisodeRow>,
-    /// Recorded frames per episode (empty unless recording).
+    /// Recorded frames per episode (empty unless recording), each up to its episode's end.
     pub frames: Vec<Vec<Vec<u8>>>,
     /// Whole episodes (empty unless [`Start::trajectories`]; from the world-model
     /// branch, the seeds, actions, scores and successes only).

@@ -128,6 +128,7 @@ fn a_success_scored_task_runs_through_the_simulator_branch() {
         judge: None,
         judge_every_frame: false,
         float_frames: false,
+        record: false,
     };
     let mut start = Start::new("to-goal", &[0, 2, 4], &setup).unwrap();
     start.trajectories = true;
@@ -162,6 +163,7 @@ fn recorded_actions_replayed_in_the_simulator_give_the_recorded_rows() {
         judge: None,
         judge_every_frame: false,
         float_frames: false,
+        record: false,
     };
     let mut start = Start::new("to-goal", &[0, 2, 1], &setup).unwrap();
     start.trajectories = true;
@@ -205,6 +207,7 @@ fn a_recorded_replay_comes_back_whole_with_the_same_row() {
         judge: None,
         judge_every_frame: false,
         float_frames: false,
+        record: false,
     };
     let replay = |record| {
         replay_in_sim("to-goal", (1, 2), 1, vec![vec![7.0]; 6], (&setup, record), &mut Timing::default())
@@ -234,6 +237,7 @@ fn episodes_that_never_succeed_run_to_the_step_limit() {
         judge: None,
         judge_every_frame: false,
         float_frames: false,
+        record: false,
     };
     let start = Start::new("to-goal", &[1], &setup).unwrap();
     let out = sim_branch(&ToGoal, start, &setup, &mut Timing::default()).unwrap();
@@ -283,6 +287,7 @@ fn robomimic_lift_runs_through_the_simulator_branch_with_a_given_judge() {
         judge: None,
         judge_every_frame: false,
         float_frames: false,
+        record: false,
     };
     let start = Start::new("up", &[0], &bare).unwrap();
     let wm = WorldModel::from_parts(
@@ -368,6 +373,7 @@ fn the_policy_sees_the_rewritten_frames_and_the_scores_stay_exact() {
         judge: None,
         judge_every_frame: false,
         float_frames: false,
+        record: false,
     };
     // Seed 2 starts at 6 (frame byte 150): seen as is, the policy commands 7 and the agent
     // reaches 6.5, then 6.75: success at step 2.
@@ -418,6 +424,7 @@ fn a_judge_scoring_nan_stops_the_imagined_branch_by_name() {
         judge: Some(&broken),
         judge_every_frame: false,
         float_frames: false,
+        record: false,
     };
     let start = Start::new("up", &[7], &setup).unwrap();
     let device = burn::tensor::Device::flex();

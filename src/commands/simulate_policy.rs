@@ -30,14 +30,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let dir = std::path::Path::new(&args.policy);
     let task = load_task(&c.scenario)?;
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
-    let setup = Setup {
-        task: task.as_ref(),
-        master_seed: args.seed.unwrap_or(0),
-        max_steps,
-        judge: None,
-        judge_every_frame: false,
-        float_frames: false,
-    };
+    let setup = Setup::new(task.as_ref(), args.seed.unwrap_or(0), max_steps, None);
     let device = world_model::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
     let observe = match &args.observe_through {

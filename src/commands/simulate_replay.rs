@@ -66,14 +66,7 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
         Some(d) => Some(Arc::new(load_judge(d, task.as_ref(), &device)?) as Arc<dyn harness::judge::Judge>),
         None => None,
     };
-    let setup = Setup {
-        task: task.as_ref(),
-        master_seed: args.seed.unwrap_or(0),
-        max_steps,
-        judge: judge.as_ref(),
-        judge_every_frame: false,
-        float_frames: false,
-    };
+    let setup = Setup::new(task.as_ref(), args.seed.unwrap_or(0), max_steps, judge.as_ref());
     let dirs = checkpoint_dirs(Path::new(&args.policy))?;
     let inputs = super::simulate::inputs(args).maybe("--judge", judge_dir.as_deref());
     let out = Staged::new(&args.out, c.force, &inputs)?;

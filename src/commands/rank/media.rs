@@ -1,22 +1,32 @@
 //! Side-by-side rollouts for the report: for each policy, the episodes where the
 //! world model agreed best and worst with MuJoCo (smallest and largest
-//! |imagined − real| score) are replayed with frame recording — the same seed,
-//! policy noise and generator noise as in the run — and written as a filmstrip
-//! (row 1 MuJoCo, row 2 world model, every `every`-th action chunk) and a GIF
-//! with both branches side by side.
+//! |imagined − real| score), written as a filmstrip (row 1 MuJoCo, row 2 world model,
+//! every `every`-th action chunk) and a GIF with both branches side by side.
+//!
+//! A run records every episode's frames at the end of each action chunk and keeps,
+//! per policy, those of the best- and worst-agreeing episode so far ([`Kept`]), so the
+//! filmstrips come from the run itself. An episode the run did not make here (rows of
+//! a resumed run's earlier process, or of shard processes) is replayed: the same seed,
+//! policy noise and generator noise give the same frames (a batch's episodes do not
+//! depend on one another).
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
+use engine::schedule::EpisodeFrames;
 use harness::policy::Policy;
 use world_model::model::WorldModel;
 
 use engine::{Setup, Start, Timing, sim_branch, wm_branch};
 use harness::results::{Branch, EpisodeRow};
 
-/// The best- and worst-agreeing seeds of a policy (at most 2, distinct).
-pub fn pick_seeds(rows: &[EpisodeRow], policy: &str) -> Vec<(u64, &'static str)> {
-    let mut gaps: Vec<(f64, u64)> = Vec::new();
+/// An episode's |imagined − real| score and its seed.
+type Gap = (f64, u64);
+
+/// |imagined − real| score of each seed of `policy` that has both rows, with the seed.
+fn gaps(rows: &[EpisodeRow], policy: &str) -> Vec<Gap> {
+    let mut gaps: Vec<Gap> = Vec::new();
     for r in rows.iter().filter(|r| r.policy == policy && r.branch == Branch::Sim) {
         if let Some(w) =
             rows.iter().find(|w| w.policy == policy && w.seed == r.seed && w.branch == Branch::WorldModel)
@@ -24,7 +34,61 @@ pub fn pick_seeds(rows: &[EpisodeRow], policy: &str) -> Vec<(u64, &'static str)>
             gaps.push(((w.score - r.score).abs(), r.seed));
         }
     }
-    gaps.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    gaps
+}
+
+/// The order [`pick_seeds`] sorts by: the gap, then the seed.
+fn order(a: Gap, b: Gap) -> std::cmp::Ordering {
+    a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
+}
+
+/// The most bytes of recorded frames the batches in flight may hold; above it a run
+/// records nothing and its filmstrips replay the picked episodes' batches.
+const RECORD_BUDGET: usize = 1 << 30;
+
+/// Whether recording every episode's frames (both branches, one frame per action chunk
+/// of the shortest-acting policy, the first frame too) fits [`RECORD_BUDGET`] with one
+/// batch per worker and one more waiting to be handed on.
+pub fn recording_fits(policies: &[&dyn Policy], setup: &Setup, batch: usize, jobs: usize) -> bool {
+    let horizon = policies.iter().map(|p| p.action_horizon().max(1)).min().unwrap_or(1);
+    let side = setup.task.observation_spec().image_size;
+    let per_episode = 2 * (setup.max_steps.div_ceil(horizon) + 1) * side * side * 3;
+    per_episode.saturating_mul(batch).saturating_mul(jobs.max(1) + 1) <= RECORD_BUDGET
+}
+
+/// Per policy, the recorded frames of the best- and worst-agreeing episode among the
+/// batches this process ran: what [`pick_seeds`] can pick from them, and nothing else
+/// (two episodes per policy at most).
+#[derive(Default)]
+pub struct Kept {
+    by_policy: HashMap<String, Vec<(Gap, EpisodeFrames)>>,
+}
+
+impl Kept {
+    /// Takes a finished batch of `policy`: its rows and recorded frames.
+    pub fn add(&mut self, policy: &str, rows: &[EpisodeRow], frames: Vec<EpisodeFrames>) {
+        let gaps = gaps(rows, policy);
+        let kept = self.by_policy.entry(policy.to_string()).or_default();
+        for f in frames {
+            if let Some(&g) = gaps.iter().find(|g| g.1 == f.seed) {
+                kept.push((g, f));
+            }
+        }
+        let lo = kept.iter().map(|k| k.0).min_by(|a, b| order(*a, *b));
+        let hi = kept.iter().map(|k| k.0).max_by(|a, b| order(*a, *b));
+        kept.retain(|k| Some(k.0) == lo || Some(k.0) == hi);
+    }
+
+    /// The kept frames of `policy`'s `seed`, if this run recorded them.
+    fn get(&self, policy: &str, seed: u64) -> Option<&EpisodeFrames> {
+        self.by_policy.get(policy)?.iter().map(|k| &k.1).find(|f| f.seed == seed)
+    }
+}
+
+/// The best- and worst-agreeing seeds of a policy (at most 2, distinct).
+pub fn pick_seeds(rows: &[EpisodeRow], policy: &str) -> Vec<(u64, &'static str)> {
+    let mut gaps = gaps(rows, policy);
+    gaps.sort_by(|a, b| order(*a, *b));
     let mut out = Vec::new();
     if let Some(&(_, s)) = gaps.first() {
         out.push((s, "best"));
@@ -35,8 +99,81 @@ pub fn pick_seeds(rows: &[EpisodeRow], policy: &str) -> Vec<(u64, &'static str)>
     out
 }
 
-/// Writes `dir/<policy>_seed<seed>_<tag>.{png,gif}` for the picked seeds; returns
-/// the filmstrip paths with captions.
+/// What the filmstrips are made from: the run's rows and batches (the seeds of each, as
+/// `--batch` cut them), the frames it kept, and what replays the others.
+pub struct Sources<'a> {
+    /// Every row of the run, resumed ones included.
+    pub rows: &'a [EpisodeRow],
+    /// The frames this process recorded.
+    pub kept: &'a Kept,
+    /// The run's batches of seeds.
+    pub batches: &'a [&'a [u64]],
+    /// The run's setup.
+    pub setup: &'a Setup<'a>,
+    /// The run's world model.
+    pub wm: &'a WorldModel,
+}
+
+/// Each picked episode's frames: those kept from the run, the others replayed. A replay
+/// runs the whole batch the episode ran in: a policy's and a world model's batched
+/// calls can round differently with other episodes beside them, so only the same batch
+/// gives the run's own frames.
+///
+/// # Errors
+/// A failing replay.
+fn frames_of(
+    policy: &dyn Policy,
+    picks: &[(u64, &'static str)],
+    src: &Sources,
+) -> Result<Vec<EpisodeFrames>> {
+    let name = policy.name();
+    let mut replayed: Vec<EpisodeFrames> = Vec::new();
+    for &(seed, _) in picks {
+        if src.kept.get(name, seed).is_some() || replayed.iter().any(|f| f.seed == seed) {
+            continue;
+        }
+        let batch = src.batches.iter().find(|b| b.contains(&seed)).map_or(vec![seed], |b| b.to_vec());
+        let mut timing = Timing::default();
+        let mut start = Start::new(name, &batch, src.setup)?;
+        start.record = true;
+        let imagined = wm_branch(policy, &start, src.setup, src.wm, &mut timing)?;
+        let real = sim_branch(policy, start, src.setup, &mut timing)?;
+        replayed.extend(
+            batch
+                .iter()
+                .zip(real.frames.into_iter().zip(imagined.frames))
+                .filter(|(s, _)| picks.iter().any(|p| p.0 == **s))
+                .map(|(&seed, (real, imagined))| EpisodeFrames { seed, real, imagined }),
+        );
+    }
+    Ok(picks
+        .iter()
+        .map(|&(seed, _)| {
+            src.kept
+                .get(name, seed)
+                .or_else(|| replayed.iter().find(|f| f.seed == seed))
+                .cloned()
+                .unwrap_or_default()
+        })
+        .collect())
+}
+
+/// Pads each of `strips` to the longest by repeating its last frame, as one batch of
+/// the picked episodes recorded them before recordings ended with their episodes.
+fn pad(strips: &mut [&mut Vec<Vec<u8>>]) {
+    let longest = strips.iter().map(|s| s.len()).max().unwrap_or(0);
+    for s in strips.iter_mut() {
+        if let Some(last) = s.last().cloned() {
+            s.resize(longest, last);
+        }
+    }
+}
+
+/// The filmstrips show every `EVERY`-th action chunk.
+const EVERY: usize = 4;
+
+/// Writes `dir/<policy>_seed<seed>_<tag>.{png,gif}` for the picked seeds, from the
+/// frames the run kept or replayed ([`Sources`]); returns the filmstrip paths with captions.
 ///
 /// # Errors
 /// A failing replay or an unwritable file.
@@ -44,43 +181,42 @@ pub fn write_rollouts(
     dir: &Path,
     policy: &dyn Policy,
     picks: &[(u64, &'static str)],
-    setup: &Setup,
-    wm: &WorldModel,
-    every: usize,
+    src: &Sources,
 ) -> Result<Vec<(PathBuf, String)>> {
     std::fs::create_dir_all(dir)?;
-    let seeds: Vec<u64> = picks.iter().map(|p| p.0).collect();
-    if seeds.is_empty() {
+    if picks.is_empty() {
         return Ok(Vec::new());
     }
-    let mut timing = Timing::default();
-    let mut start = Start::new(policy.name(), &seeds, setup)?;
-    start.record = true;
-    let imagined = wm_branch(policy, &start, setup, wm, &mut timing)?;
-    let real = sim_branch(policy, start, setup, &mut timing)?;
-    let size = setup.task.observation_spec().image_size;
+    let mut eps = frames_of(policy, picks, src)?;
+    pad(&mut eps.iter_mut().map(|e| &mut e.real).collect::<Vec<_>>());
+    pad(&mut eps.iter_mut().map(|e| &mut e.imagined).collect::<Vec<_>>());
+    let size = src.setup.task.observation_spec().image_size;
+    let score = |seed: u64, b: Branch| {
+        src.rows
+            .iter()
+            .find(|r| r.policy == policy.name() && r.seed == seed && r.branch == b)
+            .map_or(0.0, |r| r.score)
+    };
     let mut out = Vec::new();
-    for (i, &(seed, tag)) in picks.iter().enumerate() {
-        let (r, w) = (&real.frames[i], &imagined.frames[i]);
+    for (&(seed, tag), ep) in picks.iter().zip(&eps) {
+        let (r, w) = (&ep.real, &ep.imagined);
         let stem = format!("{}_seed{seed}_{tag}", policy.name());
-        let rows = vec![
-            r.iter().step_by(every.max(1)).cloned().collect(),
-            w.iter().step_by(every.max(1)).cloned().collect(),
-        ];
+        let rows =
+            vec![r.iter().step_by(EVERY).cloned().collect(), w.iter().step_by(EVERY).cloned().collect()];
         let strip = reports::png::filmstrip(&rows, size, size);
         let png = dir.join(format!("{stem}.png"));
         reports::png::write_png(&png, &strip.pixels, strip.width, strip.height)?;
         let pair: Vec<Vec<u8>> = r.iter().zip(w).map(|(a, b)| side_by_side(a, b, size)).collect();
         let side = u16::try_from(size).unwrap_or(u16::MAX);
         reports::gif::write_gif(&dir.join(format!("{stem}.gif")), &pair, 2 * side, side, 200)?;
-        let (rs, ws) = (real.rows[i].score, imagined.rows[i].score);
+        let (rs, ws) = (score(seed, Branch::Sim), score(seed, Branch::WorldModel));
         out.push((
             png,
             format!(
                 "{} seed {seed} ({tag} agreement): MuJoCo (top) score {rs:.2}, world model (bottom) score {ws:.2}; every {}th action chunk ({} steps)",
                 policy.name(),
-                every,
-                every * policy.action_horizon()
+                EVERY,
+                EVERY * policy.action_horizon()
             ),
         ));
     }
@@ -114,6 +250,46 @@ mod tests {
         ];
         assert_eq!(pick_seeds(&rows, "p"), vec![(2, "best"), (1, "worst")]);
         assert!(pick_seeds(&rows, "q").is_empty());
+    }
+
+    #[test]
+    fn kept_frames_are_those_pick_seeds_picks_from_the_run() {
+        let row = |seed, b, s| EpisodeRow::new("p", seed, b, s, 0.0, 0.0, 0.95, 1);
+        let frames = |seeds: &[u64]| -> Vec<EpisodeFrames> {
+            seeds
+                .iter()
+                .map(|&seed| EpisodeFrames { seed, real: vec![vec![seed as u8]], imagined: vec![] })
+                .collect()
+        };
+        let mut kept = Kept::default();
+        // Batch 1: gaps 0.4 (seed 1) and 0.05 (seed 2). Batch 2: gaps 0.05 (seed 3, ties
+        // seed 2 and loses on the seed) and 0.2 (seed 4, neither end).
+        let b1 = vec![
+            row(1, Branch::Sim, 0.5),
+            row(1, Branch::WorldModel, 0.1),
+            row(2, Branch::Sim, 0.5),
+            row(2, Branch::WorldModel, 0.45),
+        ];
+        let b2 = vec![
+            row(3, Branch::Sim, 0.5),
+            row(3, Branch::WorldModel, 0.55),
+            row(4, Branch::Sim, 0.5),
+            row(4, Branch::WorldModel, 0.3),
+        ];
+        kept.add("p", &b1, frames(&[1, 2]));
+        kept.add("p", &b2, frames(&[3, 4]));
+        let all: Vec<EpisodeRow> = b1.into_iter().chain(b2).collect();
+        assert_eq!(pick_seeds(&all, "p"), vec![(2, "best"), (1, "worst")]);
+        assert!(kept.get("p", 1).is_some() && kept.get("p", 2).is_some());
+        assert!(kept.get("p", 3).is_none() && kept.get("p", 4).is_none(), "only the two ends are kept");
+        assert!(kept.get("q", 1).is_none());
+    }
+
+    #[test]
+    fn strips_are_padded_with_their_last_frame() {
+        let (mut a, mut b, mut c) = (vec![vec![1], vec![2]], vec![vec![5]], Vec::new());
+        pad(&mut [&mut a, &mut b, &mut c]);
+        assert_eq!((a, b, c), (vec![vec![1], vec![2]], vec![vec![5], vec![5]], Vec::<Vec<u8>>::new()));
     }
 
     #[test]

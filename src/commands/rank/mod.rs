@@ -168,11 +168,12 @@ fn run_with(
         .build()
         .context("starting worker threads")?;
     let judge = judge.map(|j| std::sync::Arc::new(j) as std::sync::Arc<dyn harness::judge::Judge>);
-    let setup = Setup {
+    let mut setup = Setup {
         judge_every_frame: a.judge_every_frame,
         float_frames: a.float_frames,
         ..Setup::new(task.as_ref(), a.seed, r.max_steps, judge.as_ref())
     };
+    let mut kept = media::Kept::default();
     let expect = expectations(task.as_ref());
     let pb = progress::bar((dirs.len() * r.episodes) as u64, "rank", quiet);
     let mut failed: Vec<FailedPolicy> = Vec::new();
@@ -215,13 +216,17 @@ fn run_with(
         }
     }
     let policies: Vec<&dyn harness::policy::Policy> = loaded.iter().map(|(_, p)| p.as_ref()).collect();
+    // The report's filmstrips come from the run's own frames (`media::Kept`) when the
+    // batches in flight can hold them.
+    setup.record = !a.no_report && shards == 1 && media::recording_fits(&policies, &setup, a.batch, a.jobs);
     let mut done = |j: usize, out: schedule::BatchResult| -> Result<()> {
         let (name, todo) = (&names[loaded[jobs[j].policy].0], &jobs[j].seeds);
         match out {
             Ok(new) => {
                 // Batches are appended whole, and `resume_rows` dropped any part of one.
-                append_rows(&jsonl, &new)?;
-                rows.extend(new);
+                append_rows(&jsonl, &new.rows)?;
+                kept.add(name, &new.rows, new.frames);
+                rows.extend(new.rows);
                 pb.inc(todo.len() as u64);
             }
             // The world model failing is not the policy's fault and would fail every
@@ -297,7 +302,8 @@ fn run_with(
                 .map(|(pi, p)| (names[*pi].clone(), p.as_ref()))
                 .filter(|(n, _)| !failed_names.contains(&n.as_str()))
                 .collect();
-            rollouts(a, &named, &rows, &setup, &wm, &pool)?;
+            let src = media::Sources { rows: &rows, kept: &kept, batches: &batches, setup: &setup, wm: &wm };
+            rollouts(a, &named, &src, &pool)?;
         }
         Some(report::write_report(&a.out)?)
     };
@@ -426,16 +432,14 @@ pub(crate) fn load_world_model(
     Ok(wm)
 }
 
-/// Replays each policy's best- and worst-agreeing episodes with frame recording, the
-/// policies (those that loaded, as the run loaded them) on the pool's threads at once (a
-/// policy's replay alone is two episodes: its batched calls leave a core idle); the files
-/// and the index are the same in any order.
+/// Writes each policy's best- and worst-agreeing episodes as filmstrips, from the frames
+/// the run kept or replayed ([`media::Sources`]), the policies (those that loaded, as the run loaded
+/// them) on the pool's threads at once (a policy's replay alone is two episodes: its
+/// batched calls leave a core idle); the files and the index are the same in any order.
 fn rollouts(
     a: &RankArgs,
     policies: &[(String, &dyn harness::policy::Policy)],
-    rows: &[EpisodeRow],
-    setup: &Setup,
-    wm: &WorldModel,
+    src: &media::Sources,
     pool: &rayon::ThreadPool,
 ) -> Result<()> {
     use rayon::prelude::*;
@@ -444,8 +448,8 @@ fn rollouts(
         policies
             .par_iter()
             .map(|(name, policy)| {
-                let picks = media::pick_seeds(rows, name);
-                media::write_rollouts(&dir, *policy, &picks, setup, wm, 4)
+                let picks = media::pick_seeds(src.rows, name);
+                media::write_rollouts(&dir, *policy, &picks, src)
             })
             .collect::<Result<_>>()
     })?;
