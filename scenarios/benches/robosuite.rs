@@ -72,7 +72,7 @@ fn settings() -> Vec<(&'static str, Visual)> {
     let base = Visual::default();
     vec![
         ("default", base),
-        ("offscreen_96", Visual { offscreen: [96, 96], ..base }),
+        ("offscreen_640x480", Visual { offscreen: [640, 480], ..base }),
         ("samples_0", Visual { samples: 0, ..base }),
         ("shadow_256", Visual { shadow_size: 256, ..base }),
         ("no_reflections", Visual { reflections: false, ..base }),

@@ -96,7 +96,7 @@ fn frame_cost_per_visual_setting() {
     let base = Visual::default();
     let variants = [
         ("default", base),
-        ("offscreen 96x96", Visual { offscreen: [96, 96], ..base }),
+        ("offscreen 640x480", Visual { offscreen: [640, 480], ..base }),
         ("samples 0", Visual { samples: 0, ..base }),
         ("samples 1", Visual { samples: 1, ..base }),
         ("samples 2", Visual { samples: 2, ..base }),
@@ -211,4 +211,45 @@ fn frames_rendered_at_84_are_upsampled_as_driftworlds_robomimic_data() {
     let mean =
         frame.iter().zip(&direct).map(|(x, y)| f64::from(x.abs_diff(*y))).sum::<f64>() / frame.len() as f64;
     assert!(mean > 0.1, "upsampled and direct renders should differ ({mean})");
+}
+
+#[test]
+fn the_default_offscreen_buffer_renders_the_bytes_of_robosuites() {
+    // The default buffer is the frame's size; robosuite's 640 x 480 one, which the shipped
+    // models' frames were rendered in, gives the same bytes along a moving episode of each
+    // task (the arm sweeping, the gripper opening and closing).
+    use crate::robosuite::visual::Visual;
+    let robosuites = Visual { offscreen: [640, 480], ..Visual::default() };
+    assert_eq!(Visual::default().offscreen, [96, 96]);
+    let action = |k: usize| {
+        let s = if k % 10 < 5 { 0.5 } else { -0.5 };
+        [s, -s, -0.3, 0.0, 0.0, 0.2 * s, if k % 12 < 6 { 1.0 } else { -1.0 }]
+    };
+    let frames = |v: Visual, task: &str| -> Vec<Vec<u8>> {
+        let mut out = Vec::new();
+        if task == "lift" {
+            let sim = crate::lift::LiftSim::new(crate::lift::LiftConfig { visual: v, ..Default::default() })
+                .unwrap();
+            let mut ep = sim.reset(4).unwrap();
+            for k in 0..12 {
+                ep.step(&action(k)).unwrap();
+                out.push(ep.render(96).unwrap());
+            }
+        } else {
+            let sim =
+                crate::can::CanSim::new(crate::can::CanConfig { visual: v, ..Default::default() }).unwrap();
+            let mut ep = sim.reset(4).unwrap();
+            for k in 0..12 {
+                ep.arm_mut().step(&action(k)).unwrap();
+                out.push(ep.arm_mut().render(96).unwrap());
+            }
+        }
+        crate::robosuite::episode::release_renderer();
+        out
+    };
+    for task in ["lift", "can"] {
+        let (ours, theirs) = (frames(Visual::default(), task), frames(robosuites, task));
+        assert!(ours.windows(2).any(|w| w[0] != w[1]), "{task}: the episode should move");
+        assert!(ours == theirs, "{task}: a 96 x 96 buffer renders other bytes than robosuite's 640 x 480");
+    }
 }
