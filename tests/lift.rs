@@ -302,23 +302,35 @@ fn collect_writes_a_can_dataset_with_its_default_mix() {
 }
 
 #[test]
-fn rank_filmstrips_show_the_runs_own_episodes_when_resumed_too() {
-    // A run takes its filmstrips from the frames it recorded; a resumed run, whose
-    // episodes were made by an earlier process, replays them. On Lift an episode's frames
-    // depend on the episodes beside it in its batch (these 4 seeds end at different
-    // steps, and replaying the two picked seeds alone drew another worst episode), so
-    // the replay runs the picked episode's whole batch and must give the same bytes.
+fn rank_filmstrips_show_the_runs_own_episodes_when_resumed_or_sharded_too() {
+    // A run takes its filmstrips from the frames it recorded. A resumed run finds those of
+    // its earlier process in `filmstrip-frames/`, the run joining `--processes` shards those
+    // of the shards; a run without them (resuming a finished one) replays. On Lift an
+    // episode's frames depend on the episodes beside it in its batch (these 4 seeds end at
+    // different steps, and replaying the two picked seeds alone drew another worst
+    // episode), so a replay runs the picked episode's whole batch and gives the same bytes.
     let tmp = tempfile::tempdir().unwrap();
-    let (first, resumed) = (tmp.path().join("run"), tmp.path().join("resumed"));
+    let (first, resumed, split) =
+        (tmp.path().join("run"), tmp.path().join("resumed"), tmp.path().join("split"));
     let pol = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/lift/policies/epoch-0014");
-    let args = ["rank", "--scenario", "lift", "--policies", s(&pol), "--episodes", "4", "--batch", "4"];
-    let more = ["--max-steps", "150", "--bootstrap", "10"];
+    let args = ["rank", "--scenario", "lift", "--policies", s(&pol), "--episodes", "4", "--bootstrap", "10"];
+    let more = ["--max-steps", "150", "--batch", "4"];
     // One policy ranks nothing against another: exit 1, the run and its report complete.
-    expect_code(&run(&[&args[..], &more[..], &["--out", s(&first)]].concat()), 1);
+    let (_, err) = expect_code(&run(&[&args[..], &more[..], &["--out", s(&first)]].concat()), 1);
+    assert!(!err.contains("replaying"), "{err}");
+    assert!(!first.join("filmstrip-frames").exists(), "the kept frames are removed");
     crate::util::copy_dir(&first, &resumed);
     std::fs::remove_dir_all(resumed.join("filmstrips")).unwrap();
-    expect_code(&run(&[&args[..], &more[..], &["--out", s(&resumed), "--resume"]].concat()), 1);
+    let (_, err) =
+        expect_code(&run(&[&args[..], &more[..], &["--out", s(&resumed), "--resume"]].concat()), 1);
+    assert!(err.contains("replaying epoch-0014's batch of 4 episodes"), "{err}");
     let strips = tree_bytes(&first.join("filmstrips"));
     assert_eq!(strips.len(), 5, "best and worst, PNG and GIF, and the index");
     assert_eq!(strips, tree_bytes(&resumed.join("filmstrips")));
+    // Two shard processes of two batches each keep their frames for the joining run.
+    let split_args = ["--max-steps", "40", "--batch", "2", "--processes", "2", "--out", s(&split)];
+    let (_, err) = expect_code(&run(&[&args[..], &split_args[..]].concat()), 1);
+    assert!(!err.contains("replaying"), "{err}");
+    assert_eq!(tree_bytes(&split.join("filmstrips")).len(), 5);
+    assert!(!split.join("filmstrip-frames").exists());
 }

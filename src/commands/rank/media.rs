@@ -10,37 +10,17 @@
 //! policy noise and generator noise give the same frames (a batch's episodes do not
 //! depend on one another).
 
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use engine::schedule::EpisodeFrames;
+
+use super::kept::{Kept, gaps, order};
 use harness::policy::Policy;
 use world_model::model::WorldModel;
 
 use engine::{Setup, Start, Timing, sim_branch, wm_branch};
 use harness::results::{Branch, EpisodeRow};
-
-/// An episode's |imagined − real| score and its seed.
-type Gap = (f64, u64);
-
-/// |imagined − real| score of each seed of `policy` that has both rows, with the seed.
-fn gaps(rows: &[EpisodeRow], policy: &str) -> Vec<Gap> {
-    let mut gaps: Vec<Gap> = Vec::new();
-    for r in rows.iter().filter(|r| r.policy == policy && r.branch == Branch::Sim) {
-        if let Some(w) =
-            rows.iter().find(|w| w.policy == policy && w.seed == r.seed && w.branch == Branch::WorldModel)
-        {
-            gaps.push(((w.score - r.score).abs(), r.seed));
-        }
-    }
-    gaps
-}
-
-/// The order [`pick_seeds`] sorts by: the gap, then the seed.
-fn order(a: Gap, b: Gap) -> std::cmp::Ordering {
-    a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
-}
 
 /// The most bytes of recorded frames the batches in flight may hold; above it a run
 /// records nothing and its filmstrips replay the picked episodes' batches.
@@ -54,35 +34,6 @@ pub fn recording_fits(policies: &[&dyn Policy], setup: &Setup, batch: usize, job
     let side = setup.task.observation_spec().image_size;
     let per_episode = 2 * (setup.max_steps.div_ceil(horizon) + 1) * side * side * 3;
     per_episode.saturating_mul(batch).saturating_mul(jobs.max(1) + 1) <= RECORD_BUDGET
-}
-
-/// Per policy, the recorded frames of the best- and worst-agreeing episode among the
-/// batches this process ran: what [`pick_seeds`] can pick from them, and nothing else
-/// (two episodes per policy at most).
-#[derive(Default)]
-pub struct Kept {
-    by_policy: HashMap<String, Vec<(Gap, EpisodeFrames)>>,
-}
-
-impl Kept {
-    /// Takes a finished batch of `policy`: its rows and recorded frames.
-    pub fn add(&mut self, policy: &str, rows: &[EpisodeRow], frames: Vec<EpisodeFrames>) {
-        let gaps = gaps(rows, policy);
-        let kept = self.by_policy.entry(policy.to_string()).or_default();
-        for f in frames {
-            if let Some(&g) = gaps.iter().find(|g| g.1 == f.seed) {
-                kept.push((g, f));
-            }
-        }
-        let lo = kept.iter().map(|k| k.0).min_by(|a, b| order(*a, *b));
-        let hi = kept.iter().map(|k| k.0).max_by(|a, b| order(*a, *b));
-        kept.retain(|k| Some(k.0) == lo || Some(k.0) == hi);
-    }
-
-    /// The kept frames of `policy`'s `seed`, if this run recorded them.
-    fn get(&self, policy: &str, seed: u64) -> Option<&EpisodeFrames> {
-        self.by_policy.get(policy)?.iter().map(|k| &k.1).find(|f| f.seed == seed)
-    }
 }
 
 /// The best- and worst-agreeing seeds of a policy (at most 2, distinct).
@@ -133,6 +84,10 @@ fn frames_of(
             continue;
         }
         let batch = src.batches.iter().find(|b| b.contains(&seed)).map_or(vec![seed], |b| b.to_vec());
+        tracing::info!(
+            "filmstrips: replaying {name}'s batch of {} episodes for seed {seed}, whose frames this run did not keep",
+            batch.len()
+        );
         let mut timing = Timing::default();
         let mut start = Start::new(name, &batch, src.setup)?;
         start.record = true;
@@ -250,39 +205,6 @@ mod tests {
         ];
         assert_eq!(pick_seeds(&rows, "p"), vec![(2, "best"), (1, "worst")]);
         assert!(pick_seeds(&rows, "q").is_empty());
-    }
-
-    #[test]
-    fn kept_frames_are_those_pick_seeds_picks_from_the_run() {
-        let row = |seed, b, s| EpisodeRow::new("p", seed, b, s, 0.0, 0.0, 0.95, 1);
-        let frames = |seeds: &[u64]| -> Vec<EpisodeFrames> {
-            seeds
-                .iter()
-                .map(|&seed| EpisodeFrames { seed, real: vec![vec![seed as u8]], imagined: vec![] })
-                .collect()
-        };
-        let mut kept = Kept::default();
-        // Batch 1: gaps 0.4 (seed 1) and 0.05 (seed 2). Batch 2: gaps 0.05 (seed 3, ties
-        // seed 2 and loses on the seed) and 0.2 (seed 4, neither end).
-        let b1 = vec![
-            row(1, Branch::Sim, 0.5),
-            row(1, Branch::WorldModel, 0.1),
-            row(2, Branch::Sim, 0.5),
-            row(2, Branch::WorldModel, 0.45),
-        ];
-        let b2 = vec![
-            row(3, Branch::Sim, 0.5),
-            row(3, Branch::WorldModel, 0.55),
-            row(4, Branch::Sim, 0.5),
-            row(4, Branch::WorldModel, 0.3),
-        ];
-        kept.add("p", &b1, frames(&[1, 2]));
-        kept.add("p", &b2, frames(&[3, 4]));
-        let all: Vec<EpisodeRow> = b1.into_iter().chain(b2).collect();
-        assert_eq!(pick_seeds(&all, "p"), vec![(2, "best"), (1, "worst")]);
-        assert!(kept.get("p", 1).is_some() && kept.get("p", 2).is_some());
-        assert!(kept.get("p", 3).is_none() && kept.get("p", 4).is_none(), "only the two ends are kept");
-        assert!(kept.get("q", 1).is_none());
     }
 
     #[test]

@@ -12,6 +12,7 @@
 mod check;
 mod claims;
 pub mod defaults;
+mod kept;
 mod media;
 pub mod merge;
 mod processes;
@@ -173,7 +174,6 @@ fn run_with(
         float_frames: a.float_frames,
         ..Setup::new(task.as_ref(), a.seed, r.max_steps, judge.as_ref())
     };
-    let mut kept = media::Kept::default();
     let expect = expectations(task.as_ref());
     let pb = progress::bar((dirs.len() * r.episodes) as u64, "rank", quiet);
     let mut failed: Vec<FailedPolicy> = Vec::new();
@@ -216,16 +216,20 @@ fn run_with(
         }
     }
     let policies: Vec<&dyn harness::policy::Policy> = loaded.iter().map(|(_, p)| p.as_ref()).collect();
-    // The report's filmstrips come from the run's own frames (`media::Kept`) when the
-    // batches in flight can hold them.
-    setup.record = !a.no_report && shards == 1 && media::recording_fits(&policies, &setup, a.batch, a.jobs);
+    // The report's filmstrips come from the run's own frames (`kept::Kept`) when the batches
+    // in flight can hold them; the shards of `--processes` (which use claims) keep theirs
+    // for the run that joins them.
+    setup.record = ((!a.no_report && shards == 1) || a.claims.is_some())
+        && media::recording_fits(&policies, &setup, a.batch, a.jobs);
+    let kept_dir = a.out.join(kept::FOLDER);
+    let mut kept = if setup.record { kept::Kept::open(&kept_dir, &rows)? } else { kept::Kept::default() };
     let mut done = |j: usize, out: schedule::BatchResult| -> Result<()> {
         let (name, todo) = (&names[loaded[jobs[j].policy].0], &jobs[j].seeds);
         match out {
             Ok(new) => {
                 // Batches are appended whole, and `resume_rows` dropped any part of one.
                 append_rows(&jsonl, &new.rows)?;
-                kept.add(name, &new.rows, new.frames);
+                kept.add(name, &new.rows, new.frames)?;
                 rows.extend(new.rows);
                 pb.inc(todo.len() as u64);
             }
@@ -307,6 +311,10 @@ fn run_with(
         }
         Some(report::write_report(&a.out)?)
     };
+    if shards == 1 && kept_dir.exists() {
+        // The filmstrips are written (or not asked for): the kept frames are done with.
+        std::fs::remove_dir_all(&kept_dir).with_context(|| format!("removing {}", kept_dir.display()))?;
+    }
     if let Some((text, true)) = scene::scene_note(&res.policies) {
         tracing::warn!("{text}");
     }

@@ -112,6 +112,8 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
     let dirs: Vec<PathBuf> = shards.iter().map(|s| s.dir.clone()).collect();
     // The shards' thread times, summed by merge; the wall clock is this command's.
     let (_, summed) = super::merge::join(&dirs, &a.out, true, true, false)?;
+    // The frames each shard kept for the filmstrips, for the finishing run to pick from.
+    super::kept::gather(&dirs, &a.out)?;
     let timing = RunTiming {
         wall_seconds: started.elapsed().as_secs_f64(),
         note: format!(
