@@ -315,44 +315,6 @@ mod tests {
     }
 
     #[test]
-    fn an_episodes_recorded_frames_do_not_depend_on_its_batch() {
-        // `rank` keeps the filmstrip frames of its batches instead of replaying the picked
-        // episodes alone: the same episode must record the same frames either way.
-        let task = scenarios::load_task("pusht").unwrap();
-        let setup = Setup { record: true, ..Setup::new(task.as_ref(), 3, 12, None) };
-        let device = Device::flex();
-        let size = task.observation_spec().image_size;
-        let wm_cfg = WorldModelConfig::pixels(UNetConfig::new(3, 8, vec![1], vec![]).with_groups(4), size);
-        let unet = wm_cfg.unet.init(&device);
-        let wm = WorldModel::from_parts(wm_cfg, FrameCodec::pixels(size), unet, &device);
-        let good = Fake { name: "good", fail: false };
-        let policies: Vec<&dyn Policy> = vec![&good];
-        let frames = |seeds: Vec<u64>| {
-            let mut out = Vec::new();
-            run_batches::<EngineError>(
-                &policies,
-                &[Batch { policy: 0, seeds }],
-                &setup,
-                &wm,
-                2,
-                &mut |_, r| {
-                    out.extend(r.unwrap().frames);
-                    Ok(())
-                },
-            )
-            .unwrap();
-            out
-        };
-        let batch = frames(vec![100, 101, 102]);
-        let alone = frames(vec![101]);
-        assert_eq!(batch.iter().map(|f| f.seed).collect::<Vec<_>>(), [100, 101, 102]);
-        // The first frame and one per 4-action chunk: 1 + 12 / 4.
-        assert_eq!((alone[0].real.len(), alone[0].imagined.len()), (4, 4));
-        assert_eq!(batch[1], alone[0]);
-        assert_ne!(batch[0].real, batch[1].real, "another seed, another scene");
-    }
-
-    #[test]
     fn ordered_work_is_handed_on_in_item_order_on_one_thread_pools_and_stops_at_an_error() {
         // Items 0..6, squared; the later items finish first (they sleep less), yet are
         // handed on in order. Each runs on a pool of one thread.

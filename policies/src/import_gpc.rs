@@ -19,7 +19,7 @@ use world_model::import::ImportError;
 use world_model::import::place::{place_all, shapes, transpose};
 use world_model::import::tensors::{Source, top_level_int};
 
-use crate::imported_policy::{ImportedConfig, ImportedNet, Pool};
+use crate::imported_policy::{ImportedConfig, ImportedNet, Pool, Sampler};
 use crate::net::NetConfig;
 
 /// Which copy of the weights to import.
@@ -233,6 +233,7 @@ fn config_from(src: &Source, image_size: usize, obs_horizon: usize) -> Result<Im
         image_norm: None,
         position_first: false,
         inference_steps: None,
+        sampler: Sampler::Ddpm,
         net,
         horizon: 16,
         action_horizon: 8,

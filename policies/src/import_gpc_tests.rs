@@ -124,6 +124,7 @@ fn the_official_pusht_manifest_is_the_parameter_order() {
         image_norm: None,
         position_first: false,
         inference_steps: None,
+        sampler: crate::imported_policy::Sampler::Ddpm,
         net: NetConfig {
             image_size: 96,
             encoder_width: 64,

@@ -21,7 +21,7 @@ use world_model::import::place::{place_all, shapes, transpose};
 use world_model::import::safe::SafeSource;
 
 use crate::diffusion::{Normalisation, Range};
-use crate::imported_policy::{ImportedConfig, ImportedNet, MeanStd, Pool};
+use crate::imported_policy::{ImportedConfig, ImportedNet, MeanStd, Pool, Sampler};
 use crate::lerobot_config::{LeRobotConfig, check, features};
 use crate::net::NetConfig;
 
@@ -245,6 +245,7 @@ pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError>
         image_norm: Some(image_norm),
         position_first: true,
         inference_steps: c.num_inference_steps,
+        sampler: if c.noise_scheduler_type == "DDIM" { Sampler::Ddim } else { Sampler::Ddpm },
         net: NetConfig {
             image_size: shape[1],
             encoder_width: base,

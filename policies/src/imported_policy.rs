@@ -15,7 +15,10 @@
 //!   clipped to [-1, 1], "fixed small" variance) over every training step or over
 //!   `inference_steps` of them with "leading" spacing, stochastic: the initial noise and each
 //!   step's noise come from the episode's own generator, so a run is reproducible and
-//!   independent of batching, not equal to PyTorch's draws.
+//!   independent of batching, not equal to PyTorch's draws. A LeRobot policy configured with
+//!   `noise_scheduler_type: DDIM` samples with diffusers' `DDIMScheduler` instead (η = 0,
+//!   ᾱ = 1 past the last step, x₀ clipped, the predicted noise kept): only the initial noise
+//!   is drawn.
 //! - Actions `obs_horizon − 1 ..` `+ action_horizon` of the sequence are executed.
 
 use burn::module::Module;
@@ -53,6 +56,23 @@ impl Pool {
     }
 }
 
+/// How an imported policy denoises its action sequence.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Sampler {
+    /// diffusers' `DDPMScheduler` (stochastic steps).
+    #[default]
+    Ddpm,
+    /// diffusers' `DDIMScheduler` with η = 0 (deterministic steps).
+    Ddim,
+}
+
+impl Sampler {
+    fn is_ddpm(&self) -> bool {
+        *self == Self::Ddpm
+    }
+}
+
 /// Per-channel image normalisation, `(x − mean) / (std + 1e-8)` of frames in [0, 1].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -85,6 +105,9 @@ pub struct ImportedConfig {
     /// Denoising steps at sampling, spaced evenly from the last (absent: every training step).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub inference_steps: Option<usize>,
+    /// The sampler (absent: DDPM, as every policy imported before DDIM was).
+    #[serde(default, skip_serializing_if = "Sampler::is_ddpm")]
+    pub sampler: Sampler,
     /// The U-Net's sizes (`feature_dim` as the pool gives; `encoder_width` unused).
     pub net: NetConfig,
     /// Predicted actions per decision.
@@ -243,6 +266,28 @@ pub fn ddpm_sample(
     x
 }
 
+/// DDIM sampling (η = 0) of `x` (`[b, horizon, action_dim]`, flat) over `timesteps` (noisiest
+/// first) of the schedule `ac`, with the noise predictor `eps(x, t)`, as diffusers'
+/// `DDIMScheduler` steps: x₀ = (x − √(1 − ᾱ_t) ε) / √ᾱ_t clipped to [-1, 1], then
+/// x ← √ᾱ_prev x₀ + √(1 − ᾱ_prev) ε with ᾱ_prev = 1 after the last step (`set_alpha_to_one`).
+pub fn ddim_sample(
+    mut x: Vec<f32>,
+    ac: &[f64],
+    timesteps: &[usize],
+    mut eps: impl FnMut(&[f32], usize) -> Vec<f32>,
+) -> Vec<f32> {
+    for (j, &t) in timesteps.iter().enumerate() {
+        let e = eps(&x, t);
+        let (a, ap) = (ac[t], timesteps.get(j + 1).map_or(1.0, |&p| ac[p]));
+        let (sa, s1a, sp, s1p) = (a.sqrt(), (1.0 - a).sqrt(), ap.sqrt(), (1.0 - ap).sqrt());
+        for (v, e) in x.iter_mut().zip(&e) {
+            let x0 = ((f64::from(*v) - s1a * f64::from(*e)) / sa).clamp(-1.0, 1.0);
+            *v = (sp * x0 + s1p * f64::from(*e)) as f32;
+        }
+    }
+    x
+}
+
 /// A loaded GPC policy (inference).
 pub struct ImportedDiffusion {
     /// Checkpoint name.
@@ -342,13 +387,16 @@ impl Policy for ImportedDiffusion {
         // Each episode's initial noise, then each step's, from its own generator.
         let x: Vec<f32> = rngs.iter_mut().flat_map(|r| r.normals_f32(h * ad)).collect();
         let per = h * ad;
-        let v = ddpm_sample(
-            x,
-            &self.ac,
-            &self.cfg.timesteps(),
-            |x, t| self.eps(&cond, x, b, t),
-            |_| rngs.iter_mut().flat_map(|r| r.normals_f32(per)).collect(),
-        );
+        let v = match self.cfg.sampler {
+            Sampler::Ddpm => ddpm_sample(
+                x,
+                &self.ac,
+                &self.cfg.timesteps(),
+                |x, t| self.eps(&cond, x, b, t),
+                |_| rngs.iter_mut().flat_map(|r| r.normals_f32(per)).collect(),
+            ),
+            Sampler::Ddim => ddim_sample(x, &self.ac, &self.cfg.timesteps(), |x, t| self.eps(&cond, x, b, t)),
+        };
         if v.len() != b * h * ad || v.iter().any(|x| !x.is_finite()) {
             return Err(bad(format!(
                 "the network returned {} values (finite?), expected {}",

@@ -51,6 +51,7 @@ fn leading_spacing_steps_from_the_last_multiple_down_to_zero() {
         image_norm: None,
         position_first: false,
         inference_steps: n,
+        sampler: Sampler::Ddpm,
         net: crate::net::NetConfig::new(),
         horizon: 16,
         action_horizon: 8,

@@ -149,8 +149,8 @@ pub(crate) fn check(c: &LeRobotConfig, path: &Path) -> Result<(), ImportError> {
     if c.n_groups != 8 {
         return refuse("n_groups", c.n_groups.to_string(), "8");
     }
-    if c.noise_scheduler_type != "DDPM" {
-        return refuse("noise_scheduler_type", c.noise_scheduler_type.clone(), "DDPM");
+    if c.noise_scheduler_type != "DDPM" && c.noise_scheduler_type != "DDIM" {
+        return refuse("noise_scheduler_type", c.noise_scheduler_type.clone(), "DDPM or DDIM");
     }
     if c.beta_schedule != "squaredcos_cap_v2" {
         return refuse("beta_schedule", c.beta_schedule.clone(), "squaredcos_cap_v2");
