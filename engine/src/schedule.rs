@@ -267,15 +267,7 @@ mod tests {
     #[test]
     fn any_worker_count_hands_on_the_same_batches_and_stops_a_failing_policy() {
         let task = scenarios::load_task("pusht").unwrap();
-        let setup = Setup {
-            task: task.as_ref(),
-            master_seed: 3,
-            max_steps: 4,
-            judge: None,
-            judge_every_frame: false,
-            float_frames: false,
-            record: false,
-        };
+        let setup = Setup::new(task.as_ref(), 3, 4, None);
         // A tiny pixel-space world model with random weights: the rows only need to be
         // a deterministic function of the batch.
         let device = Device::flex();

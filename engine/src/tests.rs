@@ -121,15 +121,7 @@ impl Policy for ToGoal {
 
 #[test]
 fn a_success_scored_task_runs_through_the_simulator_branch() {
-    let setup = Setup {
-        task: &Reach,
-        master_seed: 0,
-        max_steps: 10,
-        judge: None,
-        judge_every_frame: false,
-        float_frames: false,
-        record: false,
-    };
+    let setup = Setup::new(&Reach, 0, 10, None);
     let mut start = Start::new("to-goal", &[0, 2, 4], &setup).unwrap();
     start.trajectories = true;
     let out = sim_branch(&ToGoal, start, &setup, &mut Timing::default()).unwrap();
@@ -156,15 +148,7 @@ fn a_success_scored_task_runs_through_the_simulator_branch() {
 
 #[test]
 fn recorded_actions_replayed_in_the_simulator_give_the_recorded_rows() {
-    let setup = Setup {
-        task: &Reach,
-        master_seed: 0,
-        max_steps: 10,
-        judge: None,
-        judge_every_frame: false,
-        float_frames: false,
-        record: false,
-    };
+    let setup = Setup::new(&Reach, 0, 10, None);
     let mut start = Start::new("to-goal", &[0, 2, 1], &setup).unwrap();
     start.trajectories = true;
     let out = sim_branch(&ToGoal, start, &setup, &mut Timing::default()).unwrap();
@@ -200,15 +184,7 @@ fn recorded_actions_replayed_in_the_simulator_give_the_recorded_rows() {
 fn a_recorded_replay_comes_back_whole_with_the_same_row() {
     // Seed 1 starts at 3; actions to 7 step 5, 6, 6.5, 6.75: within 0.5 of the goal (7)
     // after step 4, the end of the second chunk of 2, where the episode ends.
-    let setup = Setup {
-        task: &Reach,
-        master_seed: 0,
-        max_steps: 10,
-        judge: None,
-        judge_every_frame: false,
-        float_frames: false,
-        record: false,
-    };
+    let setup = Setup::new(&Reach, 0, 10, None);
     let replay = |record| {
         replay_in_sim("to-goal", (1, 2), 1, vec![vec![7.0]; 6], (&setup, record), &mut Timing::default())
     };
@@ -230,15 +206,7 @@ fn a_recorded_replay_comes_back_whole_with_the_same_row() {
 fn episodes_that_never_succeed_run_to_the_step_limit() {
     // Seed 1 starts at 3 and is commanded to the goal; with max_steps 2 it reaches 5 then 6:
     // never within 0.5, so the row is a failure after exactly 2 steps.
-    let setup = Setup {
-        task: &Reach,
-        master_seed: 0,
-        max_steps: 2,
-        judge: None,
-        judge_every_frame: false,
-        float_frames: false,
-        record: false,
-    };
+    let setup = Setup::new(&Reach, 0, 2, None);
     let start = Start::new("to-goal", &[1], &setup).unwrap();
     let out = sim_branch(&ToGoal, start, &setup, &mut Timing::default()).unwrap();
     let r = &out.rows[0];
@@ -280,15 +248,7 @@ fn robomimic_lift_runs_through_the_simulator_branch_with_a_given_judge() {
     let task = scenarios::load_task("lift").expect("robosuite assets (scripts/setup.sh)");
     // Lift has no hand-written judge of frames: without one given, the simulator branch
     // runs (scored exactly, no judge error to report) and the world-model branch refuses.
-    let bare = Setup {
-        task: task.as_ref(),
-        master_seed: 0,
-        max_steps: 4,
-        judge: None,
-        judge_every_frame: false,
-        float_frames: false,
-        record: false,
-    };
+    let bare = Setup::new(task.as_ref(), 0, 4, None);
     let start = Start::new("up", &[0], &bare).unwrap();
     let wm = WorldModel::from_parts(
         WorldModelConfig::pixels(
@@ -366,15 +326,7 @@ impl Policy for GoIfSeen {
 
 #[test]
 fn the_policy_sees_the_rewritten_frames_and_the_scores_stay_exact() {
-    let setup = Setup {
-        task: &Reach,
-        master_seed: 0,
-        max_steps: 4,
-        judge: None,
-        judge_every_frame: false,
-        float_frames: false,
-        record: false,
-    };
+    let setup = Setup::new(&Reach, 0, 4, None);
     // Seed 2 starts at 6 (frame byte 150): seen as is, the policy commands 7 and the agent
     // reaches 6.5, then 6.75: success at step 2.
     let start = Start::new("go-if-seen", &[2], &setup).unwrap();
@@ -417,15 +369,7 @@ fn a_judge_scoring_nan_stops_the_imagined_branch_by_name() {
     // successes and NaN as failures, and the run went on: every imagined row was wrong.
     let task = scenarios::load_task("lift").expect("robosuite assets (scripts/setup.sh)");
     let broken: std::sync::Arc<dyn Judge> = std::sync::Arc::new(Broken);
-    let setup = Setup {
-        task: task.as_ref(),
-        master_seed: 0,
-        max_steps: 2,
-        judge: Some(&broken),
-        judge_every_frame: false,
-        float_frames: false,
-        record: false,
-    };
+    let setup = Setup::new(task.as_ref(), 0, 2, Some(&broken));
     let start = Start::new("up", &[7], &setup).unwrap();
     let device = burn::tensor::Device::flex();
     let unet = UNetConfig { action_dim: 7, ..UNetConfig::new(3, 8, vec![1], vec![]).with_groups(4) };
