@@ -13,13 +13,13 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
-use engine::schedule::EpisodeFrames;
+use engine::schedule::{Batch, EpisodeFrames, run_batches};
 
 use super::kept::{Kept, gaps, order};
 use harness::policy::Policy;
 use world_model::model::WorldModel;
 
-use engine::{Setup, Start, Timing, sim_branch, wm_branch};
+use engine::Setup;
 use harness::results::{Branch, EpisodeRow};
 
 /// The most bytes of recorded frames the batches in flight may hold; above it a run
@@ -88,18 +88,15 @@ fn frames_of(
             "filmstrips: replaying {name}'s batch of {} episodes for seed {seed}, whose frames this run did not keep",
             batch.len()
         );
-        let mut timing = Timing::default();
-        let mut start = Start::new(name, &batch, src.setup)?;
-        start.record = true;
-        let imagined = wm_branch(policy, &start, src.setup, src.wm, &mut timing)?;
-        let real = sim_branch(policy, start, src.setup, &mut timing)?;
-        replayed.extend(
-            batch
-                .iter()
-                .zip(real.frames.into_iter().zip(imagined.frames))
-                .filter(|(s, _)| picks.iter().any(|p| p.0 == **s))
-                .map(|(&seed, (real, imagined))| EpisodeFrames { seed, real, imagined }),
-        );
+        // The run's own path (its scheduler, one-thread kernel pools), recording.
+        let setup = Setup { record: true, ..*src.setup };
+        let job = [Batch { policy: 0, seeds: batch }];
+        let mut out = Vec::new();
+        run_batches::<anyhow::Error>(&[policy], &job, &setup, src.wm, 1, &mut |_, r| {
+            out = r?.frames;
+            Ok(())
+        })?;
+        replayed.extend(out.into_iter().filter(|f| picks.iter().any(|p| p.0 == f.seed)));
     }
     Ok(picks
         .iter()
