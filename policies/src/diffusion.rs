@@ -195,14 +195,21 @@ fn sample_cpu(
     let prep = unet.prepare(cond, x.len() / (action_dim * horizon).max(1));
     for (t, a, a_prev) in ddim_steps(k, ac) {
         let eps = unet.forward(&prep, &x, horizon, t as f32);
-        let (sa, s1a) = (a.sqrt() as f32, (1.0 - a).sqrt() as f32);
-        let (sp, s1p) = (a_prev.sqrt() as f32, (1.0 - a_prev).sqrt() as f32);
-        for (v, e) in x.iter_mut().zip(&eps) {
-            let x0 = ((*v - e * s1a) / sa).clamp(-1.0, 1.0);
-            *v = x0 * sp + e * s1p;
-        }
+        ddim_update(&mut x, &eps, a, a_prev);
     }
     x
+}
+
+/// One deterministic DDIM step (η = 0) of `x` given its predicted noise `eps`, from ᾱ = `a`
+/// to ᾱ = `a_prev`: x₀ = (x − √(1 − a) ε) / √a clipped to [-1, 1], then
+/// x ← √a_prev x₀ + √(1 − a_prev) ε (the noise kept, not re-derived from the clipped x₀).
+pub(crate) fn ddim_update(x: &mut [f32], eps: &[f32], a: f64, a_prev: f64) {
+    let (sa, s1a) = (a.sqrt() as f32, (1.0 - a).sqrt() as f32);
+    let (sp, s1p) = (a_prev.sqrt() as f32, (1.0 - a_prev).sqrt() as f32);
+    for (v, e) in x.iter_mut().zip(eps) {
+        let x0 = ((*v - e * s1a) / sa).clamp(-1.0, 1.0);
+        *v = x0 * sp + e * s1p;
+    }
 }
 
 /// The frames and normalised proprioception of a batch of observations, checked: each has

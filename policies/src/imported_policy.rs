@@ -31,7 +31,7 @@ use harness::rng::Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::cpu_unet::CpuUnet1d;
-use crate::diffusion::{Normalisation, alphas_cumprod, executed};
+use crate::diffusion::{Normalisation, alphas_cumprod, ddim_update, executed};
 use crate::net::{CondUnet1d, NetConfig};
 use crate::resnet_gn::ResNet18Gn;
 
@@ -268,8 +268,8 @@ pub fn ddpm_sample(
 
 /// DDIM sampling (η = 0) of `x` (`[b, horizon, action_dim]`, flat) over `timesteps` (noisiest
 /// first) of the schedule `ac`, with the noise predictor `eps(x, t)`, as diffusers'
-/// `DDIMScheduler` steps: x₀ = (x − √(1 − ᾱ_t) ε) / √ᾱ_t clipped to [-1, 1], then
-/// x ← √ᾱ_prev x₀ + √(1 − ᾱ_prev) ε with ᾱ_prev = 1 after the last step (`set_alpha_to_one`).
+/// `DDIMScheduler` steps them ([`ddim_update`], evalharness's own DDIM step), with ᾱ_prev = 1
+/// after the last step (`set_alpha_to_one`).
 pub fn ddim_sample(
     mut x: Vec<f32>,
     ac: &[f64],
@@ -278,12 +278,7 @@ pub fn ddim_sample(
 ) -> Vec<f32> {
     for (j, &t) in timesteps.iter().enumerate() {
         let e = eps(&x, t);
-        let (a, ap) = (ac[t], timesteps.get(j + 1).map_or(1.0, |&p| ac[p]));
-        let (sa, s1a, sp, s1p) = (a.sqrt(), (1.0 - a).sqrt(), ap.sqrt(), (1.0 - ap).sqrt());
-        for (v, e) in x.iter_mut().zip(&e) {
-            let x0 = ((f64::from(*v) - s1a * f64::from(*e)) / sa).clamp(-1.0, 1.0);
-            *v = (sp * x0 + s1p * f64::from(*e)) as f32;
-        }
+        ddim_update(&mut x, &e, ac[t], timesteps.get(j + 1).map_or(1.0, |&p| ac[p]));
     }
     x
 }
