@@ -126,34 +126,12 @@ fn frame_cost_per_visual_setting() {
     for task in ["lift", "can"] {
         let mut reference: Vec<Vec<u8>> = Vec::new();
         for (name, v) in variants {
-            let mut frames = Vec::new();
-            let t = std::time::Instant::now();
-            let n = if task == "lift" {
-                let sim =
-                    crate::lift::LiftSim::new(crate::lift::LiftConfig { visual: v, ..Default::default() })
-                        .unwrap();
-                let mut ep = sim.reset(3).unwrap();
-                let t0 = std::time::Instant::now();
-                for k in 0..30 {
-                    let s = if k % 20 < 10 { 0.3 } else { -0.3 };
-                    ep.step(&[s, -s, 0.0, 0.0, 0.0, 0.1 * s, 1.0]).unwrap();
-                    frames.push(ep.render(96).unwrap());
-                }
-                t0
-            } else {
-                let sim = crate::can::CanSim::new(crate::can::CanConfig { visual: v, ..Default::default() })
-                    .unwrap();
-                let mut ep = sim.reset(3).unwrap();
-                let t0 = std::time::Instant::now();
-                for k in 0..30 {
-                    let s = if k % 20 < 10 { 0.3 } else { -0.3 };
-                    ep.arm_mut().step(&[s, -s, 0.0, 0.0, 0.0, 0.1 * s, 1.0]).unwrap();
-                    frames.push(ep.arm_mut().render(96).unwrap());
-                }
-                t0
+            let action = |k: usize| {
+                let s = if k % 20 < 10 { 0.3 } else { -0.3 };
+                [s, -s, 0.0, 0.0, 0.0, 0.1 * s, 1.0]
             };
-            let per = n.elapsed().as_secs_f64() * 1e3 / 30.0;
-            let _ = t;
+            let (frames, took) = frames_along(task, v, 3, 30, action);
+            let per = took.as_secs_f64() * 1e3 / 30.0;
             if reference.is_empty() {
                 reference = frames.clone();
             }
@@ -171,7 +149,6 @@ fn frame_cost_per_visual_setting() {
                 sum as f64 / count as f64,
                 100.0 * over8 as f64 / count as f64
             );
-            crate::robosuite::episode::release_renderer();
         }
     }
 }
@@ -225,31 +202,44 @@ fn the_default_offscreen_buffer_renders_the_bytes_of_robosuites() {
         let s = if k % 10 < 5 { 0.5 } else { -0.5 };
         [s, -s, -0.3, 0.0, 0.0, 0.2 * s, if k % 12 < 6 { 1.0 } else { -1.0 }]
     };
-    let frames = |v: Visual, task: &str| -> Vec<Vec<u8>> {
-        let mut out = Vec::new();
-        if task == "lift" {
-            let sim = crate::lift::LiftSim::new(crate::lift::LiftConfig { visual: v, ..Default::default() })
-                .unwrap();
-            let mut ep = sim.reset(4).unwrap();
-            for k in 0..12 {
-                ep.step(&action(k)).unwrap();
-                out.push(ep.render(96).unwrap());
-            }
-        } else {
-            let sim =
-                crate::can::CanSim::new(crate::can::CanConfig { visual: v, ..Default::default() }).unwrap();
-            let mut ep = sim.reset(4).unwrap();
-            for k in 0..12 {
-                ep.arm_mut().step(&action(k)).unwrap();
-                out.push(ep.arm_mut().render(96).unwrap());
-            }
-        }
-        crate::robosuite::episode::release_renderer();
-        out
-    };
     for task in ["lift", "can"] {
-        let (ours, theirs) = (frames(Visual::default(), task), frames(robosuites, task));
+        let (ours, theirs) = (
+            frames_along(task, Visual::default(), 4, 12, action).0,
+            frames_along(task, robosuites, 4, 12, action).0,
+        );
         assert!(ours.windows(2).any(|w| w[0] != w[1]), "{task}: the episode should move");
         assert!(ours == theirs, "{task}: a 96 x 96 buffer renders other bytes than robosuite's 640 x 480");
     }
+}
+
+/// The agentview frames of `steps` control steps of `task` (`lift` or `can`) from the reset of
+/// `seed` rendered with `visual`, each after `action(step)`, and how long the steps and frames
+/// took (not the reset); the thread's renderer is released after.
+fn frames_along(
+    task: &str,
+    visual: crate::robosuite::visual::Visual,
+    seed: u64,
+    steps: usize,
+    action: impl Fn(usize) -> [f64; 7],
+) -> (Vec<Vec<u8>>, std::time::Duration) {
+    let (mut lift, mut can);
+    let arm = if task == "lift" {
+        let sim =
+            crate::lift::LiftSim::new(crate::lift::LiftConfig { visual, ..Default::default() }).unwrap();
+        lift = sim.reset(seed).unwrap();
+        lift.arm_mut()
+    } else {
+        let sim = crate::can::CanSim::new(crate::can::CanConfig { visual, ..Default::default() }).unwrap();
+        can = sim.reset(seed).unwrap();
+        can.arm_mut()
+    };
+    let t = std::time::Instant::now();
+    let mut frames = Vec::with_capacity(steps);
+    for k in 0..steps {
+        arm.step(&action(k)).unwrap();
+        frames.push(arm.render(96).unwrap());
+    }
+    let took = t.elapsed();
+    crate::robosuite::episode::release_renderer();
+    (frames, took)
 }
