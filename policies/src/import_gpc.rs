@@ -19,6 +19,7 @@ use world_model::import::ImportError;
 use world_model::import::place::{place_all, shapes, transpose};
 use world_model::import::tensors::{Source, top_level_int};
 
+use crate::import_keys::{UnetNames, cond_unet, norm, resnet_block};
 use crate::imported_policy::{ImportedConfig, ImportedNet, Pool, Sampler};
 use crate::net::NetConfig;
 
@@ -105,7 +106,6 @@ pub fn official_names(dims: &[usize], action: usize) -> Vec<String> {
 
 /// evalharness's path of an official parameter, and whether it is a Linear weight (transposed).
 pub fn burn_path(name: &str) -> Option<(String, bool)> {
-    let norm = |s: &str| s.replace(".weight", ".gamma").replace(".bias", ".beta");
     if let Some(r) = name.strip_prefix("vision_encoder.") {
         if let Some(p) = r.strip_prefix("conv1.") {
             return Some((format!("encoder.stem.conv.{p}"), false));
@@ -116,63 +116,12 @@ pub fn burn_path(name: &str) -> Option<(String, bool)> {
         let (stage, rest) = r.strip_prefix("layer")?.split_once('.')?;
         let (i, rest) = rest.split_once('.')?;
         let b = 2 * (stage.parse::<usize>().ok()?.checked_sub(1)?) + i.parse::<usize>().ok()?;
-        let o = format!("encoder.blocks.{b}");
-        let (sub, p) = rest.rsplit_once('.')?;
-        return Some(match sub {
-            "conv1" => (format!("{o}.c1.conv.{p}"), false),
-            "bn1" => (norm(&format!("{o}.c1.norm.{p}")), false),
-            "conv2" => (format!("{o}.c2.conv.{p}"), false),
-            "bn2" => (norm(&format!("{o}.c2.norm.{p}")), false),
-            "downsample.0" => (format!("{o}.down.conv.{p}"), false),
-            "downsample.1" => (norm(&format!("{o}.down.norm.{p}")), false),
-            _ => return None,
-        });
+        return resnet_block(&format!("encoder.blocks.{b}"), rest);
     }
-    let r = name.strip_prefix("invariant.")?;
-    let block = |o: &str, rest: &str| -> Option<(String, bool)> {
-        let (sub, p) = rest.rsplit_once('.')?;
-        Some(match sub {
-            "blocks.0.block.0" => (format!("{o}.b0.conv.{p}"), false),
-            "blocks.0.block.1" => (norm(&format!("{o}.b0.norm.{p}")), false),
-            "blocks.1.block.0" => (format!("{o}.b1.conv.{p}"), false),
-            "blocks.1.block.1" => (norm(&format!("{o}.b1.norm.{p}")), false),
-            "cond_encoder.1" => (format!("{o}.film.{p}"), p == "weight"),
-            "residual_conv" => (format!("{o}.skip.{p}"), false),
-            _ => return None,
-        })
-    };
-    if let Some(p) = r.strip_prefix("diffusion_step_encoder.1.") {
-        return Some((format!("unet.step1.{p}"), p == "weight"));
-    }
-    if let Some(p) = r.strip_prefix("diffusion_step_encoder.3.") {
-        return Some((format!("unet.step2.{p}"), p == "weight"));
-    }
-    if let Some(p) = r.strip_prefix("final_conv.0.block.0.") {
-        return Some((format!("unet.final_block.conv.{p}"), false));
-    }
-    if let Some(p) = r.strip_prefix("final_conv.0.block.1.") {
-        return Some((norm(&format!("unet.final_block.norm.{p}")), false));
-    }
-    if let Some(p) = r.strip_prefix("final_conv.1.") {
-        return Some((format!("unet.final_conv.{p}"), false));
-    }
-    if let Some(rest) = r.strip_prefix("mid_modules.") {
-        let (j, rest) = rest.split_once('.')?;
-        return block(&format!("unet.mids.{j}"), rest);
-    }
-    for (theirs, ours, resample) in [("down_modules.", "downs", "down"), ("up_modules.", "ups", "up")] {
-        if let Some(rest) = r.strip_prefix(theirs) {
-            let (i, rest) = rest.split_once('.')?;
-            let (j, rest) = rest.split_once('.')?;
-            let o = format!("unet.{ours}.{i}");
-            return match j {
-                "0" | "1" => block(&format!("{o}.r{j}"), rest),
-                "2" => rest.strip_prefix("conv.").map(|p| (format!("{o}.{resample}.{p}"), false)),
-                _ => None,
-            };
-        }
-    }
-    None
+    cond_unet(
+        name.strip_prefix("invariant.")?,
+        &UnetNames { convs: ["blocks.0", "blocks.1"], resample: "conv." },
+    )
 }
 
 /// The sizes a checkpoint's shapes give (the ResNet base, the U-Net's levels, kernel and

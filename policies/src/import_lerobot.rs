@@ -21,6 +21,7 @@ use world_model::import::place::{place_all, shapes, transpose};
 use world_model::import::safe::SafeSource;
 
 use crate::diffusion::{Normalisation, Range};
+use crate::import_keys::{UnetNames, cond_unet, norm, resnet_block};
 use crate::imported_policy::{ImportedConfig, ImportedNet, MeanStd, Pool, Sampler};
 use crate::lerobot_config::{LeRobotConfig, check, features};
 use crate::net::NetConfig;
@@ -42,13 +43,12 @@ pub struct LeRobotPolicy {
 /// evalharness's path of a LeRobot key (without `diffusion.`), and whether it is a Linear
 /// weight (transposed); `None` for a key with no place.
 pub fn burn_path(key: &str) -> Option<(String, bool)> {
-    let norm = |s: String| s.replace(".weight", ".gamma").replace(".bias", ".beta");
     if let Some(r) = key.strip_prefix("rgb_encoder.") {
         if let Some(p) = r.strip_prefix("backbone.0.") {
             return Some((format!("encoder.stem.conv.{p}"), false));
         }
         if let Some(p) = r.strip_prefix("backbone.1.") {
-            return Some((norm(format!("encoder.stem.norm.{p}")), false));
+            return Some((norm(&format!("encoder.stem.norm.{p}")), false));
         }
         if let Some(p) = r.strip_prefix("pool.nets.") {
             return Some((format!("head.nets.{p}"), false));
@@ -61,64 +61,9 @@ pub fn burn_path(key: &str) -> Option<(String, bool)> {
         let (b, rest) = rest.split_once('.')?;
         let block =
             2 * layer.parse::<usize>().ok()?.checked_sub(4).filter(|l| *l < 4)? + b.parse::<usize>().ok()?;
-        let o = format!("encoder.blocks.{block}");
-        let (sub, p) = rest.rsplit_once('.')?;
-        return Some(match sub {
-            "conv1" => (format!("{o}.c1.conv.{p}"), false),
-            "bn1" => (norm(format!("{o}.c1.norm.{p}")), false),
-            "conv2" => (format!("{o}.c2.conv.{p}"), false),
-            "bn2" => (norm(format!("{o}.c2.norm.{p}")), false),
-            "downsample.0" => (format!("{o}.down.conv.{p}"), false),
-            "downsample.1" => (norm(format!("{o}.down.norm.{p}")), false),
-            _ => return None,
-        });
+        return resnet_block(&format!("encoder.blocks.{block}"), rest);
     }
-    let r = key.strip_prefix("unet.")?;
-    let res = |o: String, rest: &str| -> Option<(String, bool)> {
-        let (sub, p) = rest.rsplit_once('.')?;
-        Some(match sub {
-            "conv1.block.0" => (format!("{o}.b0.conv.{p}"), false),
-            "conv1.block.1" => (norm(format!("{o}.b0.norm.{p}")), false),
-            "conv2.block.0" => (format!("{o}.b1.conv.{p}"), false),
-            "conv2.block.1" => (norm(format!("{o}.b1.norm.{p}")), false),
-            "cond_encoder.1" => (format!("{o}.film.{p}"), p == "weight"),
-            "residual_conv" => (format!("{o}.skip.{p}"), false),
-            _ => return None,
-        })
-    };
-    for (from, to) in
-        [("diffusion_step_encoder.1.", "unet.step1."), ("diffusion_step_encoder.3.", "unet.step2.")]
-    {
-        if let Some(p) = r.strip_prefix(from) {
-            return Some((format!("{to}{p}"), p == "weight"));
-        }
-    }
-    if let Some(p) = r.strip_prefix("final_conv.0.block.0.") {
-        return Some((format!("unet.final_block.conv.{p}"), false));
-    }
-    if let Some(p) = r.strip_prefix("final_conv.0.block.1.") {
-        return Some((norm(format!("unet.final_block.norm.{p}")), false));
-    }
-    if let Some(p) = r.strip_prefix("final_conv.1.") {
-        return Some((format!("unet.final_conv.{p}"), false));
-    }
-    if let Some(rest) = r.strip_prefix("mid_modules.") {
-        let (j, rest) = rest.split_once('.')?;
-        return res(format!("unet.mids.{j}"), rest);
-    }
-    for (theirs, ours, resample) in [("down_modules.", "downs", "down"), ("up_modules.", "ups", "up")] {
-        if let Some(rest) = r.strip_prefix(theirs) {
-            let (i, rest) = rest.split_once('.')?;
-            let (j, rest) = rest.split_once('.')?;
-            let o = format!("unet.{ours}.{i}");
-            return match j {
-                "0" | "1" => res(format!("{o}.r{j}"), rest),
-                "2" => Some((format!("{o}.{resample}.{rest}"), false)),
-                _ => None,
-            };
-        }
-    }
-    None
+    cond_unet(key.strip_prefix("unet.")?, &UnetNames { convs: ["conv1", "conv2"], resample: "" })
 }
 
 /// Keys LeRobot stores beside the weights: the spatial softmax's grid (recomputed here) and,

@@ -23,6 +23,7 @@ pub mod data;
 pub mod diffusion;
 pub mod dir;
 pub mod import_gpc;
+mod import_keys;
 pub mod import_lerobot;
 pub mod imported_policy;
 pub mod judge;
