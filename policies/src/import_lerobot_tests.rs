@@ -34,6 +34,15 @@ fn frames01(device: &Device) -> Tensor<4> {
     world_model::data::frames_to_tensor(&frames, 96, device) * 0.5 + 0.5
 }
 
+/// The imported U-Net's noise prediction for the fixture's two `[16, 2]` sequences `x` at step
+/// `t`, given their conditioning `cond`.
+fn eps_of(p: &LeRobotPolicy, cond: &[f32], x: &[f32], t: usize, device: &Device) -> Vec<f32> {
+    let xt = Tensor::from_data(TensorData::new(x.to_vec(), [2, 16, 2]), device);
+    let ct = Tensor::from_data(TensorData::new(cond.to_vec(), [2, cond.len() / 2]), device);
+    let out = p.net.unet.forward(xt, Tensor::from_floats([t as f32, t as f32], device), ct);
+    out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+}
+
 #[test]
 fn both_layouts_import_and_predict_what_pytorch_predicts() {
     let device = Device::flex();
@@ -68,19 +77,13 @@ fn ten_leading_ddpm_steps_with_pytorchs_noise_give_pytorchs_actions() {
     let device = Device::flex();
     let p = import(&fixture("pretrained_model"), &device).unwrap_or_else(|e| panic!("{e}"));
     let (cond, noises) = (io("cond"), io("noises")); // noises [10, 2, 16, 2]
-    let c = cond.len() / 2;
     let ac = crate::diffusion::alphas_cumprod(100);
     let mut j = 0;
     let got = ddpm_sample(
         io("x"),
         &ac,
         &p.cfg.timesteps(),
-        |x, t| {
-            let xt = Tensor::from_data(TensorData::new(x.to_vec(), [2, 16, 2]), &device);
-            let ct = Tensor::from_data(TensorData::new(cond.clone(), [2, c]), &device);
-            let out = p.net.unet.forward(xt, Tensor::from_floats([t as f32, t as f32], &device), ct);
-            out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
-        },
+        |x, t| eps_of(&p, &cond, x, t, &device),
         |n| {
             j += 1;
             noises[(j - 1) * n..j * n].to_vec()
@@ -103,14 +106,8 @@ fn a_ddim_policy_imports_and_its_ten_steps_give_pytorchs_actions() {
     assert_eq!(p.cfg.sampler, Sampler::Ddim);
     assert_eq!(p.cfg.timesteps(), [90, 80, 70, 60, 50, 40, 30, 20, 10, 0]);
     let cond = io("cond");
-    let c = cond.len() / 2;
     let ac = crate::diffusion::alphas_cumprod(100);
-    let got = ddim_sample(io("x"), &ac, &p.cfg.timesteps(), |x, t| {
-        let xt = Tensor::from_data(TensorData::new(x.to_vec(), [2, 16, 2]), &device);
-        let ct = Tensor::from_data(TensorData::new(cond.clone(), [2, c]), &device);
-        let out = p.net.unet.forward(xt, Tensor::from_floats([t as f32, t as f32], &device), ct);
-        out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
-    });
+    let got = ddim_sample(io("x"), &ac, &p.cfg.timesteps(), |x, t| eps_of(&p, &cond, x, t, &device));
     let d = max_abs(&got, &io("actions_ddim"));
     assert!(d <= 1e-4, "DDIM differs from PyTorch's by {d}");
     // Not the DDPM result: the sampler is used, not only recorded.
