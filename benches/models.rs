@@ -49,6 +49,7 @@ fn observation() -> Observation {
     Observation {
         frames: vec![vec![200u8; 96 * 96 * 3]; 2],
         proprio: vec![vec![256.0, 256.0]; 2],
+        robot: vec![Vec::new(); 2],
         size: 96,
         exact: None,
     }

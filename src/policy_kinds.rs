@@ -43,5 +43,6 @@ pub fn expectations(task: &dyn Task) -> Expectations {
         action_low: act.low,
         action_high: act.high,
         task: Some(task.name().to_string()),
+        robot: obs.robot,
     }
 }

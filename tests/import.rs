@@ -253,3 +253,89 @@ fn gpc_and_lerobot_policies_become_checkpoints_that_rank_runs() {
     let res = read_json(&planned.join("results.json"));
     assert_eq!(res["planners"]["world-model"]["episodes"], 1, "{res}");
 }
+
+#[test]
+fn a_robomimic_policy_ranks_beside_native_ones_on_lift_and_can() {
+    // policies/tests/fixtures/robomimic_policy/policy.pth: robomimic's checkpoint layout at a
+    // reduced size (scripts/fixtures/robomimic_policy.py), agentview at 84² plus the robot's
+    // eef position, orientation and finger joints. Imported for Lift (its env_name) and, named,
+    // for Can; each ranks beside the task's weakest shipped policy, and GPC's Push-T policy
+    // in the same folder is reported in failed_policies by name while the others rank.
+    let dir = tempfile::tempdir().unwrap();
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("policies/tests/fixtures");
+    let file = fixtures.join("robomimic_policy/policy.pth");
+    let gpc = fixtures.join("gpc_policy/policy.pth");
+    for task in ["lift", "can"] {
+        let set = dir.path().join(task);
+        let pol = set.join("robomimic");
+        let mut args = vec!["import", "policy", "--format", "robomimic", s(&file), "--out", s(&pol)];
+        if task == "can" {
+            args.extend(["--scenario", "can"]);
+        }
+        expect_code(&run(&args), 0);
+        let p = read_json(&pol.join("policy.json"));
+        assert_eq!(
+            (p["kind"].as_str(), p["task"].as_str(), p["epoch"].as_u64()),
+            (Some("robomimic-diffusion"), Some(task), Some(120))
+        );
+        assert_eq!(p["config"]["robot_keys"][2], "robot0_gripper_qpos", "{p}");
+        assert_eq!(p["provenance"]["import"]["weights"], "model.ema", "{p}");
+        let weakest = if task == "lift" { "epoch-0014" } else { "epoch-0006" };
+        let native =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("checkpoints/{task}/policies/{weakest}"));
+        crate::util::copy_dir(&native, &set.join(weakest));
+        expect_code(
+            &run(&["import", "policy", "--format", "gpc", s(&gpc), "--out", s(&set.join("gpc-pusht"))]),
+            0,
+        );
+        let out = dir.path().join(format!("rank-{task}"));
+        let args = ["rank", "--scenario", task, "--policies", s(&set), "--episodes", "2", "--batch", "2"];
+        let more = ["--max-steps", "16", "--bootstrap", "10", "--no-report", "--out", s(&out)];
+        // Two policies rank; with two, the gates may pass or fail: not an error.
+        let res = run(&[&args[..], &more[..]].concat());
+        let err = String::from_utf8_lossy(&res.stderr);
+        assert!(matches!(res.status.code(), Some(0 | 1)), "{task}: {err}");
+        let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
+        for name in ["\"robomimic\"".to_string(), format!("\"{weakest}\"")] {
+            assert_eq!(
+                rows.lines().filter(|l| l.contains(name.as_str())).count(),
+                4,
+                "{task} {name}: two episodes per branch:\n{rows}"
+            );
+        }
+        let res = read_json(&out.join("results.json"));
+        let failed = &res["failed_policies"];
+        assert_eq!(failed.as_array().map(Vec::len), Some(1), "{res}");
+        assert_eq!(failed[0]["policy"], "gpc-pusht", "{res}");
+    }
+    // A key no scene gives is refused naming it, before anything is written; so is a camera
+    // the world model cannot imagine.
+    let bad = dir.path().join("bad");
+    let (_, err) = expect_code(
+        &run(&[
+            "import",
+            "policy",
+            "--format",
+            "robomimic",
+            s(&fixtures.join("robomimic_policy/object_key.pth")),
+            "--out",
+            s(&bad),
+        ]),
+        2,
+    );
+    assert!(err.contains("`object`") && err.contains("robot0_eef_pos"), "{err}");
+    let (_, err) = expect_code(
+        &run(&[
+            "import",
+            "policy",
+            "--format",
+            "robomimic",
+            s(&fixtures.join("robomimic_policy/eye_in_hand.pth")),
+            "--out",
+            s(&bad),
+        ]),
+        2,
+    );
+    assert!(err.contains("robot0_eye_in_hand_image"), "{err}");
+    assert!(!bad.exists());
+}

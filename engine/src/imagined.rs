@@ -123,8 +123,12 @@ pub fn wm_branch(
                         track[i].add(judged(judges[i].score(fr), &name, start.seeds[i])?, &kind);
                         if j >= first_seen {
                             let x = exact.as_mut().map(|e| std::mem::take(&mut e[p * m + j - first]));
-                            let seen =
-                                Seen { frame: std::mem::take(fr), proprio: imagine[i].proprio(), exact: x };
+                            let seen = Seen {
+                                frame: std::mem::take(fr),
+                                proprio: imagine[i].proprio(),
+                                robot: imagine[i].robot(),
+                                exact: x,
+                            };
                             push(&mut hist[i], seen, o);
                         }
                     }

@@ -101,7 +101,13 @@ mod tests {
     use harness::policy::Observation;
 
     fn obs() -> Observation {
-        Observation { frames: vec![vec![0]], size: 1, proprio: vec![vec![0.0]], exact: None }
+        Observation {
+            frames: vec![vec![0]],
+            size: 1,
+            proprio: vec![vec![0.0]],
+            robot: vec![Vec::new()],
+            exact: None,
+        }
     }
 
     #[test]

@@ -236,6 +236,7 @@ pub fn obs_of(hist: &VecDeque<Seen>, size: usize) -> Observation {
     Observation {
         frames: hist.iter().map(|s| s.frame.clone()).collect(),
         proprio: hist.iter().map(|s| s.proprio.clone()).collect(),
+        robot: hist.iter().map(|s| s.robot.clone()).collect(),
         size,
         // Where any frame has its unrounded values, every frame does: a real frame's are its
         // bytes / 255.
@@ -370,7 +371,7 @@ mod tests {
 
     #[test]
     fn observations_carry_the_proprioception_of_any_size() {
-        let seen = |p: Vec<f32>| Seen { frame: vec![0; 3], proprio: p, exact: None };
+        let seen = |p: Vec<f32>| Seen { frame: vec![0; 3], proprio: p, robot: Vec::new(), exact: None };
         let hist: VecDeque<Seen> = [seen(vec![1.0, 2.0]), seen(vec![3.0, 4.0])].into();
         let obs = obs_of(&hist, 1);
         assert_eq!(obs.proprio, vec![vec![1.0, 2.0], vec![3.0, 4.0]]);

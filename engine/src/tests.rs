@@ -41,7 +41,12 @@ impl Task for Reach {
         ActionSpec { dim: 1, low: vec![0.0], high: vec![10.0], kind: ActionKind::Absolute }
     }
     fn observation_spec(&self) -> ObservationSpec {
-        ObservationSpec { image_size: 1, cameras: vec!["line".into()], proprio: vec!["x".into()] }
+        ObservationSpec {
+            image_size: 1,
+            cameras: vec!["line".into()],
+            proprio: vec!["x".into()],
+            robot: Vec::new(),
+        }
     }
     fn score_kind(&self) -> ScoreKind {
         ScoreKind::Success
@@ -74,7 +79,12 @@ impl Env for ReachEnv {
         self.seed
     }
     fn observe(&self) -> Seen {
-        Seen { frame: vec![(self.x * 25.0) as u8, 0, 0], proprio: vec![self.x as f32], exact: None }
+        Seen {
+            frame: vec![(self.x * 25.0) as u8, 0, 0],
+            proprio: vec![self.x as f32],
+            robot: Vec::new(),
+            exact: None,
+        }
     }
     fn step(&mut self, action: &[f32]) -> Result<f64, TaskError> {
         self.x += (f64::from(action[0]) - self.x) / 2.0;

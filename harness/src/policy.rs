@@ -17,6 +17,9 @@ pub struct Observation {
     /// Proprioception, oldest first, one vector per frame, with the entries the
     /// task's observation spec names (Push-T: the agent's position in world units).
     pub proprio: Vec<Vec<f32>>,
+    /// The robot's state, oldest first, one vector per frame, laid out as the task's
+    /// [`crate::task::ObservationSpec::robot`] (empty vectors where it gives none).
+    pub robot: Vec<Vec<f32>>,
     /// Frame side in pixels.
     pub size: usize,
     /// Every frame's values before rounding to bytes (HWC, [0, 1], unclamped), when the

@@ -56,6 +56,20 @@ pub fn resize_linear_u8(img: &[u8], h: usize, w: usize, c: usize, oh: usize, ow:
     Some(out)
 }
 
+/// PyTorch's bilinear taps (`align_corners=False`, no antialiasing) of `dst` outputs from `src`
+/// inputs: per output, the two source indices and the weight of the second, in single precision.
+pub fn torch_taps(src: usize, dst: usize) -> Vec<(usize, usize, f32)> {
+    let scale = src as f32 / dst as f32;
+    (0..dst)
+        .map(|x| {
+            let s = ((x as f32 + 0.5) * scale - 0.5).max(0.0);
+            let i0 = (s as usize).min(src - 1);
+            let i1 = (i0 + 1).min(src - 1);
+            (i0, i1, s - i0 as f32)
+        })
+        .collect()
+}
+
 /// Resizes an `h × w × c` 8-bit image to `oh × ow × c` as PyTorch's
 /// `F.interpolate(mode="bilinear", align_corners=False)` does on its float values, then
 /// `round()` (half to even) and clamp to bytes: how DriftWorld's robomimic data brought 84²
@@ -72,19 +86,7 @@ pub fn resize_bilinear_torch_u8(
     if img.len() != h * w * c || [h, w, c, oh, ow].contains(&0) {
         return None;
     }
-    // Per output index: the two source indices and the weight of the second.
-    let taps = |src: usize, dst: usize| -> Vec<(usize, usize, f32)> {
-        let scale = src as f32 / dst as f32;
-        (0..dst)
-            .map(|x| {
-                let s = ((x as f32 + 0.5) * scale - 0.5).max(0.0);
-                let i0 = (s as usize).min(src - 1);
-                let i1 = (i0 + 1).min(src - 1);
-                (i0, i1, s - i0 as f32)
-            })
-            .collect()
-    };
-    let (tx, ty) = (taps(w, ow), taps(h, oh));
+    let (tx, ty) = (torch_taps(w, ow), torch_taps(h, oh));
     let mut out = vec![0u8; oh * ow * c];
     for (dy, &(y0, y1, ly)) in ty.iter().enumerate() {
         for (dx, &(x0, x1, lx)) in tx.iter().enumerate() {

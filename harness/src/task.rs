@@ -53,6 +53,53 @@ pub struct ObservationSpec {
     pub cameras: Vec<String>,
     /// Names of the proprioceptive vector's entries, in order.
     pub proprio: Vec<String>,
+    /// The robot's measured state that policies trained elsewhere read (robomimic's
+    /// `robot0_eef_pos`, …), key by key in [`Seen::robot`]'s order; empty where the task
+    /// gives none (Push-T).
+    pub robot: Vec<StateKey>,
+}
+
+/// One named entry of [`Seen::robot`]: `width` consecutive values.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StateKey {
+    /// The key, as the codebases that record it name it (`robot0_eef_pos`).
+    pub name: String,
+    /// Values.
+    pub width: usize,
+}
+
+impl StateKey {
+    /// A key of `width` values.
+    pub fn new(name: &str, width: usize) -> Self {
+        Self { name: name.to_string(), width }
+    }
+}
+
+/// Where each of `wanted`'s keys lies in a robot-state vector laid out as `keys`: the
+/// `(offset, width)` of each, in `wanted`'s order.
+///
+/// # Errors
+/// The first wanted key the layout lacks, named, with the keys it has.
+pub fn robot_slices(keys: &[StateKey], wanted: &[String]) -> Result<Vec<(usize, usize)>, String> {
+    let mut at = std::collections::BTreeMap::new();
+    let mut offset = 0;
+    for k in keys {
+        at.insert(k.name.as_str(), (offset, k.width));
+        offset += k.width;
+    }
+    wanted
+        .iter()
+        .map(|w| {
+            at.get(w.as_str()).copied().ok_or_else(|| {
+                let have: Vec<&str> = keys.iter().map(|k| k.name.as_str()).collect();
+                format!(
+                    "reads `{w}`, which the scenario does not give (it gives: {})",
+                    if have.is_empty() { "nothing".to_string() } else { have.join(", ") }
+                )
+            })
+        })
+        .collect()
 }
 
 /// How an episode is scored. Every step yields a raw value (the exact one from
@@ -114,6 +161,9 @@ pub struct Seen {
     pub frame: Vec<u8>,
     /// The entries [`ObservationSpec::proprio`] names (Push-T: the agent's position).
     pub proprio: Vec<f32>,
+    /// The keys [`ObservationSpec::robot`] names, in order: measured in the simulator,
+    /// estimated from the commands in imagination ([`Imagination::robot`]).
+    pub robot: Vec<f32>,
     /// A generated frame's values before rounding to bytes (HWC, [0, 1], unclamped), where
     /// the run feeds a world model's frames to policies as floats (`rank --float-frames`).
     pub exact: Option<Vec<f32>>,
@@ -157,6 +207,11 @@ pub trait Imagination: Send + Sync {
     /// commands alone (Push-T: the last commanded target standing in for the agent's
     /// position, as DriftWorld evaluates).
     fn proprio(&self) -> Vec<f32>;
+    /// The estimate of [`ObservationSpec::robot`] with the newest imagined frame, from what
+    /// the episode showed at reset and the commands since (none by default).
+    fn robot(&self) -> Vec<f32> {
+        Vec::new()
+    }
 }
 
 /// What a planner minimises on a frame of the policy's view, lower being better
@@ -278,5 +333,16 @@ mod tests {
         let e = TaskError::new(io);
         assert_eq!(e.to_string(), "step 3 diverged");
         assert!(e.0.downcast_ref::<std::io::Error>().is_some());
+    }
+
+    #[test]
+    fn robot_slices_find_each_wanted_key_or_name_the_missing_one() {
+        let keys = [StateKey::new("eef_pos", 3), StateKey::new("eef_quat", 4), StateKey::new("qpos", 2)];
+        // Offsets: eef_pos 0..3, eef_quat 3..7, qpos 7..9.
+        let got = robot_slices(&keys, &["qpos".into(), "eef_pos".into()]).unwrap();
+        assert_eq!(got, vec![(7, 2), (0, 3)]);
+        let err = robot_slices(&keys, &["object".into()]).unwrap_err();
+        assert!(err.contains("`object`") && err.contains("eef_pos, eef_quat, qpos"), "{err}");
+        assert!(robot_slices(&[], &["x".into()]).unwrap_err().contains("gives: nothing"));
     }
 }

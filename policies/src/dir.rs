@@ -153,6 +153,8 @@ pub struct Expectations {
     pub action_high: Vec<f32>,
     /// The task's name: a checkpoint that records another task is refused.
     pub task: Option<String>,
+    /// The robot-state keys the task gives ([`harness::task::ObservationSpec::robot`]).
+    pub robot: Vec<harness::task::StateKey>,
 }
 
 impl Expectations {
@@ -164,6 +166,7 @@ impl Expectations {
             action_low: vec![0.0; 2],
             action_high: vec![512.0; 2],
             task: Some("pusht".into()),
+            robot: Vec::new(),
         }
     }
 
@@ -235,9 +238,11 @@ pub fn load_policy(
             let bounds = (expect.action_low.clone(), expect.action_high.clone());
             Ok(Box::new(DiffusionPolicy::new(name, cfg, file.normalisation, bounds, net, device)))
         }
-        "gpc-diffusion" | "lerobot-diffusion" => crate::imported_policy::load(dir, file, expect, device),
+        "gpc-diffusion" | "lerobot-diffusion" | "robomimic-diffusion" => {
+            crate::imported_policy::load(dir, file, expect, device)
+        }
         other => Err(err(format!(
-            "unknown policy kind \"{other}\" (known: diffusion, gpc-diffusion, lerobot-diffusion, scripted)"
+            "unknown policy kind \"{other}\" (known: diffusion, gpc-diffusion, lerobot-diffusion, robomimic-diffusion, scripted)"
         ))),
     }
 }

@@ -19,7 +19,7 @@ use world_model::import::ImportError;
 use world_model::import::place::{place_all, shapes, transpose};
 use world_model::import::tensors::{Source, top_level_int};
 
-use crate::import_keys::{UnetNames, cond_unet, norm, resnet_block};
+use crate::import_keys::{UnetNames, UnetSizes, cond_unet, norm, resnet_block, unet_sizes};
 use crate::imported_policy::{ImportedConfig, ImportedNet, Pool, Sampler};
 use crate::net::NetConfig;
 
@@ -139,23 +139,10 @@ fn config_from(src: &Source, image_size: usize, obs_horizon: usize) -> Result<Im
             )));
         }
     };
-    let mut dims = Vec::new();
-    let (mut action, mut kernel) = (0, 0);
-    while let Some(w) = s.get(&format!("invariant.down_modules.{}.0.blocks.0.block.0.weight", dims.len())) {
-        if dims.is_empty() {
-            (action, kernel) = (w[1], w[2]);
-        }
-        dims.push(w[0]);
-    }
-    if dims.is_empty() {
-        return Err(missing("invariant.down_modules.0.0.blocks.0.block.0.weight"));
-    }
-    let step = get("invariant.diffusion_step_encoder.1.weight")?; // [4e, e]
-    let e = step[1];
-    let film = get("invariant.down_modules.0.0.cond_encoder.1.weight")?; // [2 out, e + cond]
-    let cond = film[1]
-        .checked_sub(e)
-        .ok_or_else(|| layout(format!("FiLM input {} narrower than the step embedding {e}", film[1])))?;
+    let unet: BTreeMap<String, Vec<usize>> =
+        s.iter().filter_map(|(k, v)| Some((k.strip_prefix("invariant.")?.to_string(), v.clone()))).collect();
+    let UnetSizes { dims, action, kernel, step_embed: e, cond } =
+        unet_sizes(&unet, "blocks.0").map_err(|m| layout(format!("`invariant.*`: {m}")))?;
     let features = 8 * base;
     let proprio =
         (cond / obs_horizon.max(1)).checked_sub(features).filter(|_| cond % obs_horizon.max(1) == 0);
@@ -178,9 +165,11 @@ fn config_from(src: &Source, image_size: usize, obs_horizon: usize) -> Result<Im
     Ok(ImportedConfig {
         resnet_base: base,
         pool: Pool::Average,
+        input_size: None,
         crop: None,
         image_norm: None,
         position_first: false,
+        robot_keys: Vec::new(),
         inference_steps: None,
         sampler: Sampler::Ddpm,
         net,

@@ -120,9 +120,11 @@ fn the_official_pusht_manifest_is_the_parameter_order() {
     let cfg = ImportedConfig {
         resnet_base: 64,
         pool: crate::imported_policy::Pool::Average,
+        input_size: None,
         crop: None,
         image_norm: None,
         position_first: false,
+        robot_keys: Vec::new(),
         inference_steps: None,
         sampler: crate::imported_policy::Sampler::Ddpm,
         net: NetConfig {

@@ -28,6 +28,72 @@ pub(crate) fn resnet_block(o: &str, rest: &str) -> Option<(String, bool)> {
     })
 }
 
+/// A parameter of torchvision's ResNet-18 kept as a `Sequential` of its children without the
+/// pool and classifier (`0` conv1, `1` bn1, `4`–`7` layer1–4; LeRobot's `backbone.*`,
+/// robomimic's `backbone.nets.*`), `r` being its name inside the `Sequential`.
+pub(crate) fn resnet_children(r: &str) -> Option<(String, bool)> {
+    if let Some(p) = r.strip_prefix("0.") {
+        return Some((format!("encoder.stem.conv.{p}"), false));
+    }
+    if let Some(p) = r.strip_prefix("1.") {
+        return Some((norm(&format!("encoder.stem.norm.{p}")), false));
+    }
+    let (layer, rest) = r.split_once('.')?;
+    let (b, rest) = rest.split_once('.')?;
+    let block =
+        2 * layer.parse::<usize>().ok()?.checked_sub(4).filter(|l| *l < 4)? + b.parse::<usize>().ok()?;
+    resnet_block(&format!("encoder.blocks.{block}"), rest)
+}
+
+/// The sizes of a `ConditionalUnet1D` read from its parameters' shapes (`shapes` by name
+/// inside the U-Net module, `blocks.0` naming a residual block's first convolution).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct UnetSizes {
+    /// Channels per level.
+    pub dims: Vec<usize>,
+    /// Action width (the input's channels).
+    pub action: usize,
+    /// 1-D kernel size.
+    pub kernel: usize,
+    /// Step embedding.
+    pub step_embed: usize,
+    /// Global conditioning width (FiLM's input less the step embedding).
+    pub cond: usize,
+}
+
+/// Reads [`UnetSizes`] from `shapes` (names inside the U-Net module).
+///
+/// # Errors
+/// The first name missing (without the prefix the caller adds), or why the shapes do not
+/// make a U-Net.
+pub(crate) fn unet_sizes(
+    shapes: &std::collections::BTreeMap<String, Vec<usize>>,
+    first_conv: &str,
+) -> Result<UnetSizes, String> {
+    let mut dims = Vec::new();
+    let (mut action, mut kernel) = (0, 0);
+    while let Some(w) = shapes.get(&format!("down_modules.{}.0.{first_conv}.block.0.weight", dims.len())) {
+        if w.len() != 3 {
+            return Err(format!("down_modules.{}.0.{first_conv}.block.0.weight has shape {w:?}", dims.len()));
+        }
+        if dims.is_empty() {
+            (action, kernel) = (w[1], w[2]);
+        }
+        dims.push(w[0]);
+    }
+    if dims.is_empty() {
+        return Err(format!("missing down_modules.0.0.{first_conv}.block.0.weight"));
+    }
+    let get =
+        |k: &str| shapes.get(k).filter(|s| s.len() == 2).ok_or_else(|| format!("missing {k} (or not 2-D)"));
+    let e = get("diffusion_step_encoder.1.weight")?[1];
+    let film = get("down_modules.0.0.cond_encoder.1.weight")?[1];
+    let cond = film
+        .checked_sub(e)
+        .ok_or_else(|| format!("FiLM input {film} narrower than the step embedding {e}"))?;
+    Ok(UnetSizes { dims, action, kernel, step_embed: e, cond })
+}
+
 /// How a checkpoint names the parts that differ between diffusion_policy's versions.
 pub(crate) struct UnetNames {
     /// A residual block's two convolutions: `["blocks.0", "blocks.1"]` (diffusion_policy, GPC)

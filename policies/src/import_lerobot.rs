@@ -21,7 +21,7 @@ use world_model::import::place::{place_all, shapes, transpose};
 use world_model::import::safe::SafeSource;
 
 use crate::diffusion::{Normalisation, Range};
-use crate::import_keys::{UnetNames, cond_unet, norm, resnet_block};
+use crate::import_keys::{UnetNames, cond_unet, resnet_children};
 use crate::imported_policy::{ImportedConfig, ImportedNet, MeanStd, Pool, Sampler};
 use crate::lerobot_config::{LeRobotConfig, check, features};
 use crate::net::NetConfig;
@@ -44,24 +44,13 @@ pub struct LeRobotPolicy {
 /// weight (transposed); `None` for a key with no place.
 pub fn burn_path(key: &str) -> Option<(String, bool)> {
     if let Some(r) = key.strip_prefix("rgb_encoder.") {
-        if let Some(p) = r.strip_prefix("backbone.0.") {
-            return Some((format!("encoder.stem.conv.{p}"), false));
-        }
-        if let Some(p) = r.strip_prefix("backbone.1.") {
-            return Some((norm(&format!("encoder.stem.norm.{p}")), false));
-        }
         if let Some(p) = r.strip_prefix("pool.nets.") {
             return Some((format!("head.nets.{p}"), false));
         }
         if let Some(p) = r.strip_prefix("out.") {
             return Some((format!("head.out.{p}"), p == "weight"));
         }
-        let rest = r.strip_prefix("backbone.")?;
-        let (layer, rest) = rest.split_once('.')?;
-        let (b, rest) = rest.split_once('.')?;
-        let block =
-            2 * layer.parse::<usize>().ok()?.checked_sub(4).filter(|l| *l < 4)? + b.parse::<usize>().ok()?;
-        return resnet_block(&format!("encoder.blocks.{block}"), rest);
+        return resnet_children(r.strip_prefix("backbone.")?);
     }
     cond_unet(key.strip_prefix("unet.")?, &UnetNames { convs: ["conv1", "conv2"], resample: "" })
 }
@@ -185,10 +174,12 @@ pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError>
     }
     let cfg = ImportedConfig {
         resnet_base: base,
-        pool: Pool::SpatialSoftmax { keypoints: k },
+        pool: Pool::SpatialSoftmax { keypoints: k, features: None },
+        input_size: None,
         crop: c.crop_shape.map(|[h, _]| h),
         image_norm: Some(image_norm),
         position_first: true,
+        robot_keys: Vec::new(),
         inference_steps: c.num_inference_steps,
         sampler: if c.noise_scheduler_type == "DDIM" { Sampler::Ddim } else { Sampler::Ddpm },
         net: NetConfig {

@@ -51,7 +51,7 @@ fn both_layouts_import_and_predict_what_pytorch_predicts() {
         assert_eq!(p.tensors, 212, "{folder}: every weight but the grid");
         assert_eq!(
             (p.cfg.resnet_base, p.cfg.pool, p.cfg.crop),
-            (16, Pool::SpatialSoftmax { keypoints: 4 }, Some(84))
+            (16, Pool::SpatialSoftmax { keypoints: 4, features: None }, Some(84))
         );
         assert_eq!((p.cfg.inference_steps, p.cfg.net.feature_dim, p.cfg.position_first), (Some(10), 8, true));
         // State min-max normalised as LeRobot does, with its statistics.

@@ -43,10 +43,13 @@ pub enum Pool {
     #[default]
     Average,
     /// A spatial softmax over `keypoints` keypoints, a linear layer and a ReLU (LeRobot:
-    /// 2 × keypoints features).
+    /// 2 × keypoints features; robomimic: `features` of them).
     SpatialSoftmax {
         /// Keypoints K.
         keypoints: usize,
+        /// The linear layer's outputs (absent: 2K, as LeRobot has it).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        features: Option<usize>,
     },
 }
 
@@ -92,6 +95,11 @@ pub struct ImportedConfig {
     /// How the ResNet's map becomes features (absent: GPC's average pool).
     #[serde(default, skip_serializing_if = "Pool::is_average")]
     pub pool: Pool,
+    /// The side frames are resized to (bilinear, PyTorch's `align_corners=False` without
+    /// antialiasing) before the crop: the size the policy was trained on where the scenario
+    /// renders another (robomimic's 84 against evalharness's 96; absent: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_size: Option<usize>,
     /// The side of the centre crop of each frame before the ResNet (absent: none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub crop: Option<usize>,
@@ -102,6 +110,11 @@ pub struct ImportedConfig {
     /// features (GPC).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub position_first: bool,
+    /// The robot-state keys read with each frame in place of the task's proprioception, in
+    /// order (robomimic's `robot0_eef_pos`, …; the task gives them as
+    /// [`harness::task::ObservationSpec::robot`]; absent: the proprioception).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub robot_keys: Vec<String>,
     /// Denoising steps at sampling, spaced evenly from the last (absent: every training step).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub inference_steps: Option<usize>,
@@ -144,15 +157,15 @@ pub struct SpatialHead {
 }
 
 impl SpatialHead {
-    fn new(c: usize, k: usize, device: &Device) -> Self {
+    fn new(c: usize, k: usize, out: usize, device: &Device) -> Self {
         Self {
             nets: Conv2dConfig::new([c, k], [1, 1]).init(device),
-            out: LinearConfig::new(2 * k, 2 * k).init(device),
+            out: LinearConfig::new(2 * k, out).init(device),
         }
     }
 
     /// # Shapes
-    /// `[n, c, h, w]` → `[n, 2k]` (x then y of each keypoint, keypoint by keypoint)
+    /// `[n, c, h, w]` → `[n, out]` (from the x then y of each keypoint, keypoint by keypoint)
     fn forward(&self, x: Tensor<4>) -> Tensor<2> {
         let a = self.nets.forward(x); // [n, k, h, w]
         let [n, k, h, w] = a.dims();
@@ -175,7 +188,8 @@ pub struct ImportedNet {
     pub head: Option<SpatialHead>,
     /// Noise predictor.
     pub unet: CondUnet1d,
-    /// Centre crop, image normalisation and the order of each frame's conditioning.
+    /// Resize, centre crop, image normalisation and the order of each frame's conditioning.
+    input_size: Option<usize>,
     crop: Option<usize>,
     image_norm: Option<([f32; 3], [f32; 3])>,
     position_first: bool,
@@ -186,14 +200,18 @@ impl ImportedNet {
     pub fn new(cfg: &ImportedConfig, device: &Device) -> Self {
         let head = match cfg.pool {
             Pool::Average => None,
-            Pool::SpatialSoftmax { keypoints } => {
-                Some(SpatialHead::new(8 * cfg.resnet_base, keypoints, device))
-            }
+            Pool::SpatialSoftmax { keypoints, features } => Some(SpatialHead::new(
+                8 * cfg.resnet_base,
+                keypoints,
+                features.unwrap_or(2 * keypoints),
+                device,
+            )),
         };
         Self {
             encoder: ResNet18Gn::new(cfg.resnet_base, device),
             head,
             unet: CondUnet1d::new(&cfg.net, device),
+            input_size: cfg.input_size,
             crop: cfg.crop,
             image_norm: cfg.image_norm.as_ref().map(|m| (m.mean, m.std)),
             position_first: cfg.position_first,
@@ -215,6 +233,9 @@ impl ImportedNet {
             let s = Tensor::<1>::from_floats(std.map(|v| v + 1e-8).as_slice(), &dev).reshape([1, 3, 1, 1]);
             x = (x - m) / s;
         }
+        if let Some(r) = self.input_size {
+            x = resize_bilinear(x, r);
+        }
         if let Some(c) = self.crop {
             let [_, _, h, w] = x.dims();
             // torchvision's CenterCrop: offset round((side − c) / 2), halves to even.
@@ -231,6 +252,31 @@ impl ImportedNet {
         let parts = if self.position_first { vec![pos, feat] } else { vec![feat, pos] };
         Tensor::cat(parts, 2).reshape([b, o * (f + p)])
     }
+}
+
+/// The weights of PyTorch's bilinear resampling (`align_corners=False`, no antialiasing) of
+/// `from` samples to `to`: `[to, from]`, each row two taps summing to 1.
+pub fn bilinear_weights(from: usize, to: usize) -> Vec<f32> {
+    let mut w = vec![0.0f32; to * from];
+    for (i, (i0, i1, l1)) in harness::resize::torch_taps(from, to).into_iter().enumerate() {
+        w[i * from + i0] += 1.0 - l1;
+        w[i * from + i1] += l1;
+    }
+    w
+}
+
+/// Resizes `[n, c, h, w]` frames to `[n, c, side, side]` with [`bilinear_weights`] along each
+/// axis.
+pub fn resize_bilinear(x: Tensor<4>, side: usize) -> Tensor<4> {
+    let [n, c, h, w] = x.dims();
+    if (h, w) == (side, side) {
+        return x;
+    }
+    let dev = x.device();
+    let wy = Tensor::<2>::from_data(TensorData::new(bilinear_weights(h, side), [side, h]), &dev);
+    let wx = Tensor::<2>::from_data(TensorData::new(bilinear_weights(w, side), [side, w]), &dev);
+    let cols = x.matmul(wx.transpose().unsqueeze::<4>().expand([n, c, w, side])); // [n, c, h, side]
+    wy.unsqueeze::<4>().expand([n, c, side, h]).matmul(cols) // [n, c, side, side]
 }
 
 /// One DDPM step from `x` at step `t` to step `prev` (`None`: the end, ᾱ = 1) given the
@@ -293,6 +339,9 @@ pub struct ImportedDiffusion {
     pub norm: Normalisation,
     /// Each action entry's bounds in the task: outputs are clamped into them.
     pub bounds: (Vec<f32>, Vec<f32>),
+    /// Where each of `cfg.robot_keys` lies in the task's robot state (offset, width): these
+    /// entries, in this order, are the policy's proprioception (empty: the task's own).
+    pub robot: Vec<(usize, usize)>,
     net: ImportedNet,
     /// The U-Net on plain CPU loops (on the CPU device).
     cpu_unet: Option<CpuUnet1d>,
@@ -317,7 +366,36 @@ impl ImportedDiffusion {
                     .inspect_err(|e| tracing::warn!(policy = %name, "burn's U-Net kept: {e}"))
             })
             .and_then(Result::ok);
-        Self { name, cfg, norm, bounds, net, cpu_unet, ac, device: device.clone() }
+        Self { name, cfg, norm, bounds, robot: Vec::new(), net, cpu_unet, ac, device: device.clone() }
+    }
+
+    /// The observations with their proprioception made of the robot-state entries the policy
+    /// reads ([`Self::robot`]).
+    fn with_robot_state(&self, obs: &[Observation]) -> Result<Vec<Observation>, PolicyError> {
+        let need = self.robot.iter().map(|(o, w)| o + w).max().unwrap_or(0);
+        obs.iter()
+            .enumerate()
+            .map(|(i, ob)| {
+                let proprio = ob
+                    .robot
+                    .iter()
+                    .map(|r| {
+                        if r.len() < need {
+                            return Err(PolicyError::Input {
+                                policy: self.name.clone(),
+                                message: format!(
+                                    "episode {i}: a robot state of {} entries, the policy reads {:?}",
+                                    r.len(),
+                                    self.cfg.robot_keys
+                                ),
+                            });
+                        }
+                        Ok(self.robot.iter().flat_map(|&(o, w)| r[o..o + w].iter().copied()).collect())
+                    })
+                    .collect::<Result<Vec<Vec<f32>>, _>>()?;
+                Ok(Observation { proprio, ..ob.clone() })
+            })
+            .collect()
     }
 
     /// The noise prediction for `x` (`[b, horizon, action_dim]`) at step `t` under `cond`.
@@ -357,6 +435,13 @@ impl Policy for ImportedDiffusion {
     fn act(&self, obs: &[Observation], rngs: &mut [Rng]) -> Result<Vec<ActionChunk>, PolicyError> {
         let (o, s, h) = (self.cfg.net.obs_horizon, self.cfg.net.image_size, self.cfg.horizon);
         let (p, ad) = (self.norm.agent_pos.dim(), self.norm.action.dim());
+        let selected;
+        let obs = if self.robot.is_empty() {
+            obs
+        } else {
+            selected = self.with_robot_state(obs)?;
+            &selected[..]
+        };
         let (frames, pos) = crate::diffusion::gather(&self.name, obs, o, s, p, &self.norm)?;
         let bad = |m: String| PolicyError::Input { policy: self.name.clone(), message: m };
         let b = obs.len();
@@ -444,13 +529,19 @@ pub fn load_returning(
             n.image_size, expect.image_size
         )));
     }
-    if n.action_dim != expect.action_dim() || n.proprio() != expect.proprio_dim {
+    let robot = if cfg.robot_keys.is_empty() {
+        Vec::new()
+    } else {
+        harness::task::robot_slices(&expect.robot, &cfg.robot_keys).map_err(err)?
+    };
+    let reads = if robot.is_empty() { expect.proprio_dim } else { robot.iter().map(|(_, w)| w).sum() };
+    if n.action_dim != expect.action_dim() || n.proprio() != reads {
         return Err(err(format!(
             "acts in {}-D and reads {} proprioceptive entries, the scenario takes {}-D and gives {}",
             n.action_dim,
             n.proprio(),
             expect.action_dim(),
-            expect.proprio_dim
+            reads
         )));
     }
     let norm = &file.normalisation;
@@ -467,7 +558,9 @@ pub fn load_returning(
         .map_err(|e| err(format!("model.bpk: {e}")))?;
     let bounds = (expect.action_low.clone(), expect.action_high.clone());
     let name = crate::dir::checkpoint_name(dir);
-    Ok(Box::new(ImportedDiffusion::new(name, cfg, file.normalisation, bounds, net, device)))
+    let mut policy = ImportedDiffusion::new(name, cfg, file.normalisation, bounds, net, device);
+    policy.robot = robot;
+    Ok(Box::new(policy))
 }
 
 #[cfg(test)]

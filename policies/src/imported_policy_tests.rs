@@ -47,9 +47,11 @@ fn leading_spacing_steps_from_the_last_multiple_down_to_zero() {
     let cfg = |n: Option<usize>| ImportedConfig {
         resnet_base: 16,
         pool: Pool::Average,
+        input_size: None,
         crop: None,
         image_norm: None,
         position_first: false,
+        robot_keys: Vec::new(),
         inference_steps: n,
         sampler: Sampler::Ddpm,
         net: crate::net::NetConfig::new(),
@@ -84,6 +86,7 @@ fn unrounded_frames_are_read_when_the_observation_has_them() {
     let bytes = Observation {
         frames: vec![frame.clone(); 2],
         proprio: vec![vec![100.0, 200.0]; 2],
+        robot: vec![Vec::new(); 2],
         size: 96,
         exact: None,
     };

@@ -238,7 +238,13 @@ mod tests {
         let (state, goal) = initial_state(cfg, seed).unwrap();
         let frame = Rasterizer::new(cfg).render(&state, &goal);
         let p = vec![state.agent[0] as f32, state.agent[1] as f32];
-        Observation { frames: vec![frame.clone(), frame], proprio: vec![p.clone(), p], size: 96, exact: None }
+        Observation {
+            frames: vec![frame.clone(), frame],
+            proprio: vec![p.clone(), p],
+            robot: vec![Vec::new(); 2],
+            size: 96,
+            exact: None,
+        }
     }
 
     #[test]

@@ -72,6 +72,7 @@ impl Task for PushTTask {
             image_size: self.raster.size(),
             cameras: vec!["top".into()],
             proprio: vec!["agent_x".into(), "agent_y".into()],
+            robot: Vec::new(),
         }
     }
 
@@ -127,6 +128,7 @@ impl Env for PushTEpisode {
         Seen {
             frame: self.raster.render(&st, &self.env.goal()),
             proprio: st.agent.map(|v| v as f32).to_vec(),
+            robot: Vec::new(),
             exact: None,
         }
     }

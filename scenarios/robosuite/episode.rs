@@ -31,6 +31,8 @@ pub fn noisy_init_qpos(rng: &mut impl rand::Rng, noise: f64) -> [f64; 7] {
     })
 }
 
+/// The arm's last body, whose orientation robosuite reports as `robot0_eef_quat`.
+pub const HAND_BODY: &str = "robot0_right_hand";
 /// The gripper's initial finger positions (`PandaGripper.init_qpos`).
 pub const GRIPPER_INIT_QPOS: [f64; 2] = [0.020833, -0.020833];
 
@@ -56,6 +58,8 @@ pub struct ArmEpisode {
     data: MjData<Arc<MjModel>>,
     osc: Osc,
     object: usize,
+    /// The `robot0_right_hand` body (robosuite's `eef_quat` reads its orientation).
+    hand: usize,
     /// The joint positions the data's poses were last computed at (what a frame
     /// shows), for a render worker ([`super::render_pool`]).
     shown: Vec<f64>,
@@ -89,6 +93,7 @@ impl ArmEpisode {
         let body = model.body(object.body).ok_or_else(|| miss("body", object.body))?.id;
         let joint = model.joint(object.joint).ok_or_else(|| miss("joint", object.joint))?.id;
         let adr = model.jnt_qposadr()[joint] as usize;
+        let hand = model.body(HAND_BODY).ok_or_else(|| miss("body", HAND_BODY))?.id;
         let mut data = MjData::new(model.clone());
         {
             let q = data.qpos_mut();
@@ -103,7 +108,18 @@ impl ArmEpisode {
         data.forward();
         let osc = Osc::new(&data, index);
         let shown = data.qpos().to_vec();
-        Ok(Self { scenario, seed, step: 0, data, osc, object: body, shown, key: None, render_from: None })
+        Ok(Self {
+            scenario,
+            seed,
+            step: 0,
+            data,
+            osc,
+            object: body,
+            hand,
+            shown,
+            key: None,
+            render_from: None,
+        })
     }
 
     /// Names the recipe of this episode's model, so that render workers
@@ -181,6 +197,11 @@ impl ArmEpisode {
     pub fn eef_mat(&self) -> [[f64; 3]; 3] {
         let x = self.data.site_xmat()[self.osc.index().grip_site];
         [[x[0], x[1], x[2]], [x[3], x[4], x[5]], [x[6], x[7], x[8]]]
+    }
+
+    /// The `robot0_right_hand` body's orientation (w, x, y, z), as MuJoCo gives it.
+    pub fn hand_quat(&self) -> [f64; 4] {
+        self.data.xquat()[self.hand]
     }
 
     /// The finger joints, m (open: ±0.04).

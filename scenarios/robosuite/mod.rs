@@ -12,6 +12,7 @@ pub mod episode;
 pub mod linalg;
 pub mod osc;
 pub mod render_pool;
+pub mod robot_state;
 pub mod rollout;
 pub mod scene;
 pub mod task;

@@ -25,6 +25,7 @@ use harness::task::{
 };
 
 use super::episode::ROBOT_COLUMNS;
+use super::robot_state::{self, RobotEstimate};
 use super::rollout::{ArmTask, TaskEpisode};
 use crate::error::ScenarioError;
 
@@ -107,6 +108,7 @@ impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
             image_size: IMAGE_SIZE,
             cameras: vec!["agentview".into()],
             proprio: PROPRIO.iter().map(|s| (*s).to_string()).collect(),
+            robot: robot_state::keys(),
         }
     }
 
@@ -194,7 +196,8 @@ impl<E: TaskEpisode + Send + 'static> Env for ArmEnv<E> {
             tracing::error!(seed = self.seed, "rendering: {e}");
             Vec::new()
         });
-        Seen { frame, proprio: self.cmd.vector(), exact: None }
+        let robot = robot_state::measured(self.ep.borrow().arm());
+        Seen { frame, proprio: self.cmd.vector(), robot, exact: None }
     }
 
     fn step(&mut self, action: &[f32]) -> Result<f64, TaskError> {
@@ -234,14 +237,17 @@ impl<E: TaskEpisode + Send + 'static> Env for ArmEnv<E> {
     fn imagination(&self, _view: ModelView) -> Box<dyn Imagination> {
         // The scenes have no goal drawn in them, so both views are the observation.
         let first = self.frame().unwrap_or_default();
-        Box::new(ArmImagination { first, cmd: self.cmd })
+        let robot = RobotEstimate::at_reset(self.ep.borrow().arm());
+        Box::new(ArmImagination { first, cmd: self.cmd, robot })
     }
 }
 
-/// What the imagined branch knows of an episode: its first frame, then its commands.
+/// What the imagined branch knows of an episode: its first frame and robot state, then its
+/// commands.
 struct ArmImagination {
     first: Vec<u8>,
     cmd: Commanded,
+    robot: RobotEstimate,
 }
 
 impl Imagination for ArmImagination {
@@ -253,10 +259,15 @@ impl Imagination for ArmImagination {
 
     fn advance(&mut self, action: &[f32]) {
         self.cmd.add(action);
+        self.robot.advance(action);
     }
 
     fn proprio(&self) -> Vec<f32> {
         self.cmd.vector()
+    }
+
+    fn robot(&self) -> Vec<f32> {
+        self.robot.vector()
     }
 }
 

@@ -30,12 +30,16 @@ pub enum PolicyFormat {
     /// LeRobot's diffusion policies: a `pretrained_model/` folder (`config.json`,
     /// `model.safetensors`, and from LeRobot 0.4 the preprocessor's statistics).
     Lerobot,
+    /// robomimic's diffusion policies (a `.pth` from its `save_model`: `model.{nets, ema}`,
+    /// `config`, `shape_metadata`, statistics), for Lift or Can (`--scenario`).
+    Robomimic,
 }
 
 /// Which copy of a policy checkpoint's weights to import.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum PolicyWeights {
-    /// `ema.shadow_params`, what GPC's evaluation runs.
+    /// What the codebase's own evaluation runs: GPC's `ema.shadow_params`; robomimic's
+    /// `model.ema` when its config enables EMA, else `model.nets`.
     Ema,
     /// `model`, the weights before averaging.
     Model,
@@ -55,6 +59,11 @@ pub struct ImportPolicyArgs {
     /// Which weights to import (GPC's files hold two copies; LeRobot's one).
     #[arg(long, value_enum, default_value = "ema")]
     pub weights: PolicyWeights,
+    /// The scenario the policy is for (robomimic: its robot-state keys are matched to what
+    /// the scenario gives before anything is written; default: the checkpoint's
+    /// `env_metadata.env_name`, Lift → lift, PickPlaceCan → can).
+    #[arg(long)]
+    pub scenario: Option<String>,
     /// Frames' side in pixels the policy reads.
     #[arg(long, default_value_t = 96, value_parser = clap::value_parser!(u16).range(32..=1024))]
     pub image_size: u16,

@@ -2,7 +2,8 @@
 //! checkpoint folder. A DriftWorld/GPC Push-T diffusion policy becomes a `"gpc-diffusion"`
 //! checkpoint (sizes read from the file, GPC's sampling, the normalisation statistics GPC's
 //! evaluation script uses), a LeRobot diffusion policy a `"lerobot-diffusion"` one (settings
-//! from its `config.json`, statistics from its files): `policy.json` (with the sources'
+//! from its `config.json`, statistics from its files), a robomimic one a `"robomimic-diffusion"`
+//! one ([`super::import_robomimic`]): `policy.json` (with the sources'
 //! SHA-256, the command, the commit) and `model.bpk` (f32, as trained). The folder is staged,
 //! replaces `--out` only once complete, and must load before the command reports it.
 
@@ -29,9 +30,15 @@ fn gpc_pusht_normalisation() -> Normalisation {
 
 /// `evalharness import policy`.
 pub fn run(a: &ImportPolicyArgs) -> Result<ExitCode> {
+    if a.scenario.is_some() && a.format != PolicyFormat::Robomimic {
+        anyhow::bail!(
+            "--scenario is read with --format robomimic only (GPC's policies are Push-T's; LeRobot's folders are checked when ranked)"
+        );
+    }
     match a.format {
         PolicyFormat::Gpc => gpc(a),
         PolicyFormat::Lerobot => lerobot(a),
+        PolicyFormat::Robomimic => super::import_robomimic::run(a),
     }
 }
 
@@ -88,6 +95,7 @@ fn lerobot(a: &ImportPolicyArgs) -> Result<ExitCode> {
         action_low: p.norm.action.min.clone(),
         action_high: p.norm.action.max.clone(),
         task: None,
+        robot: Vec::new(),
     };
     load_policy(&out, &expect, &device)
         .with_context(|| format!("{}: the imported policy does not load", out.display()))?;

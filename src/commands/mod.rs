@@ -11,6 +11,7 @@ mod export_policies;
 mod goal_free;
 mod import_judge;
 mod import_policy;
+mod import_robomimic;
 mod import_wm;
 pub(crate) mod plan;
 pub(crate) mod rank;

@@ -49,7 +49,7 @@ fn load_proposer(
         .unwrap_or("?")
         .to_string();
     let file = match kind.as_str() {
-        "diffusion" | "gpc-diffusion" | "lerobot-diffusion" => read_policy_file(dir)?,
+        "diffusion" | "gpc-diffusion" | "lerobot-diffusion" | "robomimic-diffusion" => read_policy_file(dir)?,
         _ => bail!(
             "{}: plan needs a diffusion policy (its sampling noise makes the proposals), this one is kind \"{kind}\"",
             dir.display()
