@@ -243,3 +243,61 @@ fn frames_along(
     crate::robosuite::episode::release_renderer();
     (frames, took)
 }
+
+#[test]
+fn the_robot_state_is_what_robosuite_reports_for_the_same_joints() {
+    // robosuite 1.5.2's `robot0_eef_pos`, `robot0_eef_quat` (x y z w) and
+    // `robot0_gripper_qpos` after setting these joints and `sim.forward()` (printed by a
+    // throw-away script beside `scripts/crosscheck_robosuite.py`, with its MuJoCo 3.17 shims):
+    // the seed-0 joints, then a turned wrist. Fingers at robosuite's initial opening.
+    let cases: [([f64; 7], [f32; 9]); 2] = [
+        (
+            [
+                -0.010885179657146199,
+                0.19002353772197897,
+                0.008232610727482657,
+                -2.5971436106026404,
+                -0.0025706932588806853,
+                2.968921923000787,
+                0.772094269927716,
+            ],
+            [
+                -0.085_323_22,
+                -0.000_852_813,
+                1.023_990_0,
+                0.995_850_86,
+                0.006_645_548,
+                0.090_756_86,
+                0.000_313_728,
+                0.020_833,
+                -0.020_833,
+            ],
+        ),
+        (
+            [0.3, 0.1, -0.2, -2.2, 0.4, 2.5, 1.9],
+            [
+                0.019_600_116,
+                0.077_480_28,
+                1.178_688_4,
+                0.783_207_1,
+                -0.600_828_5,
+                0.011_152_009,
+                -0.159_585_26,
+                0.020_833,
+                -0.020_833,
+            ],
+        ),
+    ];
+    for (q, want) in cases {
+        let names = super::episode::ObjectNames { body: "cube_main", joint: "cube_joint0" };
+        let pose = [0.0, 0.0, 0.83, 1.0, 0.0, 0.0, 0.0];
+        let model = lift_model(&LiftConfig::default(), &assets_dir().unwrap(), [0.02; 3]).unwrap();
+        let ep = super::episode::ArmEpisode::start("lift", 0, model, &names, q, pose).unwrap();
+        let got = super::robot_state::measured(&ep);
+        for (i, (a, b)) in got.iter().zip(want).enumerate() {
+            assert!((a - b).abs() < 1e-6, "entry {i}: {got:?} vs {want:?}");
+        }
+        // At reset the imagined branch's estimate is the measurement.
+        assert_eq!(super::robot_state::RobotEstimate::at_reset(&ep).vector(), got);
+    }
+}
