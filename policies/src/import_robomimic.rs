@@ -345,7 +345,10 @@ pub fn import(
         action_horizon: h.action_horizon,
         train_steps,
     };
-    if cfg.action_horizon == 0 || cfg.action_horizon > cfg.max_action_horizon() || cfg.horizon % 4 != 0 {
+    if cfg.action_horizon == 0
+        || cfg.action_horizon > cfg.max_action_horizon()
+        || !cfg.horizon.is_multiple_of(4)
+    {
         return Err(layout(
             path,
             format!(

@@ -264,7 +264,7 @@ fn the_robot_state_is_what_robosuite_reports_for_the_same_joints() {
             [
                 -0.085_323_22,
                 -0.000_852_813,
-                1.023_990_0,
+                1.023_99,
                 0.995_850_86,
                 0.006_645_548,
                 0.090_756_86,
