@@ -190,9 +190,24 @@ fn gpc_and_lerobot_policies_become_checkpoints_that_rank_runs() {
     assert!(err.contains("micro.pth") && err.contains("model."), "{err}");
     assert!(!other.exists());
     // Each format says what it reads when given the other kind of path.
+    let empty = tempfile::tempdir().unwrap();
     let (_, err) =
-        expect_code(&run(&["import", "policy", "--format", "gpc", s(dir.path()), "--out", s(&other)]), 2);
-    assert!(err.contains("reads a checkpoint file"), "{err}");
+        expect_code(&run(&["import", "policy", "--format", "gpc", s(empty.path()), "--out", s(&other)]), 2);
+    assert!(err.contains("vision_encoder.pth (GPC's folder layout)"), "{err}");
+    // GPC's folder layout of the same networks imports to the same checkpoint.
+    let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("policies/tests/fixtures/gpc_policy/official");
+    let from_folder = dir.path().join("from-folder");
+    expect_code(&run(&["import", "policy", "--format", "gpc", s(&folder), "--out", s(&from_folder)]), 0);
+    // (The unit test `gpcs_folder_layout_imports_to_the_same_networks` compares the outputs.)
+    let p = read_json(&from_folder.join("policy.json"));
+    assert_eq!(p["config"], read_json(&pol.join("policy.json"))["config"], "{p}");
+    assert_eq!(p["step"], 4242, "{p}");
+    assert!(
+        p["provenance"]["import"]["sha256"]["ema_nets.pth"]
+            .as_str()
+            .is_some_and(|h| h.starts_with("sha256:")),
+        "{p}"
+    );
     let (_, err) =
         expect_code(&run(&["import", "policy", "--format", "lerobot", s(&file), "--out", s(&other)]), 2);
     assert!(err.contains("reads a pretrained_model folder"), "{err}");

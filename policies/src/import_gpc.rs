@@ -10,9 +10,13 @@
 //! the model tensor of its place. `cfg` (a pickled OmegaConf object) is not read. The sizes are
 //! read from the shapes; every key is mapped by [`burn_path`]; anything missing, unexpected,
 //! mis-shaped, not float32 or not finite is refused naming the key.
+//!
+//! GPC's "official" layout (`use_official: True`) is a folder instead: `vision_encoder.pth` and
+//! `invariant.pth`, plain state dicts of the training weights, and `ema_nets.pth`, the EMA's
+//! state with the same `shadow_params` list; the same checks apply ([`FOLDER_FILES`]).
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use burn::tensor::{Device, TensorData};
 use world_model::import::ImportError;
@@ -124,9 +128,91 @@ pub fn burn_path(name: &str) -> Option<(String, bool)> {
     )
 }
 
+/// A GPC policy's training weights by official name (`vision_encoder.*`, `invariant.*`), from
+/// either layout GPC writes.
+enum Model {
+    /// `ckpt-epN.pth`'s `model` entry.
+    File(Source),
+    /// The "official" folder (`use_official: True`): `vision_encoder.pth` and `invariant.pth`,
+    /// plain state dicts of each network.
+    Folder { dir: PathBuf, parts: [(&'static str, Source); 2] },
+}
+
+/// The files of GPC's "official" folder layout.
+pub const FOLDER_FILES: [&str; 3] = ["vision_encoder.pth", "invariant.pth", "ema_nets.pth"];
+
+impl Model {
+    fn open(path: &Path) -> Result<Self, ImportError> {
+        if !path.is_dir() {
+            return Ok(Self::File(Source::open(path, Some("model"), "")?));
+        }
+        if let Some(f) = FOLDER_FILES.iter().find(|f| !path.join(f).is_file()) {
+            return Err(ImportError::Missing {
+                path: path.into(),
+                key: format!("the file {f} (GPC's folder layout)"),
+            });
+        }
+        let part = |name: &'static str| -> Result<(&'static str, Source), ImportError> {
+            Ok((name, Source::open(&path.join(format!("{name}.pth")), None, "")?))
+        };
+        Ok(Self::Folder { dir: path.into(), parts: [part("vision_encoder")?, part("invariant")?] })
+    }
+
+    /// The EMA's `shadow_params` and the file's step entry.
+    fn ema_and_step(&self, path: &Path) -> (PathBuf, Option<&'static str>, &'static str) {
+        match self {
+            Self::File(_) => (path.into(), Some("ema"), "step"),
+            Self::Folder { dir, .. } => (dir.join("ema_nets.pth"), None, "optimization_step"),
+        }
+    }
+
+    /// The part holding official name `name`, and the name inside it.
+    fn part<'a>(&'a self, name: &'a str) -> Option<(&'a Source, &'a str)> {
+        match self {
+            Self::File(src) => Some((src, name)),
+            Self::Folder { parts, .. } => {
+                parts.iter().find_map(|(p, src)| Some((src, name.strip_prefix(p)?.strip_prefix('.')?)))
+            }
+        }
+    }
+
+    fn shapes(&self) -> BTreeMap<String, Vec<usize>> {
+        match self {
+            Self::File(src) => src.shapes(),
+            Self::Folder { parts, .. } => parts
+                .iter()
+                .flat_map(|(p, src)| src.shapes().into_iter().map(move |(k, v)| (format!("{p}.{k}"), v)))
+                .collect(),
+        }
+    }
+
+    fn path(&self) -> &Path {
+        match self {
+            Self::File(src) => src.path(),
+            Self::Folder { dir, .. } => dir,
+        }
+    }
+
+    /// How the files name `name`, for messages.
+    fn shown(&self, name: &str) -> String {
+        match (self, self.part(name)) {
+            (Self::File(src), _) => src.shown(name),
+            (Self::Folder { .. }, Some((src, inner))) => format!("{}: {inner}", src.path().display()),
+            (Self::Folder { dir, .. }, None) => format!("{}: {name}", dir.display()),
+        }
+    }
+
+    fn f32s(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>, ImportError> {
+        let (src, inner) = self
+            .part(name)
+            .ok_or_else(|| ImportError::Missing { path: self.path().into(), key: name.to_string() })?;
+        src.f32s(inner, shape)
+    }
+}
+
 /// The sizes a checkpoint's shapes give (the ResNet base, the U-Net's levels, kernel and
 /// step embedding, the action and proprioception widths), for `obs_horizon` frames.
-fn config_from(src: &Source, image_size: usize, obs_horizon: usize) -> Result<ImportedConfig, ImportError> {
+fn config_from(src: &Model, image_size: usize, obs_horizon: usize) -> Result<ImportedConfig, ImportError> {
     let s = src.shapes();
     let missing = |k: &str| ImportError::Missing { path: src.path().into(), key: src.shown(k) };
     let get = |k: &str| s.get(k).cloned().ok_or_else(|| missing(k));
@@ -142,7 +228,7 @@ fn config_from(src: &Source, image_size: usize, obs_horizon: usize) -> Result<Im
     let unet: BTreeMap<String, Vec<usize>> =
         s.iter().filter_map(|(k, v)| Some((k.strip_prefix("invariant.")?.to_string(), v.clone()))).collect();
     let UnetSizes { dims, action, kernel, step_embed: e, cond } =
-        unet_sizes(&unet, "blocks.0").map_err(|m| layout(format!("`invariant.*`: {m}")))?;
+        unet_sizes(&unet, "blocks.0").map_err(|m| layout(format!("`{}*`: {m}", src.shown("invariant."))))?;
     let features = 8 * base;
     let proprio =
         (cond / obs_horizon.max(1)).checked_sub(features).filter(|_| cond % obs_horizon.max(1) == 0);
@@ -191,7 +277,7 @@ pub fn import(
     image_size: usize,
     device: &Device,
 ) -> Result<ImportedPolicy, ImportError> {
-    let model = Source::open(path, Some("model"), "")?;
+    let model = Model::open(path)?;
     let cfg = config_from(&model, image_size, 2)?;
     let names = official_names(&cfg.net.down_dims, cfg.net.action_dim);
     let shapes_of = model.shapes();
@@ -205,8 +291,9 @@ pub fn import(
     if let Some(n) = names.iter().find(|n| !shapes_of.contains_key(*n)) {
         return Err(ImportError::Missing { path: path.into(), key: model.shown(n) });
     }
+    let (ema_file, ema_top, step_key) = model.ema_and_step(path);
     let ema = match weights {
-        GpcWeights::Ema => Some(Source::open(path, Some("ema"), "shadow_params.")?),
+        GpcWeights::Ema => Some(Source::open(&ema_file, ema_top, "shadow_params.")?),
         GpcWeights::Model => None,
     };
     if let Some(ema) = &ema {
@@ -258,7 +345,7 @@ pub fn import(
     }
     let net = place_all(net, values, path)?;
     let tensors = names.len();
-    Ok(ImportedPolicy { net, cfg, step: top_level_int(path, "step"), tensors })
+    Ok(ImportedPolicy { net, cfg, step: top_level_int(&ema_file, step_key), tensors })
 }
 
 #[cfg(test)]

@@ -170,3 +170,34 @@ fn a_file_that_is_not_a_policy_is_refused_by_key() {
         .unwrap_or_default();
     assert!(err.contains("policy_io.pth") && err.contains("model"), "{err}");
 }
+
+#[test]
+fn gpcs_folder_layout_imports_to_the_same_networks() {
+    // `official/`: the fixture's networks saved as GPC's folder layout (the same seed, so the
+    // same values): both weight copies give the file's conditioning, the EMA's PyTorch's.
+    let device = Device::flex();
+    for w in [GpcWeights::Ema, GpcWeights::Model] {
+        let file = import(&fixture("policy.pth"), w, 96, &device).unwrap_or_else(|e| panic!("{e}"));
+        let folder = import(&fixture("official"), w, 96, &device).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            (folder.tensors, folder.step),
+            (208, Some(4242)),
+            "the step is the EMA's optimization_step"
+        );
+        assert_eq!(cond_of(&folder.net, &device), cond_of(&file.net, &device), "{w:?}");
+    }
+    // A folder without one of the files is refused naming it.
+    let tmp = tempfile::tempdir().unwrap();
+    for f in ["vision_encoder.pth", "invariant.pth"] {
+        std::fs::copy(fixture("official").join(f), tmp.path().join(f)).unwrap();
+    }
+    let err =
+        import(tmp.path(), GpcWeights::Model, 96, &device).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("ema_nets.pth"), "{err}");
+    // A key missing from one part is named with its file.
+    std::fs::copy(fixture("official/ema_nets.pth"), tmp.path().join("ema_nets.pth")).unwrap();
+    std::fs::copy(fixture("policy_io.pth"), tmp.path().join("invariant.pth")).unwrap();
+    let err =
+        import(tmp.path(), GpcWeights::Model, 96, &device).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("invariant.pth: *") && err.contains("missing down_modules.0.0"), "{err}");
+}

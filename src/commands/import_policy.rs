@@ -105,14 +105,25 @@ fn lerobot(a: &ImportPolicyArgs) -> Result<ExitCode> {
 
 /// A GPC checkpoint file.
 fn gpc(a: &ImportPolicyArgs) -> Result<ExitCode> {
-    if a.file.is_dir() {
-        anyhow::bail!(
-            "{}: --format gpc reads a checkpoint file (ckpt-epN.pth), not a folder",
-            a.file.display()
-        );
-    }
     let staged = Staged::new(&a.out, a.force, &Inputs::new().add("FILE", &a.file))?;
-    let sha = harness::fingerprint::file(&a.file).with_context(|| format!("{}", a.file.display()))?;
+    // A checkpoint file, or GPC's "official" folder of three files: each one's SHA-256.
+    let files: Vec<std::path::PathBuf> = if a.file.is_dir() {
+        policies::import_gpc::FOLDER_FILES.iter().map(|f| a.file.join(f)).collect()
+    } else {
+        vec![a.file.clone()]
+    };
+    let mut sha = serde_json::Map::new();
+    for f in &files {
+        if f.is_file() {
+            let h = harness::fingerprint::file(f).with_context(|| format!("{}", f.display()))?;
+            sha.insert(f.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(), h.into());
+        }
+    }
+    let sha = if a.file.is_dir() {
+        serde_json::Value::Object(sha)
+    } else {
+        sha.into_iter().next().map(|(_, v)| v).unwrap_or_default()
+    };
     let device = world_model::device::selected()?;
     let weights = match a.weights {
         PolicyWeights::Ema => GpcWeights::Ema,
@@ -132,6 +143,7 @@ fn gpc(a: &ImportPolicyArgs) -> Result<ExitCode> {
                 "sha256": sha,
                 "step": p.step,
                 "epoch": if epoch_of(&a.file).is_some() { "from the file name" } else { "unknown (the file name has no ep<N>): 0" },
+                "layout": if a.file.is_dir() { "GPC's folder (vision_encoder.pth, invariant.pth, ema_nets.pth)" } else { "a checkpoint file" },
                 "weights": match a.weights { PolicyWeights::Ema => "ema.shadow_params", PolicyWeights::Model => "model" },
                 "tensors": p.tensors,
                 "normalisation": "GPC's Push-T evaluation script's agent-position and action ranges (not stored in the checkpoint)",
