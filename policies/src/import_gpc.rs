@@ -258,6 +258,7 @@ fn config_from(src: &Model, image_size: usize, obs_horizon: usize) -> Result<Imp
         robot_keys: Vec::new(),
         inference_steps: None,
         sampler: Sampler::Ddpm,
+        prediction: crate::imported_policy::Prediction::Epsilon,
         net,
         horizon: 16,
         action_horizon: 8,

@@ -127,6 +127,7 @@ fn the_official_pusht_manifest_is_the_parameter_order() {
         robot_keys: Vec::new(),
         inference_steps: None,
         sampler: crate::imported_policy::Sampler::Ddpm,
+        prediction: crate::imported_policy::Prediction::Epsilon,
         net: NetConfig {
             image_size: 96,
             encoder_width: 64,

@@ -22,7 +22,7 @@ use world_model::import::safe::SafeSource;
 
 use crate::diffusion::{Normalisation, Range};
 use crate::import_keys::{UnetNames, cond_unet, resnet_children};
-use crate::imported_policy::{ImportedConfig, ImportedNet, MeanStd, Pool, Sampler};
+use crate::imported_policy::{ImportedConfig, ImportedNet, MeanStd, Pool, Prediction, Sampler};
 use crate::lerobot_config::{LeRobotConfig, check, features};
 use crate::net::NetConfig;
 
@@ -182,6 +182,7 @@ pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError>
         robot_keys: Vec::new(),
         inference_steps: c.num_inference_steps,
         sampler: if c.noise_scheduler_type == "DDIM" { Sampler::Ddim } else { Sampler::Ddpm },
+        prediction: if c.prediction_type == "sample" { Prediction::Sample } else { Prediction::Epsilon },
         net: NetConfig {
             image_size: shape[1],
             encoder_width: base,

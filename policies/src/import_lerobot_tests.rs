@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::*;
-use crate::imported_policy::{Sampler, ddim_sample, ddpm_sample};
+use crate::imported_policy::{Prediction, Sampler, ddim_sample, ddpm_sample};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/lerobot_policy").join(name)
@@ -118,6 +118,41 @@ fn a_ddim_policy_imports_and_its_ten_steps_give_pytorchs_actions() {
     assert!(!serde_json::to_string(&ddpm.cfg).unwrap().contains("sampler"));
 }
 
+#[test]
+fn a_sample_predicting_policy_steps_as_diffusers_does() {
+    // `prediction_type: sample`: the U-Net's output is x0; the noise the step uses is derived
+    // from it before clipping. The fixture's `actions_sample` and `actions_ddim_sample` are the
+    // script's DDPM and DDIM loops reading the same network that way.
+    let device = Device::flex();
+    let tmp = tempfile::tempdir().unwrap();
+    let cond = io("cond");
+    let ac = crate::diffusion::alphas_cumprod(100);
+    for (sched, want) in [("DDPM", "actions_sample"), ("DDIM", "actions_ddim_sample")] {
+        let dir = edited(tmp.path(), |v| {
+            v["prediction_type"] = serde_json::json!("sample");
+            v["noise_scheduler_type"] = serde_json::json!(sched);
+        });
+        let p = import(&dir, &device).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(p.cfg.prediction, Prediction::Sample);
+        let eps = |x: &[f32], t: usize| p.cfg.prediction.noise(x, eps_of(&p, &cond, x, t, &device), ac[t]);
+        let got = if sched == "DDPM" {
+            let noises = io("noises");
+            let mut j = 0;
+            ddpm_sample(io("x"), &ac, &p.cfg.timesteps(), eps, |n| {
+                j += 1;
+                noises[(j - 1) * n..j * n].to_vec()
+            })
+        } else {
+            ddim_sample(io("x"), &ac, &p.cfg.timesteps(), eps)
+        };
+        let d = max_abs(&got, &io(want));
+        assert!(d <= 1e-4, "{sched}: differs from PyTorch's by {d}");
+        // Reading the output as noise gives other actions: the setting is used.
+        let other = if sched == "DDPM" { "actions" } else { "actions_ddim" };
+        assert!(max_abs(&got, &io(other)) > 1e-2, "{sched}");
+    }
+}
+
 /// A copy of the legacy fixture folder with `config.json` edited by `edit`.
 fn edited(dir: &Path, edit: impl Fn(&mut serde_json::Value)) -> PathBuf {
     let out = dir.join("pm");
@@ -137,7 +172,7 @@ fn unsupported_settings_and_missing_statistics_are_refused_by_name() {
     for (field, value) in [
         ("use_group_norm", serde_json::json!(false)),
         ("noise_scheduler_type", serde_json::json!("PNDM")),
-        ("prediction_type", serde_json::json!("sample")),
+        ("prediction_type", serde_json::json!("v_prediction")),
         ("vision_backbone", serde_json::json!("resnet34")),
     ] {
         let dir = edited(tmp.path(), |v| v[field] = value.clone());

@@ -32,7 +32,7 @@ use world_model::import::tensors::Source;
 use crate::diffusion::{Normalisation, Range};
 use crate::import_gpc::official_names;
 use crate::import_keys::{UnetNames, UnetSizes, cond_unet, resnet_children, unet_sizes};
-use crate::imported_policy::{ImportedConfig, ImportedNet, Pool, Sampler};
+use crate::imported_policy::{ImportedConfig, ImportedNet, Pool, Prediction, Sampler};
 use crate::net::NetConfig;
 use crate::robomimic_config::{Meta, RobomimicConfig, read};
 
@@ -114,7 +114,10 @@ fn keys(c: &RobomimicConfig, path: &Path) -> Result<(Vec<String>, bool), ImportE
 }
 
 /// The sampler and its step counts, checked.
-fn sampler(c: &RobomimicConfig, path: &Path) -> Result<(Sampler, usize, Option<usize>), ImportError> {
+fn sampler(
+    c: &RobomimicConfig,
+    path: &Path,
+) -> Result<(Sampler, Prediction, usize, Option<usize>), ImportError> {
     let (s, which) = match (&c.algo.ddpm, &c.algo.ddim) {
         (Some(s), _) if s.enabled => (s, Sampler::Ddpm),
         (_, Some(s)) if s.enabled => (s, Sampler::Ddim),
@@ -125,9 +128,11 @@ fn sampler(c: &RobomimicConfig, path: &Path) -> Result<(Sampler, usize, Option<u
     if s.beta_schedule != "squaredcos_cap_v2" {
         return Err(bad("beta_schedule", s.beta_schedule.clone()));
     }
-    if s.prediction_type != "epsilon" {
-        return Err(bad("prediction_type", s.prediction_type.clone()));
-    }
+    let prediction = match s.prediction_type.as_str() {
+        "epsilon" => Prediction::Epsilon,
+        "sample" => Prediction::Sample,
+        other => return Err(bad("prediction_type", other.to_string())),
+    };
     if !s.clip_sample {
         return Err(bad("clip_sample", "false".into()));
     }
@@ -144,7 +149,7 @@ fn sampler(c: &RobomimicConfig, path: &Path) -> Result<(Sampler, usize, Option<u
         Sampler::Ddim if !s.set_alpha_to_one || s.steps_offset != 0 => {
             Err(bad("set_alpha_to_one/steps_offset", format!("{}/{}", s.set_alpha_to_one, s.steps_offset)))
         }
-        _ => Ok((which, t, (n != t).then_some(n))),
+        _ => Ok((which, prediction, t, (n != t).then_some(n))),
     }
 }
 
@@ -257,7 +262,7 @@ pub fn import(
     let meta = read(path)?;
     let c = &meta.config;
     let (low, image_last) = keys(c, path)?;
-    let (sampler, train_steps, inference_steps) = sampler(c, path)?;
+    let (sampler, prediction, train_steps, inference_steps) = sampler(c, path)?;
     let crop = crop(c, path)?;
     let use_ema = weights == RobomimicWeights::Ema && c.algo.ema.enabled;
     let (prefix, which) = if use_ema { ("ema.", "model.ema") } else { ("nets.", "model.nets") };
@@ -330,6 +335,7 @@ pub fn import(
         robot_keys: low.clone(),
         inference_steps,
         sampler,
+        prediction,
         net: NetConfig {
             image_size: scene_size,
             encoder_width: base,

@@ -76,6 +76,35 @@ impl Sampler {
     }
 }
 
+/// What the noise predictor's output is (diffusers' `prediction_type`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Prediction {
+    /// The noise ε (`epsilon`).
+    #[default]
+    Epsilon,
+    /// The clean sample x₀ (`sample`): the noise is derived from it as diffusers derives it,
+    /// `(x − √ᾱ·x₀) / √(1 − ᾱ)`, before x₀ is clipped.
+    Sample,
+}
+
+impl Prediction {
+    fn is_epsilon(&self) -> bool {
+        *self == Self::Epsilon
+    }
+
+    /// The noise the samplers step with, from the network's `out` for `x` at ᾱ = `a`.
+    pub fn noise(self, x: &[f32], out: Vec<f32>, a: f64) -> Vec<f32> {
+        match self {
+            Self::Epsilon => out,
+            Self::Sample => {
+                let (sa, s1a) = (a.sqrt(), (1.0 - a).sqrt());
+                x.iter().zip(out).map(|(&x, x0)| ((f64::from(x) - sa * f64::from(x0)) / s1a) as f32).collect()
+            }
+        }
+    }
+}
+
 /// Per-channel image normalisation, `(x − mean) / (std + 1e-8)` of frames in [0, 1].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -121,6 +150,9 @@ pub struct ImportedConfig {
     /// The sampler (absent: DDPM, as every policy imported before DDIM was).
     #[serde(default, skip_serializing_if = "Sampler::is_ddpm")]
     pub sampler: Sampler,
+    /// What the U-Net predicts (absent: the noise).
+    #[serde(default, skip_serializing_if = "Prediction::is_epsilon")]
+    pub prediction: Prediction,
     /// The U-Net's sizes (`feature_dim` as the pool gives; `encoder_width` unused).
     pub net: NetConfig,
     /// Predicted actions per decision.
@@ -400,6 +432,11 @@ impl ImportedDiffusion {
 
     /// The noise prediction for `x` (`[b, horizon, action_dim]`) at step `t` under `cond`.
     fn eps(&self, cond: &[f32], x: &[f32], b: usize, t: usize) -> Vec<f32> {
+        self.cfg.prediction.noise(x, self.net_out(cond, x, b, t), self.ac[t])
+    }
+
+    /// The U-Net's output for `x` (`[b, horizon, action_dim]`) at step `t` under `cond`.
+    fn net_out(&self, cond: &[f32], x: &[f32], b: usize, t: usize) -> Vec<f32> {
         let (h, ad) = (self.cfg.horizon, self.cfg.net.action_dim);
         if let Some(unet) = &self.cpu_unet {
             let prep = unet.prepare(cond, b);

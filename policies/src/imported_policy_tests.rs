@@ -54,6 +54,7 @@ fn leading_spacing_steps_from_the_last_multiple_down_to_zero() {
         robot_keys: Vec::new(),
         inference_steps: n,
         sampler: Sampler::Ddpm,
+        prediction: crate::imported_policy::Prediction::Epsilon,
         net: crate::net::NetConfig::new(),
         horizon: 16,
         action_horizon: 8,

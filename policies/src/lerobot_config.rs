@@ -155,8 +155,8 @@ pub(crate) fn check(c: &LeRobotConfig, path: &Path) -> Result<(), ImportError> {
     if c.beta_schedule != "squaredcos_cap_v2" {
         return refuse("beta_schedule", c.beta_schedule.clone(), "squaredcos_cap_v2");
     }
-    if c.prediction_type != "epsilon" {
-        return refuse("prediction_type", c.prediction_type.clone(), "epsilon");
+    if c.prediction_type != "epsilon" && c.prediction_type != "sample" {
+        return refuse("prediction_type", c.prediction_type.clone(), "epsilon or sample");
     }
     if !c.clip_sample || c.clip_sample_range != 1.0 {
         return refuse(
