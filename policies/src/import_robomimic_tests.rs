@@ -1,6 +1,8 @@
 //! The robomimic import against PyTorch: fixtures written by `scripts/fixtures/robomimic_policy.py`
-//! (evalharness's own re-implementation of a robomimic 0.5 diffusion-policy checkpoint, reduced to
-//! ResNet base 16, 4 keypoints, 6 features, U-Net levels 16/32/64, 84² images cropped to 76).
+//! (evalharness's own re-implementation of a robomimic 0.5 diffusion-policy checkpoint, checked
+//! outside the project against robomimic's own `DiffusionPolicyUNet` at the full size: the same
+//! 280 names and shapes, identical features and noise; reduced here to ResNet base 16, 4
+//! keypoints, 6 features, U-Net levels 16/32/64, 84² images cropped to 76).
 
 use std::path::{Path, PathBuf};
 
