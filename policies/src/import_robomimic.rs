@@ -407,6 +407,22 @@ fn expected_names(enc: &str, dims: &[usize], action: usize) -> Vec<String> {
     v
 }
 
+/// evalharness's path of a robomimic weight `key` whose camera encoder is under `enc`, and
+/// whether it is a Linear weight (transposed); `None` for the copies, buffers and any key with
+/// no place.
+pub(crate) fn burn_path(enc: &str, key: &str) -> Option<(String, bool)> {
+    match key.strip_prefix(enc) {
+        Some(r) => r
+            .strip_prefix("backbone.nets.")
+            .and_then(resnet_children)
+            .or_else(|| r.strip_prefix("pool.nets.").map(|p| (format!("head.nets.{p}"), false)))
+            .or_else(|| r.strip_prefix("nets.3.").map(|p| (format!("head.out.{p}"), p == "weight"))),
+        None => key
+            .strip_prefix(UNET)
+            .and_then(|r| cond_unet(r, &UnetNames { convs: ["blocks.0", "blocks.1"], resample: "conv." })),
+    }
+}
+
 /// Every tensor of `src` mapped onto the networks' parameters (`ours`, path → shape), checked.
 fn weights_of(
     src: &Source,
@@ -459,17 +475,7 @@ fn weights_of(
             }
             _ => {}
         }
-        let mapped = match local {
-            Some(r) => r
-                .strip_prefix("backbone.nets.")
-                .and_then(resnet_children)
-                .or_else(|| r.strip_prefix("pool.nets.").map(|p| (format!("head.nets.{p}"), false)))
-                .or_else(|| r.strip_prefix("nets.3.").map(|p| (format!("head.out.{p}"), p == "weight"))),
-            None => key.strip_prefix(UNET).and_then(|r| {
-                cond_unet(r, &UnetNames { convs: ["blocks.0", "blocks.1"], resample: "conv." })
-            }),
-        };
-        let Some((to, linear)) = mapped.filter(|(to, _)| ours.contains_key(to)) else {
+        let Some((to, linear)) = burn_path(enc, key).filter(|(to, _)| ours.contains_key(to)) else {
             unexpected.push(src.shown(key));
             continue;
         };

@@ -4,6 +4,7 @@
 //! 280 names and shapes, identical features and noise; reduced here to ResNet base 16, 4
 //! keypoints, 6 features, U-Net levels 16/32/64, 84² images cropped to 76).
 
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::{Device, Tensor, TensorData};
@@ -207,4 +208,62 @@ fn broken_files_are_refused_naming_the_key_or_field() {
         (d.low_dim, d.env_name.as_deref()),
         (vec!["object".to_string(), "robot0_eef_pos".into()], Some("Lift"))
     );
+}
+
+#[test]
+fn robomimics_full_size_manifest_maps_every_weight_exactly_once() {
+    // robomimic_dp_full_keys.tsv: the state dict of robomimic's own DiffusionPolicyUNet at its
+    // default size (written by the cross-check outside the project). Every weight but the
+    // copies (`nets.0.*`, `nets.1.*`), the temperature and the grid lands on one parameter of
+    // the full-size networks with its shape, and every parameter is reached.
+    let text = std::fs::read_to_string(fixture("robomimic_dp_full_keys.tsv")).unwrap();
+    let entries: Vec<(String, Vec<usize>)> = text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| {
+            let (k, s) = l.split_once('\t').unwrap();
+            let dims = s
+                .trim_matches(['[', ']'])
+                .split(", ")
+                .filter(|d| !d.is_empty())
+                .map(|d| d.parse().unwrap())
+                .collect();
+            (k.to_string(), dims)
+        })
+        .collect();
+    assert_eq!(entries.len(), 280);
+    let full = NetConfig {
+        image_size: 96,
+        encoder_width: 64,
+        feature_dim: 64,
+        down_dims: vec![256, 512, 1024],
+        kernel: 5,
+        step_embed: 256,
+        obs_horizon: 2,
+        action_dim: 7,
+        proprio_dim: Some(9),
+    };
+    let pool = Pool::SpatialSoftmax { keypoints: 32, features: Some(64) };
+    let cfg = ImportedConfig { net: full, resnet_base: 64, pool, ..imported(RobomimicWeights::Ema).cfg };
+    let ours = shapes(&ImportedNet::new(&cfg, &Device::flex()));
+    let enc = format!("{ENCODER}{IMAGE_KEY}.");
+    let skipped = |k: &str| {
+        let local = k.strip_prefix(enc.as_str()).unwrap_or("");
+        local.starts_with("nets.0.")
+            || local.starts_with("nets.1.")
+            || ["pool.temperature", "pool.pos_x", "pool.pos_y"].contains(&local)
+    };
+    let mut mapped = BTreeSet::new();
+    for (k, theirs) in entries.iter().filter(|(k, _)| !skipped(k)) {
+        let (to, linear) = burn_path(&enc, k).unwrap_or_else(|| panic!("{k} has no place"));
+        let want = if linear { vec![theirs[1], theirs[0]] } else { theirs.clone() };
+        assert_eq!(ours.get(&to), Some(&want), "{k} -> {to}");
+        assert!(mapped.insert(to.clone()), "{to} mapped twice");
+    }
+    assert_eq!(mapped.len(), ours.len(), "every parameter is reached");
+    // The names the importer requires at these sizes are exactly the manifest's originals.
+    let names: BTreeSet<String> = expected_names(&enc, &[256, 512, 1024], 7).into_iter().collect();
+    let originals: BTreeSet<String> =
+        entries.iter().map(|(k, _)| k.clone()).filter(|k| !skipped(k)).collect();
+    assert_eq!(names, originals);
 }
