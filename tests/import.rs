@@ -326,31 +326,13 @@ fn a_robomimic_policy_ranks_beside_native_ones_on_lift_and_can() {
     // A key no scene gives is refused naming it, before anything is written; so is a camera
     // the world model cannot imagine.
     let bad = dir.path().join("bad");
-    let (_, err) = expect_code(
-        &run(&[
-            "import",
-            "policy",
-            "--format",
-            "robomimic",
-            s(&fixtures.join("robomimic_policy/object_key.pth")),
-            "--out",
-            s(&bad),
-        ]),
-        2,
-    );
+    let refused = |name: &str| {
+        let file = fixtures.join("robomimic_policy").join(name);
+        expect_code(&run(&["import", "policy", "--format", "robomimic", s(&file), "--out", s(&bad)]), 2).1
+    };
+    let err = refused("object_key.pth");
     assert!(err.contains("`object`") && err.contains("robot0_eef_pos"), "{err}");
-    let (_, err) = expect_code(
-        &run(&[
-            "import",
-            "policy",
-            "--format",
-            "robomimic",
-            s(&fixtures.join("robomimic_policy/eye_in_hand.pth")),
-            "--out",
-            s(&bad),
-        ]),
-        2,
-    );
+    let err = refused("eye_in_hand.pth");
     assert!(err.contains("robot0_eye_in_hand_image"), "{err}");
     assert!(!bad.exists());
 }

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::*;
-use crate::imported_policy::{ImportedNet, ddpm_sample};
+use crate::imported_policy::{ImportedNet, ddpm_sample, replayed, unet_out};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/gpc_policy").join(name)
@@ -74,25 +74,9 @@ fn ddpm_with_pytorchs_noise_gives_pytorchs_actions() {
     let p = import(&fixture("policy.pth"), GpcWeights::Ema, 96, &device).unwrap_or_else(|e| panic!("{e}"));
     let src = io();
     let (cond, x, noises) = (read(&src, "cond"), read(&src, "x"), read(&src, "noises")); // noises [100, 2, 16, 2]
-    let c = cond.len() / 2;
     let ac = crate::diffusion::alphas_cumprod(100);
-    let mut j = 0;
     let steps: Vec<usize> = (0..100).rev().collect();
-    let got = ddpm_sample(
-        x,
-        &ac,
-        &steps,
-        |x, t| {
-            let xt = Tensor::from_data(TensorData::new(x.to_vec(), [2, 16, 2]), &device);
-            let ct = Tensor::from_data(TensorData::new(cond.clone(), [2, c]), &device);
-            let out = p.net.unet.forward(xt, Tensor::from_floats([t as f32, t as f32], &device), ct);
-            out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
-        },
-        |n| {
-            j += 1;
-            noises[(j - 1) * n..j * n].to_vec()
-        },
-    );
+    let got = ddpm_sample(x, &ac, &steps, |x, t| unet_out(&p.net, &cond, x, [2, 16, 2], t), replayed(noises));
     let d = max_abs(&got, &read(&src, "actions"));
     assert!(d <= 1e-4, "DDPM differs from PyTorch's by {d}");
 }

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::*;
-use crate::imported_policy::{Prediction, Sampler, ddim_sample, ddpm_sample};
+use crate::imported_policy::{Prediction, Sampler, ddim_sample, ddpm_sample, replayed, unet_out};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/lerobot_policy").join(name)
@@ -36,11 +36,8 @@ fn frames01(device: &Device) -> Tensor<4> {
 
 /// The imported U-Net's noise prediction for the fixture's two `[16, 2]` sequences `x` at step
 /// `t`, given their conditioning `cond`.
-fn eps_of(p: &LeRobotPolicy, cond: &[f32], x: &[f32], t: usize, device: &Device) -> Vec<f32> {
-    let xt = Tensor::from_data(TensorData::new(x.to_vec(), [2, 16, 2]), device);
-    let ct = Tensor::from_data(TensorData::new(cond.to_vec(), [2, cond.len() / 2]), device);
-    let out = p.net.unet.forward(xt, Tensor::from_floats([t as f32, t as f32], device), ct);
-    out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+fn eps_of(p: &LeRobotPolicy, cond: &[f32], x: &[f32], t: usize) -> Vec<f32> {
+    unet_out(&p.net, cond, x, [2, 16, 2], t)
 }
 
 #[test]
@@ -76,19 +73,10 @@ fn both_layouts_import_and_predict_what_pytorch_predicts() {
 fn ten_leading_ddpm_steps_with_pytorchs_noise_give_pytorchs_actions() {
     let device = Device::flex();
     let p = import(&fixture("pretrained_model"), &device).unwrap_or_else(|e| panic!("{e}"));
-    let (cond, noises) = (io("cond"), io("noises")); // noises [10, 2, 16, 2]
+    let cond = io("cond"); // noises [10, 2, 16, 2]
     let ac = crate::diffusion::alphas_cumprod(100);
-    let mut j = 0;
-    let got = ddpm_sample(
-        io("x"),
-        &ac,
-        &p.cfg.timesteps(),
-        |x, t| eps_of(&p, &cond, x, t, &device),
-        |n| {
-            j += 1;
-            noises[(j - 1) * n..j * n].to_vec()
-        },
-    );
+    let got =
+        ddpm_sample(io("x"), &ac, &p.cfg.timesteps(), |x, t| eps_of(&p, &cond, x, t), replayed(io("noises")));
     let d = max_abs(&got, &io("actions"));
     assert!(d <= 1e-4, "DDPM differs from PyTorch's by {d}");
 }
@@ -107,7 +95,7 @@ fn a_ddim_policy_imports_and_its_ten_steps_give_pytorchs_actions() {
     assert_eq!(p.cfg.timesteps(), [90, 80, 70, 60, 50, 40, 30, 20, 10, 0]);
     let cond = io("cond");
     let ac = crate::diffusion::alphas_cumprod(100);
-    let got = ddim_sample(io("x"), &ac, &p.cfg.timesteps(), |x, t| eps_of(&p, &cond, x, t, &device));
+    let got = ddim_sample(io("x"), &ac, &p.cfg.timesteps(), |x, t| eps_of(&p, &cond, x, t));
     let d = max_abs(&got, &io("actions_ddim"));
     assert!(d <= 1e-4, "DDIM differs from PyTorch's by {d}");
     // Not the DDPM result: the sampler is used, not only recorded.
@@ -134,14 +122,9 @@ fn a_sample_predicting_policy_steps_as_diffusers_does() {
         });
         let p = import(&dir, &device).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(p.cfg.prediction, Prediction::Sample);
-        let eps = |x: &[f32], t: usize| p.cfg.prediction.noise(x, eps_of(&p, &cond, x, t, &device), ac[t]);
+        let eps = |x: &[f32], t: usize| p.cfg.prediction.noise(x, eps_of(&p, &cond, x, t), ac[t]);
         let got = if sched == "DDPM" {
-            let noises = io("noises");
-            let mut j = 0;
-            ddpm_sample(io("x"), &ac, &p.cfg.timesteps(), eps, |n| {
-                j += 1;
-                noises[(j - 1) * n..j * n].to_vec()
-            })
+            ddpm_sample(io("x"), &ac, &p.cfg.timesteps(), eps, replayed(io("noises")))
         } else {
             ddim_sample(io("x"), &ac, &p.cfg.timesteps(), eps)
         };

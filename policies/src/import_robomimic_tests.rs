@@ -12,7 +12,7 @@ use harness::policy::{Observation, Policy};
 use harness::rng::Rng;
 
 use super::*;
-use crate::imported_policy::{ImportedDiffusion, bilinear_weights, ddpm_sample};
+use crate::imported_policy::{ImportedDiffusion, bilinear_weights, ddpm_sample, replayed, unet_out};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/robomimic_policy").join(name)
@@ -96,22 +96,14 @@ fn features_conditioning_and_noise_match_pytorch() {
 fn ddpm_with_pytorchs_noise_gives_pytorchs_actions() {
     let p = imported(RobomimicWeights::Ema);
     let device = Device::flex();
-    let (cond, noises) = (io("cond"), io("noises")); // noises [100, 2, 16, 7]
-    let mut j = 0;
+    let cond = io("cond");
+    // PyTorch's initial and per-step noise (`noises` [100, 2, 16, 7]) handed in.
     let got = ddpm_sample(
         io("x"),
         &crate::diffusion::alphas_cumprod(100),
         &p.cfg.timesteps(),
-        |x, t| {
-            let xt = Tensor::from_data(TensorData::new(x.to_vec(), [2, 16, 7]), &device);
-            let ct = Tensor::from_data(TensorData::new(cond.clone(), [2, 30]), &device);
-            let out = p.net.unet.forward(xt, Tensor::from_floats([t as f32, t as f32], &device), ct);
-            out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
-        },
-        |n| {
-            j += 1;
-            noises[(j - 1) * n..j * n].to_vec()
-        },
+        |x, t| unet_out(&p.net, &cond, x, [2, 16, 7], t),
+        replayed(io("noises")),
     );
     let d = max_abs(&got, &io("actions"));
     assert!(d <= 1e-4, "DDPM differs from PyTorch's by {d}");

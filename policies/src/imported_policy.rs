@@ -600,6 +600,27 @@ pub fn load_returning(
     Ok(Box::new(policy))
 }
 
+/// The U-Net's output for `x` (`dims` = `[b, horizon, action_dim]`) at step `t` under `cond`
+/// (`[b, c]`), through burn: what the importers' tests compare with PyTorch.
+#[cfg(test)]
+pub(crate) fn unet_out(net: &ImportedNet, cond: &[f32], x: &[f32], dims: [usize; 3], t: usize) -> Vec<f32> {
+    let device = Device::flex();
+    let xt = Tensor::from_data(TensorData::new(x.to_vec(), dims), &device);
+    let ct = Tensor::from_data(TensorData::new(cond.to_vec(), [dims[0], cond.len() / dims[0]]), &device);
+    let tt = Tensor::<1>::from_floats(vec![t as f32; dims[0]].as_slice(), &device);
+    net.unet.forward(xt, tt, ct).into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+}
+
+/// Hands out `noises` in order, `n` values a call: a PyTorch run's step noise, replayed.
+#[cfg(test)]
+pub(crate) fn replayed(noises: Vec<f32>) -> impl FnMut(usize) -> Vec<f32> {
+    let mut at = 0;
+    move |n| {
+        at += n;
+        noises[at - n..at].to_vec()
+    }
+}
+
 #[cfg(test)]
 #[path = "imported_policy_tests.rs"]
 mod tests;

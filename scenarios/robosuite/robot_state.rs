@@ -34,6 +34,20 @@ pub(crate) fn finger_target(i: usize, c: f64) -> f64 {
     0.5 * (lo + hi) + 0.5 * (hi - lo) * c
 }
 
+/// The gripper's running command after a step of gripper command `g`: each finger's entry moves
+/// 0.2 towards closing (`g` > 0) or opening (`g` < 0), in opposite directions, within [−1, 1], as
+/// the controller moves it.
+pub(crate) fn grip_step(grip: [f64; 2], g: f64) -> [f64; 2] {
+    let sign = if g > 0.0 {
+        1.0
+    } else if g < 0.0 {
+        -1.0
+    } else {
+        0.0
+    };
+    [(grip[0] - 0.2 * sign).clamp(-1.0, 1.0), (grip[1] + 0.2 * sign).clamp(-1.0, 1.0)]
+}
+
 /// Metres per unit of a position delta, radians per unit of a rotation delta (OSC_POSE).
 const POS_SCALE: f64 = 0.05;
 const ROT_SCALE: f64 = 0.5;
@@ -102,16 +116,7 @@ impl RobotEstimate {
         let step = mat_quat(&axis_angle_to_mat(self.turn));
         self.quat = normalise(quat_mul(step, self.quat));
         if action.len() > 6 {
-            let g = a(6);
-            let sign = if g > 0.0 {
-                1.0
-            } else if g < 0.0 {
-                -1.0
-            } else {
-                0.0
-            };
-            self.grip =
-                [(self.grip[0] - 0.2 * sign).clamp(-1.0, 1.0), (self.grip[1] + 0.2 * sign).clamp(-1.0, 1.0)];
+            self.grip = grip_step(self.grip, a(6));
         }
         for i in 0..2 {
             self.fingers[i] += FINGER_PULL * (finger_target(i, self.grip[i]) - self.fingers[i]);

@@ -47,23 +47,24 @@ fn the_lift_scene_has_robosuites_bodies_masses_and_joint_settings() {
     assert_eq!(m.opt().timestep, 0.002);
 }
 
+/// robosuite's seed-0 reset of the arm's joints (`robosuite.make("Lift", robots="Panda", seed=0)`).
+const SEED0_ARM: [f64; 7] = [
+    -0.010885179657146199,
+    0.19002353772197897,
+    0.008232610727482657,
+    -2.5971436106026404,
+    -0.0025706932588806853,
+    2.968921923000787,
+    0.772094269927716,
+];
+
 #[test]
 fn the_grip_site_is_where_robosuite_puts_it_for_the_same_joints() {
     let m = Arc::new(lift_scene());
     let mut d = MjData::new(m.clone());
     // robosuite's seed-0 reset: the noisy initial joints and the fingers.
-    let q = [
-        -0.010885179657146199,
-        0.19002353772197897,
-        0.008232610727482657,
-        -2.5971436106026404,
-        -0.0025706932588806853,
-        2.968921923000787,
-        0.772094269927716,
-        0.020833,
-        -0.020833,
-    ];
-    d.qpos_mut()[..9].copy_from_slice(&q);
+    d.qpos_mut()[..7].copy_from_slice(&SEED0_ARM);
+    d.qpos_mut()[7..9].copy_from_slice(&[0.020833, -0.020833]);
     d.forward();
     let site = m.site("gripper0_right_grip_site").unwrap().id;
     let want = [-0.0853232205760393, -0.0008528129235318627, 1.0239900041318835];
@@ -252,15 +253,7 @@ fn the_robot_state_is_what_robosuite_reports_for_the_same_joints() {
     // the seed-0 joints, then a turned wrist. Fingers at robosuite's initial opening.
     let cases: [([f64; 7], [f32; 9]); 2] = [
         (
-            [
-                -0.010885179657146199,
-                0.19002353772197897,
-                0.008232610727482657,
-                -2.5971436106026404,
-                -0.0025706932588806853,
-                2.968921923000787,
-                0.772094269927716,
-            ],
+            SEED0_ARM,
             [
                 -0.085_323_22,
                 -0.000_852_813,
@@ -365,14 +358,7 @@ fn robot_state_fit_of_the_estimates_coefficients() {
         if k % 120 == 0 {
             grip = [0.0; 2];
         }
-        let sign = if a[6] > 0.0 {
-            1.0
-        } else if a[6] < 0.0 {
-            -1.0
-        } else {
-            0.0
-        };
-        grip = [(grip[0] - 0.2 * sign).clamp(-1.0, 1.0), (grip[1] + 0.2 * sign).clamp(-1.0, 1.0)];
+        grip = super::robot_state::grip_step(grip, a[6]);
         // Opening steps only: nothing stops the fingers there.
         for i in (0..2).filter(|_| a[6] < 0.0) {
             let target = super::robot_state::finger_target(i, grip[i]);
@@ -388,14 +374,7 @@ fn robot_state_fit_of_the_estimates_coefficients() {
             if j % 120 == 0 {
                 (q, grip) = (before.2, [0.0; 2]);
             }
-            let sign = if a[6] > 0.0 {
-                1.0
-            } else if a[6] < 0.0 {
-                -1.0
-            } else {
-                0.0
-            };
-            grip = [(grip[0] - 0.2 * sign).clamp(-1.0, 1.0), (grip[1] + 0.2 * sign).clamp(-1.0, 1.0)];
+            grip = super::robot_state::grip_step(grip, a[6]);
             for i in 0..2 {
                 q[i] += k * (super::robot_state::finger_target(i, grip[i]) - q[i]);
                 err += (q[i] - after.2[i]).abs();
