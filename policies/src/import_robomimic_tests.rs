@@ -95,7 +95,6 @@ fn features_conditioning_and_noise_match_pytorch() {
 #[test]
 fn ddpm_with_pytorchs_noise_gives_pytorchs_actions() {
     let p = imported(RobomimicWeights::Ema);
-    let device = Device::flex();
     let cond = io("cond");
     // PyTorch's initial and per-step noise (`noises` [100, 2, 16, 7]) handed in.
     let got = ddpm_sample(
