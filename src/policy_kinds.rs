@@ -22,12 +22,7 @@ pub fn load_any(
     device: &Device,
     task: &dyn Task,
 ) -> Result<Box<dyn Policy>, PolicyLoadError> {
-    let json = dir.join("policy.json");
-    let kind = std::fs::read_to_string(&json)
-        .ok()
-        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-        .and_then(|v| v["kind"].as_str().map(str::to_owned));
-    if kind.as_deref() == Some("scripted") {
+    if policies::dir::policy_kind(dir).as_deref() == Some("scripted") {
         return task.scripted_policy(dir).map_err(|m| PolicyLoadError::new(dir, m));
     }
     load_policy(dir, expect, device)

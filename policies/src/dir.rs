@@ -247,10 +247,22 @@ pub fn load_policy(
     }
 }
 
+/// The `kind` of a checkpoint folder's `policy.json` (every kind's file has one; the rest of
+/// the file depends on it), or `None` for a missing or unreadable file or a file without one.
+pub fn policy_kind(dir: &Path) -> Option<String> {
+    /// The one field every kind's `policy.json` shares.
+    #[derive(Deserialize)]
+    struct Kind {
+        kind: String,
+    }
+    let text = std::fs::read_to_string(dir.join("policy.json")).ok()?;
+    serde_json::from_str::<Kind>(&text).ok().map(|k| k.kind)
+}
+
 /// Reads a checkpoint folder's `policy.json`.
 ///
 /// # Errors
-/// [`PolicyLoadError`] naming the folder for a missing or invalid file.
+/// [`PolicyLoadError`] naming the folder for a missing or malformed file.
 pub fn read_policy_file(dir: &Path) -> Result<PolicyFile, PolicyLoadError> {
     let err = |m: String| PolicyLoadError::new(dir, m);
     let json = dir.join("policy.json");

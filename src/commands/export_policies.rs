@@ -150,9 +150,14 @@ pub(super) fn append(slot: &mut Value, record: Value) {
 /// A diffusion checkpoint's `policy.json` (other kinds are named and refused).
 fn read_policy(dir: &Path) -> Result<PolicyFile> {
     let path = dir.join("policy.json");
-    let v = read_json(&path)?;
-    if v["kind"] != "diffusion" {
-        bail!("{}: kind {}: only diffusion checkpoints are exported", path.display(), v["kind"]);
+    match policies::dir::policy_kind(dir) {
+        Some(k) if k == "diffusion" => {}
+        k => bail!(
+            "{}: kind {}: only diffusion checkpoints are exported",
+            path.display(),
+            k.map_or_else(|| "(none)".to_string(), |k| format!("{k:?}"))
+        ),
     }
-    serde_json::from_value(v).with_context(|| format!("{}: not a diffusion policy file", path.display()))
+    policies::dir::read_policy_file(dir)
+        .with_context(|| format!("{}: not a diffusion policy file", path.display()))
 }
