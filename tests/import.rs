@@ -194,6 +194,30 @@ fn gpc_and_lerobot_policies_become_checkpoints_that_rank_runs() {
     let (_, err) =
         expect_code(&run(&["import", "policy", "--format", "gpc", s(empty.path()), "--out", s(&other)]), 2);
     assert!(err.contains("vision_encoder.pth (GPC's folder layout)"), "{err}");
+    // Statistics of one's own (GPC's files carry none): recorded with their SHA-256; a file of
+    // the wrong widths is refused naming it, nothing written.
+    let stats = dir.path().join("stats.json");
+    let own =
+        r#"{"agent_pos": {"min": [0, 0], "max": [500, 500]}, "action": {"min": [1, 1], "max": [510, 510]}}"#;
+    std::fs::write(&stats, own).unwrap();
+    let with_stats = dir.path().join("with-stats");
+    let args =
+        ["import", "policy", "--format", "gpc", s(&file), "--stats", s(&stats), "--out", s(&with_stats)];
+    expect_code(&run(&args), 0);
+    let p = read_json(&with_stats.join("policy.json"));
+    assert_eq!(p["normalisation"]["action"]["max"], serde_json::json!([510.0, 510.0]), "{p}");
+    assert!(
+        p["provenance"]["import"]["normalisation"]["sha256"]
+            .as_str()
+            .is_some_and(|h| h.starts_with("sha256:")),
+        "{p}"
+    );
+    std::fs::write(&stats, own.replace("[1, 1]", "[1]")).unwrap();
+    let refused = dir.path().join("refused");
+    let args = ["import", "policy", "--format", "gpc", s(&file), "--stats", s(&stats), "--out", s(&refused)];
+    let (_, err) = expect_code(&run(&args), 2);
+    assert!(err.contains("stats.json") && err.contains("action 2 finite (min, max) pairs"), "{err}");
+    assert!(!refused.exists());
     // GPC's folder layout of the same networks imports to the same checkpoint.
     let folder = Path::new(env!("CARGO_MANIFEST_DIR")).join("policies/tests/fixtures/gpc_policy/official");
     let from_folder = dir.path().join("from-folder");

@@ -59,6 +59,11 @@ pub struct ImportPolicyArgs {
     /// Which weights to import (GPC's files hold two copies; LeRobot's one).
     #[arg(long, value_enum, default_value = "ema")]
     pub weights: PolicyWeights,
+    /// GPC's format: the normalisation statistics, a JSON file `{"agent_pos": {"min": [..],
+    /// "max": [..]}, "action": {"min": [..], "max": [..]}}` (GPC's files carry none; default: the
+    /// ranges GPC's Push-T evaluation script uses).
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
     /// The scenario the policy is for (robomimic: its robot-state keys are matched to what
     /// the scenario gives before anything is written; default: the checkpoint's
     /// `env_metadata.env_name`, Lift → lift, PickPlaceCan → can).

@@ -30,6 +30,11 @@ fn gpc_pusht_normalisation() -> Normalisation {
 
 /// `evalharness import policy`.
 pub fn run(a: &ImportPolicyArgs) -> Result<ExitCode> {
+    if a.stats.is_some() && a.format != PolicyFormat::Gpc {
+        anyhow::bail!(
+            "--stats is read with --format gpc only: LeRobot's and robomimic's files carry their statistics"
+        );
+    }
     if a.scenario.is_some() && a.format != PolicyFormat::Robomimic {
         anyhow::bail!(
             "--scenario is read with --format robomimic only (GPC's policies are Push-T's; LeRobot's folders are checked when ranked)"
@@ -130,12 +135,44 @@ fn gpc(a: &ImportPolicyArgs) -> Result<ExitCode> {
         PolicyWeights::Model => GpcWeights::Model,
     };
     let p = import(&a.file, weights, usize::from(a.image_size), &device)?;
+    let (normalisation, stats) = match &a.stats {
+        None => (
+            gpc_pusht_normalisation(),
+            json!(
+                "GPC's Push-T evaluation script's agent-position and action ranges (not stored in the checkpoint)"
+            ),
+        ),
+        Some(f) => {
+            let text = std::fs::read_to_string(f).with_context(|| format!("--stats {}", f.display()))?;
+            let n: Normalisation = serde_json::from_str(&text).with_context(|| {
+                format!(
+                    "--stats {}: not {{\"agent_pos\": {{\"min\", \"max\"}}, \"action\": {{..}}}}",
+                    f.display()
+                )
+            })?;
+            let (pw, aw) = (p.cfg.net.proprio(), p.cfg.net.action_dim);
+            let widths_agree = [&n.agent_pos, &n.action].iter().all(|r| r.min.len() == r.max.len())
+                && n.agent_pos.dim() == pw
+                && n.action.dim() == aw;
+            let finite = [&n.agent_pos, &n.action].iter().all(|r| {
+                r.min.iter().zip(&r.max).all(|(lo, hi)| lo.is_finite() && hi.is_finite() && hi > lo)
+            });
+            if !widths_agree || !finite {
+                anyhow::bail!(
+                    "--stats {}: agent_pos needs {pw} and action {aw} finite (min, max) pairs with max > min, for this checkpoint's networks",
+                    f.display()
+                );
+            }
+            let sha = harness::fingerprint::file(f).with_context(|| format!("{}", f.display()))?;
+            (n, json!({"source": f.display().to_string(), "sha256": sha}))
+        }
+    };
     let file = PolicyFile {
         kind: "gpc-diffusion".into(),
         epoch: epoch_of(&a.file).unwrap_or(0),
         step: p.step.and_then(|s| u64::try_from(s).ok()).unwrap_or(0),
         config: serde_json::to_value(&p.cfg)?,
-        normalisation: gpc_pusht_normalisation(),
+        normalisation,
         provenance: json!({
             "import": {
                 "format": "gpc",
@@ -146,7 +183,7 @@ fn gpc(a: &ImportPolicyArgs) -> Result<ExitCode> {
                 "layout": if a.file.is_dir() { "GPC's folder (vision_encoder.pth, invariant.pth, ema_nets.pth)" } else { "a checkpoint file" },
                 "weights": match a.weights { PolicyWeights::Ema => "ema.shadow_params", PolicyWeights::Model => "model" },
                 "tensors": p.tensors,
-                "normalisation": "GPC's Push-T evaluation script's agent-position and action ranges (not stored in the checkpoint)",
+                "normalisation": stats,
                 "sampling": "DDPM, every one of the 100 training steps, squared-cosine betas, x0 clipped",
             },
             "command": crate::stdout::command_line().join(" "),
