@@ -109,6 +109,20 @@ fn ddpm_with_pytorchs_noise_gives_pytorchs_actions() {
 }
 
 #[test]
+fn one_ddpm_step_with_injected_noise_is_pytorchs() {
+    // From x at t = 77 to 76, given PyTorch's noise prediction there and its noise z: the step's
+    // arithmetic alone (x0 clipped, the posterior mean, "fixed_small" variance).
+    let (mut x, eps, z) = (io("x"), io("eps77"), io("z"));
+    crate::imported_policy::ddpm_step(&mut x, &eps, 77, Some(76), &crate::diffusion::alphas_cumprod(100), &z);
+    let d = max_abs(&x, &io("step77"));
+    assert!(d <= 1e-6, "one DDPM step differs from PyTorch's by {d}");
+    // The networks' own prediction there is PyTorch's within 1e-5.
+    let p = imported(RobomimicWeights::Ema);
+    let ours = unet_out(&p.net, &io("cond"), &io("x"), [2, 16, 7], 77);
+    assert!(max_abs(&ours, &eps) <= 1e-5);
+}
+
+#[test]
 fn the_policy_reads_its_keys_from_the_robot_state_and_the_training_copy_differs() {
     let p = imported(RobomimicWeights::Ema);
     let raw = imported(RobomimicWeights::Model);
