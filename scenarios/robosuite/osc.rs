@@ -36,9 +36,9 @@ const KP: f64 = 150.0;
 /// Null-space posture stiffness.
 const KP_NULL: f64 = 10.0;
 /// Largest position delta per control step, m.
-const MAX_DPOS: f64 = 0.05;
+pub(super) const MAX_DPOS: f64 = 0.05;
 /// Largest rotation delta per control step, rad.
-const MAX_DROT: f64 = 0.5;
+pub(super) const MAX_DROT: f64 = 0.5;
 /// How far one control step moves the gripper's running command.
 const GRIPPER_SPEED: f64 = 0.2;
 
@@ -209,6 +209,26 @@ fn read(d: &Data, ix: &PandaIndex, nv: usize) -> ArmState {
     }
 }
 
+/// The gripper's running command after a step of gripper command `g`: each finger's entry moves
+/// [`GRIPPER_SPEED`] towards closing (`g` > 0) or opening (`g` < 0), in opposite directions,
+/// within [−1, 1] (`np.sign`: 0 leaves it where it is).
+pub(super) fn grip_step(grip: [f64; 2], g: f64) -> [f64; 2] {
+    let sign = if g > 0.0 {
+        1.0
+    } else if g < 0.0 {
+        -1.0
+    } else {
+        0.0
+    };
+    [(grip[0] - GRIPPER_SPEED * sign).clamp(-1.0, 1.0), (grip[1] + GRIPPER_SPEED * sign).clamp(-1.0, 1.0)]
+}
+
+/// A finger servo's target for the gripper's running command `c` in [−1, 1]: linear onto its
+/// control range `[lo, hi]` (GRIP).
+pub(super) fn servo_target([lo, hi]: [f64; 2], c: f64) -> f64 {
+    0.5 * (lo + hi) + 0.5 * (hi - lo) * c
+}
+
 /// The controller's state across control steps.
 #[derive(Clone, Debug)]
 pub struct Osc {
@@ -245,15 +265,7 @@ impl Osc {
         let rot = axis_angle_to_mat([a[3] * MAX_DROT, a[4] * MAX_DROT, a[5] * MAX_DROT]);
         self.goal_ori = mul(&rot, &s.ori);
         // np.sign: 0 leaves the command where it is. The raw (unclipped) entry decides.
-        let sign = if action[6] > 0.0 {
-            1.0
-        } else if action[6] < 0.0 {
-            -1.0
-        } else {
-            0.0
-        };
-        self.gripper[0] = (self.gripper[0] - GRIPPER_SPEED * sign).clamp(-1.0, 1.0);
-        self.gripper[1] = (self.gripper[1] + GRIPPER_SPEED * sign).clamp(-1.0, 1.0);
+        self.gripper = grip_step(self.gripper, action[6]);
     }
 
     #[allow(clippy::needless_range_loop)]
@@ -329,8 +341,7 @@ impl Osc {
             }
             for i in 0..2 {
                 // GRIP: the command in [−1, 1] maps linearly onto the servo's range.
-                let [lo, hi] = ix.ctrlrange[7 + i];
-                ctrl[ix.finger_act[i]] = 0.5 * (lo + hi) + 0.5 * (hi - lo) * self.gripper[i];
+                ctrl[ix.finger_act[i]] = servo_target(ix.ctrlrange[7 + i], self.gripper[i]);
             }
             d.step2();
         }

@@ -16,7 +16,8 @@
 use harness::task::StateKey;
 
 use super::episode::ArmEpisode;
-use super::osc::axis_angle_to_mat;
+use super::episode::mat_to_quat;
+use super::osc::{MAX_DPOS, MAX_DROT, axis_angle_to_mat, grip_step, servo_target};
 
 /// The keys, in the order of [`measured`] and [`RobotEstimate::vector`].
 pub fn keys() -> Vec<StateKey> {
@@ -30,28 +31,10 @@ pub fn keys() -> Vec<StateKey> {
 /// The servo target of finger `i` (0: `finger_joint1`, range [0, 0.04] m; 1: `finger_joint2`,
 /// [−0.04, 0]) for the gripper's running command `c` in [−1, 1], as the controller maps it.
 pub(crate) fn finger_target(i: usize, c: f64) -> f64 {
-    let [lo, hi] = if i == 0 { [0.0, FINGER_OPEN] } else { [-FINGER_OPEN, 0.0] };
-    0.5 * (lo + hi) + 0.5 * (hi - lo) * c
+    servo_target(if i == 0 { [0.0, FINGER_OPEN] } else { [-FINGER_OPEN, 0.0] }, c)
 }
 
-/// The gripper's running command after a step of gripper command `g`: each finger's entry moves
-/// 0.2 towards closing (`g` > 0) or opening (`g` < 0), in opposite directions, within [−1, 1], as
-/// the controller moves it.
-pub(crate) fn grip_step(grip: [f64; 2], g: f64) -> [f64; 2] {
-    let sign = if g > 0.0 {
-        1.0
-    } else if g < 0.0 {
-        -1.0
-    } else {
-        0.0
-    };
-    [(grip[0] - 0.2 * sign).clamp(-1.0, 1.0), (grip[1] + 0.2 * sign).clamp(-1.0, 1.0)]
-}
-
-/// Metres per unit of a position delta, radians per unit of a rotation delta (OSC_POSE).
-const POS_SCALE: f64 = 0.05;
-const ROT_SCALE: f64 = 0.5;
-/// A finger joint's opening when the gripper is fully open, m.
+/// A finger joint's opening when the gripper is fully open, m (the Panda gripper's servo range).
 const FINGER_OPEN: f64 = 0.04;
 
 /// The measured state of an episode, as robosuite reports it.
@@ -109,11 +92,11 @@ impl RobotEstimate {
     pub fn advance(&mut self, action: &[f32]) {
         let a = |d: usize| f64::from(action.get(d).copied().unwrap_or(0.0).clamp(-1.0, 1.0));
         for d in 0..3 {
-            self.vel[d] = POS_KEEP * self.vel[d] + POS_GAIN * a(d) * POS_SCALE;
+            self.vel[d] = POS_KEEP * self.vel[d] + POS_GAIN * a(d) * MAX_DPOS;
             self.pos[d] += self.vel[d];
-            self.turn[d] = ROT_KEEP * self.turn[d] + ROT_GAIN * a(3 + d) * ROT_SCALE;
+            self.turn[d] = ROT_KEEP * self.turn[d] + ROT_GAIN * a(3 + d) * MAX_DROT;
         }
-        let step = mat_quat(&axis_angle_to_mat(self.turn));
+        let step = mat_to_quat(&axis_angle_to_mat(self.turn));
         self.quat = normalise(quat_mul(step, self.quat));
         if action.len() > 6 {
             self.grip = grip_step(self.grip, a(6));
@@ -161,11 +144,6 @@ pub(crate) fn rotvec(q: [f64; 4]) -> [f64; 3] {
 fn normalise(q: [f64; 4]) -> [f64; 4] {
     let n = q.iter().map(|c| c * c).sum::<f64>().sqrt();
     if n > 0.0 { q.map(|c| c / n) } else { [1.0, 0.0, 0.0, 0.0] }
-}
-
-/// The rotation's quaternion with w ≥ 0 (a turn of under π has one).
-fn mat_quat(m: &[[f64; 3]; 3]) -> [f64; 4] {
-    super::episode::mat_to_quat(m)
 }
 
 #[cfg(test)]

@@ -32,9 +32,9 @@ use crate::error::ScenarioError;
 /// Side of the agentview frames policies and world models read.
 pub const IMAGE_SIZE: usize = 96;
 /// OSC_POSE's scale of the position deltas (metres per unit action).
-const POS_SCALE: f32 = 0.05;
+const POS_SCALE: f32 = super::osc::MAX_DPOS as f32;
 /// OSC_POSE's scale of the rotation deltas (radians per unit action).
-const ROT_SCALE: f32 = 0.5;
+const ROT_SCALE: f32 = super::osc::MAX_DROT as f32;
 /// Names of the proprioceptive entries.
 pub const PROPRIO: [&str; 7] = ["cmd_x", "cmd_y", "cmd_z", "cmd_rx", "cmd_ry", "cmd_rz", "gripper_cmd"];
 

@@ -358,7 +358,7 @@ fn robot_state_fit_of_the_estimates_coefficients() {
         if k % 120 == 0 {
             grip = [0.0; 2];
         }
-        grip = super::robot_state::grip_step(grip, a[6]);
+        grip = super::osc::grip_step(grip, a[6]);
         // Opening steps only: nothing stops the fingers there.
         for i in (0..2).filter(|_| a[6] < 0.0) {
             let target = super::robot_state::finger_target(i, grip[i]);
@@ -374,7 +374,7 @@ fn robot_state_fit_of_the_estimates_coefficients() {
             if j % 120 == 0 {
                 (q, grip) = (before.2, [0.0; 2]);
             }
-            grip = super::robot_state::grip_step(grip, a[6]);
+            grip = super::osc::grip_step(grip, a[6]);
             for i in 0..2 {
                 q[i] += k * (super::robot_state::finger_target(i, grip[i]) - q[i]);
                 err += (q[i] - after.2[i]).abs();
