@@ -32,7 +32,7 @@ use world_model::import::tensors::Source;
 use crate::diffusion::{Normalisation, Range};
 use crate::import_gpc::official_names;
 use crate::import_keys::{UnetNames, UnetSizes, cond_unet, resnet_children, unet_sizes};
-use crate::imported_policy::{ImportedConfig, ImportedNet, Pool, Prediction, Sampler};
+use crate::imported_policy::{ImportedConfig, ImportedNet, Pool, Prediction, Sampler, centre_offset};
 use crate::net::NetConfig;
 use crate::robomimic_config::{Meta, RobomimicConfig, read};
 
@@ -169,13 +169,10 @@ fn crop(c: &RobomimicConfig, path: &Path) -> Result<Option<usize>, ImportError> 
     if let Some(v) = core.pool_class.as_deref().filter(|v| *v != "SpatialSoftmax") {
         return Err(unsupported("core_kwargs.pool_class", v.into()));
     }
-    let on = |m: &std::collections::HashMap<String, serde_json::Value>, k: &str| {
-        m.get(k).and_then(serde_json::Value::as_bool) == Some(true)
-    };
-    if on(&core.backbone_kwargs, "input_coord_conv") {
+    if core.backbone_kwargs.input_coord_conv {
         return Err(unsupported("core_kwargs.backbone_kwargs.input_coord_conv", "true".into()));
     }
-    if on(&core.pool_kwargs, "output_variance") {
+    if core.pool_kwargs.output_variance {
         return Err(unsupported("core_kwargs.pool_kwargs.output_variance", "true".into()));
     }
     match rgb.obs_randomizer_class.as_deref() {
@@ -325,6 +322,15 @@ pub fn import(
             ));
         }
     };
+    // robomimic's eval-time crop starts at ⌊margin / 2⌋; the networks crop as torchvision does.
+    if let Some(c) = crop.filter(|&c| c > side || centre_offset(side - c) != (side - c) / 2) {
+        return Err(layout(
+            path,
+            format!(
+                "`config` crop {c} of {side}x{side} frames: a crop starting at another pixel than torchvision's is not supported"
+            ),
+        ));
+    }
     let cfg = ImportedConfig {
         resnet_base: base,
         pool: Pool::SpatialSoftmax { keypoints, features: Some(features) },

@@ -270,9 +270,7 @@ impl ImportedNet {
         }
         if let Some(c) = self.crop {
             let [_, _, h, w] = x.dims();
-            // torchvision's CenterCrop: offset round((side − c) / 2), halves to even.
-            let offset = |d: usize| if d % 2 == 1 && (d / 2) % 2 == 1 { d / 2 + 1 } else { d / 2 };
-            let (top, left) = (offset(h.saturating_sub(c)), offset(w.saturating_sub(c)));
+            let (top, left) = (centre_offset(h.saturating_sub(c)), centre_offset(w.saturating_sub(c)));
             x = x.narrow(2, top, c.min(h)).narrow(3, left, c.min(w));
         }
         let feat = match &self.head {
@@ -284,6 +282,12 @@ impl ImportedNet {
         let parts = if self.position_first { vec![pos, feat] } else { vec![feat, pos] };
         Tensor::cat(parts, 2).reshape([b, o * (f + p)])
     }
+}
+
+/// Where a centre crop starts for a `margin` of pixels to drop: torchvision's `CenterCrop`,
+/// `round(margin / 2)` with halves to even.
+pub fn centre_offset(margin: usize) -> usize {
+    if margin % 2 == 1 && (margin / 2) % 2 == 1 { margin / 2 + 1 } else { margin / 2 }
 }
 
 /// The weights of PyTorch's bilinear resampling (`align_corners=False`, no antialiasing) of

@@ -105,3 +105,11 @@ fn unrounded_frames_are_read_when_the_observation_has_them() {
     assert!(d(&a[0], &b[0]) < 1e-3, "bytes and their exact values act alike");
     assert!(d(&a[0], &c[0]) > 1e-3, "shifted exact values were not read");
 }
+
+#[test]
+fn centre_crops_start_where_torchvision_starts_them() {
+    // round(m / 2), halves to even: 8 → 4, 3 → round(1.5) = 2, 5 → round(2.5) = 2, 7 → 4.
+    let got: Vec<usize> =
+        [0, 1, 3, 5, 7, 8, 12].iter().map(|&m| crate::imported_policy::centre_offset(m)).collect();
+    assert_eq!(got, [0, 0, 2, 2, 4, 4, 6]);
+}

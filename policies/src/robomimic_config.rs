@@ -11,7 +11,7 @@
 //! `(x − offset) / scale`, which is the min-max map of min = offset − scale, max = offset +
 //! scale that evalharness's [`Range`] applies.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use pytorch_reader::{PickleValue, PytorchReader};
@@ -77,15 +77,29 @@ pub(crate) struct Modalities {
     pub(crate) scan: Vec<String>,
 }
 
+/// `core_kwargs.backbone_kwargs`: the setting the importer refuses when on.
+#[derive(Clone, Debug, Default, Deserialize)]
+pub(crate) struct BackboneKwargs {
+    #[serde(default)]
+    pub(crate) input_coord_conv: bool,
+}
+
+/// `core_kwargs.pool_kwargs`: the setting the importer refuses when on.
+#[derive(Clone, Debug, Default, Deserialize)]
+pub(crate) struct PoolKwargs {
+    #[serde(default)]
+    pub(crate) output_variance: bool,
+}
+
 /// `observation.encoder.rgb.core_kwargs` (robomimic's defaults where absent).
 #[derive(Clone, Debug, Default, Deserialize)]
 pub(crate) struct CoreKwargs {
     pub(crate) backbone_class: Option<String>,
     #[serde(default)]
-    pub(crate) backbone_kwargs: HashMap<String, serde_json::Value>,
+    pub(crate) backbone_kwargs: BackboneKwargs,
     pub(crate) pool_class: Option<String>,
     #[serde(default)]
-    pub(crate) pool_kwargs: HashMap<String, serde_json::Value>,
+    pub(crate) pool_kwargs: PoolKwargs,
 }
 
 /// `observation.encoder.rgb.obs_randomizer_kwargs` for a `CropRandomizer`.
