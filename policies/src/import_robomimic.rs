@@ -21,7 +21,7 @@
 //! (robomimic's 84 against evalharness's 96) are resized bilinearly. Anything else is refused
 //! naming the file and the key or config field.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use burn::tensor::{Device, TensorData};
@@ -454,7 +454,10 @@ fn weights_of(
             ));
         }
     };
-    let (mut values, mut read, mut unexpected) = (BTreeMap::new(), BTreeSet::new(), Vec::new());
+    let (mut values, mut unexpected) = (BTreeMap::new(), Vec::new());
+    // The backbone's and pool's values as read, for their copies to be checked against; and
+    // the copies (`nets.0.*`, `nets.1.*`) with the original each must equal.
+    let (mut originals, mut copies) = (BTreeMap::new(), Vec::new());
     for (key, theirs) in &s {
         let local = key.strip_prefix(enc);
         // Copies robomimic keeps of the backbone and the pool: equal to what they copy.
@@ -464,19 +467,19 @@ fn weights_of(
                 .or_else(|| r.strip_prefix("nets.1.").map(|p| format!("{enc}pool.{p}")))
         });
         if let Some(orig) = original {
-            if !s.contains_key(&orig) || f32s(key)? != f32s(&orig)? {
-                return Err(layout(
-                    path,
-                    format!("`{}` is not a copy of `{}`", src.shown(key), src.shown(&orig)),
-                ));
-            }
+            copies.push((key, orig));
             continue;
         }
         match local {
-            Some("pool.temperature") => continue,
+            Some("pool.temperature") => {
+                originals.insert(key.clone(), temperature.clone());
+                continue;
+            }
             Some(grid @ ("pool.pos_x" | "pool.pos_y")) => {
-                check_grid(&f32s(key)?, grid == "pool.pos_x")
+                let v = f32s(key)?;
+                check_grid(&v, grid == "pool.pos_x")
                     .map_err(|m| layout(path, format!("`{}`: {m}", src.shown(key))))?;
+                originals.insert(key.clone(), v);
                 continue;
             }
             _ => {}
@@ -488,6 +491,9 @@ fn weights_of(
         let want = &ours[&to];
         let expect = if linear { vec![want[1], want[0]] } else { want.clone() };
         let mut v = src.f32s(key, &expect)?;
+        if local.is_some_and(|r| r.starts_with("backbone.") || r.starts_with("pool.")) {
+            originals.insert(key.clone(), v.clone());
+        }
         if linear {
             v = transpose(&v, theirs[1], theirs[0]);
         }
@@ -495,13 +501,21 @@ fn weights_of(
             // softmax(f / T) with f = W x + b is softmax((W / T) x + b / T).
             v.iter_mut().for_each(|x| *x /= t);
         }
-        values.insert(to.clone(), TensorData::new(v, want.clone()));
-        read.insert(to);
+        values.insert(to, TensorData::new(v, want.clone()));
+    }
+    for (key, orig) in copies {
+        let v = f32s(key)?;
+        if originals.get(&orig) != Some(&v) {
+            return Err(layout(
+                path,
+                format!("`{}` is not a copy of `{}`", src.shown(key), src.shown(&orig)),
+            ));
+        }
     }
     if !unexpected.is_empty() {
         return Err(ImportError::Unexpected { path: path.into(), keys: unexpected });
     }
-    if let Some(missing) = ours.keys().find(|p| !read.contains(*p)) {
+    if let Some(missing) = ours.keys().find(|p| !values.contains_key(*p)) {
         return Err(ImportError::Missing { path: path.into(), key: format!("the weights of `{missing}`") });
     }
     let n = values.len();
