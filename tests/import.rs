@@ -249,6 +249,13 @@ fn gpc_and_lerobot_policies_become_checkpoints_that_rank_runs() {
         "{p}"
     );
 
+    // One with torchvision's BatchNorms (`use_group_norm: false`), folded at import.
+    let bn = set.join("lerobot-bn");
+    let src = lerobot.with_file_name("pretrained_model_bn");
+    expect_code(&run(&["import", "policy", "--format", "lerobot", s(&src), "--out", s(&bn)]), 0);
+    let p = read_json(&bn.join("policy.json"));
+    assert_eq!(p["config"]["backbone_norm"], "folded-batch", "{p}");
+
     let wm = dir.path().join("wm");
     expect_code(&import(&fixture("wm.pth"), &wm, &[]), 0);
     let out = dir.path().join("rank");
@@ -256,7 +263,7 @@ fn gpc_and_lerobot_policies_become_checkpoints_that_rank_runs() {
     let args = with_flag(&with_flag(&args, "--episodes", "2"), "--max-steps", "4");
     expect_code(&run(&[&args[..], &["--scenario", "pusht-gpc"]].concat()), 0);
     let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
-    for name in ["\"ckpt-ep50\"", "\"lerobot-pusht\""] {
+    for name in ["\"ckpt-ep50\"", "\"lerobot-pusht\"", "\"lerobot-bn\""] {
         let n = rows.lines().filter(|l| l.contains(name)).count();
         assert_eq!(n, 4, "{name}: two episodes in each branch:\n{rows}");
     }

@@ -26,6 +26,7 @@ use world_model::import::tensors::{Source, top_level_int};
 use crate::import_keys::{UnetNames, UnetSizes, cond_unet, norm, resnet_block, unet_sizes};
 use crate::imported_policy::{ImportedConfig, ImportedNet, Pool, Sampler};
 use crate::net::NetConfig;
+use crate::resnet_gn::BackboneNorm;
 
 /// Which copy of the weights to import.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -250,6 +251,7 @@ fn config_from(src: &Model, image_size: usize, obs_horizon: usize) -> Result<Imp
     };
     Ok(ImportedConfig {
         resnet_base: base,
+        backbone_norm: BackboneNorm::Group,
         pool: Pool::Average,
         input_size: None,
         crop: None,

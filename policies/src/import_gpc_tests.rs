@@ -103,6 +103,7 @@ fn the_official_pusht_manifest_is_the_parameter_order() {
     assert_eq!(names, rows.iter().map(|r| r.0.to_string()).collect::<Vec<_>>());
     let cfg = ImportedConfig {
         resnet_base: 64,
+        backbone_norm: crate::resnet_gn::BackboneNorm::Group,
         pool: crate::imported_policy::Pool::Average,
         input_size: None,
         crop: None,

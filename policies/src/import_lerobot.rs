@@ -7,9 +7,10 @@
 //! statistics are in `model.safetensors` (`normalize_inputs.buffer_*`, LeRobot before 0.4) or
 //! in the preprocessor's `policy_preprocessor_step_*_normalizer_processor.safetensors` (0.4 and
 //! later). Supported: one camera with LeRobot's Push-T settings (a ResNet-18 with GroupNorm
-//! trained from scratch, a spatial softmax, a centre crop, FiLM with scale, DDPM on the
-//! squared-cosine schedule, ε-prediction, clipped samples); anything else is refused naming the
-//! `config.json` field. Weights are mapped key by key ([`burn_path`]); a missing, unexpected,
+//! trained from scratch, or with its BatchNorms as torchvision has them, `use_group_norm:
+//! false`, usually from ImageNet weights, folded into the convolutions at import; a spatial
+//! softmax, a centre crop, FiLM with scale, DDPM or DDIM on the squared-cosine schedule, ε- or
+//! x₀-prediction, clipped samples); anything else is refused naming the `config.json` field. Weights are mapped key by key ([`burn_path`]); a missing, unexpected,
 //! mis-shaped, non-float32 or non-finite tensor is refused naming the file and key.
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -25,6 +26,8 @@ use crate::import_keys::{UnetNames, cond_unet, resnet_children};
 use crate::imported_policy::{ImportedConfig, ImportedNet, MeanStd, Pool, Prediction, Sampler};
 use crate::lerobot_config::{LeRobotConfig, check, features};
 use crate::net::NetConfig;
+use crate::resnet::fold_batch_norm;
+use crate::resnet_gn::BackboneNorm;
 
 /// An imported LeRobot policy: networks, config, statistics and what was read.
 pub struct LeRobotPolicy {
@@ -62,6 +65,58 @@ fn is_extra(key: &str) -> bool {
         || ["normalize_inputs.", "normalize_targets.", "unnormalize_outputs."]
             .iter()
             .any(|p| key.starts_with(p))
+}
+
+/// The backbone's convolutions with their eval-mode BatchNorms folded in (LeRobot's
+/// `use_group_norm: false`, torchvision's ResNet-18 as it is, often from ImageNet weights):
+/// evalharness's values by path, and the file's keys they consumed (each BatchNorm's step
+/// counter, an int64, is consumed unread).
+fn folded_backbone(
+    model: &SafeSource,
+    ours: &BTreeMap<String, Vec<usize>>,
+) -> Result<(BTreeMap<String, TensorData>, BTreeSet<String>), ImportError> {
+    let keys: BTreeMap<String, String> =
+        model.shapes().into_keys().map(|k| (k.replace("._orig_mod", ""), k)).collect();
+    // (conv, its BatchNorm, evalharness's conv), LeRobot's backbone being torchvision's children.
+    let mut pairs =
+        vec![("backbone.0".to_string(), "backbone.1".to_string(), "encoder.stem.conv".to_string())];
+    for b in 0..8 {
+        let (k, o) = (format!("backbone.{}.{}", 4 + b / 2, b % 2), format!("encoder.blocks.{b}"));
+        pairs.push((format!("{k}.conv1"), format!("{k}.bn1"), format!("{o}.c1.conv")));
+        pairs.push((format!("{k}.conv2"), format!("{k}.bn2"), format!("{o}.c2.conv")));
+        if ours.contains_key(&format!("{o}.down.conv.weight")) {
+            pairs.push((format!("{k}.downsample.0"), format!("{k}.downsample.1"), format!("{o}.down.conv")));
+        }
+    }
+    let (mut values, mut used) = (BTreeMap::new(), BTreeSet::new());
+    for (conv, bn, to) in pairs {
+        let shape = ours[&format!("{to}.weight")].clone();
+        let co = shape[0];
+        let mut take = |name: &str, shape: &[usize]| -> Result<Vec<f32>, ImportError> {
+            let short = format!("diffusion.rgb_encoder.{name}");
+            let key = keys
+                .get(&short)
+                .ok_or_else(|| ImportError::Missing { path: model.path().into(), key: short })?;
+            used.insert(key.clone());
+            model.f32s(key, shape, false)
+        };
+        let mut w = take(&format!("{conv}.weight"), &shape)?;
+        let gamma = take(&format!("{bn}.weight"), &[co])?;
+        let beta = take(&format!("{bn}.bias"), &[co])?;
+        let mean = take(&format!("{bn}.running_mean"), &[co])?;
+        let var = take(&format!("{bn}.running_var"), &[co])?;
+        let bias =
+            fold_batch_norm(&mut w, &gamma, &beta, &mean, &var).map_err(|neg| ImportError::Layout {
+                path: model.path().into(),
+                what: format!("key `diffusion.rgb_encoder.{bn}.running_var` is negative at channel {neg}"),
+            })?;
+        if let Some(k) = keys.get(&format!("diffusion.rgb_encoder.{bn}.num_batches_tracked")) {
+            used.insert(k.clone());
+        }
+        values.insert(format!("{to}.weight"), TensorData::new(w, shape));
+        values.insert(format!("{to}.bias"), TensorData::new(bias, [co]));
+    }
+    Ok((values, used))
 }
 
 /// The statistics: from `model.safetensors`'s legacy entries, else from the preprocessor's file.
@@ -144,7 +199,7 @@ pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError>
     let (image, shape, state, action) = features(&c, &cfg_path)?;
     let model = SafeSource::open(&dir.join("model.safetensors"))?;
     let base = match model.shapes().get("diffusion.rgb_encoder.backbone.0.weight").map(Vec::as_slice) {
-        Some(&[b, 3, 7, 7]) if b > 0 && b % 16 == 0 => b,
+        Some(&[b, 3, 7, 7]) if b > 0 && (b % 16 == 0 || !c.use_group_norm) => b,
         Some(s) => {
             return Err(ImportError::Shape {
                 path: model.path().into(),
@@ -172,8 +227,10 @@ pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError>
             ),
         });
     }
+    let backbone_norm = if c.use_group_norm { BackboneNorm::Group } else { BackboneNorm::FoldedBatch };
     let cfg = ImportedConfig {
         resnet_base: base,
+        backbone_norm,
         pool: Pool::SpatialSoftmax { keypoints: k, features: None },
         input_size: None,
         crop: c.crop_shape.map(|[h, _]| h),
@@ -209,11 +266,12 @@ pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError>
     }
     let net = ImportedNet::new(&cfg, device);
     let ours = shapes(&net);
-    let mut values = BTreeMap::new();
+    let (mut values, consumed) =
+        if c.use_group_norm { Default::default() } else { folded_backbone(&model, &ours)? };
     let mut unexpected = Vec::new();
-    let mut read = BTreeSet::new();
+    let mut read: BTreeSet<String> = values.keys().cloned().collect();
     for (key, theirs) in model.shapes() {
-        if is_extra(&key) {
+        if is_extra(&key) || consumed.contains(&key) {
             continue;
         }
         let short = key.replace("._orig_mod", "");

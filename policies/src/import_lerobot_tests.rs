@@ -2,7 +2,8 @@
 //! (evalharness's own re-implementation; checked outside the project against LeRobot 0.6.2's own
 //! `DiffusionModel` at ResNet base 64: the same 213 names and shapes, identical conditioning and
 //! noise prediction), reduced to ResNet base 16, 4 keypoints and U-Net levels 16/32/64, in both
-//! of LeRobot's layouts (statistics in `model.safetensors`, or in the preprocessor's file).
+//! of LeRobot's layouts (statistics in `model.safetensors`, or in the preprocessor's file), and
+//! with torchvision's BatchNorms (`pretrained_model_bn`, `use_group_norm: false`).
 
 use std::path::{Path, PathBuf};
 
@@ -16,7 +17,11 @@ fn fixture(name: &str) -> PathBuf {
 }
 
 fn io(k: &str) -> Vec<f32> {
-    let src = SafeSource::open(&fixture("io.safetensors")).unwrap_or_else(|e| panic!("{e}"));
+    io_of("io.safetensors", k)
+}
+
+fn io_of(file: &str, k: &str) -> Vec<f32> {
+    let src = SafeSource::open(&fixture(file)).unwrap_or_else(|e| panic!("{e}"));
     let n = src.shapes()[k].iter().product();
     src.f32s(k, &[n], true).unwrap_or_else(|e| panic!("{e}"))
 }
@@ -67,6 +72,71 @@ fn both_layouts_import_and_predict_what_pytorch_predicts() {
         let d = max_abs(&eps, &io("eps"));
         assert!(d <= 1e-5, "{folder}: noise prediction differs from PyTorch by {d}");
     }
+}
+
+/// The conditioning of the fixture's frames and states by `p`, as `[b, cond]` values.
+fn cond_by(p: &LeRobotPolicy, device: &Device) -> Vec<f32> {
+    let state = io("state"); // [2, 2, 2] raw
+    let pos: Vec<f32> =
+        state.chunks(2).flat_map(|s| p.norm.agent_pos.normalise(s).collect::<Vec<_>>()).collect();
+    let pos = Tensor::from_data(TensorData::new(pos, [2, 2, 2]), device);
+    let cond = p.net.obs_cond(frames01(device), pos);
+    cond.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+}
+
+#[test]
+fn a_batch_norm_backbone_is_folded_and_predicts_what_pytorch_predicts() {
+    // `use_group_norm: false` (LeRobot with `pretrained_backbone_weights`): torchvision's
+    // BatchNorms in eval mode, each with running statistics and affine weights far from the
+    // identity, folded into the convolutions at import.
+    let device = Device::flex();
+    let p = import(&fixture("pretrained_model_bn"), &device).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(p.cfg.backbone_norm, BackboneNorm::FoldedBatch);
+    // 20 convolutions with their biases (the stem, 16 in the blocks, 3 projections) stand for 20
+    // convolutions and 20 BatchNorms (4 tensors each, the step counter unread); the head and
+    // the U-Net as in the GroupNorm fixture (212 − 20 convs − 40 GroupNorm tensors = 152).
+    assert_eq!(p.tensors, 152 + 40, "every weight placed");
+    let d = max_abs(&cond_by(&p, &device), &io_of("io_bn.safetensors", "cond"));
+    assert!(d <= 1e-5, "conditioning differs from PyTorch by {d}");
+    let eps = unet_out(&p.net, &io_of("io_bn.safetensors", "cond"), &io("x"), [2, 16, 2], 3);
+    // `eps` was written for t = [3, 77]: compare the first sequence, at t = 3.
+    let d = max_abs(&eps[..32], &io_of("io_bn.safetensors", "eps")[..32]);
+    assert!(d <= 1e-5, "noise prediction differs from PyTorch by {d}");
+    // The folded backbone is recorded; a GroupNorm one leaves policy.json as it was.
+    assert!(serde_json::to_string(&p.cfg).unwrap().contains("\"backbone_norm\":\"folded-batch\""));
+    let gn = import(&fixture("pretrained_model"), &device).unwrap_or_else(|e| panic!("{e}"));
+    assert!(!serde_json::to_string(&gn.cfg).unwrap().contains("backbone_norm"));
+}
+
+#[test]
+fn a_backbone_whose_norm_disagrees_with_the_config_is_refused_by_key() {
+    let device = Device::flex();
+    let tmp = tempfile::tempdir().unwrap();
+    // GroupNorm weights under `use_group_norm: false`: the first BatchNorm statistic is missing.
+    let dir = edited(tmp.path(), |v| v["use_group_norm"] = serde_json::json!(false));
+    let err = import(&dir, &device).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("diffusion.rgb_encoder.backbone.1.running_mean"), "{err}");
+    // BatchNorm weights under `use_group_norm: true`: their running statistics have no place.
+    let out = tmp.path().join("bn_as_gn");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::copy(fixture("pretrained_model_bn/model.safetensors"), out.join("model.safetensors")).unwrap();
+    std::fs::copy(fixture("pretrained_model/config.json"), out.join("config.json")).unwrap();
+    let err = import(&out, &device).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("running_mean") && err.contains("model.safetensors"), "{err}");
+}
+
+#[test]
+fn one_ddpm_step_with_injected_noise_is_pytorchs() {
+    // One of the ten leading steps, t = 80 to 70, given PyTorch's noise prediction there and its
+    // noise z: the step's arithmetic alone (x0 clipped, the posterior mean, "fixed_small"
+    // variance), as the fixture script computes it with diffusers' formulas.
+    let (mut x, eps, z) = (io("x"), io("eps80"), io("z"));
+    crate::imported_policy::ddpm_step(&mut x, &eps, 80, Some(70), &crate::diffusion::alphas_cumprod(100), &z);
+    let d = max_abs(&x, &io("step80"));
+    assert!(d <= 1e-6, "one DDPM step differs from PyTorch's by {d}");
+    // The networks' own prediction there is PyTorch's within 1e-5.
+    let p = import(&fixture("pretrained_model"), &Device::flex()).unwrap_or_else(|e| panic!("{e}"));
+    assert!(max_abs(&eps_of(&p, &io("cond"), &io("x"), 80), &eps) <= 1e-5);
 }
 
 #[test]
@@ -153,7 +223,6 @@ fn unsupported_settings_and_missing_statistics_are_refused_by_name() {
     let device = Device::flex();
     let tmp = tempfile::tempdir().unwrap();
     for (field, value) in [
-        ("use_group_norm", serde_json::json!(false)),
         ("noise_scheduler_type", serde_json::json!("PNDM")),
         ("prediction_type", serde_json::json!("v_prediction")),
         ("vision_backbone", serde_json::json!("resnet34")),

@@ -34,6 +34,7 @@ use crate::import_gpc::official_names;
 use crate::import_keys::{UnetNames, UnetSizes, cond_unet, resnet_children, unet_sizes};
 use crate::imported_policy::{ImportedConfig, ImportedNet, Pool, Prediction, Sampler, centre_offset};
 use crate::net::NetConfig;
+use crate::resnet_gn::BackboneNorm;
 use crate::robomimic_config::{Meta, RobomimicConfig, read};
 
 /// The one camera key imported policies may read.
@@ -261,6 +262,24 @@ pub fn import(
     let (low, image_last) = keys(c, path)?;
     let (sampler, prediction, train_steps, inference_steps) = sampler(c, path)?;
     let crop = crop(c, path)?;
+    let side = match meta.shapes.get(IMAGE_KEY).map(Vec::as_slice) {
+        Some(&[3, hh, ww]) if hh == ww && hh > 0 => hh,
+        other => {
+            return Err(layout(
+                path,
+                format!("`shape_metadata.all_shapes.{IMAGE_KEY}` is {other:?}, expected [3, N, N]"),
+            ));
+        }
+    };
+    // robomimic's eval-time crop starts at ⌊margin / 2⌋; the networks crop as torchvision does.
+    if let Some(c) = crop.filter(|&c| c > side || centre_offset(side - c) != (side - c) / 2) {
+        return Err(layout(
+            path,
+            format!(
+                "`config` crop {c} of {side}x{side} frames: a crop starting at another pixel than torchvision's is not supported"
+            ),
+        ));
+    }
     let use_ema = weights == RobomimicWeights::Ema && c.algo.ema.enabled;
     let (prefix, which) = if use_ema { ("ema.", "model.ema") } else { ("nets.", "model.nets") };
     let src = Source::open(path, Some("model"), prefix)?;
@@ -313,26 +332,9 @@ pub fn import(
             ),
         ));
     }
-    let side = match meta.shapes.get(IMAGE_KEY).map(Vec::as_slice) {
-        Some(&[3, hh, ww]) if hh == ww && hh > 0 => hh,
-        other => {
-            return Err(layout(
-                path,
-                format!("`shape_metadata.all_shapes.{IMAGE_KEY}` is {other:?}, expected [3, N, N]"),
-            ));
-        }
-    };
-    // robomimic's eval-time crop starts at ⌊margin / 2⌋; the networks crop as torchvision does.
-    if let Some(c) = crop.filter(|&c| c > side || centre_offset(side - c) != (side - c) / 2) {
-        return Err(layout(
-            path,
-            format!(
-                "`config` crop {c} of {side}x{side} frames: a crop starting at another pixel than torchvision's is not supported"
-            ),
-        ));
-    }
     let cfg = ImportedConfig {
         resnet_base: base,
+        backbone_norm: BackboneNorm::Group,
         pool: Pool::SpatialSoftmax { keypoints, features: Some(features) },
         input_size: (side != scene_size).then_some(side),
         crop,

@@ -208,6 +208,9 @@ fn broken_files_are_refused_naming_the_key_or_field() {
     assert!(e.contains("model.ema"), "EMA enabled but not stored: {e}");
     let e = err_of("policy_io.pth", RobomimicWeights::Ema);
     assert!(e.contains("algo_name"), "{e}");
+    // A 77 crop of 84: robomimic starts it at ⌊7 / 2⌋ = 3, torchvision at round-half-even(3.5) = 4.
+    let e = err_of("odd_crop.pth", RobomimicWeights::Ema);
+    assert!(e.contains("crop 77 of 84x84") && e.contains("torchvision"), "{e}");
     let d = declared(&fixture("object_key.pth")).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(
         (d.low_dim, d.env_name.as_deref()),

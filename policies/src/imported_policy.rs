@@ -4,7 +4,8 @@
 //! the few settings in which they differ.
 //!
 //! - Each of the last `obs_horizon` frames, in [0, 1] (LeRobot: then normalised by its image mean
-//!   and std, and centre-cropped), goes through a ResNet-18 with GroupNorm ([`ResNet18Gn`]) and
+//!   and std, and centre-cropped), goes through a ResNet-18 with GroupNorm or folded BatchNorms
+//!   ([`ResNet18Gn`]) and
 //!   either its global average pool (GPC: 512 features) or a spatial softmax over K keypoints, a
 //!   linear layer and a ReLU (LeRobot: 2K features, [`SpatialHead`]). The conditioning is, per
 //!   frame, oldest first, its features and the agent position min-max normalised to [-1, 1]
@@ -33,7 +34,7 @@ use serde::{Deserialize, Serialize};
 use crate::cpu_unet::CpuUnet1d;
 use crate::diffusion::{Normalisation, alphas_cumprod, ddim_update, executed};
 use crate::net::{CondUnet1d, NetConfig};
-use crate::resnet_gn::ResNet18Gn;
+use crate::resnet_gn::{BackboneNorm, ResNet18Gn};
 
 /// How the ResNet's last map becomes a frame's features.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -121,6 +122,10 @@ pub struct MeanStd {
 pub struct ImportedConfig {
     /// The ResNet's base width (64 in the released policies).
     pub resnet_base: usize,
+    /// How the ResNet normalises (absent: GroupNorm, as every policy imported before LeRobot's
+    /// BatchNorm backbones was).
+    #[serde(default, skip_serializing_if = "BackboneNorm::is_group")]
+    pub backbone_norm: BackboneNorm,
     /// How the ResNet's map becomes features (absent: GPC's average pool).
     #[serde(default, skip_serializing_if = "Pool::is_average")]
     pub pool: Pool,
@@ -240,7 +245,7 @@ impl ImportedNet {
             )),
         };
         Self {
-            encoder: ResNet18Gn::new(cfg.resnet_base, device),
+            encoder: ResNet18Gn::new(cfg.resnet_base, cfg.backbone_norm, device),
             head,
             unet: CondUnet1d::new(&cfg.net, device),
             input_size: cfg.input_size,

@@ -46,6 +46,7 @@ fn leading_spacing_steps_from_the_last_multiple_down_to_zero() {
     // 100 training steps sampled in 10: t = j · ⌊100 / 10⌋, j = 9 … 0 (diffusers' "leading").
     let cfg = |n: Option<usize>| ImportedConfig {
         resnet_base: 16,
+        backbone_norm: crate::resnet_gn::BackboneNorm::Group,
         pool: Pool::Average,
         input_size: None,
         crop: None,

@@ -21,10 +21,7 @@ use world_model::import::ImportError;
 use world_model::import::place::{place_all, shapes, transpose};
 use world_model::import::tensors::Source;
 
-use crate::resnet::ResNet18;
-
-/// BatchNorm's ε in torchvision's ResNet-18.
-pub const BN_EPS: f32 = 1e-5;
+use crate::resnet::{ResNet18, fold_batch_norm};
 
 /// One reward predictor: ResNet-18 features, then 512 → 256 → 128 → 2 with ReLUs (8·base
 /// → 256 at another base width).
@@ -133,18 +130,10 @@ pub fn import_pose_net(path: &Path, device: &Device) -> Result<(PoseNet, usize),
         let b = take(&format!("{bn}.bias"), &[co])?;
         let m = take(&format!("{bn}.running_mean"), &[co])?;
         let var = take(&format!("{bn}.running_var"), &[co])?;
-        if let Some(neg) = var.iter().position(|&v| v < 0.0) {
-            return Err(ImportError::Layout {
-                path: path.into(),
-                what: format!("key `{bn}.running_var` is negative at channel {neg}"),
-            });
-        }
-        let scale: Vec<f32> = g.iter().zip(&var).map(|(g, v)| g / (v + BN_EPS).sqrt()).collect();
-        let per = w.len() / co;
-        for (c, row) in w.chunks_mut(per).enumerate() {
-            row.iter_mut().for_each(|x| *x *= scale[c]);
-        }
-        let bias: Vec<f32> = (0..co).map(|c| b[c] - m[c] * scale[c]).collect();
+        let bias = fold_batch_norm(&mut w, &g, &b, &m, &var).map_err(|neg| ImportError::Layout {
+            path: path.into(),
+            what: format!("key `{bn}.running_var` is negative at channel {neg}"),
+        })?;
         values.insert(format!("{ours_path}.weight"), TensorData::new(w, shape));
         values.insert(format!("{ours_path}.bias"), TensorData::new(bias, [co]));
         Ok(())

@@ -134,9 +134,6 @@ pub(crate) fn check(c: &LeRobotConfig, path: &Path) -> Result<(), ImportError> {
     if c.vision_backbone != "resnet18" {
         return refuse("vision_backbone", c.vision_backbone.clone(), "resnet18");
     }
-    if !c.use_group_norm {
-        return refuse("use_group_norm", "false".into(), "true (BatchNorm backbones are not imported yet)");
-    }
     if c.use_separate_rgb_encoder_per_camera {
         return refuse("use_separate_rgb_encoder_per_camera", "true".into(), "false");
     }

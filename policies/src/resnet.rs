@@ -18,6 +18,33 @@ use world_model::autoencoder::conv;
 /// torchvision's base width (stage widths 64, 128, 256, 512).
 pub const BASE: usize = 64;
 
+/// BatchNorm's ε in torchvision's ResNet-18.
+pub const BN_EPS: f32 = 1e-5;
+
+/// An eval-mode BatchNorm (`gamma`, `beta`, running `mean` and `var`, ε = [`BN_EPS`]) folded
+/// into the bias-free convolution before it: scales `w` (`[c_out, …]`, output channel major) in
+/// place by `γ/√(σ²+ε)` and returns the bias `β − μ·γ/√(σ²+ε)`.
+///
+/// # Errors
+/// The first output channel whose running variance is negative.
+pub fn fold_batch_norm(
+    w: &mut [f32],
+    gamma: &[f32],
+    beta: &[f32],
+    mean: &[f32],
+    var: &[f32],
+) -> Result<Vec<f32>, usize> {
+    if let Some(neg) = var.iter().position(|&v| v < 0.0) {
+        return Err(neg);
+    }
+    let scale: Vec<f32> = gamma.iter().zip(var).map(|(g, v)| g / (v + BN_EPS).sqrt()).collect();
+    let per = w.len() / scale.len().max(1);
+    for (row, s) in w.chunks_mut(per.max(1)).zip(&scale) {
+        row.iter_mut().for_each(|x| *x *= s);
+    }
+    Ok(beta.iter().zip(mean).zip(&scale).map(|((b, m), s)| b - m * s).collect())
+}
+
 /// Stage widths for base width `base`: base·(1, 2, 4, 8).
 pub fn widths(base: usize) -> [usize; 4] {
     [base, 2 * base, 4 * base, 8 * base]
@@ -94,5 +121,26 @@ impl ResNet18 {
         }
         let [n, c, _, _] = h.dims();
         self.avg.forward(h).reshape([n, c])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_folded_batch_norm_is_the_affine_map_it_replaces() {
+        // Two output channels of two weights each. Channel 0: γ 2, β 1, μ 0.5, σ² 3 − ε, so
+        // the scale is 2/√3 and the bias 1 − 0.5·2/√3 = 0.42265. Channel 1: γ 1, β 0, μ 0,
+        // σ² 1 − ε: scale 1, bias 0.
+        let mut w = vec![1.0, -3.0, 0.25, 4.0];
+        let b = fold_batch_norm(&mut w, &[2.0, 1.0], &[1.0, 0.0], &[0.5, 0.0], &[3.0 - BN_EPS, 1.0 - BN_EPS])
+            .expect("variances are positive");
+        let s = 2.0 / 3f32.sqrt();
+        let want = [s, -3.0 * s, 0.25, 4.0];
+        assert!(w.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-6), "{w:?}");
+        assert!((b[0] - 0.422_65).abs() < 1e-5 && b[1].abs() < 1e-7, "{b:?}");
+        // A negative variance names its channel.
+        assert_eq!(fold_batch_norm(&mut [1.0, 1.0], &[1.0, 1.0], &[0.0; 2], &[0.0; 2], &[1.0, -0.5]), Err(1));
     }
 }
