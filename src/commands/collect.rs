@@ -12,12 +12,12 @@ use anyhow::{Context, Result, bail};
 use harness::replay::{EpisodeArrays, ReplaySpec};
 
 use crate::output::dataset::StagedDataset;
-use harness::seed::{derive, fnv1a};
 use serde_json::{Value, json};
 
 use scenarios::pusht::PushTConfig;
 use scenarios::pusht::rollout::Episode;
 
+use super::collect_mix::{draw, parse_mix_with, with_source};
 use super::episodes::{BehaviourKind, FrameSpec, Perturbation, Runner, behaviour_label};
 use crate::cli::CollectArgs;
 use crate::cli::RendererKind;
@@ -33,41 +33,6 @@ pub const PUSHT_MIX: &str = "expert=0.8,explore=0.2";
 /// Parses `expert=0.8,explore=0.2` into normalised weights.
 fn parse_mix(text: &str) -> Result<Vec<(BehaviourKind, f64)>> {
     parse_mix_with(text, BehaviourKind::parse)
-}
-
-/// Parses `name=weight` pairs, naming behaviours with `parse`, into normalised weights.
-pub(super) fn parse_mix_with<K>(text: &str, parse: impl Fn(&str) -> Result<K>) -> Result<Vec<(K, f64)>> {
-    let mut mix = Vec::new();
-    for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let Some((name, w)) = part.split_once('=') else {
-            bail!("--mix: '{part}' is not name=weight");
-        };
-        let kind = parse(name.trim()).map_err(|e| anyhow::anyhow!("--mix: {e}"))?;
-        let w: f64 =
-            w.trim().parse().map_err(|_| anyhow::anyhow!("--mix: weight '{w}' of {name} is not a number"))?;
-        if !(w.is_finite() && w >= 0.0) {
-            bail!("--mix: weight of {name} must be >= 0, got {w}");
-        }
-        mix.push((kind, w));
-    }
-    let total: f64 = mix.iter().map(|(_, w)| w).sum();
-    if total <= 0.0 {
-        bail!("--mix: needs at least one positive weight, got '{text}'");
-    }
-    Ok(mix.into_iter().map(|(k, w)| (k, w / total)).collect())
-}
-
-/// The behaviour of episode `seed`: a pure function of the seed and the mix.
-pub(super) fn draw<K: Copy>(mix: &[(K, f64)], seed: u64) -> K {
-    let u = (derive(seed, &[fnv1a("collect/mix")]) >> 11) as f64 / (1u64 << 53) as f64;
-    let mut acc = 0.0;
-    for &(k, w) in mix {
-        acc += w;
-        if u < acc {
-            return k;
-        }
-    }
-    mix.last().map(|m| m.0).expect("a parsed mix has an entry")
 }
 
 /// The dataset layout: `size`² RGB images, 2-D actions, 8 state columns, coverage.
@@ -120,22 +85,6 @@ pub(super) fn dataset_attrs(
         "seed_start": seed_start,
     });
     with_source(e, source, max_steps, episodes)
-}
-
-/// A dataset's attributes from its task's own (`e`): how the episodes were made
-/// (`source`'s entries), the step limit and one entry per episode, under `evalharness`.
-pub(super) fn with_source(
-    mut e: Value,
-    source: Value,
-    max_steps: impl Into<Value>,
-    episodes: Vec<Value>,
-) -> Value {
-    if let (Some(map), Value::Object(src)) = (e.as_object_mut(), source) {
-        map.extend(src);
-        map.insert("max_steps".into(), max_steps.into());
-        map.insert("episodes".into(), Value::Array(episodes));
-    }
-    json!({ "evalharness": e })
 }
 
 /// `--no-early-stop` on Push-T (`collect`, `collect --policy`, `simulate`): refused, since

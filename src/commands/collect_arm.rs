@@ -23,7 +23,7 @@ use crate::output::dataset::StagedDataset;
 use scenarios::robosuite::rollout::{ArmTask, Episode, Perturbation};
 use serde_json::{Value, json};
 
-use super::collect::{draw, parse_mix_with};
+use super::collect_mix::{draw, parse_mix_with, with_source};
 use super::simulate_arm::{ArmRun, behaviour};
 use crate::cli::CollectArgs;
 use crate::progress;
@@ -93,7 +93,7 @@ pub(super) fn with_header(
     if let Some(m) = header.as_object_mut() {
         m.insert("seed_start".into(), seed_start.into());
     }
-    super::collect::with_source(header, source, max_steps, episodes)
+    with_source(header, source, max_steps, episodes)
 }
 
 /// A robosuite dataset's own attributes: the task, its config and the meaning of

@@ -3,6 +3,7 @@
 pub(crate) mod agreement;
 mod collect;
 mod collect_arm;
+mod collect_mix;
 mod collect_policy;
 mod dataset;
 mod dataset_merge;
