@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use crate::cpu_encoder::CpuEncoder;
 use crate::diffusion::{frames_to_tensor, frames_to_vec};
 use crate::dir::{PolicyLoadError, load_weights, save_f16};
+use crate::judge_metrics::JudgeMetrics;
 use crate::judge_pose::{GpcPose, PoseNet};
 use crate::judge_rule::ColourHeight;
 use crate::net::{NetConfig, ObsEncoder};
@@ -73,64 +74,6 @@ impl Label {
             Self::Coverage => "coverage",
             Self::Success => "success",
         }
-    }
-}
-
-/// How well a judge reads a set of real frames.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct JudgeMetrics {
-    /// Frames judged.
-    pub frames: usize,
-    /// Frames whose label is above the threshold.
-    pub positives: usize,
-    /// Mean |estimate − label|.
-    pub mean_abs_error: f64,
-    /// Fraction of frames on the label's side of the threshold.
-    pub accuracy: f64,
-    /// Of the frames above the threshold, the fraction the judge puts above it.
-    pub recall: Option<f64>,
-    /// Of the frames the judge puts above the threshold, the fraction truly above it.
-    pub precision: Option<f64>,
-    /// Whole held-out episodes read as `rank` reads an imagined one (absent in judges
-    /// written before it was measured).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub episodes: Option<EpisodeReading>,
-}
-
-/// How a judge reads whole episodes, by its reading ([`crate::judge_read`]: the
-/// frames `rank` judges, k in a row) and by the exact label (at any step).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct EpisodeReading {
-    /// The frames judged and the persistence (absent in judges that read every frame
-    /// alone, written before the rule existed).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub reading: Option<crate::judge_read::Reading>,
-    /// Episodes judged.
-    pub episodes: usize,
-    /// Episodes that truly succeed.
-    pub successes: usize,
-    /// Episodes the judge reads right (success or not).
-    pub agree: usize,
-    /// Failed episodes the judge calls successes.
-    pub false_successes: usize,
-    /// Successful episodes the judge calls failures.
-    pub missed_successes: usize,
-}
-
-impl EpisodeReading {
-    /// Counts `(judged success, true success)` pairs, one per episode.
-    pub fn of(pairs: impl IntoIterator<Item = (bool, bool)>) -> Self {
-        let mut r = Self::default();
-        for (said, truth) in pairs {
-            r.episodes += 1;
-            r.successes += usize::from(truth);
-            r.agree += usize::from(said == truth);
-            r.false_successes += usize::from(said && !truth);
-            r.missed_successes += usize::from(!said && truth);
-        }
-        r
     }
 }
 

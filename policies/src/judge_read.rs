@@ -9,46 +9,78 @@
 //! exact truth is the dataset's label at any step, judged or not, as the
 //! simulator branch scores it.
 
+use std::path::Path;
+
 use harness::judge::Sustained;
-use serde::{Deserialize, Serialize};
+use harness::replay::ReplayReader;
 
-use crate::judge::{EpisodeReading, FrameJudge, JudgeMetrics};
-use crate::judge_train::{JudgeData, metrics};
+use crate::dir::PolicyLoadError;
+use crate::judge::{FrameJudge, Label};
+use crate::judge_metrics::{EpisodeReading, JudgeMetrics, Reading, metrics};
 
-/// Actions the shipped policies execute per decision: `rank` judges at this period.
-pub const RANK_CHUNK: usize = 8;
-/// Frames the shipped policies see at the end of each chunk (their observation horizon).
-pub const RANK_SEEN: usize = 2;
-
-/// Which frames of an episode are judged, and how many in a row must show success.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Reading {
-    /// Actions executed per policy decision (the shipped policies: 8).
-    pub chunk: usize,
-    /// Frames the policy sees at the end of each chunk (its observation horizon, 2).
-    pub seen: usize,
-    /// Judged frames in a row that must show success.
-    pub persist: usize,
+/// Frames and labels of a dataset.
+pub struct JudgeData {
+    /// `n x s x s x 3` bytes.
+    pub frames: Vec<u8>,
+    /// `n` labels.
+    pub labels: Vec<f32>,
+    /// Frame side.
+    pub size: usize,
+    /// Step ranges of each episode.
+    pub episodes: Vec<std::ops::Range<usize>>,
 }
 
-impl Reading {
-    /// `rank`'s reading with the shipped policies' chunk (8) and horizon (2).
-    pub fn rank(persist: usize) -> Self {
-        Self { chunk: RANK_CHUNK, seen: RANK_SEEN, persist: persist.max(1) }
+impl JudgeData {
+    /// Loads the first `limit` episodes (all if `None`) of a dataset with its
+    /// `data/<label>` array.
+    ///
+    /// # Errors
+    /// [`PolicyLoadError`] naming the dataset for an unreadable layout, a missing
+    /// label array, non-finite labels or no episodes.
+    pub fn load(path: &Path, label: Label, limit: Option<usize>) -> Result<Self, PolicyLoadError> {
+        let err = |m: String| PolicyLoadError::new(path, m);
+        let r = ReplayReader::open(path).map_err(|e| err(e.to_string()))?;
+        let Some(all) = r.extra(label.array()).map_err(|e| err(e.to_string()))? else {
+            return Err(err(format!("no data/{} array to learn from", label.array())));
+        };
+        if let Some(t) = all.iter().position(|v| !v.is_finite()) {
+            return Err(err(format!("data/{} is not finite at step {t}", label.array())));
+        }
+        let n = limit.unwrap_or(usize::MAX).min(r.episodes());
+        if n == 0 {
+            return Err(err("no episodes".into()));
+        }
+        let episodes: Vec<_> = (0..n).map(|i| r.episode_range(i)).collect();
+        let end = episodes.last().map_or(0, |e| e.end);
+        let frames = r.img.read_rows(0, end).map_err(|e| err(e.to_string()))?;
+        let labels = all[..end].iter().map(|&v| v as f32).collect();
+        Ok(Self { frames, labels, size: r.img.shape()[1], episodes })
     }
 
-    /// Whether the frame at time `t` (the observation before action `t`) is judged:
-    /// the first, and the observations after each chunk's last `seen` actions,
-    /// i.e. `t % chunk` in {0} ∪ [chunk − seen + 1, chunk). Every frame when
-    /// `chunk` is 0 or `seen` ≥ `chunk`.
-    pub fn judged(&self, t: usize) -> bool {
-        if self.chunk == 0 || self.seen >= self.chunk {
-            return true;
-        }
-        let r = t % self.chunk;
-        r == 0 || r > self.chunk - self.seen
+    /// Frame `i`.
+    pub fn frame(&self, i: usize) -> &[u8] {
+        let n = self.size * self.size * 3;
+        &self.frames[i * n..(i + 1) * n]
     }
+
+    /// Steps of the training and held-out episodes (every 10th episode is held out).
+    pub fn split(&self) -> (Vec<usize>, Vec<usize>) {
+        let mut sets = (Vec::new(), Vec::new());
+        for (e, r) in self.episodes.iter().enumerate() {
+            if held_out(e) { sets.1.extend(r.clone()) } else { sets.0.extend(r.clone()) }
+        }
+        sets
+    }
+
+    /// Step ranges of the held-out episodes.
+    pub fn held_out_episodes(&self) -> Vec<std::ops::Range<usize>> {
+        self.episodes.iter().enumerate().filter(|&(e, _)| held_out(e)).map(|(_, r)| r.clone()).collect()
+    }
+}
+
+/// Whether episode `e` is held out: every 10th.
+fn held_out(e: usize) -> bool {
+    e % 10 == 9
 }
 
 /// One episode's judged frames: the judge's estimates and the exact labels there,

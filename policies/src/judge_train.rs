@@ -26,81 +26,21 @@ use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
-use harness::replay::ReplayReader;
 use harness::rng::Rng;
 use harness::seed::derive;
 use serde::{Deserialize, Serialize};
 
 use crate::diffusion::frames_to_tensor;
 use crate::dir::PolicyLoadError;
-use crate::judge::{EpisodeReading, FrameJudge, JudgeFile, JudgeMetrics, JudgeNet, Label};
-use crate::judge_read::{Reading, judge_episodes, read_judged};
+use crate::judge::{FrameJudge, JudgeFile, JudgeNet};
+use crate::judge_metrics::{EpisodeReading, JudgeMetrics, Reading, metrics};
+use crate::judge_read::{JudgeData, judge_episodes, read_judged};
 use crate::symmetry::augment_frame;
 
 /// Linear warm-up steps of the learning rate.
 const WARMUP: u64 = 100;
 /// Held-out frames evaluated at most (evenly spaced).
 const EVAL_FRAMES: usize = 2048;
-
-/// Frames and labels of a dataset.
-pub struct JudgeData {
-    /// `n x s x s x 3` bytes.
-    pub frames: Vec<u8>,
-    /// `n` labels.
-    pub labels: Vec<f32>,
-    /// Frame side.
-    pub size: usize,
-    /// Step ranges of each episode.
-    pub episodes: Vec<std::ops::Range<usize>>,
-}
-
-impl JudgeData {
-    /// Loads the first `limit` episodes (all if `None`) of a dataset with its
-    /// `data/<label>` array.
-    ///
-    /// # Errors
-    /// [`PolicyLoadError`] naming the dataset for an unreadable layout, a missing
-    /// label array, non-finite labels or no episodes.
-    pub fn load(path: &Path, label: Label, limit: Option<usize>) -> Result<Self, PolicyLoadError> {
-        let err = |m: String| PolicyLoadError::new(path, m);
-        let r = ReplayReader::open(path).map_err(|e| err(e.to_string()))?;
-        let Some(all) = r.extra(label.array()).map_err(|e| err(e.to_string()))? else {
-            return Err(err(format!("no data/{} array to learn from", label.array())));
-        };
-        if let Some(t) = all.iter().position(|v| !v.is_finite()) {
-            return Err(err(format!("data/{} is not finite at step {t}", label.array())));
-        }
-        let n = limit.unwrap_or(usize::MAX).min(r.episodes());
-        if n == 0 {
-            return Err(err("no episodes".into()));
-        }
-        let episodes: Vec<_> = (0..n).map(|i| r.episode_range(i)).collect();
-        let end = episodes.last().map_or(0, |e| e.end);
-        let frames = r.img.read_rows(0, end).map_err(|e| err(e.to_string()))?;
-        let labels = all[..end].iter().map(|&v| v as f32).collect();
-        Ok(Self { frames, labels, size: r.img.shape()[1], episodes })
-    }
-
-    /// Frame `i`.
-    pub fn frame(&self, i: usize) -> &[u8] {
-        let n = self.size * self.size * 3;
-        &self.frames[i * n..(i + 1) * n]
-    }
-
-    /// Steps of the training and held-out episodes (every 10th episode is held out).
-    pub fn split(&self) -> (Vec<usize>, Vec<usize>) {
-        let mut sets = (Vec::new(), Vec::new());
-        for (e, r) in self.episodes.iter().enumerate() {
-            if held_out(e) { sets.1.extend(r.clone()) } else { sets.0.extend(r.clone()) }
-        }
-        sets
-    }
-
-    /// Step ranges of the held-out episodes.
-    pub fn held_out_episodes(&self) -> Vec<std::ops::Range<usize>> {
-        self.episodes.iter().enumerate().filter(|&(e, _)| held_out(e)).map(|(_, r)| r.clone()).collect()
-    }
-}
 
 /// Training hyper-parameters (written into `judge.json`'s provenance).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -145,30 +85,6 @@ pub fn evaluate(judge: &FrameJudge, data: &JudgeData, steps: &[usize], threshold
         est.extend(judge.score_frames(&frames));
     }
     metrics(&est, &pick.iter().map(|&i| f64::from(data.labels[i])).collect::<Vec<_>>(), threshold)
-}
-
-/// [`JudgeMetrics`] of estimates against labels.
-pub fn metrics(est: &[f64], labels: &[f64], threshold: f64) -> JudgeMetrics {
-    let n = est.len().min(labels.len());
-    let (mut abs, mut right, mut tp, mut pos, mut said) = (0.0, 0usize, 0usize, 0usize, 0usize);
-    for (&e, &y) in est.iter().zip(labels) {
-        abs += (e - y).abs();
-        let (pe, py) = (e > threshold, y > threshold);
-        right += usize::from(pe == py);
-        tp += usize::from(pe && py);
-        pos += usize::from(py);
-        said += usize::from(pe);
-    }
-    let frac = |a: usize, b: usize| (b > 0).then(|| a as f64 / b as f64);
-    JudgeMetrics {
-        frames: n,
-        positives: pos,
-        mean_abs_error: if n > 0 { abs / n as f64 } else { 0.0 },
-        accuracy: frac(right, n).unwrap_or(0.0),
-        recall: frac(tp, pos),
-        precision: frac(tp, said),
-        episodes: None,
-    }
 }
 
 /// Trains a judge of `data`'s label with the network and threshold of `judge`
@@ -279,14 +195,10 @@ pub fn train_judge(
     Ok(Some((net.valid(), m, done)))
 }
 
-/// Whether episode `e` is held out: every 10th.
-fn held_out(e: usize) -> bool {
-    e % 10 == 9
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::judge::Label;
     use crate::net::NetConfig;
 
     #[test]

@@ -28,6 +28,7 @@ pub mod import_lerobot;
 pub mod import_robomimic;
 pub mod imported_policy;
 pub mod judge;
+pub mod judge_metrics;
 pub mod judge_pose;
 pub mod judge_read;
 pub mod judge_rule;

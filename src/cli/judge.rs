@@ -24,10 +24,10 @@ pub struct ReadJudgeArgs {
     pub persist: Vec<usize>,
     /// Actions executed per policy decision; `rank` judges the first frame and the
     /// last `--seen` of every chunk.
-    #[arg(long, default_value_t = policies::judge_read::RANK_CHUNK)]
+    #[arg(long, default_value_t = policies::judge_metrics::RANK_CHUNK)]
     pub chunk: usize,
     /// Frames the policy sees at the end of each chunk (its observation horizon).
-    #[arg(long, default_value_t = policies::judge_read::RANK_SEEN)]
+    #[arg(long, default_value_t = policies::judge_metrics::RANK_SEEN)]
     pub seen: usize,
     /// Read at most this many episodes (the first ones).
     #[arg(long)]

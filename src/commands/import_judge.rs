@@ -7,7 +7,8 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use policies::judge::{FrameJudge, JudgeFile, JudgeMetrics, Label};
+use policies::judge::{FrameJudge, JudgeFile, Label};
+use policies::judge_metrics::JudgeMetrics;
 use policies::judge_pose::{import_gpc, write_pose_weights};
 use policies::net::NetConfig;
 use serde_json::json;

@@ -8,10 +8,10 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use policies::judge::{EpisodeReading, FrameJudge, JudgeFile, JudgeMetrics, Label, write_judge};
-use policies::judge_read::{Reading, judge_episodes, judged_frame_metrics, read_judged};
+use policies::judge::{FrameJudge, JudgeFile, Label, write_judge};
+use policies::judge_metrics::{EpisodeReading, JudgeMetrics, Reading};
+use policies::judge_read::{JudgeData, judge_episodes, judged_frame_metrics, read_judged};
 use policies::judge_rule::ColourHeight;
-use policies::judge_train::JudgeData;
 use policies::net::NetConfig;
 use serde::Serialize;
 use serde_json::json;

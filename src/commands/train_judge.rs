@@ -6,8 +6,10 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use policies::judge::{JudgeFile, JudgeMetrics, Label, write_judge};
-use policies::judge_train::{JudgeData, JudgeTrainConfig, train_judge};
+use policies::judge::{JudgeFile, Label, write_judge};
+use policies::judge_metrics::JudgeMetrics;
+use policies::judge_read::JudgeData;
+use policies::judge_train::{JudgeTrainConfig, train_judge};
 use policies::net::NetConfig;
 use serde_json::json;
 
