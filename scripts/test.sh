@@ -6,4 +6,12 @@ scripts/setup.sh --no-build --tests
 # Mesa's llvmpipe without helper threads, as the binary sets it (scenarios::init_mujoco): the unit
 # tests that render run their own renderers, outside the binary's main.
 export LP_NUM_THREADS=${LP_NUM_THREADS:-0}
-cargo test --workspace --locked
+# cargo-nextest (on this workplace's machines) runs every test binary's tests in one pool, so no
+# core waits while a binary's last test finishes: 421 s against 466 s for `cargo test` on a 2-core
+# machine (BENCHMARKS.md, 2026-12-01). Its doc tests run apart. Without nextest: `cargo test`.
+if cargo nextest --version >/dev/null 2>&1; then
+  cargo nextest run --workspace --locked
+  cargo test --workspace --locked --doc
+else
+  cargo test --workspace --locked
+fi
