@@ -7,8 +7,10 @@ scripts/setup.sh --no-build --tests
 # tests that render run their own renderers, outside the binary's main.
 export LP_NUM_THREADS=${LP_NUM_THREADS:-0}
 # cargo-nextest (on this workplace's machines) runs every test binary's tests in one pool, so no
-# core waits while a binary's last test finishes: 421 s against 466 s for `cargo test` on a 2-core
-# machine (BENCHMARKS.md, 2026-12-01). Its doc tests run apart. Without nextest: `cargo test`.
+# core waits while a binary's last test finishes, and each test in its own process, so a crash in
+# the GL driver fails one test, not its whole binary. Measured on a 2-core machine: 419 and 475 s
+# against 466 s for `cargo test`, within that machine's noise (BENCHMARKS.md, 2026-12-01). Its doc
+# tests run apart. Without nextest: `cargo test`.
 if cargo nextest --version >/dev/null 2>&1; then
   cargo nextest run --workspace --locked
   cargo test --workspace --locked --doc
