@@ -10,8 +10,9 @@
 //! trained from scratch, or with its BatchNorms as torchvision has them, `use_group_norm:
 //! false`, usually from ImageNet weights, folded into the convolutions at import; a spatial
 //! softmax, a centre crop, FiLM with scale, DDPM or DDIM on the squared-cosine schedule, ε- or
-//! x₀-prediction, clipped samples); anything else is refused naming the `config.json` field. Weights are mapped key by key ([`burn_path`]); a missing, unexpected,
-//! mis-shaped, non-float32 or non-finite tensor is refused naming the file and key.
+//! x₀-prediction, clipped samples); anything else is refused naming the `config.json` field.
+//! Weights are mapped key by key ([`burn_path`]); a missing, unexpected, mis-shaped, non-float32
+//! or non-finite tensor is refused naming the file and key.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -26,7 +27,7 @@ use crate::import_keys::{UnetNames, cond_unet, resnet_children};
 use crate::imported_policy::{ImportedConfig, ImportedNet, MeanStd, Pool, Prediction, Sampler};
 use crate::lerobot_config::{LeRobotConfig, check, features};
 use crate::net::NetConfig;
-use crate::resnet::fold_batch_norm;
+use crate::resnet::{ConvSite, batch_norm_sites, fold_batch_norm};
 use crate::resnet_gn::BackboneNorm;
 
 /// An imported LeRobot policy: networks, config, statistics and what was read.
@@ -77,19 +78,15 @@ fn folded_backbone(
 ) -> Result<(BTreeMap<String, TensorData>, BTreeSet<String>), ImportError> {
     let keys: BTreeMap<String, String> =
         model.shapes().into_keys().map(|k| (k.replace("._orig_mod", ""), k)).collect();
-    // (conv, its BatchNorm, evalharness's conv), LeRobot's backbone being torchvision's children.
-    let mut pairs =
-        vec![("backbone.0".to_string(), "backbone.1".to_string(), "encoder.stem.conv".to_string())];
-    for b in 0..8 {
-        let (k, o) = (format!("backbone.{}.{}", 4 + b / 2, b % 2), format!("encoder.blocks.{b}"));
-        pairs.push((format!("{k}.conv1"), format!("{k}.bn1"), format!("{o}.c1.conv")));
-        pairs.push((format!("{k}.conv2"), format!("{k}.bn2"), format!("{o}.c2.conv")));
-        if ours.contains_key(&format!("{o}.down.conv.weight")) {
-            pairs.push((format!("{k}.downsample.0"), format!("{k}.downsample.1"), format!("{o}.down.conv")));
-        }
-    }
     let (mut values, mut used) = (BTreeMap::new(), BTreeSet::new());
-    for (conv, bn, to) in pairs {
+    for (conv, bn, site) in batch_norm_sites() {
+        let (conv, bn) = (format!("backbone.{conv}"), format!("backbone.{bn}"));
+        let to = match site {
+            ConvSite::Stem => "encoder.stem.conv".to_string(),
+            ConvSite::First(b) => format!("encoder.blocks.{b}.c1.conv"),
+            ConvSite::Second(b) => format!("encoder.blocks.{b}.c2.conv"),
+            ConvSite::Down(b) => format!("encoder.blocks.{b}.down.conv"),
+        };
         let shape = ours[&format!("{to}.weight")].clone();
         let co = shape[0];
         let mut take = |name: &str, shape: &[usize]| -> Result<Vec<f32>, ImportError> {
@@ -269,7 +266,6 @@ pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError>
     let (mut values, consumed) =
         if c.use_group_norm { Default::default() } else { folded_backbone(&model, &ours)? };
     let mut unexpected = Vec::new();
-    let mut read: BTreeSet<String> = values.keys().cloned().collect();
     for (key, theirs) in model.shapes() {
         if is_extra(&key) || consumed.contains(&key) {
             continue;
@@ -285,13 +281,12 @@ pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError>
         let expect = if linear { vec![want[1], want[0]] } else { want.clone() };
         let v = model.f32s(&key, &expect, false)?;
         let v = if linear { transpose(&v, theirs[1], theirs[0]) } else { v };
-        values.insert(to.clone(), TensorData::new(v, want.clone()));
-        read.insert(to);
+        values.insert(to, TensorData::new(v, want.clone()));
     }
     if !unexpected.is_empty() {
         return Err(ImportError::Unexpected { path: model.path().into(), keys: unexpected });
     }
-    if let Some(missing) = ours.keys().find(|p| !read.contains(*p)) {
+    if let Some(missing) = ours.keys().find(|p| !values.contains_key(*p)) {
         return Err(ImportError::Missing {
             path: model.path().into(),
             key: format!("the weights of `{missing}`"),

@@ -21,7 +21,7 @@ use world_model::import::ImportError;
 use world_model::import::place::{place_all, shapes, transpose};
 use world_model::import::tensors::Source;
 
-use crate::resnet::{ResNet18, fold_batch_norm};
+use crate::resnet::{ConvSite, ResNet18, batch_norm_sites, fold_batch_norm};
 
 /// One reward predictor: ResNet-18 features, then 512 → 256 → 128 → 2 with ReLUs (8·base
 /// → 256 at another base width).
@@ -87,11 +87,6 @@ impl GpcPose {
     }
 }
 
-/// Torchvision's key of block `b` (0–7) of the backbone inside the official Sequential.
-fn block_key(b: usize) -> String {
-    format!("resnet18.{}.{}", 4 + b / 2, b % 2)
-}
-
 /// Reads one official reward predictor (`state_dict`, 126 tensors), BatchNorms folded; the
 /// backbone's base width is read from the stem (`resnet18.0.weight`). Returns it with the base.
 ///
@@ -138,14 +133,14 @@ pub fn import_pose_net(path: &Path, device: &Device) -> Result<(PoseNet, usize),
         values.insert(format!("{ours_path}.bias"), TensorData::new(bias, [co]));
         Ok(())
     };
-    fold("resnet18.0", "resnet18.1", "resnet.stem")?;
-    for b in 0..8 {
-        let (k, o) = (block_key(b), format!("resnet.blocks.{b}"));
-        fold(&format!("{k}.conv1"), &format!("{k}.bn1"), &format!("{o}.conv1"))?;
-        fold(&format!("{k}.conv2"), &format!("{k}.bn2"), &format!("{o}.conv2"))?;
-        if ours.contains_key(&format!("{o}.down.weight")) {
-            fold(&format!("{k}.downsample.0"), &format!("{k}.downsample.1"), &format!("{o}.down"))?;
-        }
+    for (conv, bn, site) in batch_norm_sites() {
+        let to = match site {
+            ConvSite::Stem => "resnet.stem".to_string(),
+            ConvSite::First(b) => format!("resnet.blocks.{b}.conv1"),
+            ConvSite::Second(b) => format!("resnet.blocks.{b}.conv2"),
+            ConvSite::Down(b) => format!("resnet.blocks.{b}.down"),
+        };
+        fold(&format!("resnet18.{conv}"), &format!("resnet18.{bn}"), &to)?;
     }
     for (i, l) in [(1, "l1"), (3, "l2"), (5, "l3")] {
         let shape = ours[&format!("{l}.weight")].clone(); // burn [in, out]

@@ -45,6 +45,37 @@ pub fn fold_batch_norm(
     Ok(beta.iter().zip(mean).zip(&scale).map(|((b, m), s)| b - m * s).collect())
 }
 
+/// Where a convolution that a BatchNorm follows sits in ResNet-18.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConvSite {
+    /// The 7×7 stem.
+    Stem,
+    /// Block `b`'s (0–7) first 3×3 convolution.
+    First(usize),
+    /// Block `b`'s second 3×3 convolution.
+    Second(usize),
+    /// Block `b`'s 1×1 projection of the skip (blocks 2, 4 and 6, where a stage starts at
+    /// stride 2 and doubles the width).
+    Down(usize),
+}
+
+/// ResNet-18's convolutions that a BatchNorm follows, named as torchvision's children are in
+/// a `Sequential` of them (`0` conv1, `1` bn1, `4`–`7` layer1–4, two blocks each): each
+/// convolution's name, its BatchNorm's, and where it sits. What every importer of a BatchNorm
+/// ResNet-18 folds.
+pub fn batch_norm_sites() -> Vec<(String, String, ConvSite)> {
+    let mut sites = vec![("0".to_string(), "1".to_string(), ConvSite::Stem)];
+    for b in 0..8 {
+        let k = format!("{}.{}", 4 + b / 2, b % 2);
+        sites.push((format!("{k}.conv1"), format!("{k}.bn1"), ConvSite::First(b)));
+        sites.push((format!("{k}.conv2"), format!("{k}.bn2"), ConvSite::Second(b)));
+        if b > 0 && b % 2 == 0 {
+            sites.push((format!("{k}.downsample.0"), format!("{k}.downsample.1"), ConvSite::Down(b)));
+        }
+    }
+    sites
+}
+
 /// Stage widths for base width `base`: base·(1, 2, 4, 8).
 pub fn widths(base: usize) -> [usize; 4] {
     [base, 2 * base, 4 * base, 8 * base]
@@ -142,5 +173,23 @@ mod tests {
         assert!((b[0] - 0.422_65).abs() < 1e-5 && b[1].abs() < 1e-7, "{b:?}");
         // A negative variance names its channel.
         assert_eq!(fold_batch_norm(&mut [1.0, 1.0], &[1.0, 1.0], &[0.0; 2], &[0.0; 2], &[1.0, -0.5]), Err(1));
+    }
+
+    #[test]
+    fn the_batch_norm_sites_are_the_networks_projections_and_convolutions() {
+        // 1 stem + 8 blocks × 2 + 3 projections = 20, each projection where `ResNet18`
+        // builds one (the block's stride or width changes).
+        let sites = batch_norm_sites();
+        assert_eq!(sites.len(), 20);
+        let net = ResNet18::new(8, &Device::flex());
+        let downs: Vec<usize> = sites
+            .iter()
+            .filter_map(|(_, _, s)| if let ConvSite::Down(b) = s { Some(*b) } else { None })
+            .collect();
+        let built: Vec<usize> = (0..8).filter(|&b| net.blocks[b].down.is_some()).collect();
+        assert_eq!(downs, built);
+        assert_eq!(sites[0], ("0".into(), "1".into(), ConvSite::Stem));
+        assert!(sites.contains(&("7.1.conv2".into(), "7.1.bn2".into(), ConvSite::Second(7))));
+        assert!(sites.contains(&("5.0.downsample.0".into(), "5.0.downsample.1".into(), ConvSite::Down(2))));
     }
 }
