@@ -124,12 +124,7 @@ fn episodes_jsonl_reader_survives_damaged_rows() {
         std::fs::write(&path, bytes).unwrap();
         let _ = read_rows::<EpisodeRow>(&path);
         let _ = resume_rows(&path, |r: &[EpisodeRow]| {
-            whole_batches(
-                r,
-                &batches,
-                crate::commands::rank::resume::rank_key,
-                &crate::commands::rank::resume::RANK_KINDS,
-            )
+            whole_batches(r, &batches, runner::resume::rank_key, &runner::resume::RANK_KINDS)
         });
     });
 }

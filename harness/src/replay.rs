@@ -202,6 +202,7 @@ impl ReplayWriter {
 }
 
 mod column;
+pub mod origin;
 mod reader;
 
 pub use column::Column;

@@ -91,7 +91,8 @@ impl Demos {
         if shape[1] != size || shape[2] != size {
             return Err(err(format!("images are {}x{}, the policy takes {size}x{size}", shape[1], shape[2])));
         }
-        let scenario = r.attrs["evalharness"]["scenario"].as_str().unwrap_or("pusht");
+        let scenario =
+            harness::replay::origin::scenario_in(path, &r.attrs).map_err(|e| err(e.to_string()))?;
         if scenario != task.name() {
             return Err(err(format!("a {scenario} dataset, not {}", task.name())));
         }

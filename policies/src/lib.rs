@@ -22,6 +22,7 @@ pub mod cpu_unet;
 pub mod data;
 pub mod diffusion;
 pub mod dir;
+pub mod gpc_stats;
 pub mod import_gpc;
 mod import_keys;
 pub mod import_lerobot;

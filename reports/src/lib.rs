@@ -9,12 +9,14 @@
 //! - [`tables`]: the LaTeX table and the summary CSV;
 //! - [`html`]: the self-contained HTML report.
 
+pub mod episode_tables;
 pub mod episodes;
 pub mod gif;
 pub mod html;
 pub mod labels;
 pub mod plots;
 pub mod png;
+pub mod scene;
 pub mod summary;
 pub mod tables;
 pub mod tasks;

@@ -10,7 +10,6 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use policies::diffusion::{Normalisation, Range};
 use policies::dir::{Expectations, PolicyFile, load_policy, write_policy_f32};
 use policies::import_gpc::{GpcWeights, import};
 use serde_json::json;
@@ -18,15 +17,6 @@ use serde_json::json;
 use super::git_commit;
 use crate::cli::{ImportPolicyArgs, PolicyFormat, PolicyWeights};
 use crate::output::{Inputs, Staged};
-
-/// The statistics GPC's Push-T evaluation normalises with (not stored in its checkpoints;
-/// `policy_eval.py` sets them): the agent position's and the action's range.
-fn gpc_pusht_normalisation() -> Normalisation {
-    Normalisation {
-        agent_pos: Range { min: vec![9.897_889, 9.635_92], max: vec![499.517, 499.004_88] },
-        action: Range { min: vec![2.0, 2.0], max: vec![511.0, 511.0] },
-    }
-}
 
 /// `evalharness import policy`.
 pub fn run(a: &ImportPolicyArgs) -> Result<ExitCode> {
@@ -137,32 +127,14 @@ fn gpc(a: &ImportPolicyArgs) -> Result<ExitCode> {
     let p = import(&a.file, weights, usize::from(a.image_size), &device)?;
     let (normalisation, stats) = match &a.stats {
         None => (
-            gpc_pusht_normalisation(),
+            policies::gpc_stats::pusht_normalisation(),
             json!(
                 "GPC's Push-T evaluation script's agent-position and action ranges (not stored in the checkpoint)"
             ),
         ),
         Some(f) => {
-            let text = std::fs::read_to_string(f).with_context(|| format!("--stats {}", f.display()))?;
-            let n: Normalisation = serde_json::from_str(&text).with_context(|| {
-                format!(
-                    "--stats {}: not {{\"agent_pos\": {{\"min\", \"max\"}}, \"action\": {{..}}}}",
-                    f.display()
-                )
-            })?;
-            let (pw, aw) = (p.cfg.net.proprio(), p.cfg.net.action_dim);
-            let widths_agree = [&n.agent_pos, &n.action].iter().all(|r| r.min.len() == r.max.len())
-                && n.agent_pos.dim() == pw
-                && n.action.dim() == aw;
-            let finite = [&n.agent_pos, &n.action].iter().all(|r| {
-                r.min.iter().zip(&r.max).all(|(lo, hi)| lo.is_finite() && hi.is_finite() && hi > lo)
-            });
-            if !widths_agree || !finite {
-                anyhow::bail!(
-                    "--stats {}: agent_pos needs {pw} and action {aw} finite (min, max) pairs with max > min, for this checkpoint's networks",
-                    f.display()
-                );
-            }
+            let n = policies::gpc_stats::read_statistics(f, p.cfg.net.proprio(), p.cfg.net.action_dim)
+                .with_context(|| format!("--stats {}", f.display()))?;
             let sha = harness::fingerprint::file(f).with_context(|| format!("{}", f.display()))?;
             (n, json!({"source": f.display().to_string(), "sha256": sha}))
         }

@@ -24,6 +24,7 @@ mod simulate;
 mod simulate_arm;
 mod simulate_policy;
 mod simulate_replay;
+mod tasks;
 mod train;
 mod train_judge;
 mod train_policy;
@@ -73,13 +74,13 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Rank(a) => rank::run(a, cli.render_workers, cli.quiet),
         Command::Plan(a) => plan::run(a, cli.quiet),
         Command::Merge(a) => rank::merge::run(&a.shards, &a.out, a.force, a.no_report),
-        Command::Tasks(a) => rank::report::tasks_table(&a.runs, a.tex.as_deref(), a.force),
+        Command::Tasks(a) => tasks::run(&a.runs, a.tex.as_deref(), a.force),
         // Answered in `main`, before any command runs.
         Command::RenderWorker => Ok(ExitCode::SUCCESS),
         Command::Report(a) => {
             // The report is written into the run's folder: not while a run writes there.
             let _lock = crate::output::lock::lock(&a.out)?;
-            let html = rank::report::write_report(&a.out)?;
+            let html = runner::report::write_report(&a.out)?;
             outln!("{}", html.display());
             Ok(ExitCode::SUCCESS)
         }

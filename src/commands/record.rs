@@ -108,7 +108,7 @@ impl Sink {
                 super::collect_arm::with_header(header, seed_start, source, max_steps, episodes)
             }
         };
-        self.writer.finish(&attrs)
+        Ok(self.writer.finish(&attrs)?)
     }
 }
 

@@ -17,14 +17,15 @@ use crate::cli::TrainAutoencoderArgs;
 use crate::output::write_json;
 use crate::progress;
 
-/// The task a dataset was collected in (its attributes name it; Push-T when absent).
+/// The task a dataset was collected in ([`harness::replay::origin`]: its attributes name
+/// it; another codebase's Push-T replay buffer has none).
 ///
 /// # Errors
-/// A task this build cannot load.
+/// A dataset whose attributes cannot be read or name no task, or a task this build
+/// cannot load.
 pub(super) fn dataset_task(data: &std::path::Path) -> Result<Box<dyn harness::task::Task>> {
-    let attrs = harness::zarr::read_attrs(data).unwrap_or_default();
-    let scenario = attrs["evalharness"]["scenario"].as_str().unwrap_or("pusht");
-    crate::scenario::load_task(scenario).with_context(|| format!("{}: its task {scenario}", data.display()))
+    let scenario = harness::replay::origin::scenario_of(data)?;
+    crate::scenario::load_task(&scenario).with_context(|| format!("{}: its task {scenario}", data.display()))
 }
 
 /// How an evalharness dataset was collected (from its attributes), to regenerate it:
@@ -155,7 +156,7 @@ pub(super) fn prepare_out(
     if resume && !out.join(state).is_file() {
         bail!("--resume: {} has no checkpoint ({state})", out.display());
     }
-    crate::output::RunDir::prepare(out, &listed, resume, force, state)
+    Ok(crate::output::RunDir::prepare(out, &listed, resume, force, state)?)
 }
 
 /// The `data` entry of a world-model or autoencoder provenance file.

@@ -85,7 +85,7 @@ impl Group {
 }
 
 /// The groups of `path`: itself if it is a group, else its `*.zarr` entries in name order.
-fn group_paths(path: &Path) -> Result<Vec<PathBuf>, ReplayError> {
+pub(super) fn group_paths(path: &Path) -> Result<Vec<PathBuf>, ReplayError> {
     if path.join(".zgroup").is_file() {
         return Ok(vec![path.to_path_buf()]);
     }

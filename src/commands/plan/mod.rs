@@ -159,26 +159,38 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         listed = listed.world_model("--world-model", &a.world_model);
     }
     let (out_dir, jsonl) = crate::commands::rank::prepare_run(&a.out, &listed, a.resume, a.force)?;
-    let config = json!({
-        "command": crate::stdout::command_line().join(" "),
-        "scenario": a.scenario, "policy": a.policy,
-        "world_model": wm.as_ref().map(|_| &a.world_model),
-        "world_model_config": wm.as_ref().map(|w| serde_json::to_value(&w.cfg)).transpose()?,
-        "planners": planners.iter().map(|p| p.name()).collect::<Vec<_>>(),
-        "proposals": a.proposals, "imagine": imagine, "execute": execute, "spread": a.spread, "margin": a.margin,
-        "judge": a.judge,
-        "cost": match &a.judge {
+    let config = runner::PlanConfig {
+        command: crate::stdout::command_line().join(" "),
+        scenario: a.scenario.clone(),
+        policy: a.policy.clone(),
+        world_model: wm.as_ref().map(|_| a.world_model.clone()),
+        world_model_config: wm.as_ref().map(|w| w.cfg.clone()),
+        planners: planners.iter().map(|p| p.name().to_string()).collect(),
+        proposals: a.proposals,
+        imagine,
+        execute,
+        spread: a.spread,
+        margin: a.margin,
+        judge: a.judge.clone(),
+        cost: match &a.judge {
             Some(_) => "1 - the judge's score of the last imagined frame",
             None => "mean distance (world units) of the last imagined frame's block pixels from the goal T",
-        },
-        "episodes": a.episodes, "seed_start": a.seed_start, "max_steps": a.max_steps,
-        "batch": a.batch, "seed": a.seed, "bootstrap": a.bootstrap, "record": a.record,
-        "fingerprints": inputs.iter().map(|(k, _, f)| (k.clone(), json!(f))).collect::<serde_json::Map<_, _>>(),
-    });
+        }
+        .to_string(),
+        episodes: a.episodes,
+        seed_start: a.seed_start,
+        max_steps: a.max_steps,
+        batch: a.batch,
+        seed: a.seed,
+        bootstrap: a.bootstrap,
+        record: a.record,
+        fingerprints: inputs.iter().map(|(k, _, f)| (k.clone(), f.clone())).collect(),
+    };
+    let config_file = a.out.join("config.json");
     if a.resume {
-        crate::commands::rank::resume::check_config(&a.out.join("config.json"), &config)?;
+        runner::resume::check(&config_file, &config)?;
     }
-    write_json(&a.out.join("config.json"), &config)?;
+    runner::config::write(&config_file, &config)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.jobs.max(1))
         .build()

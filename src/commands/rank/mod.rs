@@ -9,16 +9,9 @@
 //! the batches it claims first); `--judge`
 //! scores the imagined frames with a learned judge instead of the task's own.
 
-mod check;
-mod claims;
 pub mod defaults;
-mod kept;
-mod media;
 pub mod merge;
 mod processes;
-pub mod report;
-pub(crate) mod resume;
-pub mod scene;
 mod summary;
 
 use std::path::Path;
@@ -34,7 +27,6 @@ use policies::judge::{FrameJudge, Label};
 
 use crate::policy_kinds::{expectations, load_any};
 use harness::results::{FailedPolicy, RankResults, RunTiming};
-use serde_json::{Value, json};
 use world_model::model::WorldModel;
 
 use crate::cli::RankArgs;
@@ -43,7 +35,6 @@ use crate::progress;
 use harness::results::EpisodeRow;
 use harness::rows::append_rows;
 use harness::summarise::summarise;
-pub(crate) use summary::write_tables;
 
 /// Parses `--shard i/n`.
 fn parse_shard(s: Option<&str>) -> Result<(usize, usize)> {
@@ -111,6 +102,12 @@ fn run_with(
     }
     let device = world_model::device::selected()?;
     let wm = load_world_model(&r.world_model, a.alpha, a.noise_scale, &device)?;
+    if a.float_frames && wm.cfg.is_goal_free() {
+        bail!(
+            "--float-frames: world model {} is goal-free (its frames get the goal drawn back as bytes); use a world model of whole frames",
+            r.world_model.display()
+        );
+    }
     let mut judge = r.judge.as_deref().map(|d| load_judge(d, task.as_ref(), &device)).transpose()?;
     if let (Some(k), Some(j)) = (a.judge_persist, judge.as_mut()) {
         j.file.persist_frames = k;
@@ -130,39 +127,40 @@ fn run_with(
         .world_model("--world-model", &r.world_model)
         .maybe("--judge", r.judge.as_deref());
     let (out_dir, jsonl) = prepare_run(&a.out, &listed, a.resume, a.force)?;
-    let mut config = json!({
-        "command": crate::stdout::command_line().join(" "),
-        "scenario": a.scenario, "policies": r.policies, "world_model": r.world_model,
-        "world_model_config": serde_json::to_value(&wm.cfg)?,
-        "episodes": r.episodes, "seed_start": a.seed_start, "max_steps": r.max_steps,
-        "batch": a.batch, "seed": a.seed, "bootstrap": a.bootstrap, "shard": [shard, shards],
-        "checkpoints": dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
-        "fingerprints": inputs.iter().map(|(k, _, f)| (k.clone(), json!(f))).collect::<serde_json::Map<_, _>>(),
-    });
-    if let (Some(dir), Some(j)) = (&r.judge, &judge) {
-        config["judge"] = json!({"path": dir, "label": j.file.label, "threshold": j.file.threshold,
-            "persist_frames": j.file.persist_frames, "heldout": j.file.heldout});
-    }
-    if a.judge_every_frame {
-        // Written only when set, so runs written before the flag existed resume as they were.
-        config["judge_every_frame"] = json!(true);
-    }
-    if a.float_frames {
-        if wm.cfg.is_goal_free() {
-            bail!(
-                "--float-frames: world model {} is goal-free (its frames get the goal drawn back as bytes); use a world model of whole frames",
-                r.world_model.display()
-            );
-        }
-        config["float_frames"] = json!(true);
-    }
+    let config = runner::RankConfig {
+        command: crate::stdout::command_line().join(" "),
+        scenario: a.scenario.clone(),
+        policies: r.policies.clone(),
+        world_model: r.world_model.clone(),
+        world_model_config: wm.cfg.clone(),
+        episodes: r.episodes,
+        seed_start: a.seed_start,
+        max_steps: r.max_steps,
+        batch: a.batch,
+        seed: a.seed,
+        bootstrap: a.bootstrap,
+        shard: (shard, shards),
+        checkpoints: dirs.clone(),
+        fingerprints: inputs.iter().map(|(k, _, f)| (k.clone(), f.clone())).collect(),
+        judge: r.judge.as_ref().zip(judge.as_ref()).map(|(dir, j)| runner::JudgeSettings {
+            path: dir.clone(),
+            label: j.file.label,
+            threshold: j.file.threshold,
+            persist_frames: j.file.persist_frames,
+            heldout: j.file.heldout,
+        }),
+        judge_every_frame: a.judge_every_frame,
+        float_frames: a.float_frames,
+        merged_from: Vec::new(),
+    };
+    let config_file = a.out.join("config.json");
     if a.resume {
-        resume::check_config(&a.out.join("config.json"), &config)?;
+        runner::resume::check(&config_file, &config)?;
     }
-    write_json(&a.out.join("config.json"), &config)?;
+    runner::config::write(&config_file, &config)?;
     let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
     let mut rows: Vec<EpisodeRow> = harness::rows::resume_rows(&jsonl, |r| {
-        harness::rows::whole_batches(r, &batches, resume::rank_key, &resume::RANK_KINDS)
+        harness::rows::whole_batches(r, &batches, runner::resume::rank_key, &runner::resume::RANK_KINDS)
     })?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.jobs.max(1))
@@ -194,7 +192,7 @@ fn run_with(
             }
         }
     }
-    let claims = a.claims.as_deref().map(|d| claims::Claims::open(d, shard)).transpose()?;
+    let claims = a.claims.as_deref().map(|d| runner::claims::Claims::open(d, shard)).transpose()?;
     let (mut jobs, mut keys): (Vec<Batch>, Vec<String>) = (Vec::new(), Vec::new());
     for (li, (pi, _)) in loaded.iter().enumerate() {
         for (bi, batch) in batches.iter().enumerate() {
@@ -211,7 +209,7 @@ fn run_with(
             pb.inc((batch.len() - todo.len()) as u64);
             if !todo.is_empty() {
                 jobs.push(Batch { policy: li, seeds: todo });
-                keys.push(claims::Claims::key(*pi, bi));
+                keys.push(runner::claims::Claims::key(*pi, bi));
             }
         }
     }
@@ -220,9 +218,13 @@ fn run_with(
     // in flight can hold them; the shards of `--processes` (which use claims) keep theirs
     // for the run that joins them.
     setup.record = ((!a.no_report && shards == 1) || a.claims.is_some())
-        && media::recording_fits(&policies, &setup, a.batch, a.jobs);
-    let kept_dir = a.out.join(kept::FOLDER);
-    let mut kept = if setup.record { kept::Kept::open(&kept_dir, &rows)? } else { kept::Kept::default() };
+        && runner::media::recording_fits(&policies, &setup, a.batch, a.jobs);
+    let kept_dir = a.out.join(runner::media::kept::FOLDER);
+    let mut kept = if setup.record {
+        runner::media::kept::Kept::open(&kept_dir, &rows)?
+    } else {
+        runner::media::kept::Kept::default()
+    };
     let mut done = |j: usize, out: schedule::BatchResult| -> Result<()> {
         let (name, todo) = (&names[loaded[jobs[j].policy].0], &jobs[j].seeds);
         match out {
@@ -259,12 +261,14 @@ fn run_with(
         Ok(())
     };
     let timing = match &claims {
-        Some(c) => claims::run_claimed(&policies, &jobs, &keys, c, &setup, &wm, &mut done)?,
+        Some(c) => {
+            runner::claims::run_claimed::<anyhow::Error>(&policies, &jobs, &keys, c, &setup, &wm, &mut done)?
+        }
         None => schedule::run_batches::<anyhow::Error>(&policies, &jobs, &setup, &wm, a.jobs, &mut done)?,
     };
     pb.finish_and_clear();
     if a.resume {
-        resume::straight_order(&jsonl, &mut rows, &names, &batches)?;
+        runner::resume::straight_order(&jsonl, &mut rows, &names, &batches)?;
     }
     let failed_names: Vec<&str> = failed.iter().map(|f| f.policy.as_str()).collect();
     let ok_names: Vec<String> =
@@ -292,7 +296,7 @@ fn run_with(
         },
     };
     write_json(&a.out.join("results.json"), &res.to_json()?)?;
-    write_tables(&a.out, &rows)?;
+    reports::episode_tables::write_tables(&a.out, &rows)?;
     // The results are complete (the report can be made again from them with
     // `evalharness report`): a run this one replaced can go.
     out_dir.finish(true)?;
@@ -306,16 +310,22 @@ fn run_with(
                 .map(|(pi, p)| (names[*pi].clone(), p.as_ref()))
                 .filter(|(n, _)| !failed_names.contains(&n.as_str()))
                 .collect();
-            let src = media::Sources { rows: &rows, kept: &kept, batches: &batches, setup: &setup, wm: &wm };
+            let src = runner::media::Sources {
+                rows: &rows,
+                kept: &kept,
+                batches: &batches,
+                setup: &setup,
+                wm: &wm,
+            };
             rollouts(a, &named, &src, &pool)?;
         }
-        Some(report::write_report(&a.out)?)
+        Some(runner::report::write_report(&a.out)?)
     };
     if shards == 1 && kept_dir.exists() {
         // The filmstrips are written (or not asked for): the kept frames are done with.
         std::fs::remove_dir_all(&kept_dir).with_context(|| format!("removing {}", kept_dir.display()))?;
     }
-    if let Some((text, true)) = scene::scene_note(&res.policies) {
+    if let Some((text, true)) = reports::scene::scene_note(&res.policies) {
         tracing::warn!("{text}");
     }
     summary::print(&res, &a.out, html.as_deref());
@@ -441,13 +451,13 @@ pub(crate) fn load_world_model(
 }
 
 /// Writes each policy's best- and worst-agreeing episodes as filmstrips, from the frames
-/// the run kept or replayed ([`media::Sources`]), the policies (those that loaded, as the run loaded
+/// the run kept or replayed ([`runner::media::Sources`]), the policies (those that loaded, as the run loaded
 /// them) on the pool's threads at once (a policy's replay alone is two episodes: its
 /// batched calls leave a core idle); the files and the index are the same in any order.
 fn rollouts(
     a: &RankArgs,
     policies: &[(String, &dyn harness::policy::Policy)],
-    src: &media::Sources,
+    src: &runner::media::Sources,
     pool: &rayon::ThreadPool,
 ) -> Result<()> {
     use rayon::prelude::*;
@@ -456,16 +466,19 @@ fn rollouts(
         policies
             .par_iter()
             .map(|(name, policy)| {
-                let picks = media::pick_seeds(src.rows, name);
-                media::write_rollouts(&dir, *policy, &picks, src)
+                let picks = runner::media::pick_seeds(src.rows, name);
+                runner::media::write_rollouts(&dir, *policy, &picks, src)
             })
-            .collect::<Result<_>>()
+            .collect::<Result<_, runner::RunError>>()
     })?;
-    let mut index = Vec::new();
-    for (png, caption) in strips.into_iter().flatten() {
-        let file = png.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
-        index.push(json!({"png": file, "caption": caption}));
-    }
+    let index: Vec<runner::filmstrips::Filmstrip> = strips
+        .into_iter()
+        .flatten()
+        .map(|(png, caption)| {
+            let png = png.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+            runner::filmstrips::Filmstrip { png, caption }
+        })
+        .collect();
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    write_json(&dir.join("index.json"), &Value::Array(index))
+    write_json(&dir.join("index.json"), &index)
 }

@@ -10,7 +10,7 @@
 //! minutes where one took about 27 (BENCHMARKS.md, 2026-11-27). The rows are those of
 //! one process, byte for byte (merge's contract).
 //!
-//! The shards share one claims folder (`OUT.shards/claims`, [`super::claims`]): each
+//! The shards share one claims folder (`OUT.shards/claims`, [`runner::claims`]): each
 //! runs the next batch no shard has claimed, so a shard that drew short episodes takes
 //! more batches instead of waiting for the others.
 
@@ -113,7 +113,7 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
     // The shards' thread times, summed by merge; the wall clock is this command's.
     let (_, summed) = super::merge::join(&dirs, &a.out, true, true, false)?;
     // The frames each shard kept for the filmstrips, for the finishing run to pick from.
-    super::kept::gather(&dirs, &a.out)?;
+    runner::media::kept::gather(&dirs, &a.out)?;
     let timing = RunTiming {
         wall_seconds: started.elapsed().as_secs_f64(),
         note: format!(
@@ -137,12 +137,7 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
 /// # Errors
 /// A saved split of another count.
 fn check_split(parts: &Path, n: usize) -> Result<()> {
-    let cfg = parts.join("shard-0").join("config.json");
-    let Ok(text) = std::fs::read_to_string(&cfg) else { return Ok(()) };
-    let saved: Option<usize> = serde_json::from_str::<serde_json::Value>(&text)
-        .ok()
-        .and_then(|v| v["shard"][1].as_u64())
-        .and_then(|k| usize::try_from(k).ok());
+    let saved = runner::shards::saved_split(&parts.join("shard-0").join("config.json"));
     match saved {
         Some(k) if k != n => bail!(
             "--resume: {} holds a run split into {k} processes, and this one would be {n}; \

@@ -1,15 +1,12 @@
-//! What a finished `rank` (or `merge`) leaves besides `results.json`: the sorted
-//! episode tables (`episodes.csv`, `episodes.parquet`), the per-policy table and
-//! agreement line on stdout, and the exit code of the gates.
+//! What a finished `rank` says: the per-policy table and agreement line on stdout,
+//! and the exit code of the gates (its episode tables are
+//! `reports::episode_tables`).
 
 use std::path::Path;
 use std::process::ExitCode;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use harness::results::RankResults;
-use reports::episodes::write_episodes_parquet;
-
-use harness::results::EpisodeRow;
 
 /// Exit 1 when a gate fails (or a policy failed, or fewer than two policies were
 /// ranked, so no agreement could be measured), 0 otherwise. Undefined metrics fail
@@ -58,44 +55,6 @@ pub(super) fn gates(
         ok = false;
     }
     Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
-}
-
-/// Writes `episodes.csv` and `episodes.parquet` into `out`: the rows sorted by
-/// (policy, seed, branch).
-pub(crate) fn write_tables(out: &Path, rows: &[EpisodeRow]) -> Result<()> {
-    let mut sorted: Vec<&EpisodeRow> = rows.iter().collect();
-    sorted.sort_by(|x, y| (&x.policy, x.seed, x.branch).cmp(&(&y.policy, y.seed, y.branch)));
-    write_csv(&out.join("episodes.csv"), &sorted)?;
-    write_episodes_parquet(&out.join("episodes.parquet"), &sorted)?;
-    Ok(())
-}
-
-fn write_csv(path: &Path, sorted: &[&EpisodeRow]) -> Result<()> {
-    let mut w = csv::Writer::from_path(path).with_context(|| format!("creating {}", path.display()))?;
-    w.write_record([
-        "policy",
-        "seed",
-        "branch",
-        "score",
-        "max_coverage",
-        "final_coverage",
-        "success",
-        "steps",
-    ])?;
-    for r in sorted {
-        let branch = r.branch.as_str().to_string();
-        w.write_record([
-            r.policy.clone(),
-            r.seed.to_string(),
-            branch,
-            format!("{:.6}", r.score),
-            format!("{:.6}", r.max_coverage),
-            format!("{:.6}", r.final_coverage),
-            r.success.to_string(),
-            r.steps.to_string(),
-        ])?;
-    }
-    w.flush().with_context(|| format!("writing {}", path.display()))
 }
 
 /// The per-policy table, the agreement line and where the results (and the report,

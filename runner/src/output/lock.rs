@@ -17,8 +17,8 @@ use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-use anyhow::{Context, Result, bail};
-
+use super::OutputError;
+use super::error::io;
 use super::inputs::absolute;
 
 /// The locks this process holds, by lock file, with their holders' count.
@@ -42,7 +42,7 @@ fn lock_path(out: &Path) -> PathBuf {
 ///
 /// # Errors
 /// Another process holds it (naming the folder), or the lock file cannot be made.
-pub fn lock(out: &Path) -> Result<OutLock> {
+pub fn lock(out: &Path) -> Result<OutLock, OutputError> {
     let path = lock_path(out);
     let mut held = HELD.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let held = held.get_or_insert_with(HashMap::new);
@@ -51,7 +51,7 @@ pub fn lock(out: &Path) -> Result<OutLock> {
         return Ok(OutLock { path, file: None });
     }
     if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent).with_context(|| format!("creating {}", parent.display()))?;
+        std::fs::create_dir_all(parent).map_err(io(format!("creating {}", parent.display())))?;
     }
     for _ in 0..8 {
         let file = OpenOptions::new()
@@ -59,18 +59,13 @@ pub fn lock(out: &Path) -> Result<OutLock> {
             .truncate(false)
             .write(true)
             .open(&path)
-            .with_context(|| format!("creating the lock file {}", path.display()))?;
+            .map_err(io(format!("creating the lock file {}", path.display())))?;
         match file.try_lock() {
             Ok(()) => {}
-            Err(TryLockError::WouldBlock) => bail!(
-                "{} is being written by another evalharness process (its lock {} is held); \
-                 wait for it to finish, or write to another --out",
-                out.display(),
-                path.display()
-            ),
-            Err(TryLockError::Error(e)) => {
-                return Err(e).with_context(|| format!("locking {}", path.display()));
+            Err(TryLockError::WouldBlock) => {
+                return Err(OutputError::Locked { out: out.to_path_buf(), lock: path });
             }
+            Err(TryLockError::Error(e)) => return Err(io(format!("locking {}", path.display()))(e)),
         }
         // The holder before us may have unlinked the file after we opened it: then the
         // lock is on a file nobody else will see; take the one at the path instead.
@@ -81,7 +76,7 @@ pub fn lock(out: &Path) -> Result<OutLock> {
             return Ok(OutLock { path, file: Some(file) });
         }
     }
-    bail!("could not lock {}: its lock file kept changing", out.display())
+    Err(OutputError::LockChanging { out: out.to_path_buf() })
 }
 
 impl Drop for OutLock {

@@ -13,7 +13,9 @@
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Result, bail};
+use super::OutputError;
+
+type Result<T, E = OutputError> = std::result::Result<T, E>;
 
 /// The names of the folders the tool keeps beside an output `OUT` (see the module docs).
 pub const OWNED_SUFFIXES: [&str; 3] = [".partial", ".replaced", ".shards"];
@@ -81,11 +83,12 @@ impl Inputs {
             } else {
                 continue;
             };
-            bail!(
-                "--out {} {how} the input {flag} {}; write the output somewhere else",
-                out.display(),
-                input.display()
-            );
+            return Err(OutputError::Overlaps {
+                out: out.to_path_buf(),
+                how,
+                flag: flag.clone(),
+                input: input.clone(),
+            });
         }
         Ok(())
     }
@@ -102,12 +105,12 @@ impl Inputs {
         for (flag, input) in &self.list {
             let i = absolute(input);
             if i == kept || i.starts_with(&kept) || kept.starts_with(&i) {
-                bail!(
-                    "the input {flag} {} is where this command keeps {suffix} files for --out {} \
-                     (it would be cleared or replaced); rename the input or write the output elsewhere",
-                    input.display(),
-                    out.display()
-                );
+                return Err(OutputError::InputKept {
+                    flag: flag.clone(),
+                    input: input.clone(),
+                    suffix: suffix.to_string(),
+                    out: out.to_path_buf(),
+                });
             }
         }
         Ok(())
@@ -172,10 +175,7 @@ fn check_not_dangling(out: &Path) -> Result<()> {
     let is_link = std::fs::symlink_metadata(out).is_ok_and(|m| m.file_type().is_symlink());
     if is_link && std::fs::metadata(out).is_err() {
         let target = std::fs::read_link(out).map_or_else(|_| "?".into(), |t| t.display().to_string());
-        bail!(
-            "--out {} is a symbolic link to {target}, which does not exist; create the target or give another --out",
-            out.display()
-        );
+        return Err(OutputError::Dangling { out: out.to_path_buf(), target });
     }
     Ok(())
 }

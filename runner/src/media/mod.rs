@@ -12,15 +12,18 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
-use engine::schedule::{Batch, EpisodeFrames, run_batches};
+pub mod kept;
 
-use super::kept::{Kept, gaps, order};
+use engine::schedule::{Batch, EpisodeFrames, run_batches};
+use engine::{EngineError, Setup};
 use harness::policy::Policy;
+use harness::results::{Branch, EpisodeRow};
 use world_model::model::WorldModel;
 
-use engine::Setup;
-use harness::results::{Branch, EpisodeRow};
+use crate::error::RunError;
+use kept::{Kept, gaps, order};
+
+type Result<T, E = RunError> = std::result::Result<T, E>;
 
 /// The most bytes of recorded frames the batches in flight may hold; above it a run
 /// records nothing and its filmstrips replay the picked episodes' batches.
@@ -92,10 +95,12 @@ fn frames_of(
         let setup = Setup { record: true, ..*src.setup };
         let job = [Batch { policy: 0, seeds: batch }];
         let mut out = Vec::new();
-        run_batches::<anyhow::Error>(&[policy], &job, &setup, src.wm, 1, &mut |_, r| {
+        let replay = |e: EngineError| RunError::Replay { policy: name.to_string(), seed, source: e };
+        run_batches::<EngineError>(&[policy], &job, &setup, src.wm, 1, &mut |_, r| {
             out = r?.frames;
             Ok(())
-        })?;
+        })
+        .map_err(replay)?;
         replayed.extend(out.into_iter().filter(|f| picks.iter().any(|p| p.0 == f.seed)));
     }
     Ok(picks
@@ -135,7 +140,8 @@ pub fn write_rollouts(
     picks: &[(u64, &'static str)],
     src: &Sources,
 ) -> Result<Vec<(PathBuf, String)>> {
-    std::fs::create_dir_all(dir)?;
+    std::fs::create_dir_all(dir)
+        .map_err(|source| RunError::File { doing: format!("creating {}", dir.display()), source })?;
     if picks.is_empty() {
         return Ok(Vec::new());
     }
@@ -157,10 +163,12 @@ pub fn write_rollouts(
             vec![r.iter().step_by(EVERY).cloned().collect(), w.iter().step_by(EVERY).cloned().collect()];
         let strip = reports::png::filmstrip(&rows, size, size);
         let png = dir.join(format!("{stem}.png"));
-        reports::png::write_png(&png, &strip.pixels, strip.width, strip.height)?;
+        reports::png::write_png(&png, &strip.pixels, strip.width, strip.height)
+            .map_err(|e| RunError::Media(e.to_string()))?;
         let pair: Vec<Vec<u8>> = r.iter().zip(w).map(|(a, b)| side_by_side(a, b, size)).collect();
         let side = u16::try_from(size).unwrap_or(u16::MAX);
-        reports::gif::write_gif(&dir.join(format!("{stem}.gif")), &pair, 2 * side, side, 200)?;
+        reports::gif::write_gif(&dir.join(format!("{stem}.gif")), &pair, 2 * side, side, 200)
+            .map_err(|e| RunError::Media(e.to_string()))?;
         let (rs, ws) = (score(seed, Branch::Sim), score(seed, Branch::WorldModel));
         out.push((
             png,

@@ -1,5 +1,5 @@
 //! The filmstrip frames a run keeps: per policy, those of the best- and worst-agreeing
-//! episode among the batches run so far (what [`super::media::pick_seeds`] can pick),
+//! episode among the batches run so far (what [`super::pick_seeds`] can pick),
 //! in memory and in the run's `filmstrip-frames/` folder, so that a resumed run, or the
 //! run that joins `--processes` shards, finds the episodes its earlier processes made
 //! instead of replaying them. The run removes the folder once its filmstrips are written.
@@ -12,9 +12,17 @@ use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
 use engine::schedule::EpisodeFrames;
 use harness::results::{Branch, EpisodeRow};
+
+use crate::error::RunError;
+
+type Result<T, E = RunError> = std::result::Result<T, E>;
+
+/// A [`RunError::File`] builder.
+fn io(doing: String) -> impl FnOnce(std::io::Error) -> RunError {
+    move |source| RunError::File { doing, source }
+}
 
 /// The folder of a run's kept frames.
 pub const FOLDER: &str = "filmstrip-frames";
@@ -43,7 +51,7 @@ pub(super) fn order(a: Gap, b: Gap) -> std::cmp::Ordering {
 }
 
 /// Per policy, the recorded frames of the best- and worst-agreeing episode among the
-/// batches of this run: what [`super::media::pick_seeds`] can pick from them, and nothing
+/// batches of this run: what [`super::pick_seeds`] can pick from them, and nothing
 /// else (two episodes per policy at most). With a folder, each kept episode is also a file
 /// there.
 #[derive(Default)]
@@ -112,7 +120,7 @@ impl Kept {
     }
 
     /// The kept frames of `policy`'s `seed`, if the run recorded them.
-    pub(super) fn get(&self, policy: &str, seed: u64) -> Option<&EpisodeFrames> {
+    pub fn get(&self, policy: &str, seed: u64) -> Option<&EpisodeFrames> {
         self.by_policy.get(policy)?.iter().map(|k| &k.1).find(|f| f.seed == seed)
     }
 }
@@ -130,11 +138,14 @@ pub fn gather(shards: &[PathBuf], out: &Path) -> Result<()> {
         }
         for policy in read_dir(&from)? {
             let to = out.join(FOLDER).join(policy.file_name());
-            std::fs::create_dir_all(&to).with_context(|| format!("creating {}", to.display()))?;
+            std::fs::create_dir_all(&to).map_err(io(format!("creating {}", to.display())))?;
             for f in read_dir(&policy.path())? {
                 let dest = to.join(f.file_name());
-                std::fs::rename(f.path(), &dest)
-                    .with_context(|| format!("moving {} to {}", f.path().display(), dest.display()))?;
+                std::fs::rename(f.path(), &dest).map_err(io(format!(
+                    "moving {} to {}",
+                    f.path().display(),
+                    dest.display()
+                )))?;
             }
         }
     }
@@ -146,10 +157,9 @@ fn file(dir: &Path, policy: &str, seed: u64) -> PathBuf {
 }
 
 fn read_dir(dir: &Path) -> Result<Vec<std::fs::DirEntry>> {
-    let mut v: Vec<std::fs::DirEntry> = std::fs::read_dir(dir)
-        .with_context(|| format!("reading {}", dir.display()))?
-        .collect::<std::io::Result<_>>()
-        .with_context(|| format!("reading {}", dir.display()))?;
+    let reading = || io(format!("reading {}", dir.display()));
+    let mut v: Vec<std::fs::DirEntry> =
+        std::fs::read_dir(dir).map_err(reading())?.collect::<std::io::Result<_>>().map_err(reading())?;
     v.sort_by_key(std::fs::DirEntry::file_name);
     Ok(v)
 }
@@ -157,7 +167,7 @@ fn read_dir(dir: &Path) -> Result<Vec<std::fs::DirEntry>> {
 fn remove(path: &Path) -> Result<()> {
     match std::fs::remove_file(path) {
         Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-            Err(e).with_context(|| format!("removing {}", path.display()))
+            Err(io(format!("removing {}", path.display()))(e))
         }
         _ => Ok(()),
     }
@@ -165,34 +175,36 @@ fn remove(path: &Path) -> Result<()> {
 
 /// Writes `f` to `path` whole (a temporary file renamed), so a killed run leaves no half file.
 fn write(path: &Path, f: &EpisodeFrames) -> Result<()> {
-    let dir = path.parent().context("a kept file has a folder")?;
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let bad = |why: String| RunError::Kept { path: path.to_path_buf(), why };
+    let dir = path.parent().ok_or_else(|| bad("it has no folder".into()))?;
+    std::fs::create_dir_all(dir).map_err(io(format!("creating {}", dir.display())))?;
     let len = f.real.iter().chain(&f.imagined).map(Vec::len).max().unwrap_or(0);
     if f.real.iter().chain(&f.imagined).any(|x| x.len() != len) {
-        bail!("kept frames of seed {}: frames of different sizes", f.seed);
+        return Err(bad(format!("the frames of seed {} differ in size", f.seed)));
     }
     let mut bytes = Vec::with_capacity(MAGIC.len() + 12 + len * (f.real.len() + f.imagined.len()));
     bytes.extend_from_slice(MAGIC);
     for n in [f.real.len(), f.imagined.len(), len] {
-        bytes.extend_from_slice(&u32::try_from(n).context("too many frames")?.to_le_bytes());
+        let n = u32::try_from(n).map_err(|_| bad(format!("{n} frames or bytes do not fit its header")))?;
+        bytes.extend_from_slice(&n.to_le_bytes());
     }
     f.real.iter().chain(&f.imagined).for_each(|x| bytes.extend_from_slice(x));
     let tmp = path.with_extension("tmp");
-    let mut out = std::fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
-    out.write_all(&bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+    let mut out = std::fs::File::create(&tmp).map_err(io(format!("creating {}", tmp.display())))?;
+    out.write_all(&bytes).map_err(io(format!("writing {}", tmp.display())))?;
+    std::fs::rename(&tmp, path).map_err(io(format!("renaming {} to {}", tmp.display(), path.display())))
 }
 
 /// Reads a file [`write`] wrote; its seed is its name.
 fn read(path: &Path) -> Result<EpisodeFrames> {
-    let bad = |why: &str| anyhow::anyhow!("{}: not a kept-frames file ({why})", path.display());
+    let bad = |why: &str| RunError::Kept { path: path.to_path_buf(), why: why.to_string() };
     let seed: u64 = path
         .file_stem()
         .and_then(|s| s.to_str())
         .and_then(|s| s.parse().ok())
         .filter(|_| path.extension().is_some_and(|e| e == "frames"))
         .ok_or_else(|| bad("its name is not <seed>.frames"))?;
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let bytes = std::fs::read(path).map_err(io(format!("reading {}", path.display())))?;
     let rest = bytes.strip_prefix(MAGIC).ok_or_else(|| bad("no magic"))?;
     if rest.len() < 12 {
         return Err(bad("truncated header"));
@@ -248,7 +260,7 @@ mod tests {
         kept.add("p", &b1, frames(&[1, 2])).unwrap();
         kept.add("p", &b2, frames(&[3, 4])).unwrap();
         let all: Vec<EpisodeRow> = b1.iter().chain(&b2).cloned().collect();
-        assert_eq!(super::super::media::pick_seeds(&all, "p"), vec![(2, "best"), (1, "worst")]);
+        assert_eq!(super::super::pick_seeds(&all, "p"), vec![(2, "best"), (1, "worst")]);
         assert!(kept.get("p", 1).is_some() && kept.get("p", 2).is_some());
         assert!(kept.get("p", 3).is_none() && kept.get("p", 4).is_none(), "only the two ends are kept");
         let mut files: Vec<String> = read_dir(&dir.join("p"))

@@ -21,10 +21,16 @@
 use std::io::{ErrorKind, Write};
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
 use engine::schedule::{self, Batch, BatchResult};
-use engine::{Setup, Timing};
+use engine::{EngineError, Setup, Timing};
 use world_model::model::WorldModel;
+
+use crate::error::RunError;
+
+/// A [`RunError::File`] builder.
+fn file(doing: String) -> impl FnOnce(std::io::Error) -> RunError {
+    move |source| RunError::File { doing, source }
+}
 
 /// One shard's hold on a claims folder.
 pub struct Claims {
@@ -37,9 +43,9 @@ impl Claims {
     ///
     /// # Errors
     /// A folder that cannot be created, naming it.
-    pub fn open(dir: &Path, shard: usize) -> Result<Self> {
+    pub fn open(dir: &Path, shard: usize) -> Result<Self, RunError> {
         std::fs::create_dir_all(dir)
-            .with_context(|| format!("creating the claims folder {}", dir.display()))?;
+            .map_err(file(format!("creating the claims folder {}", dir.display())))?;
         Ok(Self { dir: dir.to_path_buf(), shard })
     }
 
@@ -54,21 +60,21 @@ impl Claims {
     ///
     /// # Errors
     /// A claim that cannot be written or read, naming the file.
-    pub fn take(&self, key: &str) -> Result<bool> {
+    pub fn take(&self, key: &str) -> Result<bool, RunError> {
         let path = self.dir.join(key);
         let mine = self.shard.to_string();
         match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
             Ok(mut f) => {
                 f.write_all(mine.as_bytes())
-                    .with_context(|| format!("writing the claim {}", path.display()))?;
+                    .map_err(file(format!("writing the claim {}", path.display())))?;
                 Ok(true)
             }
             Err(e) if e.kind() == ErrorKind::AlreadyExists => {
                 let owner = std::fs::read_to_string(&path)
-                    .with_context(|| format!("reading the claim {}", path.display()))?;
+                    .map_err(file(format!("reading the claim {}", path.display())))?;
                 Ok(owner == mine)
             }
-            Err(e) => Err(e).with_context(|| format!("claiming {}", path.display())),
+            Err(e) => Err(file(format!("claiming {}", path.display()))(e)),
         }
     }
 }
@@ -80,15 +86,15 @@ impl Claims {
 ///
 /// # Errors
 /// A claim that cannot be made, or what `done` or the scheduler return.
-pub fn run_claimed(
+pub fn run_claimed<E: From<EngineError> + From<RunError>>(
     policies: &[&dyn harness::policy::Policy],
     jobs: &[Batch],
     keys: &[String],
     claims: &Claims,
     setup: &Setup,
     wm: &WorldModel,
-    done: &mut dyn FnMut(usize, BatchResult) -> Result<()>,
-) -> Result<Timing> {
+    done: &mut dyn FnMut(usize, BatchResult) -> Result<(), E>,
+) -> Result<Timing, E> {
     let mut failed = vec![false; policies.len()];
     let mut total = Timing::default();
     for (j, job) in jobs.iter().enumerate() {
@@ -99,14 +105,7 @@ pub fn run_claimed(
             failed[job.policy] |= out.is_err();
             done(j, out)
         };
-        let t = schedule::run_batches::<anyhow::Error>(
-            policies,
-            std::slice::from_ref(job),
-            setup,
-            wm,
-            1,
-            &mut one,
-        )?;
+        let t = schedule::run_batches::<E>(policies, std::slice::from_ref(job), setup, wm, 1, &mut one)?;
         total.add(&t);
     }
     Ok(total)

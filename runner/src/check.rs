@@ -3,14 +3,16 @@
 //! run can produce. A hand-edited or damaged file with Pearson 5 or a success rate of
 //! −3 is refused, naming the field, rather than drawn as if it were a result.
 
-use anyhow::{Result, bail};
 use harness::results::{BranchStats, RankResults};
+
+use crate::error::RunError;
 
 /// Checks the ranges of every shown number of `r`.
 ///
 /// # Errors
-/// The first value out of range, named by its path in the file.
-pub fn ranges(r: &RankResults) -> Result<()> {
+/// [`RunError::OutOfRange`]: the first value out of range, named by its path in the
+/// file, and how many more there are.
+pub fn ranges(r: &RankResults) -> Result<(), RunError> {
     let mut bad: Vec<String> = Vec::new();
     let mut unit = |field: String, v: f64| {
         if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
@@ -48,10 +50,7 @@ pub fn ranges(r: &RankResults) -> Result<()> {
         }
     }
     match bad.first() {
-        Some(first) => bail!(
-            "results.json: {first}{}",
-            if bad.len() > 1 { format!(" (and {} more)", bad.len() - 1) } else { String::new() }
-        ),
+        Some(first) => Err(RunError::OutOfRange { first: first.clone(), more: bad.len() - 1 }),
         None => Ok(()),
     }
 }

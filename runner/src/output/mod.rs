@@ -6,18 +6,21 @@
 //! in place, and moves a folder it replaces aside until it completes. Both take the
 //! command's [`Inputs`] and check them against `--out` before touching anything
 //! ([`inputs`]), refuse a dangling `--out` link, and hold the output's lock ([`lock`])
-//! while they write.
+//! while they write. What can go wrong is an [`OutputError`].
 
 pub mod dataset;
+pub mod error;
 pub mod inputs;
 pub mod lock;
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
-
+pub use error::OutputError;
+use error::io;
 pub use inputs::Inputs;
 use inputs::sibling;
+
+type Result<T, E = OutputError> = std::result::Result<T, E>;
 
 /// The file that marks a folder beside `--out` as the tool's own (`OUT.partial`,
 /// `OUT.shards`): only a folder with it is ever cleared. A folder of the same name
@@ -32,20 +35,16 @@ pub const OWNED_MARK: &str = ".evalharness-owned";
 pub fn make_owned(dir: &Path, what: &str, clear: bool) -> Result<()> {
     if std::fs::symlink_metadata(dir).is_ok() {
         if !dir.join(OWNED_MARK).is_file() {
-            bail!(
-                "{} exists and was not made by evalharness, which keeps {what} there; \
-                 move or rename it (nothing was written)",
-                dir.display()
-            );
+            return Err(OutputError::NotOurs { dir: dir.to_path_buf(), what: what.to_string() });
         }
         if !clear {
             return Ok(());
         }
-        std::fs::remove_dir_all(dir).with_context(|| format!("removing the old {}", dir.display()))?;
+        std::fs::remove_dir_all(dir).map_err(io(format!("removing the old {}", dir.display())))?;
     }
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    std::fs::create_dir_all(dir).map_err(io(format!("creating {}", dir.display())))?;
     std::fs::write(dir.join(OWNED_MARK), format!("{what}\n"))
-        .with_context(|| format!("writing {}", dir.join(OWNED_MARK).display()))
+        .map_err(io(format!("writing {}", dir.join(OWNED_MARK).display())))
 }
 
 /// A run's output folder that `--resume` can continue, guarded so that a failed or
@@ -99,26 +98,20 @@ impl RunDir {
             dir.aside = aside.exists().then_some(aside);
         } else if out.exists() {
             if !force {
-                bail!(
-                    "{} already exists (pass --resume to continue it or --force to replace it)",
-                    out.display()
-                );
+                return Err(OutputError::RunExists { out: out.to_path_buf() });
             }
             if aside.exists() {
-                bail!(
-                    "{} holds the run an interrupted --force run was replacing; move it back to {} \
-                     (or delete it) before replacing {} again, or pass --resume to continue the new run",
-                    aside.display(),
-                    out.display(),
-                    out.display()
-                );
+                return Err(OutputError::ReplacedLeft { aside, out: out.to_path_buf() });
             }
-            std::fs::rename(out, &aside)
-                .with_context(|| format!("moving {} aside to {}", out.display(), aside.display()))?;
+            std::fs::rename(out, &aside).map_err(io(format!(
+                "moving {} aside to {}",
+                out.display(),
+                aside.display()
+            )))?;
             dir.aside = Some(aside);
         }
         if !dir.out.exists() {
-            std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+            std::fs::create_dir_all(out).map_err(io(format!("creating {}", out.display())))?;
             // Only a folder this run made is removed again by a failure (never the
             // path it could not create, which may be the user's link or file).
             dir.created = true;
@@ -134,11 +127,7 @@ impl RunDir {
     /// As [`RunDir::prepare`], and rows without a `config.json` on `--resume`.
     pub fn prepare_episodes(out: &Path, inputs: &Inputs, resume: bool, force: bool) -> Result<Self> {
         if resume && out.join("episodes.jsonl").exists() && !out.join("config.json").is_file() {
-            bail!(
-                "--resume: {} has episodes but no config.json, so the settings its rows were run with \
-                 are unknown; start a new run (--force or another --out)",
-                out.display()
-            );
+            return Err(OutputError::RowsWithoutConfig { out: out.to_path_buf() });
         }
         Self::prepare(out, inputs, resume, force, "episodes.jsonl")
     }
@@ -152,7 +141,7 @@ impl RunDir {
         self.settled = true;
         match (&self.aside, complete) {
             (Some(aside), true) => std::fs::remove_dir_all(aside)
-                .with_context(|| format!("removing the replaced run {}", aside.display())),
+                .map_err(io(format!("removing the replaced run {}", aside.display()))),
             (Some(aside), false) => {
                 tracing::warn!(
                     "the run this one replaces stays in {} until it completes (--resume)",
@@ -216,7 +205,7 @@ impl Staged {
     pub fn new(target: &Path, force: bool, inputs: &Inputs) -> Result<Self> {
         let lock = inputs.claim(target, ".partial")?;
         if std::fs::symlink_metadata(target).is_ok() && !force {
-            bail!("output {} already exists (pass --force to replace it)", target.display());
+            return Err(OutputError::Exists { out: target.to_path_buf() });
         }
         let tmp = sibling(target, ".partial");
         make_owned(&tmp, "a command's output while it is written", true)?;
@@ -241,9 +230,9 @@ impl Staged {
             Ok(_) => std::fs::remove_file(&self.target),
             Err(_) => Ok(()),
         }
-        .with_context(|| format!("removing old {}", self.target.display()))?;
+        .map_err(io(format!("removing old {}", self.target.display())))?;
         std::fs::rename(&self.tmp, &self.target)
-            .with_context(|| format!("moving {} into place", self.target.display()))?;
+            .map_err(io(format!("moving {} into place", self.target.display())))?;
         Ok(self.target.clone())
     }
 
@@ -251,11 +240,12 @@ impl Staged {
     /// refusing (before moving anything) names the target already holds.
     pub fn commit_into(self) -> Result<PathBuf> {
         let _ = std::fs::remove_file(self.tmp.join(OWNED_MARK));
+        let reading = || io(format!("reading {}", self.tmp.display()));
         let entries: Vec<PathBuf> = std::fs::read_dir(&self.tmp)
-            .with_context(|| format!("reading {}", self.tmp.display()))?
+            .map_err(reading())?
             .map(|e| e.map(|e| e.path()))
             .collect::<std::io::Result<_>>()
-            .with_context(|| format!("reading {}", self.tmp.display()))?;
+            .map_err(reading())?;
         let taken: Vec<String> = entries
             .iter()
             .filter_map(|e| e.file_name())
@@ -263,15 +253,14 @@ impl Staged {
             .map(|n| n.to_string_lossy().into_owned())
             .collect();
         if !taken.is_empty() {
-            std::fs::remove_dir_all(&self.tmp).with_context(|| format!("removing {}", self.tmp.display()))?;
-            bail!("{} already holds {}", self.target.display(), taken.join(", "));
+            std::fs::remove_dir_all(&self.tmp).map_err(io(format!("removing {}", self.tmp.display())))?;
+            return Err(OutputError::Holds { target: self.target.clone(), taken });
         }
         for e in &entries {
             let dst = self.target.join(e.file_name().unwrap_or_default());
-            std::fs::rename(e, &dst)
-                .with_context(|| format!("moving {} to {}", e.display(), dst.display()))?;
+            std::fs::rename(e, &dst).map_err(io(format!("moving {} to {}", e.display(), dst.display())))?;
         }
-        std::fs::remove_dir(&self.tmp).with_context(|| format!("removing {}", self.tmp.display()))?;
+        std::fs::remove_dir(&self.tmp).map_err(io(format!("removing {}", self.tmp.display())))?;
         Ok(self.target.clone())
     }
 }
@@ -283,17 +272,4 @@ impl Drop for Staged {
             let _ = std::fs::remove_dir_all(&self.tmp);
         }
     }
-}
-
-/// Reads a JSON file, naming it in any error.
-pub fn read_json(path: &Path) -> Result<serde_json::Value> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
-}
-
-/// Writes pretty JSON to a file.
-pub fn write_json<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<()> {
-    let mut text = serde_json::to_string_pretty(value)?;
-    text.push('\n');
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }

@@ -4,11 +4,12 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
 use harness::replay::{EpisodeArrays, ReplaySpec, ReplayWriter};
 use serde_json::Value;
 
-use super::{Inputs, Staged};
+use super::{Inputs, OutputError, Staged};
+
+type Result<T, E = OutputError> = std::result::Result<T, E>;
 
 /// A dataset being written to `--out`.
 pub struct StagedDataset {
@@ -25,7 +26,7 @@ impl StagedDataset {
     pub fn create(out: &Path, force: bool, inputs: &Inputs, spec: ReplaySpec) -> Result<Self> {
         let staged = Staged::new(out, force, inputs)?;
         let writer = ReplayWriter::create_in(staged.dir(), spec)
-            .with_context(|| format!("creating {}", staged.dir().display()))?;
+            .map_err(|source| OutputError::Dataset { dir: staged.dir().to_path_buf(), source })?;
         Ok(Self { staged, writer })
     }
 
@@ -34,7 +35,8 @@ impl StagedDataset {
     /// # Errors
     /// Arrays that disagree with the layout, or an I/O failure.
     pub fn append(&mut self, ep: &EpisodeArrays) -> Result<()> {
-        Ok(self.writer.append(ep)?)
+        let dir = self.staged.dir();
+        self.writer.append(ep).map_err(|source| OutputError::Dataset { dir: dir.to_path_buf(), source })
     }
 
     /// Writes the metadata and `attrs`, then moves the dataset into place.
@@ -42,7 +44,8 @@ impl StagedDataset {
     /// # Errors
     /// An I/O failure; the old `out` is then as it was.
     pub fn finish(self, attrs: &Value) -> Result<PathBuf> {
-        self.writer.finish(attrs)?;
+        let dir = self.staged.dir().to_path_buf();
+        self.writer.finish(attrs).map_err(|source| OutputError::Dataset { dir, source })?;
         self.staged.commit()
     }
 }

@@ -1,0 +1,90 @@
+//! Which task a dataset was collected in, read from its attributes as a typed view.
+//!
+//! evalharness writes `evalharness.scenario` into every dataset it makes. A dataset
+//! without evalharness attributes at all is another codebase's Push-T replay buffer
+//! (diffusion_policy's `pusht_cchi_v7_replay.zarr`, GPC's data), which is Push-T's by
+//! construction. Anything else (attributes that do not parse, evalharness attributes
+//! that name no task) is refused, never read as Push-T.
+
+use std::path::Path;
+
+use serde::Deserialize;
+use serde_json::Value;
+
+use super::ReplayError;
+use super::reader::group_paths;
+use crate::zarr::read_attrs;
+
+/// The task of datasets without evalharness attributes.
+pub const FOREIGN_TASK: &str = "pusht";
+
+/// The part of a dataset's root attributes read here.
+#[derive(Deserialize)]
+struct Root {
+    evalharness: Option<Origin>,
+}
+
+/// The part of the `evalharness` attributes read here.
+#[derive(Deserialize)]
+struct Origin {
+    scenario: String,
+}
+
+/// The task named in root attributes `attrs` of the dataset group `path`.
+///
+/// # Errors
+/// [`ReplayError::Layout`] naming `path` when the `evalharness` attributes name no
+/// scenario (or not as a string).
+pub fn scenario_in(path: &Path, attrs: &Value) -> Result<String, ReplayError> {
+    match Root::deserialize(attrs) {
+        Ok(Root { evalharness: None }) => Ok(FOREIGN_TASK.to_string()),
+        Ok(Root { evalharness: Some(o) }) => Ok(o.scenario),
+        Err(e) => Err(ReplayError::Layout {
+            path: path.to_path_buf(),
+            reason: format!("its evalharness attributes name no task (\"scenario\"): {e}"),
+        }),
+    }
+}
+
+/// The task a dataset (a group, or a folder of groups: its first) was collected in.
+///
+/// # Errors
+/// Not a dataset, attributes that do not parse, or evalharness attributes that name
+/// no task, naming the group.
+pub fn scenario_of(path: &Path) -> Result<String, ReplayError> {
+    let first = group_paths(path)?.swap_remove(0);
+    let attrs = read_attrs(&first)?;
+    scenario_in(&first, &attrs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn the_task_is_named_or_foreign_and_never_guessed() {
+        let p = Path::new("d.zarr");
+        assert_eq!(scenario_in(p, &json!({"evalharness": {"scenario": "lift", "seed": 1}})).unwrap(), "lift");
+        assert_eq!(scenario_in(p, &json!({})).unwrap(), "pusht");
+        let err = scenario_in(p, &json!({"evalharness": {"seed": 1}})).unwrap_err().to_string();
+        assert!(err.contains("d.zarr") && err.contains("missing field `scenario`"), "{err}");
+        let err = scenario_in(p, &json!({"evalharness": {"scenario": 3}})).unwrap_err().to_string();
+        assert!(err.contains("invalid type"), "{err}");
+    }
+
+    #[test]
+    fn a_folder_of_groups_is_read_from_its_first_group() {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, task) in [("b.zarr", "can"), ("a.zarr", "lift")] {
+            let g = dir.path().join(name);
+            std::fs::create_dir_all(&g).unwrap();
+            std::fs::write(g.join(".zgroup"), r#"{"zarr_format": 2}"#).unwrap();
+            let attrs = json!({"evalharness": {"scenario": task}});
+            std::fs::write(g.join(".zattrs"), attrs.to_string()).unwrap();
+        }
+        assert_eq!(scenario_of(dir.path()).unwrap(), "lift");
+        assert_eq!(scenario_of(&dir.path().join("b.zarr")).unwrap(), "can");
+        assert!(scenario_of(&dir.path().join("none")).is_err());
+    }
+}

@@ -1,0 +1,162 @@
+//! What can be wrong with a run folder's configuration, one variant per rule, each
+//! naming the file and what to do instead.
+
+use std::path::PathBuf;
+
+/// A run configuration that cannot be read or written, or a resume or merge its
+/// rules refuse.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// The file could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A file-system operation failed; `doing` says which, naming the path.
+    #[error("{doing}: {source}")]
+    File {
+        /// What was being done.
+        doing: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is not a configuration of this kind: damaged, or written by a
+    /// version of evalharness whose settings differ.
+    #[error(
+        "{}: not a {what} run's config.json that this version reads ({field}: {source}); \
+         start a new run (--force or another --out)",
+        path.display()
+    )]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// `rank` or `plan`.
+        what: &'static str,
+        /// The setting where parsing stopped (`.` for the whole file).
+        field: String,
+        /// The parser's error.
+        source: serde_json::Error,
+    },
+    /// `--resume` under settings other than the saved run's.
+    #[error(
+        "--resume: {} was written with other settings: {}; pass the same options, or --force to start over",
+        path.display(),
+        differs.join("; ")
+    )]
+    Differs {
+        /// The saved configuration.
+        path: PathBuf,
+        /// Each differing setting, `name (saved: …, now: …)`.
+        differs: Vec<String>,
+    },
+    /// A model folder's content changed since the saved run.
+    #[error(
+        "--resume: the content of {} changed since {} was written (its rows came from the \
+         old files); restore them, or start a new run (--force or another --out)",
+        names.join(", "),
+        path.display()
+    )]
+    Changed {
+        /// The saved configuration.
+        path: PathBuf,
+        /// The inputs whose fingerprint differs.
+        names: Vec<String>,
+    },
+    /// `--episodes` lower than the saved run's.
+    #[error(
+        "--resume: {} holds a run of {was} episodes per policy, and --episodes {now} would drop \
+         some; pass --episodes {was} (or more, to extend it)",
+        path.display()
+    )]
+    Shrinks {
+        /// The saved configuration.
+        path: PathBuf,
+        /// Episodes per policy saved.
+        was: usize,
+        /// Episodes per policy asked for.
+        now: usize,
+    },
+    /// A saved run ending in a part batch cannot grow bit for bit.
+    #[error(
+        "--resume --episodes {now}: the saved run's {was} episodes end in a part batch of \
+         --batch {batch}, which a straight run of {now} would fill with other seeds (and \
+         round differently), so this run cannot be extended bit for bit; start a new one \
+         (--force or another --out), or run the extra seeds with --seed-start {next}"
+    )]
+    PartBatch {
+        /// Episodes per policy saved.
+        was: usize,
+        /// Episodes per policy asked for.
+        now: usize,
+        /// The batch size.
+        batch: usize,
+        /// The first seed after the saved run's.
+        next: u64,
+    },
+    /// A shard's share of the batches changes with their number.
+    #[error(
+        "--resume --episodes {now}: {} is one shard of a run, and a shard's share of the \
+         batches changes with their number; extend the merged run instead",
+        path.display()
+    )]
+    ShardGrows {
+        /// The saved configuration.
+        path: PathBuf,
+        /// Episodes per policy asked for.
+        now: usize,
+    },
+    /// A filmstrip index that is not a list of filmstrips.
+    #[error("{}: not a filmstrip index ({field}: {source})", path.display())]
+    Index {
+        /// The file.
+        path: PathBuf,
+        /// The entry and field where parsing stopped.
+        field: String,
+        /// The parser's error.
+        source: serde_json::Error,
+    },
+    /// A `results.json` number no run can produce (a hand-edited or damaged file).
+    #[error("results.json: {first}{}", if *more > 0 { format!(" (and {more} more)") } else { String::new() })]
+    OutOfRange {
+        /// The first value out of range, with its path in the file.
+        first: String,
+        /// How many more there are.
+        more: usize,
+    },
+    /// A kept-frames file that is not one, or frames that cannot be kept.
+    #[error("{}: not a kept-frames file ({why})", path.display())]
+    Kept {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        why: String,
+    },
+    /// Replaying a picked episode's batch for its filmstrip failed.
+    #[error("filmstrips: replaying policy {policy}'s batch of seed {seed}: {source}")]
+    Replay {
+        /// The policy.
+        policy: String,
+        /// The picked seed.
+        seed: u64,
+        /// The engine's error.
+        source: engine::EngineError,
+    },
+    /// A filmstrip's PNG or GIF could not be written.
+    #[error("{0}")]
+    Media(String),
+    /// A run's `results.json` that cannot be read.
+    #[error(transparent)]
+    Results(#[from] harness::results::ResultsError),
+    /// A run's `episodes.jsonl` that cannot be read.
+    #[error(transparent)]
+    Rows(#[from] harness::rows::RowsError),
+    /// A plot that cannot be drawn or written.
+    #[error(transparent)]
+    Plot(#[from] reports::plots::PlotError),
+    /// Shard folders that are not one complete split of one run.
+    #[error("{0}")]
+    Shards(String),
+}

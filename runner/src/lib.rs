@@ -1,0 +1,29 @@
+//! The run layer: output folders that never look complete before they are
+//! ([`output`]: staged outputs, resumable run folders, inputs checked before outputs,
+//! one writer per output), and for `rank` and `plan` what a run folder's `config.json` holds, as
+//! typed structs ([`config::RankConfig`], [`config::PlanConfig`]), and the rules that
+//! read it back: which settings `--resume` may change and how a run grows
+//! ([`resume`]), and which shard folders `merge` may join ([`shards`]); and the
+//! list of filmstrips a run's report shows ([`filmstrips`]), and the ranges a
+//! `results.json` must keep to be reported ([`check`]); and the batches the shard
+//! processes of one run share out as they go ([`claims`]); and the report's filmstrips,
+//! from the frames a run keeps or replays ([`media`]), and its report ([`report`]).
+//!
+//! Why a crate of its own: the configuration is the contract between the processes of
+//! one run (the shards of `rank --processes`, `merge`, `report`, a later `--resume`),
+//! and it names types of three crates (the world model's configuration, the judge's
+//! label and metrics), so it sits above them and below the binary.
+
+pub mod check;
+pub mod claims;
+pub mod config;
+pub mod error;
+pub mod filmstrips;
+pub mod media;
+pub mod output;
+pub mod report;
+pub mod resume;
+pub mod shards;
+
+pub use config::{JudgeSettings, PlanConfig, RankConfig, RunSettings};
+pub use error::RunError;
