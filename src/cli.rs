@@ -66,6 +66,13 @@ pub enum Command {
     /// stdin, frames on stdout).
     #[command(hide = true)]
     RenderWorker,
+    /// One shard process of `rank --processes` (started by evalharness itself): the
+    /// shard's whole `rank` arguments, typed, in a JSON file.
+    #[command(hide = true)]
+    RankShard {
+        /// The file `rank --processes` wrote (`OUT.shards/shard-I.args.json`).
+        file: PathBuf,
+    },
     /// Run episodes in the MuJoCo reference simulator and score them.
     Simulate(SimulateArgs),
     /// Collect a dataset (zarr replay buffer) from a mix of scripted behaviours.
@@ -270,7 +277,8 @@ pub struct WmEvalArgs {
 }
 
 /// `evalharness rank`.
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct RankArgs {
     /// A policy checkpoint, or a folder of them [default: checkpoints/<task>/policies].
     #[arg(long)]

@@ -156,6 +156,12 @@ pub enum RunError {
     /// A plot that cannot be drawn or written.
     #[error(transparent)]
     Plot(#[from] reports::plots::PlotError),
+    /// An output folder that cannot be prepared or committed.
+    #[error(transparent)]
+    Output(#[from] crate::output::OutputError),
+    /// An episode table that cannot be written.
+    #[error(transparent)]
+    Table(#[from] reports::episodes::TableError),
     /// Shard folders that are not one complete split of one run.
     #[error("{0}")]
     Shards(String),

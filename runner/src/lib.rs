@@ -3,7 +3,8 @@
 //! one writer per output), and for `rank` and `plan` what a run folder's `config.json` holds, as
 //! typed structs ([`config::RankConfig`], [`config::PlanConfig`]), and the rules that
 //! read it back: which settings `--resume` may change and how a run grows
-//! ([`resume`]), and which shard folders `merge` may join ([`shards`]); and the
+//! ([`resume`]), and which shard folders `merge` may join ([`shards`]) and how
+//! ([`merge`]); and the
 //! list of filmstrips a run's report shows ([`filmstrips`]), and the ranges a
 //! `results.json` must keep to be reported ([`check`]); and the batches the shard
 //! processes of one run share out as they go ([`claims`]); and the report's filmstrips,
@@ -20,6 +21,7 @@ pub mod config;
 pub mod error;
 pub mod filmstrips;
 pub mod media;
+pub mod merge;
 pub mod output;
 pub mod report;
 pub mod resume;

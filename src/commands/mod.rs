@@ -14,6 +14,7 @@ mod import_judge;
 mod import_policy;
 mod import_robomimic;
 mod import_wm;
+mod merge;
 pub(crate) mod plan;
 pub(crate) mod rank;
 mod read_judge;
@@ -72,8 +73,9 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         }
         Command::Agreement(a) => agreement::run(a),
         Command::Rank(a) => rank::run(a, cli.render_workers, cli.quiet),
+        Command::RankShard { file } => rank::run_shard(file, cli.render_workers, cli.quiet),
         Command::Plan(a) => plan::run(a, cli.quiet),
-        Command::Merge(a) => rank::merge::run(&a.shards, &a.out, a.force, a.no_report),
+        Command::Merge(a) => merge::run(&a.shards, &a.out, a.force, a.no_report),
         Command::Tasks(a) => tasks::run(&a.runs, a.tex.as_deref(), a.force),
         // Answered in `main`, before any command runs.
         Command::RenderWorker => Ok(ExitCode::SUCCESS),

@@ -10,8 +10,8 @@
 //! scores the imagined frames with a learned judge instead of the task's own.
 
 pub mod defaults;
-pub mod merge;
 mod processes;
+pub(crate) use processes::run_shard;
 mod summary;
 
 use std::path::Path;

@@ -111,7 +111,7 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
     }
     let dirs: Vec<PathBuf> = shards.iter().map(|s| s.dir.clone()).collect();
     // The shards' thread times, summed by merge; the wall clock is this command's.
-    let (_, summed) = super::merge::join(&dirs, &a.out, true, true, false)?;
+    let (_, summed) = runner::merge::join(&dirs, &a.out, true, true, false)?;
     // The frames each shard kept for the filmstrips, for the finishing run to pick from.
     runner::media::kept::gather(&dirs, &a.out)?;
     let timing = RunTiming {
@@ -174,8 +174,16 @@ impl Shard {
             .truncate(!again)
             .open(&self.log)
             .with_context(|| format!("opening {}", self.log.display()))?;
+        // The shard's arguments, typed, in a file beside its folder: every setting of the
+        // run reaches it as the struct it is (no command line rebuilt flag by flag).
+        let file = shard_file(&self.dir);
+        let text = serde_json::to_string_pretty(&shard_args(a, self.i, n, &self.dir, resume))?;
+        harness::runfile::write_atomic(&file, &text)
+            .map_err(|e| anyhow::anyhow!("writing {}: {}", e.path.display(), e.message))?;
+        // A shard renders its own frames: the processes are the parallelism.
         let child = Command::new(exe)
-            .args(shard_args(a, self.i, n, &self.dir, resume))
+            .args([OsString::from("-q"), "--render-workers".into(), "0".into(), "rank-shard".into()])
+            .arg(&file)
             .env(PARENT_ENV, std::process::id().to_string())
             .stdin(Stdio::null())
             .stdout(Stdio::null())
@@ -273,63 +281,49 @@ fn tail(log: &Path) -> String {
     lines[lines.len().saturating_sub(20)..].join("\n")
 }
 
-/// The command line of shard `i` of `n` into `dir`: every setting of the run
-/// (the finishing `--resume` refuses the joined rows if one differed), one worker, no
-/// report and no gates (they belong to the whole run); `--resume` or `--force`. A test
-/// (`every_flag_of_rank_is_either_passed_to_the_shards_or_set_by_them`) fails when `rank` gains
-/// a flag this function is not told about.
-fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> Vec<OsString> {
-    let mut v: Vec<OsString> = Vec::new();
-    let mut flag = |name: &str, value: OsString| {
-        v.push(name.into());
-        v.push(value);
-    };
-    if let Some(p) = &a.policies {
-        flag("--policies", p.into());
-    }
-    if let Some(p) = &a.world_model {
-        flag("--world-model", p.into());
-    }
-    if let Some(p) = &a.judge {
-        flag("--judge", p.into());
-    }
-    if let Some(k) = a.judge_persist {
-        flag("--judge-persist", k.to_string().into());
-    }
-    if let Some(x) = a.alpha {
-        flag("--alpha", x.to_string().into());
-    }
-    if let Some(x) = a.noise_scale {
-        flag("--noise-scale", x.to_string().into());
-    }
-    if let Some(e) = a.episodes {
-        flag("--episodes", e.to_string().into());
-    }
-    if let Some(m) = a.max_steps {
-        flag("--max-steps", m.to_string().into());
-    }
-    flag("--scenario", a.scenario.clone().into());
-    flag("--seed-start", a.seed_start.to_string().into());
-    flag("--batch", a.batch.to_string().into());
-    flag("--seed", a.seed.to_string().into());
-    flag("--bootstrap", a.bootstrap.to_string().into());
-    flag("--jobs", "1".into());
-    flag("--shard", format!("{i}/{n}").into());
+/// The file of shard `dir`'s arguments: `OUT.shards/shard-I.args.json`.
+fn shard_file(dir: &Path) -> PathBuf {
+    let mut name = dir.file_name().map_or_else(|| OsString::from("shard"), ToOwned::to_owned);
+    name.push(".args.json");
+    dir.with_file_name(name)
+}
+
+/// The arguments of shard `i` of `n` into `dir`: every setting of the run (the
+/// finishing `--resume` refuses the joined rows if one differed; a field `rank` gains
+/// reaches the shards by this struct update without being named here), one worker, its
+/// shard and the shards' shared claims folder, no processes of its own, no report and
+/// no gates (they belong to the whole run); `--resume` or `--force`.
+fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> RankArgs {
     let claims = dir.parent().map_or_else(|| PathBuf::from("claims"), |p| p.join("claims"));
-    flag("--claims", claims.into());
-    flag("--out", dir.into());
-    // A shard renders its own frames: the processes are the parallelism.
-    let mut all: Vec<OsString> = vec!["-q".into(), "--render-workers".into(), "0".into(), "rank".into()];
-    all.extend(v);
-    if a.judge_every_frame {
-        all.push("--judge-every-frame".into());
+    RankArgs {
+        jobs: 1,
+        shard: Some(format!("{i}/{n}")),
+        claims: Some(claims),
+        out: dir.to_path_buf(),
+        processes: None,
+        min_pearson: None,
+        max_inversions: None,
+        no_report: true,
+        resume,
+        force: !resume,
+        ..a.clone()
     }
-    if a.float_frames {
-        all.push("--float-frames".into());
+}
+
+/// `evalharness rank-shard FILE`: one shard process of `rank --processes`, its
+/// arguments read from the file its parent wrote.
+///
+/// # Errors
+/// A file that cannot be read or is not `rank`'s arguments (naming it), or what the
+/// shard's run returns.
+pub fn run_shard(file: &Path, render_workers: Option<usize>, quiet: bool) -> Result<ExitCode> {
+    let text = std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
+    let args: RankArgs = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a rank shard's arguments", file.display()))?;
+    if args.shard.is_none() {
+        bail!("{}: not a rank shard's arguments (no shard)", file.display());
     }
-    all.push("--no-report".into());
-    all.push(if resume { "--resume" } else { "--force" }.into());
-    all
+    super::run(&args, render_workers, quiet)
 }
 
 #[cfg(test)]
@@ -391,82 +385,37 @@ mod tests {
             ]
             .map(OsString::from),
         );
-        let args = shard_args(&a, 2, 3, Path::new("o.shards/shard-2"), false);
-        let argv = std::iter::once(OsString::from("evalharness")).chain(args.iter().cloned());
-        let cli = crate::cli::Cli::try_parse_from(argv).unwrap();
-        assert_eq!(cli.render_workers, Some(0), "a shard renders its own frames");
-        let s = parse(&args);
-        assert_eq!((&s.policies, &s.world_model, &s.judge), (&a.policies, &a.world_model, &a.judge));
-        assert_eq!((s.noise_scale, s.judge_every_frame, s.float_frames), (Some(0.25), true, true));
-        assert_eq!(
-            (s.judge_persist, s.alpha, s.episodes, s.max_steps),
-            (Some(2), Some(0.5), Some(20), Some(30))
-        );
-        assert_eq!((s.scenario.as_str(), s.seed_start, s.batch, s.seed, s.bootstrap), ("can", 7, 5, 3, 100));
+        let dir = Path::new("o.shards/shard-2");
+        let s = shard_args(&a, 2, 3, dir, false);
+        // Every setting of the run, as given: only the shard's own fields differ.
+        let own = RankArgs {
+            jobs: a.jobs,
+            shard: None,
+            claims: None,
+            out: a.out.clone(),
+            processes: a.processes,
+            min_pearson: a.min_pearson,
+            max_inversions: a.max_inversions,
+            no_report: a.no_report,
+            resume: a.resume,
+            force: a.force,
+            ..s.clone()
+        };
+        assert_eq!(own, a);
         assert_eq!((s.jobs, s.shard.as_deref(), s.processes), (1, Some("2/3"), None));
         assert_eq!((s.min_pearson, s.max_inversions, s.no_report), (None, None, true));
-        assert_eq!((s.out, s.force, s.resume), (PathBuf::from("o.shards/shard-2"), true, false));
+        assert_eq!((s.out.as_path(), s.force, s.resume), (dir, true, false));
         assert_eq!(s.claims, Some(PathBuf::from("o.shards/claims")), "the shards share one claims folder");
-        let r = parse(&shard_args(&a, 0, 3, Path::new("d"), true));
+        let r = shard_args(&a, 0, 3, Path::new("d"), true);
         assert!(r.resume && !r.force);
-    }
-
-    /// The flags of `rank` a shard is given with the run's value (`shard_args`); every other flag
-    /// is in [`SHARD_SETS_ITSELF`]. A test checks that every flag of `rank` is in one of the two,
-    /// so a new flag cannot be dropped from the shards unnoticed.
-    const SHARD_GETS: &[&str] = &[
-        "policies",
-        "world_model",
-        "judge",
-        "judge_persist",
-        "judge_every_frame",
-        "float_frames",
-        "alpha",
-        "noise_scale",
-        "scenario",
-        "episodes",
-        "seed_start",
-        "max_steps",
-        "batch",
-        "seed",
-        "bootstrap",
-    ];
-
-    /// The flags a shard sets for itself: one worker, its own shard, claims folder and output,
-    /// `--force` or `--resume`, no processes of its own, no report and no gates (the whole run's).
-    const SHARD_SETS_ITSELF: &[&str] = &[
-        "jobs",
-        "shard",
-        "claims",
-        "out",
-        "force",
-        "resume",
-        "processes",
-        "min_pearson",
-        "max_inversions",
-        "no_report",
-    ];
-
-    #[test]
-    fn every_flag_of_rank_is_either_passed_to_the_shards_or_set_by_them() {
-        use clap::CommandFactory;
-        let cli = crate::cli::Cli::command();
-        let rank = cli.find_subcommand("rank").expect("a rank subcommand");
-        let ids: Vec<String> = rank
-            .get_arguments()
-            .map(|a| a.get_id().to_string())
-            .filter(|id| !["help", "version"].contains(&id.as_str()))
-            .collect();
-        for id in &ids {
-            let known = SHARD_GETS.contains(&id.as_str()) || SHARD_SETS_ITSELF.contains(&id.as_str());
-            assert!(
-                known,
-                "rank's --{id} is neither passed to shards (SHARD_GETS) nor set by them (SHARD_SETS_ITSELF)"
-            );
-        }
-        for id in SHARD_GETS.iter().chain(SHARD_SETS_ITSELF) {
-            assert!(ids.iter().any(|i| i == id), "{id} is not a flag of rank");
-        }
+        // The file round-trips, and the hidden command reads it.
+        let text = serde_json::to_string(&s).unwrap();
+        assert_eq!(serde_json::from_str::<RankArgs>(&text).unwrap(), s);
+        assert_eq!(shard_file(dir), PathBuf::from("o.shards/shard-2.args.json"));
+        let argv = ["evalharness", "-q", "--render-workers", "0", "rank-shard", "o.shards/shard-2.args.json"];
+        let cli = crate::cli::Cli::try_parse_from(argv).unwrap();
+        assert_eq!(cli.render_workers, Some(0), "a shard renders its own frames");
+        assert!(matches!(cli.command, crate::cli::Command::RankShard { .. }));
     }
 
     #[test]

@@ -1,28 +1,18 @@
-//! `evalharness merge SHARD... --out OUT`: joins `rank --shard i/n` outputs into
-//! what one unsharded run writes — the same `episodes.jsonl` rows in the same
-//! order (policy, seed, branch), hence the same `results.json` (timings are summed).
+//! `merge`'s work: `rank --shard i/n` folders joined into what one unsharded run
+//! writes — the same `episodes.jsonl` rows in the same order (policy, seed, branch),
+//! hence the same `results.json` (timings are summed) — staged in `OUT.partial` and
+//! moved into place when complete.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
-use anyhow::{Result, bail};
-use harness::results::{FailedPolicy, RankResults, RunTiming};
-use runner::RankConfig;
-
-use crate::output::{Staged, write_json};
-use harness::results::EpisodeRow;
+use harness::results::{Branch, EpisodeRow, FailedPolicy, RankResults, RunTiming};
 use harness::rows::{append_rows, read_rows};
 use harness::summarise::summarise;
 
-/// `evalharness merge`: joins shard folders into `out` and says so on stdout.
-///
-/// # Errors
-/// As [`join`].
-pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Result<ExitCode> {
-    let (rows, _) = join(shards, out, force, no_report, true)?;
-    outln!("merged {} shards: {rows} rows -> {}", shards.len(), out.display());
-    Ok(ExitCode::SUCCESS)
-}
+use crate::config::RankConfig;
+use crate::error::RunError;
+use crate::output::{Inputs, Staged};
 
 /// Joins shard folders into `out` (written into `OUT.partial`, moved into place when
 /// complete); returns the number of rows and the shards' timing, summed. With
@@ -33,23 +23,27 @@ pub fn run(shards: &[PathBuf], out: &Path, force: bool, no_report: bool) -> Resu
 /// # Errors
 /// Missing files, shards of different runs, duplicate rows that disagree, missing
 /// rows (with `complete`), or I/O failures.
-pub(super) fn join(
+pub fn join(
     shards: &[PathBuf],
     out: &Path,
     force: bool,
     no_report: bool,
     complete: bool,
-) -> Result<(usize, RunTiming)> {
+) -> Result<(usize, RunTiming), RunError> {
+    let none = || RunError::Shards("give at least one shard folder".into());
     if shards.is_empty() {
-        bail!("give at least one shard folder");
+        return Err(none());
     }
-    let listed = crate::output::Inputs::new().all("shard", shards);
+    let listed = Inputs::new().all("shard", shards);
     listed.check(out)?;
     let configs: Vec<RankConfig> =
-        shards.iter().map(|s| runner::config::read(&s.join("config.json"))).collect::<Result<_, _>>()?;
-    runner::shards::check_complete_set(shards, &configs)?;
+        shards.iter().map(|s| crate::config::read(&s.join("config.json"))).collect::<Result<_, _>>()?;
+    crate::shards::check_complete_set(shards, &configs)?;
     let first = &configs[0];
     let mut rows: Vec<EpisodeRow> = Vec::new();
+    // Where each (policy, seed, branch) is in `rows`: a row two shards both hold must be
+    // the same row.
+    let mut at: HashMap<(String, u64, Branch), usize> = HashMap::new();
     let mut failed: Vec<FailedPolicy> = Vec::new();
     let mut timing = RunTiming {
         wall_seconds: 0.0,
@@ -63,12 +57,20 @@ pub(super) fn join(
     let mut first_res: Option<RankResults> = None;
     for s in shards {
         for r in read_rows::<EpisodeRow>(&s.join("episodes.jsonl"))? {
-            match rows.iter().find(|x| x.policy == r.policy && x.seed == r.seed && x.branch == r.branch) {
-                Some(x) if *x != r => {
-                    bail!("{}: policy {} seed {} differs between shards", s.display(), r.policy, r.seed)
+            match at.get(&(r.policy.clone(), r.seed, r.branch)) {
+                Some(&i) if rows[i] != r => {
+                    return Err(RunError::Shards(format!(
+                        "{}: policy {} seed {} differs between shards",
+                        s.display(),
+                        r.policy,
+                        r.seed
+                    )));
                 }
                 Some(_) => {}
-                None => rows.push(r),
+                None => {
+                    at.insert((r.policy.clone(), r.seed, r.branch), rows.len());
+                    rows.push(r);
+                }
             }
         }
         let res = RankResults::read(&s.join("results.json"))?;
@@ -87,13 +89,13 @@ pub(super) fn join(
         }
         first_res.get_or_insert(res);
     }
-    let Some(first_res) = first_res else { bail!("give at least one shard folder") };
+    let first_res = first_res.ok_or_else(none)?;
     timing.world_model_ms_per_frame = 1e3 * timing.world_model_seconds / frames.max(1.0);
     let names = first.policy_names();
     let order = |p: &str| names.iter().position(|n| n == p).unwrap_or(usize::MAX);
     rows.sort_by_key(|r| (order(&r.policy), r.seed, r.branch));
     if complete {
-        runner::shards::check_every_row(&rows, &failed, first)?;
+        crate::shards::check_every_row(&rows, &failed, first)?;
     }
     // Everything is written into OUT.partial and moved into place at the end.
     let staged = Staged::new(out, force, &listed)?;
@@ -103,11 +105,17 @@ pub(super) fn join(
     let ok: Vec<String> = names.iter().filter(|n| !failed_names.contains(&n.as_str())).cloned().collect();
     let (policies, agreement) = summarise(&rows, &ok, first.bootstrap, first.seed);
     let res = RankResults { policies, agreement, failed_policies: failed, timing, ..first_res };
-    write_json(&tmp.join("results.json"), &res.to_json()?)?;
-    runner::config::write(&tmp.join("config.json"), &runner::shards::joined(first, shards))?;
+    // As `rank` writes it: the struct as a JSON value (its keys sorted).
+    let results = tmp.join("results.json");
+    let value = res.to_json().map_err(|e| RunError::File {
+        doing: format!("writing {}", results.display()),
+        source: std::io::Error::other(e),
+    })?;
+    crate::config::write(&results, &value)?;
+    crate::config::write(&tmp.join("config.json"), &crate::shards::joined(first, shards))?;
     reports::episode_tables::write_tables(&tmp, &rows)?;
     if !no_report {
-        runner::report::write_report(&tmp)?;
+        crate::report::write_report(&tmp)?;
     }
     staged.commit()?;
     Ok((rows.len(), res.timing))
