@@ -168,3 +168,17 @@ pub fn build_arm_model(
 pub fn serve_render_worker(input: impl std::io::Read, output: impl std::io::Write) -> std::io::Result<()> {
     robosuite::render_pool::serve(input, output, &build_arm_model)
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn every_task_says_without_a_reset_whether_its_episodes_judge_their_frames() {
+        // `rank` asks `judges_own_frames` to pick a learned judge; the episodes' own
+        // `judge` must agree with it (Push-T: its frame scorer; Lift and Can: none).
+        for (name, own) in [("pusht", true), ("pusht-gpc", true), ("lift", false), ("can", false)] {
+            let task = super::load_task(name).expect("robosuite assets (scripts/setup.sh)");
+            assert_eq!(task.judges_own_frames(), own, "{name}");
+            assert_eq!(task.reset(7).unwrap().judge().is_some(), own, "{name}");
+        }
+    }
+}

@@ -57,6 +57,9 @@ impl Task for Reach {
     fn control_hz(&self) -> f64 {
         1.0
     }
+    fn judges_own_frames(&self) -> bool {
+        true
+    }
     fn reset(&self, seed: u64) -> Result<Box<dyn Env>, TaskError> {
         Ok(Box::new(ReachEnv { seed, x: 3.0 * seed as f64 }))
     }
@@ -285,7 +288,8 @@ fn robomimic_lift_runs_through_the_simulator_branch_with_a_given_judge() {
     let mut cfg = WorldModelConfig::pixels(unet, 96);
     let pusht = WorldModel::from_parts(cfg.clone(), FrameCodec::pixels(96), cfg.unet.init(&device), &device);
     let e = crate::wm_branch(&Up, &start, &setup, &pusht, &mut Timing::default()).err().unwrap();
-    assert!(format!("{e:?}").contains("actions have 7 entries, the world model reads 2"), "{e:?}");
+    let source = std::error::Error::source(&e).map(ToString::to_string).unwrap_or_default();
+    assert_eq!(source, "actions have 7 entries, the world model reads 2", "{e:?}");
     cfg.actions = Some(ActionScale { low: vec![-1.0; 7], high: vec![1.0; 7] });
     let wm = WorldModel::from_parts(cfg.clone(), FrameCodec::pixels(96), cfg.unet.init(&device), &device);
     let imagined = crate::wm_branch(&Up, &start, &setup, &wm, &mut Timing::default()).unwrap();

@@ -280,6 +280,10 @@ pub trait Task: Send + Sync {
     fn max_steps(&self) -> usize;
     /// Control steps per second.
     fn control_hz(&self) -> f64;
+    /// Whether its episodes judge their own imagined frames ([`Env::judge`] is `Some`
+    /// for every seed): a fact of the task, answered without a reset. A task without
+    /// such a judge needs a learned one for `rank`'s world-model branch.
+    fn judges_own_frames(&self) -> bool;
     /// The episode of `seed`, reset (a pure function of the seed).
     ///
     /// # Errors

@@ -142,7 +142,7 @@ pub enum RunError {
         /// The picked seed.
         seed: u64,
         /// The engine's error.
-        source: engine::EngineError,
+        source: Box<engine::EngineError>,
     },
     /// A filmstrip's PNG or GIF could not be written.
     #[error("{0}")]
@@ -162,7 +162,41 @@ pub enum RunError {
     /// An episode table that cannot be written.
     #[error(transparent)]
     Table(#[from] reports::episodes::TableError),
+    /// The world model failed while imagining a batch: it would fail every policy alike,
+    /// so the run stops, naming it.
+    #[error(
+        "world model {}, imagining policy {policy}'s seeds {seeds:?} (the rows of the batches before this one are kept)",
+        model.display()
+    )]
+    WorldModel {
+        /// The world model's folder.
+        model: PathBuf,
+        /// The policy whose batch it was.
+        policy: String,
+        /// The batch's seeds.
+        seeds: Vec<u64>,
+        /// The rollout's error.
+        source: Box<world_model::rollout::RolloutError>,
+    },
+    /// A judge scored an imagined frame with something other than a score: every
+    /// policy's imagined rows would be wrong, so the run stops, naming it.
+    #[error("{judge} (the rows of the batches before this one are kept)")]
+    Judge {
+        /// `judge DIR`, or the task's own judge.
+        judge: String,
+        /// The engine's error.
+        source: Box<engine::EngineError>,
+    },
+    /// The engine stopped a run of batches (its worker threads could not start).
+    #[error(transparent)]
+    Engine(Box<engine::EngineError>),
     /// Shard folders that are not one complete split of one run.
     #[error("{0}")]
     Shards(String),
+}
+
+impl From<engine::EngineError> for RunError {
+    fn from(e: engine::EngineError) -> Self {
+        Self::Engine(Box::new(e))
+    }
 }

@@ -8,13 +8,15 @@
 //! list of filmstrips a run's report shows ([`filmstrips`]), and the ranges a
 //! `results.json` must keep to be reported ([`check`]); and the batches the shard
 //! processes of one run share out as they go ([`claims`]); and the report's filmstrips,
-//! from the frames a run keeps or replays ([`media`]), and its report ([`report`]).
+//! from the frames a run keeps or replays ([`media`]), and its report ([`report`]); and
+//! the batches one process of a run runs, appended as they finish ([`batches`]).
 //!
 //! Why a crate of its own: the configuration is the contract between the processes of
 //! one run (the shards of `rank --processes`, `merge`, `report`, a later `--resume`),
 //! and it names types of three crates (the world model's configuration, the judge's
 //! label and metrics), so it sits above them and below the binary.
 
+pub mod batches;
 pub mod check;
 pub mod claims;
 pub mod config;

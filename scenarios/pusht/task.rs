@@ -76,6 +76,11 @@ impl Task for PushTTask {
         }
     }
 
+    fn judges_own_frames(&self) -> bool {
+        // Every episode's `judge` is its frame scorer (goal mask × block colour).
+        true
+    }
+
     fn score_kind(&self) -> ScoreKind {
         ScoreKind::Coverage { success_at: self.cfg.task.success_coverage }
     }

@@ -9,6 +9,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::error::SettingError;
+
 /// Per-entry bounds of the actions a world model reads.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -45,12 +47,12 @@ impl ActionScale {
     /// Whether actions of `dim` entries can be read with this scale.
     ///
     /// # Errors
-    /// A message naming both sizes.
-    pub fn check(&self, dim: usize) -> Result<(), String> {
+    /// [`SettingError::ActionWidth`] naming both sizes.
+    pub fn check(&self, dim: usize) -> Result<(), SettingError> {
         if dim == self.dim() && self.high.len() == self.dim() {
             Ok(())
         } else {
-            Err(format!("actions have {dim} entries, the world model reads {}", self.dim()))
+            Err(SettingError::ActionWidth { given: dim, reads: self.dim() })
         }
     }
 }
@@ -76,6 +78,6 @@ mod tests {
         // 2(0.5+1)/2 − 1 = 0.5; 2(1−0)/4 − 1 = −0.5; 2(0.5+0.5)/1 − 1 = 1.
         assert_eq!(out, vec![0.5, -0.5, 1.0]);
         assert!(s.check(3).is_ok());
-        assert_eq!(s.check(2).unwrap_err(), "actions have 2 entries, the world model reads 3");
+        assert_eq!(s.check(2).unwrap_err().to_string(), "actions have 2 entries, the world model reads 3");
     }
 }

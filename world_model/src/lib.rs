@@ -37,4 +37,4 @@ pub mod train_wm;
 pub mod unet;
 pub mod weights;
 
-pub use error::WorldModelError;
+pub use error::{SettingError, WorldModelError};

@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use crate::action::ActionScale;
 use crate::codec::FrameCodec;
 use crate::cpu_decoder::CpuDecoder;
-use crate::error::WorldModelError;
+use crate::error::{SettingError, WorldModelError};
 use crate::latents::LatentStats;
 use crate::train_ae::ckpt;
 use crate::unet::cpu::CpuUNet;
@@ -298,14 +298,14 @@ impl WorldModel {
     /// Sets the action-accentuation strength α used from now on (spec §3).
     ///
     /// # Errors
-    /// A message when the model was not trained with accentuation or α is not a
+    /// [`SettingError`] when the model was not trained with accentuation or α is not a
     /// finite value >= 1.
-    pub fn set_alpha(&mut self, alpha: f32) -> Result<(), String> {
+    pub fn set_alpha(&mut self, alpha: f32) -> Result<(), SettingError> {
         if !self.cfg.unet.uses_accentuation() {
-            return Err("this world model was not trained with --accentuation, so it has no α input".into());
+            return Err(SettingError::NoAlphaInput);
         }
         if !(alpha.is_finite() && alpha >= 1.0) {
-            return Err(format!("α must be a finite value >= 1, got {alpha}"));
+            return Err(SettingError::Alpha(alpha));
         }
         self.cfg.alpha = Some(alpha);
         Ok(())
@@ -322,12 +322,12 @@ impl WorldModel {
     /// # Errors
     /// A diffusion model (its noise is the DDIM trajectory's start, not a
     /// temperature), or a scale that is not a finite value in [0, 1].
-    pub fn set_noise_scale(&mut self, scale: f32) -> Result<(), String> {
+    pub fn set_noise_scale(&mut self, scale: f32) -> Result<(), SettingError> {
         if self.cfg.objective == Objective::Diffusion {
-            return Err("a diffusion model's noise starts its DDIM sampling; it has no temperature".into());
+            return Err(SettingError::NoTemperature);
         }
         if !(scale.is_finite() && (0.0..=1.0).contains(&scale)) {
-            return Err(format!("the noise scale must be a finite value in [0, 1], got {scale}"));
+            return Err(SettingError::NoiseScale(scale));
         }
         self.cfg.noise_scale = Some(scale);
         Ok(())

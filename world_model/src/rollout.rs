@@ -24,14 +24,14 @@ pub struct NonFiniteLatents {
 }
 
 /// Why a rollout step failed.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RolloutError {
     /// The model diverged.
     #[error(transparent)]
     NonFinite(#[from] NonFiniteLatents),
     /// Actions of a size the model does not read.
-    #[error("{0}")]
-    Actions(String),
+    #[error(transparent)]
+    Actions(#[from] crate::error::SettingError),
 }
 
 /// A batch of autoregressive rollouts: each row's last K normalised latents and
@@ -83,7 +83,7 @@ impl Rollout {
         for r in 0..b {
             for j in 0..f {
                 let a = action(r, j);
-                scale.check(a.len()).map_err(RolloutError::Actions)?;
+                scale.check(a.len())?;
                 scale.normalise_into(a, &mut acts);
             }
         }

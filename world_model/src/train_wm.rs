@@ -238,7 +238,7 @@ pub fn train_world_model(
     let scale = model_cfg.action_scale();
     scale
         .check(data.action_dim)
-        .map_err(|message| WorldModelError::Data { path: data.source.clone(), message })?;
+        .map_err(|e| WorldModelError::Data { path: data.source.clone(), message: e.to_string() })?;
     let stride = (held.len() / cfg.eval_windows.max(1)).max(1);
     let eval_windows: Vec<Window> =
         held.iter().step_by(stride).take(cfg.eval_windows).map(|&t| window(data, t, k, f, &scale)).collect();

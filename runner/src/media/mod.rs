@@ -95,7 +95,8 @@ fn frames_of(
         let setup = Setup { record: true, ..*src.setup };
         let job = [Batch { policy: 0, seeds: batch }];
         let mut out = Vec::new();
-        let replay = |e: EngineError| RunError::Replay { policy: name.to_string(), seed, source: e };
+        let replay =
+            |e: EngineError| RunError::Replay { policy: name.to_string(), seed, source: Box::new(e) };
         run_batches::<EngineError>(&[policy], &job, &setup, src.wm, 1, &mut |_, r| {
             out = r?.frames;
             Ok(())

@@ -82,7 +82,7 @@ pub fn resolve_with(
     } else {
         TaskDefaults::default()
     };
-    let (judge, own_judge) = judge(a.judge.as_deref(), task, root, a.seed_start)?;
+    let (judge, own_judge) = judge(a.judge.as_deref(), task, root);
     Ok(Resolved {
         policies: a.policies.clone().unwrap_or_else(|| dir.join("policies")),
         world_model: a.world_model.clone().unwrap_or_else(|| dir.join("world_model")),
@@ -96,21 +96,14 @@ pub fn resolve_with(
 }
 
 /// The learned judge of imagined frames: `given`, else the shipped `root/<task>/judge`
-/// where it exists and the task has no hand-written judge (its episode at `seed` says);
-/// and whether it has one. Shared by `rank` and `simulate --replay-imagined`.
-///
-/// # Errors
-/// A reset of `seed` that fails.
-pub fn judge(
-    given: Option<&Path>,
-    task: &dyn Task,
-    root: &Path,
-    seed: u64,
-) -> Result<(Option<PathBuf>, bool)> {
+/// where it exists and the task has no hand-written judge
+/// ([`Task::judges_own_frames`], answered without a reset); and whether it has one.
+/// Shared by `rank` and `simulate --replay-imagined`.
+pub fn judge(given: Option<&Path>, task: &dyn Task, root: &Path) -> (Option<PathBuf>, bool) {
     let shipped = root.join(task.name()).join("judge");
-    let own = task.reset(seed)?.judge().is_some();
+    let own = task.judges_own_frames();
     let judge = given.map(Path::to_path_buf).or_else(|| (!own && shipped.is_dir()).then_some(shipped));
-    Ok((judge, own))
+    (judge, own)
 }
 
 impl Resolved {

@@ -19,8 +19,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use engine::schedule::{self, Batch};
-use engine::{EngineError, Setup};
+use engine::Setup;
 use harness::task::{ScoreKind, Task};
 use policies::dir::{checkpoint_dirs, checkpoint_name};
 use policies::judge::{FrameJudge, Label};
@@ -33,7 +32,6 @@ use crate::cli::RankArgs;
 use crate::output::write_json;
 use crate::progress;
 use harness::results::EpisodeRow;
-use harness::rows::append_rows;
 use harness::summarise::summarise;
 
 /// Parses `--shard i/n`.
@@ -159,7 +157,7 @@ fn run_with(
     }
     runner::config::write(&config_file, &config)?;
     let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
-    let mut rows: Vec<EpisodeRow> = harness::rows::resume_rows(&jsonl, |r| {
+    let rows: Vec<EpisodeRow> = harness::rows::resume_rows(&jsonl, |r| {
         harness::rows::whole_batches(r, &batches, runner::resume::rank_key, &runner::resume::RANK_KINDS)
     })?;
     let pool = rayon::ThreadPoolBuilder::new()
@@ -192,80 +190,26 @@ fn run_with(
             }
         }
     }
-    let claims = a.claims.as_deref().map(|d| runner::claims::Claims::open(d, shard)).transpose()?;
-    let (mut jobs, mut keys): (Vec<Batch>, Vec<String>) = (Vec::new(), Vec::new());
-    for (li, (pi, _)) in loaded.iter().enumerate() {
-        for (bi, batch) in batches.iter().enumerate() {
-            let name = &names[*pi];
-            if claims.is_none() && (pi * batches.len() + bi) % shards != shard {
-                pb.inc(batch.len() as u64);
-                continue;
-            }
-            let todo: Vec<u64> = batch
-                .iter()
-                .copied()
-                .filter(|s| rows.iter().filter(|r| &r.policy == name && r.seed == *s).count() < 2)
-                .collect();
-            pb.inc((batch.len() - todo.len()) as u64);
-            if !todo.is_empty() {
-                jobs.push(Batch { policy: li, seeds: todo });
-                keys.push(runner::claims::Claims::key(*pi, bi));
-            }
-        }
-    }
     let policies: Vec<&dyn harness::policy::Policy> = loaded.iter().map(|(_, p)| p.as_ref()).collect();
-    // The report's filmstrips come from the run's own frames (`kept::Kept`) when the batches
-    // in flight can hold them; the shards of `--processes` (which use claims) keep theirs
-    // for the run that joins them.
+    // The report's filmstrips come from the run's own frames (`runner::media::kept`) when the
+    // batches in flight can hold them; the shards of `--processes` (which use claims) keep
+    // theirs for the run that joins them.
     setup.record = ((!a.no_report && shards == 1) || a.claims.is_some())
         && runner::media::recording_fits(&policies, &setup, a.batch, a.jobs);
-    let kept_dir = a.out.join(runner::media::kept::FOLDER);
-    let mut kept = if setup.record {
-        runner::media::kept::Kept::open(&kept_dir, &rows)?
-    } else {
-        runner::media::kept::Kept::default()
+    let plan = runner::batches::Batches {
+        names: &names,
+        loaded: &loaded,
+        batches: &batches,
+        shard: (shard, shards),
+        claims: a.claims.as_deref(),
+        jobs: a.jobs,
+        out: &a.out,
+        world_model: &r.world_model,
+        judge: r.judge.as_deref(),
     };
-    let mut done = |j: usize, out: schedule::BatchResult| -> Result<()> {
-        let (name, todo) = (&names[loaded[jobs[j].policy].0], &jobs[j].seeds);
-        match out {
-            Ok(new) => {
-                // Batches are appended whole, and `resume_rows` dropped any part of one.
-                append_rows(&jsonl, &new.rows)?;
-                kept.add(name, &new.rows, new.frames)?;
-                rows.extend(new.rows);
-                pb.inc(todo.len() as u64);
-            }
-            // The world model failing is not the policy's fault and would fail every
-            // policy alike: stop the run once, naming the model.
-            Err(EngineError::WorldModel { source, .. }) => {
-                bail!(
-                    "world model {}: {source} (while imagining policy {name}'s seeds {todo:?}); \
-                     the rows of the batches before this one are kept",
-                    r.world_model.display(),
-                );
-            }
-            // A judge that scores nonsense would make every policy's imagined rows wrong.
-            Err(e @ EngineError::Judge { .. }) => {
-                let judge = r
-                    .judge
-                    .as_ref()
-                    .map_or_else(|| "the task's own judge".to_string(), |d| format!("judge {}", d.display()));
-                bail!("{judge}: {e}; the rows of the batches before this one are kept");
-            }
-            Err(e) => {
-                let e = anyhow::Error::new(e);
-                tracing::error!("policy {name}: {e:#}; continuing with the other policies");
-                failed.push(FailedPolicy { policy: name.clone(), error: format!("{e:#}") });
-            }
-        }
-        Ok(())
-    };
-    let timing = match &claims {
-        Some(c) => {
-            runner::claims::run_claimed::<anyhow::Error>(&policies, &jobs, &keys, c, &setup, &wm, &mut done)?
-        }
-        None => schedule::run_batches::<anyhow::Error>(&policies, &jobs, &setup, &wm, a.jobs, &mut done)?,
-    };
+    let kept_dir = plan.kept_dir();
+    let ran = plan.run(rows, failed, &setup, &wm, &|n| pb.inc(n))?;
+    let (mut rows, failed, timing, kept) = (ran.rows, ran.failed, ran.timing, ran.kept);
     pb.finish_and_clear();
     if a.resume {
         runner::resume::straight_order(&jsonl, &mut rows, &names, &batches)?;

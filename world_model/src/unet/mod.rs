@@ -35,6 +35,8 @@ use burn::nn::{GroupNorm, GroupNormConfig, Initializer, Linear, LinearConfig};
 use burn::tensor::activation::silu;
 use burn::tensor::{Device, Tensor};
 
+use crate::error::SettingError;
+
 use accent::AlphaMlp;
 use blocks::{Attention, Conv3dF, ResBlock, group_norm};
 
@@ -151,7 +153,7 @@ impl UNetConfig {
     ///
     /// # Errors
     /// The first setting that does not fit, by its config name.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), SettingError> {
         let sizes = [
             ("frame_channels", self.frame_channels),
             ("model_channels", self.model_channels),
@@ -161,29 +163,22 @@ impl UNetConfig {
             ("action_dim", self.action_dim),
             ("emb_dim", self.emb_dim),
         ];
-        if let Some((name, _)) = sizes.iter().find(|(_, v)| *v == 0) {
-            return Err(format!("{name} must be at least 1"));
+        if let Some(&(name, _)) = sizes.iter().find(|(_, v)| *v == 0) {
+            return Err(SettingError::Zero { name });
         }
         if self.channel_mult.is_empty() || self.channel_mult.contains(&0) {
-            return Err(format!(
-                "channel_mult {:?} needs one multiplier of at least 1 per level",
-                self.channel_mult
-            ));
+            return Err(SettingError::ChannelMult { mult: self.channel_mult.clone() });
         }
         let (mc, g, h) = (self.model_channels, self.groups, self.head_dim);
         let deepest = mc * self.channel_mult.last().copied().unwrap_or(1);
         for (l, m) in self.channel_mult.iter().enumerate() {
             let c = m * mc;
             if c % g != 0 || mc % g != 0 {
-                return Err(format!(
-                    "model_channels {mc} x channel_mult {m} = {c} channels at level {l}: GroupNorm needs a multiple of groups ({g})"
-                ));
+                return Err(SettingError::Groups { base: mc, mult: *m, channels: c, level: l, groups: g });
             }
             let attended = self.attention_rates.contains(&(1 << l)) || c == deepest;
             if attended && c % h != 0 {
-                return Err(format!(
-                    "{c} channels at level {l} have attention: they must be a multiple of head_dim ({h})"
-                ));
+                return Err(SettingError::Heads { channels: c, level: l, head_dim: h });
             }
         }
         Ok(())

@@ -141,13 +141,17 @@ fn configs_that_cannot_be_built_are_refused_by_setting_not_by_a_panic() {
     assert_eq!(UNetConfig { model_channels: 32, ..UNetConfig::pusht_pixel() }.check(), Ok(()));
     // 16 base channels with 32 GroupNorm groups: burn's GroupNorm asserted (a panic in
     // `train world-model --config pusht-pixel --base-channels 16` at 1951e7c).
-    let err = UNetConfig { model_channels: 16, ..UNetConfig::pusht_pixel() }.check().unwrap_err();
+    let err = UNetConfig { model_channels: 16, ..UNetConfig::pusht_pixel() }.check().unwrap_err().to_string();
     assert!(err.contains("16 channels") && err.contains("groups (32)"), "{err}");
     // 36 channels split into 8-wide heads: 36 = 4.5 heads.
-    let err = UNetConfig { model_channels: 36, groups: 4, ..UNetConfig::pusht_pixel() }.check().unwrap_err();
+    let err = UNetConfig { model_channels: 36, groups: 4, ..UNetConfig::pusht_pixel() }
+        .check()
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("head_dim (8)"), "{err}");
-    let err = UNetConfig { groups: 0, ..UNetConfig::pusht_pixel() }.check().unwrap_err();
+    let err = UNetConfig { groups: 0, ..UNetConfig::pusht_pixel() }.check().unwrap_err().to_string();
     assert!(err.contains("groups must be at least 1"), "{err}");
-    let err = UNetConfig { channel_mult: vec![], ..UNetConfig::pusht_pixel() }.check().unwrap_err();
+    let err =
+        UNetConfig { channel_mult: vec![], ..UNetConfig::pusht_pixel() }.check().unwrap_err().to_string();
     assert!(err.contains("channel_mult"), "{err}");
 }
