@@ -144,14 +144,21 @@ pub trait RunSettings: Serialize + DeserializeOwned {
     fn settings(&self) -> Vec<(&'static str, String)>;
     /// The inputs' content fingerprints.
     fn fingerprints(&self) -> &BTreeMap<String, String>;
+    /// The run's seeds and how they are cut and shared out.
+    fn span(&self) -> Span;
+}
+
+/// A run's seeds and how they are cut and shared out: what decides whether it can grow.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Span {
     /// Episodes per policy.
-    fn episodes(&self) -> usize;
+    pub episodes: usize,
     /// Episodes per batch.
-    fn batch(&self) -> usize;
+    pub batch: usize,
     /// The first episode seed.
-    fn seed_start(&self) -> u64;
+    pub seed_start: u64,
     /// The folder's shard `(i, n)` of the run.
-    fn shard(&self) -> (usize, usize);
+    pub shard: (usize, usize),
 }
 
 /// A setting's value as JSON text, for comparing and showing.
@@ -174,17 +181,8 @@ impl RunSettings for RankConfig {
     fn fingerprints(&self) -> &BTreeMap<String, String> {
         &self.fingerprints
     }
-    fn episodes(&self) -> usize {
-        self.episodes
-    }
-    fn batch(&self) -> usize {
-        self.batch
-    }
-    fn seed_start(&self) -> u64 {
-        self.seed_start
-    }
-    fn shard(&self) -> (usize, usize) {
-        self.shard
+    fn span(&self) -> Span {
+        Span { episodes: self.episodes, batch: self.batch, seed_start: self.seed_start, shard: self.shard }
     }
 }
 
@@ -198,17 +196,9 @@ impl RunSettings for PlanConfig {
     fn fingerprints(&self) -> &BTreeMap<String, String> {
         &self.fingerprints
     }
-    fn episodes(&self) -> usize {
-        self.episodes
-    }
-    fn batch(&self) -> usize {
-        self.batch
-    }
-    fn seed_start(&self) -> u64 {
-        self.seed_start
-    }
-    fn shard(&self) -> (usize, usize) {
-        (0, 1)
+    fn span(&self) -> Span {
+        // A plan is never sharded.
+        Span { episodes: self.episodes, batch: self.batch, seed_start: self.seed_start, shard: (0, 1) }
     }
 }
 

@@ -190,6 +190,43 @@ pub enum RunError {
     /// The engine stopped a run of batches (its worker threads could not start).
     #[error(transparent)]
     Engine(Box<engine::EngineError>),
+    /// A world model that cannot be loaded.
+    #[error("loading world model {}", dir.display())]
+    LoadWorldModel {
+        /// Its folder.
+        dir: PathBuf,
+        /// The loader's error.
+        source: Box<world_model::WorldModelError>,
+    },
+    /// An inference option a world model cannot take (`--alpha`, `--noise-scale`).
+    #[error("{flag}: {error} ({})", dir.display())]
+    ModelOption {
+        /// The flag.
+        flag: &'static str,
+        /// The world model's folder.
+        dir: PathBuf,
+        /// What it cannot take (shown in the message, so not a chained source).
+        error: world_model::SettingError,
+    },
+    /// A judge folder that cannot be loaded.
+    #[error("--judge {}: {message}", path.display())]
+    JudgeFolder {
+        /// The folder or file at fault.
+        path: PathBuf,
+        /// The loader's message.
+        message: String,
+    },
+    /// A judge that reads other frames or scores another thing than the task.
+    #[error("--judge {}: {what}", dir.display())]
+    JudgeMismatch {
+        /// The judge's folder.
+        dir: PathBuf,
+        /// What differs.
+        what: String,
+    },
+    /// An input that cannot be fingerprinted.
+    #[error(transparent)]
+    Fingerprint(#[from] harness::fingerprint::FingerprintError),
     /// Shard folders that are not one complete split of one run.
     #[error("{0}")]
     Shards(String),

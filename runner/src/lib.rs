@@ -9,7 +9,8 @@
 //! `results.json` must keep to be reported ([`check`]); and the batches the shard
 //! processes of one run share out as they go ([`claims`]); and the report's filmstrips,
 //! from the frames a run keeps or replays ([`media`]), and its report ([`report`]); and
-//! the batches one process of a run runs, appended as they finish ([`batches`]).
+//! the batches one process of a run runs, appended as they finish ([`batches`]), and the
+//! models a run reads, loaded, checked and fingerprinted ([`inputs`]).
 //!
 //! Why a crate of its own: the configuration is the contract between the processes of
 //! one run (the shards of `rank --processes`, `merge`, `report`, a later `--resume`),
@@ -22,6 +23,7 @@ pub mod claims;
 pub mod config;
 pub mod error;
 pub mod filmstrips;
+pub mod inputs;
 pub mod media;
 pub mod merge;
 pub mod output;
@@ -29,5 +31,5 @@ pub mod report;
 pub mod resume;
 pub mod shards;
 
-pub use config::{JudgeSettings, PlanConfig, RankConfig, RunSettings};
+pub use config::{JudgeSettings, PlanConfig, RankConfig, RunSettings, Span};
 pub use error::RunError;

@@ -68,19 +68,20 @@ pub(crate) fn differences<C: RunSettings>(a: &C, b: &C, skip: &[&str]) -> Vec<St
 
 /// The `--episodes` rule of [`check`] (the other settings already agree).
 fn check_growth<C: RunSettings>(path: &Path, saved: &C, now: &C) -> Result<(), RunError> {
-    let (was, now_n) = (saved.episodes(), now.episodes());
+    let (saved, now) = (saved.span(), now.span());
+    let (was, now_n) = (saved.episodes, now.episodes);
     if was == now_n {
         return Ok(());
     }
     if now_n < was {
         return Err(RunError::Shrinks { path: path.to_path_buf(), was, now: now_n });
     }
-    let batch = now.batch().max(1);
+    let batch = now.batch.max(1);
     if was % batch != 0 {
-        let next = saved.seed_start() + was as u64;
+        let next = saved.seed_start + was as u64;
         return Err(RunError::PartBatch { was, now: now_n, batch, next });
     }
-    if now.shard() != (0, 1) {
+    if now.shard != (0, 1) {
         return Err(RunError::ShardGrows { path: path.to_path_buf(), now: now_n });
     }
     tracing::info!(from = was, to = now_n, "extending the run: only the new seeds are run");

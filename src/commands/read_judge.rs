@@ -76,7 +76,7 @@ pub fn run(a: &ReadJudgeArgs) -> Result<ExitCode> {
     };
     let (judge, from) = match (&a.judge, a.rule) {
         (Some(dir), _) => (
-            crate::commands::rank::read_judge_folder(dir, &burn::tensor::Device::flex())?,
+            runner::inputs::read_judge_folder(dir, &burn::tensor::Device::flex())?,
             dir.display().to_string(),
         ),
         (None, Some(JudgeRule::LiftRed)) => {

@@ -21,12 +21,13 @@ use policies::dir::{checkpoint_dirs, checkpoint_name};
 use serde::Serialize;
 use world_model::model::WorldModel;
 
-use super::rank::{defaults, load_judge, load_world_model};
+use super::rank::defaults;
 use super::record::{Layout, Sink};
 use crate::cli::SimulateArgs;
 use crate::output::{Staged, write_json};
 use crate::policy_kinds::{expectations, load_any};
 use crate::progress;
+use runner::inputs::{load_judge, load_world_model};
 
 /// One checkpoint's three success rates and how the imagined successes fare.
 #[derive(Debug, Serialize)]

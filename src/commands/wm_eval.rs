@@ -103,7 +103,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         .iter()
         .map(|p| {
             let name = policies::dir::checkpoint_name(p);
-            Ok((name, crate::commands::rank::load_world_model(p, a.alpha, a.noise_scale, &device)?))
+            Ok((name, runner::inputs::load_world_model(p, a.alpha, a.noise_scale, &device)?))
         })
         .collect::<Result<_>>()?;
     let data = EpisodeData::load(&a.data, 96)?;

@@ -104,7 +104,7 @@ impl SuccessCheck {
     /// An unreadable judge, one that reads frames of another size, or an unreadable
     /// `data/success` array.
     pub fn load(dir: &Path, path: &Path, data: &EpisodeData) -> Result<Self> {
-        let judge = crate::commands::rank::read_judge_folder(dir, &burn::tensor::Device::flex())?;
+        let judge = runner::inputs::read_judge_folder(dir, &burn::tensor::Device::flex())?;
         if judge.image_size() != data.size {
             let (j, d) = (judge.image_size(), data.size);
             bail!("--judge {}: it reads {j}x{j} frames, and {} has {d}x{d}", dir.display(), path.display());

@@ -184,6 +184,40 @@ pub fn write_rollouts(
     Ok(out)
 }
 
+/// Writes each policy's best- and worst-agreeing episodes as filmstrips into `dir`, from
+/// the frames the run kept or replayed ([`Sources`]), the policies (those that loaded, as
+/// the run loaded them, with their names) on the pool's threads at once (a policy's
+/// replay alone is two episodes: its batched calls leave a core idle), and their
+/// `index.json` ([`crate::filmstrips`]); the files and the index are the same in any order.
+///
+/// # Errors
+/// A failing replay or an unwritable file.
+pub fn write_filmstrips(
+    dir: &Path,
+    policies: &[(String, &dyn Policy)],
+    src: &Sources,
+    pool: &rayon::ThreadPool,
+) -> Result<()> {
+    use rayon::prelude::*;
+    let strips: Vec<Vec<(PathBuf, String)>> = pool.install(|| {
+        policies
+            .par_iter()
+            .map(|(name, policy)| write_rollouts(dir, *policy, &pick_seeds(src.rows, name), src))
+            .collect::<Result<_>>()
+    })?;
+    let index: Vec<crate::filmstrips::Filmstrip> = strips
+        .into_iter()
+        .flatten()
+        .map(|(png, caption)| {
+            let png = png.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
+            crate::filmstrips::Filmstrip { png, caption }
+        })
+        .collect();
+    std::fs::create_dir_all(dir)
+        .map_err(|source| RunError::File { doing: format!("creating {}", dir.display()), source })?;
+    crate::config::write(&dir.join("index.json"), &index)
+}
+
 /// Two `size x size` RGB frames next to each other.
 fn side_by_side(a: &[u8], b: &[u8], size: usize) -> Vec<u8> {
     let row = size * 3;

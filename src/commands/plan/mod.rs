@@ -122,7 +122,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     }
     let device = world_model::device::selected()?;
     let wm = if planners.contains(&Planner::WorldModel) {
-        let wm = crate::commands::rank::load_world_model(&a.world_model, a.alpha, None, &device)?;
+        let wm = runner::inputs::load_world_model(&a.world_model, a.alpha, None, &device)?;
         if wm.image_size() != size {
             bail!(
                 "world model {} generates {1}x{1} frames, the scenario renders {size}x{size}",
@@ -137,17 +137,17 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     let (policy, imagine, execute) = load_proposer(a, task.as_ref(), &device)?;
     let judge = match &a.judge {
         Some(dir) => {
-            let j = crate::commands::rank::load_judge(dir, task.as_ref(), &device)?;
+            let j = runner::inputs::load_judge(dir, task.as_ref(), &device)?;
             Some(std::sync::Arc::new(j) as std::sync::Arc<dyn harness::judge::Judge>)
         }
         None => None,
     };
     // Every input is checked; only now is the output folder touched.
-    let mut inputs = crate::commands::rank::model_inputs(
+    let mut inputs = runner::inputs::model_inputs(
         wm.as_ref().map(|w| (a.world_model.as_path(), w)),
         std::slice::from_ref(&a.policy),
     )?;
-    inputs.extend(crate::commands::rank::scenario_input(&a.scenario)?);
+    inputs.extend(runner::inputs::scenario_input(&a.scenario)?);
     if let Some(dir) = &a.judge {
         inputs.push(("judge".to_string(), dir.clone(), harness::fingerprint::folder(dir)?));
     }

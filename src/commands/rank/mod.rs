@@ -20,13 +20,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use engine::Setup;
-use harness::task::{ScoreKind, Task};
+use harness::task::Task;
 use policies::dir::{checkpoint_dirs, checkpoint_name};
-use policies::judge::{FrameJudge, Label};
 
 use crate::policy_kinds::{expectations, load_any};
 use harness::results::{FailedPolicy, RankResults, RunTiming};
-use world_model::model::WorldModel;
 
 use crate::cli::RankArgs;
 use crate::output::write_json;
@@ -99,24 +97,25 @@ fn run_with(
         _ => {}
     }
     let device = world_model::device::selected()?;
-    let wm = load_world_model(&r.world_model, a.alpha, a.noise_scale, &device)?;
+    let wm = runner::inputs::load_world_model(&r.world_model, a.alpha, a.noise_scale, &device)?;
     if a.float_frames && wm.cfg.is_goal_free() {
         bail!(
             "--float-frames: world model {} is goal-free (its frames get the goal drawn back as bytes); use a world model of whole frames",
             r.world_model.display()
         );
     }
-    let mut judge = r.judge.as_deref().map(|d| load_judge(d, task.as_ref(), &device)).transpose()?;
+    let mut judge =
+        r.judge.as_deref().map(|d| runner::inputs::load_judge(d, task.as_ref(), &device)).transpose()?;
     if let (Some(k), Some(j)) = (a.judge_persist, judge.as_mut()) {
         j.file.persist_frames = k;
     }
     let dirs = checkpoint_dirs(&r.policies)?;
-    let mut inputs = model_inputs(Some((&r.world_model, &wm)), &dirs)?;
+    let mut inputs = runner::inputs::model_inputs(Some((&r.world_model, &wm)), &dirs)?;
     if let Some(d) = &r.judge {
         let f = harness::fingerprint::folder(d)?;
         inputs.push(("judge".to_string(), d.clone(), f));
     }
-    inputs.extend(scenario_input(&a.scenario)?);
+    inputs.extend(runner::inputs::scenario_input(&a.scenario)?);
     // Each checkpoint too: one linked into --policies lies elsewhere on disk.
     let listed = crate::output::Inputs::new()
         .scenario(&a.scenario)
@@ -261,7 +260,7 @@ fn run_with(
                 setup: &setup,
                 wm: &wm,
             };
-            rollouts(a, &named, &src, &pool)?;
+            runner::media::write_filmstrips(&a.out.join("filmstrips"), &named, &src, &pool)?;
         }
         Some(runner::report::write_report(&a.out)?)
     };
@@ -276,89 +275,8 @@ fn run_with(
     summary::gates(a.min_pearson, a.max_inversions, &res)
 }
 
-/// Loads `rank --judge`'s folder and checks that it reads the task's frames and scores
-/// what the task scores.
-///
-/// # Errors
-/// An unloadable judge, or one of another frame size or score kind, naming its folder.
-pub(crate) fn load_judge(dir: &Path, task: &dyn Task, device: &burn::tensor::Device) -> Result<FrameJudge> {
-    let j = read_judge_folder(dir, device)?;
-    let size = task.observation_spec().image_size;
-    if j.image_size() != size {
-        bail!(
-            "--judge {}: reads {1}x{1} frames, the task renders {size}x{size}",
-            dir.display(),
-            j.image_size()
-        );
-    }
-    let fits = matches!(
-        (j.file.label, task.score_kind()),
-        (Label::Coverage, ScoreKind::Coverage { .. }) | (Label::Success, ScoreKind::Success)
-    );
-    if !fits || j.file.threshold != task.score_kind().threshold() {
-        bail!(
-            "--judge {}: estimates {} with success above {}, the task scores {}",
-            dir.display(),
-            j.file.label.array(),
-            j.file.threshold,
-            task.score_kind().describe()
-        );
-    }
-    Ok(j)
-}
-
-/// Reads a judge folder, named in any error as the `--judge` it is (the loader's error
-/// type is the policies', which says "policy X").
-///
-/// # Errors
-/// A missing or invalid judge folder.
-pub(crate) fn read_judge_folder(dir: &Path, device: &burn::tensor::Device) -> Result<FrameJudge> {
-    FrameJudge::load(dir, device).map_err(|e| anyhow::anyhow!("--judge {}: {}", e.path.display(), e.message))
-}
-
-/// The model folders a run depends on, each as (name in `config.json`'s
-/// `fingerprints`, folder, content fingerprint): the world model (when the run uses
-/// one, with its folder) and its autoencoder, and every policy checkpoint.
-///
-/// # Errors
-/// A folder that cannot be read, naming it.
-pub(crate) fn model_inputs(
-    wm: Option<(&Path, &WorldModel)>,
-    dirs: &[std::path::PathBuf],
-) -> Result<Vec<(String, std::path::PathBuf, String)>> {
-    let mut out = Vec::new();
-    if let Some((wm_dir, wm)) = wm {
-        out.push(("world_model".to_string(), wm_dir.to_path_buf()));
-        if let Some(ae) = &wm.cfg.autoencoder {
-            out.push(("autoencoder".to_string(), wm_dir.join(ae)));
-        }
-    }
-    out.extend(dirs.iter().map(|d| (format!("policy {}", checkpoint_name(d)), d.clone())));
-    out.into_iter()
-        .map(|(k, d)| {
-            let f = harness::fingerprint::folder(&d)?;
-            Ok((k, d, f))
-        })
-        .collect()
-}
-
-/// The scenario file a run reads, as a [`model_inputs`] entry (`scenario`, its path, the
-/// SHA-256 of its bytes), so that `--resume` and `merge` refuse rows of a changed scene;
-/// none for a built-in scenario given by name.
-///
-/// # Errors
-/// A scenario file that cannot be read.
-pub(crate) fn scenario_input(scenario: &str) -> Result<Option<(String, std::path::PathBuf, String)>> {
-    let path = Path::new(scenario);
-    if !path.is_file() {
-        return Ok(None);
-    }
-    let f = harness::fingerprint::file(path)?;
-    Ok(Some(("scenario".to_string(), path.to_path_buf(), f)))
-}
-
 /// Checks that `out` stays apart from every input `listed` (every folder of
-/// [`model_inputs`] among them), then prepares it for a run that appends rows (see
+/// [`runner::inputs::model_inputs`] among them), then prepares it for a run that appends rows (see
 /// [`crate::output::RunDir::prepare_episodes`]); returns it and its `episodes.jsonl`.
 ///
 /// # Errors
@@ -371,58 +289,4 @@ pub(crate) fn prepare_run(
 ) -> Result<(crate::output::RunDir, std::path::PathBuf)> {
     let dir = crate::output::RunDir::prepare_episodes(out, listed, resume, force)?;
     Ok((dir, out.join("episodes.jsonl")))
-}
-
-/// Loads the world model in `dir`, with `--alpha` and `--noise-scale` applied when given.
-///
-/// # Errors
-/// An unloadable model, or an α or noise scale it cannot take, naming the folder.
-pub(crate) fn load_world_model(
-    dir: &Path,
-    alpha: Option<f32>,
-    noise_scale: Option<f32>,
-    device: &burn::tensor::Device,
-) -> Result<WorldModel> {
-    let mut wm =
-        WorldModel::load(dir, device).with_context(|| format!("loading world model {}", dir.display()))?;
-    if let Some(alpha) = alpha {
-        wm.set_alpha(alpha).map_err(|e| anyhow::anyhow!("--alpha: {e} ({})", dir.display()))?;
-    }
-    if let Some(t) = noise_scale {
-        wm.set_noise_scale(t).map_err(|e| anyhow::anyhow!("--noise-scale: {e} ({})", dir.display()))?;
-    }
-    Ok(wm)
-}
-
-/// Writes each policy's best- and worst-agreeing episodes as filmstrips, from the frames
-/// the run kept or replayed ([`runner::media::Sources`]), the policies (those that loaded, as the run loaded
-/// them) on the pool's threads at once (a policy's replay alone is two episodes: its
-/// batched calls leave a core idle); the files and the index are the same in any order.
-fn rollouts(
-    a: &RankArgs,
-    policies: &[(String, &dyn harness::policy::Policy)],
-    src: &runner::media::Sources,
-    pool: &rayon::ThreadPool,
-) -> Result<()> {
-    use rayon::prelude::*;
-    let dir = a.out.join("filmstrips");
-    let strips: Vec<Vec<(std::path::PathBuf, String)>> = pool.install(|| {
-        policies
-            .par_iter()
-            .map(|(name, policy)| {
-                let picks = runner::media::pick_seeds(src.rows, name);
-                runner::media::write_rollouts(&dir, *policy, &picks, src)
-            })
-            .collect::<Result<_, runner::RunError>>()
-    })?;
-    let index: Vec<runner::filmstrips::Filmstrip> = strips
-        .into_iter()
-        .flatten()
-        .map(|(png, caption)| {
-            let png = png.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default();
-            runner::filmstrips::Filmstrip { png, caption }
-        })
-        .collect();
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    write_json(&dir.join("index.json"), &index)
 }
