@@ -124,6 +124,9 @@ pub fn run_batches<E: From<EngineError>>(
                         break;
                     }
                 }
+                // The episodes ran on the pool's thread: what it holds for the task goes
+                // before it ends (`Task::release_thread`).
+                pool.install(|| s.task.release_thread());
             });
         }
         drop(tx);

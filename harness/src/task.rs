@@ -302,6 +302,11 @@ pub trait Task: Send + Sync {
     fn frame_labels(&self) -> Vec<(usize, String)> {
         Vec::new()
     }
+    /// Frees what the calling thread holds for this task's episodes, before the thread
+    /// ends: a thread that ran episodes calls it when it is done (robosuite's tasks drop
+    /// the thread's GL context, which torn down at process exit instead corrupted the
+    /// heap now and then). Nothing by default.
+    fn release_thread(&self) {}
     /// A `scripted` policy checkpoint of this task (its expert acting from frames);
     /// tasks without scripted policies refuse.
     ///

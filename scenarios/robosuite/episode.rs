@@ -302,6 +302,12 @@ fn render_lock() -> std::sync::MutexGuard<'static, ()> {
     RENDER_LOCK.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
+/// Whether this thread holds an agentview renderer (for tests of its release).
+#[cfg(test)]
+pub(crate) fn holds_renderer() -> bool {
+    RENDERER.with(|cell| cell.borrow().is_some())
+}
+
 /// Drops this thread's agentview renderer, if it has one. Call it on every
 /// thread that rendered, before the thread or the process ends.
 pub fn release_renderer() {

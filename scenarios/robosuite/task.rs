@@ -117,6 +117,10 @@ impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
         false
     }
 
+    fn release_thread(&self) {
+        crate::robosuite::episode::release_renderer();
+    }
+
     fn score_kind(&self) -> ScoreKind {
         ScoreKind::Success
     }
@@ -301,6 +305,10 @@ mod tests {
         assert_eq!((a.score(), a.state().len(), a.goal_pose()), (0.0, 23, None));
         assert!(a.judge().is_none(), "no hand-written judge of Lift frames");
         assert_ne!(t.reset(4).unwrap().state(), a.state());
+        // The frames were rendered on this thread; releasing it drops its GL context.
+        assert!(crate::robosuite::episode::holds_renderer());
+        t.release_thread();
+        assert!(!crate::robosuite::episode::holds_renderer());
     }
 
     #[test]

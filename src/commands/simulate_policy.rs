@@ -90,6 +90,9 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
         }
     }
     pb.finish_and_clear();
+    // The episodes ran on the pool's threads: what they hold for the task goes before
+    // the pool does (`Task::release_thread`).
+    pool.broadcast(|_| task.release_thread());
     write_json(
         &out.file("summary.json"),
         &json!({"scenario": c.scenario, "policies_dir": dir, "seed_start": c.seed_start, "episodes": c.episodes,
