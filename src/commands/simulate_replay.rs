@@ -97,7 +97,12 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     let record = sink.is_some();
     let work = |&(p, batch): &(usize, &[u64])| {
         let (name, policy) = &policies[p];
-        three_ways(policy.as_ref(), batch, &setup, &wm, record).with_context(|| format!("policy {name}"))
+        let out =
+            three_ways(policy.as_ref(), batch, &setup, &wm, record).with_context(|| format!("policy {name}"));
+        // The unit's frames were rendered on this worker's thread: what the thread holds
+        // for the task goes with the unit (`Task::release_thread`).
+        task.release_thread();
+        out
     };
     let mut summary = Vec::new();
     let (mut real, mut imagined, mut replayed) = (Vec::new(), Vec::new(), Vec::new());
