@@ -10,7 +10,7 @@
 use std::path::{Path, PathBuf};
 
 use burn::module::{Module, ModuleMapper, Param};
-use burn::store::ModuleRecord;
+use burn::store::{ModuleRecord, RecordError};
 use burn::tensor::{DType, Device, Tensor};
 use harness::policy::Policy;
 use serde::{Deserialize, Serialize};
@@ -96,18 +96,18 @@ impl ModuleMapper for ToF16 {
 /// Saves a module's weights in f16 (half the size; policies lose nothing measurable).
 ///
 /// # Errors
-/// The recorder's error, as text.
-pub fn save_f16<M: Module>(module: &M, path: &Path) -> Result<(), String> {
-    module.clone().map(&mut ToF16).save_file(path).map_err(|e| e.to_string())
+/// burn's [`RecordError`] (the file cannot be written).
+pub fn save_f16<M: Module>(module: &M, path: &Path) -> Result<(), RecordError> {
+    module.clone().map(&mut ToF16).save_file(path)
 }
 
 /// Loads weights saved in any float precision into `module`'s dtype.
 ///
 /// # Errors
-/// The recorder's error (missing, truncated or mismatched file), as text.
-pub fn load_weights<M: Module>(module: M, path: &Path) -> Result<M, String> {
-    let record = ModuleRecord::load(path).map_err(|e| e.to_string())?.cast_to_module_dtype();
-    module.try_load_record(record).map_err(|e| e.to_string())
+/// burn's [`RecordError`] (a missing, truncated or mismatched file).
+pub fn load_weights<M: Module>(module: M, path: &Path) -> Result<M, RecordError> {
+    let record = ModuleRecord::load(path)?.cast_to_module_dtype();
+    module.try_load_record(record)
 }
 
 /// Writes a checkpoint folder (`policy.json` + `model.bpk`, weights in f16).
@@ -124,17 +124,17 @@ pub fn write_policy(dir: &Path, file: &PolicyFile, net: &DiffusionNet) -> Result
 /// # Errors
 /// [`PolicyLoadError`] naming the file that could not be written.
 pub fn write_policy_f32<M: Module>(dir: &Path, file: &PolicyFile, net: &M) -> Result<(), PolicyLoadError> {
-    write_policy_with(dir, file, |w| net.clone().save_file(w).map_err(|e| e.to_string()))
+    write_policy_with(dir, file, |w| net.clone().save_file(w))
 }
 
 fn write_policy_with(
     dir: &Path,
     file: &PolicyFile,
-    save: impl FnOnce(&Path) -> Result<(), String>,
+    save: impl FnOnce(&Path) -> Result<(), RecordError>,
 ) -> Result<(), PolicyLoadError> {
     std::fs::create_dir_all(dir).map_err(|e| PolicyLoadError::new(dir, e.to_string()))?;
     let weights = dir.join("model.bpk");
-    save(&weights).map_err(|e| PolicyLoadError::new(&weights, e))?;
+    save(&weights).map_err(|e| PolicyLoadError::new(&weights, e.to_string()))?;
     let json = dir.join("policy.json");
     let text = serde_json::to_string_pretty(file).unwrap_or_default();
     std::fs::write(&json, text + "\n").map_err(|e| PolicyLoadError::new(&json, e.to_string()))

@@ -125,7 +125,7 @@ pub fn write_judge(dir: &Path, net: Option<&JudgeNet>, file: &JudgeFile) -> Resu
     if let Some(net) = net {
         let weights = dir.join("model.bpk");
         let tmp = dir.join(".model.bpk.tmp");
-        save_f16(net, &tmp).map_err(|e| PolicyLoadError::new(&weights, e))?;
+        save_f16(net, &tmp).map_err(|e| PolicyLoadError::new(&weights, e.to_string()))?;
         std::fs::rename(&tmp, &weights).map_err(|e| PolicyLoadError::new(&weights, e.to_string()))?;
     }
     let text = serde_json::to_string_pretty(file).unwrap_or_default() + "\n";
