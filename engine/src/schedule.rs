@@ -164,6 +164,9 @@ pub fn run_batches<E: From<EngineError>>(
 /// burn's kernels on its own one-thread rayon pool, so a result is a pure function of
 /// its item and any worker count hands on the same results.
 ///
+/// `release` runs on each worker's thread when it has no item left, before the thread
+/// ends (`Task::release_thread`: what the thread holds for the task's episodes).
+///
 /// # Errors
 /// What `done` returns (workers then take no further item), or a worker that could
 /// not start.
@@ -171,6 +174,7 @@ pub fn run_ordered<T: Sync, R: Send, E: From<EngineError>>(
     items: &[T],
     jobs: usize,
     work: &(dyn Fn(&T) -> R + Sync),
+    release: &(dyn Fn() + Sync),
     done: &mut dyn FnMut(usize, R) -> Result<(), E>,
 ) -> Result<(), E> {
     let next = AtomicUsize::new(0);
@@ -189,6 +193,7 @@ pub fn run_ordered<T: Sync, R: Send, E: From<EngineError>>(
                         break;
                     }
                 }
+                pool.install(release);
             });
         }
         drop(tx);
@@ -320,7 +325,7 @@ mod tests {
         };
         for jobs in [1, 3] {
             let mut got = Vec::new();
-            run_ordered::<u64, _, EngineError>(&items, jobs, &work, &mut |j, r| {
+            run_ordered::<u64, _, EngineError>(&items, jobs, &work, &|| {}, &mut |j, r| {
                 got.push((j, r));
                 Ok(())
             })
@@ -330,7 +335,7 @@ mod tests {
         }
         // `done` failing at item 2 stops the run with its error; nothing after 2 is handed on.
         let mut seen = Vec::new();
-        let err = run_ordered::<u64, _, EngineError>(&items, 2, &work, &mut |j, _| {
+        let err = run_ordered::<u64, _, EngineError>(&items, 2, &work, &|| {}, &mut |j, _| {
             seen.push(j);
             if j == 2 { Err(EngineError::Threads("stop".into())) } else { Ok(()) }
         })

@@ -106,7 +106,6 @@ impl Batches<'_> {
                 }
             }
         }
-        drop(have);
         let policies: Vec<&dyn Policy> = self.loaded.iter().map(|(_, p)| p.as_ref()).collect();
         let kept_dir = self.kept_dir();
         let mut kept = if setup.record { Kept::open(&kept_dir, &rows)? } else { Kept::default() };

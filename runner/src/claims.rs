@@ -27,11 +27,6 @@ use world_model::model::WorldModel;
 
 use crate::error::RunError;
 
-/// A [`RunError::File`] builder.
-fn file(doing: String) -> impl FnOnce(std::io::Error) -> RunError {
-    move |source| RunError::File { doing, source }
-}
-
 /// One shard's hold on a claims folder.
 pub struct Claims {
     dir: PathBuf,
@@ -45,7 +40,7 @@ impl Claims {
     /// A folder that cannot be created, naming it.
     pub fn open(dir: &Path, shard: usize) -> Result<Self, RunError> {
         std::fs::create_dir_all(dir)
-            .map_err(file(format!("creating the claims folder {}", dir.display())))?;
+            .map_err(RunError::file(format!("creating the claims folder {}", dir.display())))?;
         Ok(Self { dir: dir.to_path_buf(), shard })
     }
 
@@ -66,15 +61,15 @@ impl Claims {
         match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
             Ok(mut f) => {
                 f.write_all(mine.as_bytes())
-                    .map_err(file(format!("writing the claim {}", path.display())))?;
+                    .map_err(RunError::file(format!("writing the claim {}", path.display())))?;
                 Ok(true)
             }
             Err(e) if e.kind() == ErrorKind::AlreadyExists => {
                 let owner = std::fs::read_to_string(&path)
-                    .map_err(file(format!("reading the claim {}", path.display())))?;
+                    .map_err(RunError::file(format!("reading the claim {}", path.display())))?;
                 Ok(owner == mine)
             }
-            Err(e) => Err(file(format!("claiming {}", path.display()))(e)),
+            Err(e) => Err(RunError::file(format!("claiming {}", path.display()))(e)),
         }
     }
 }

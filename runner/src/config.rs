@@ -161,6 +161,17 @@ pub struct Span {
     pub shard: (usize, usize),
 }
 
+/// Every setting of `a` and `b` but those in `skip` whose values differ, as (name,
+/// `a`'s value, `b`'s value), the values as JSON text.
+pub(crate) fn differing<C: RunSettings>(a: &C, b: &C, skip: &[&str]) -> Vec<(&'static str, String, String)> {
+    a.settings()
+        .into_iter()
+        .zip(b.settings())
+        .filter(|((name, x), (_, y))| !skip.contains(name) && x != y)
+        .map(|((name, x), (_, y))| (name, x, y))
+        .collect()
+}
+
 /// A setting's value as JSON text, for comparing and showing.
 fn text<T: Serialize + ?Sized>(v: &T) -> String {
     serde_json::to_string(v).unwrap_or_else(|e| format!("<unprintable: {e}>"))
@@ -206,12 +217,7 @@ impl RankConfig {
     /// The policies' names as the rows carry them: each checkpoint's folder name.
     #[must_use]
     pub fn policy_names(&self) -> Vec<String> {
-        self.checkpoints
-            .iter()
-            .map(|c| {
-                c.file_name().map_or_else(|| c.display().to_string(), |n| n.to_string_lossy().into_owned())
-            })
-            .collect()
+        self.checkpoints.iter().map(|c| policies::dir::checkpoint_name(c)).collect()
     }
 }
 
@@ -221,14 +227,27 @@ impl RankConfig {
 /// [`RunError::Io`] when it cannot be read, [`RunError::Parse`] naming the setting
 /// where it stops being a `C`.
 pub fn read<C: RunSettings>(path: &Path) -> Result<C, RunError> {
-    let bytes = std::fs::read(path).map_err(|source| RunError::Io { path: path.to_path_buf(), source })?;
-    let mut de = serde_json::Deserializer::from_slice(&bytes);
-    serde_path_to_error::deserialize(&mut de).map_err(|e| RunError::Parse {
+    read_typed(path, |field, source| RunError::Parse {
         path: path.to_path_buf(),
         what: C::KIND,
-        field: e.path().to_string(),
-        source: e.into_inner(),
+        field,
+        source,
     })
+}
+
+/// Reads the JSON file `path` as a `T`; `bad(field, error)` is the error of a file that
+/// parses as JSON but not as a `T`, or not at all, with the path of the field where it
+/// stopped (`.` for the whole file).
+///
+/// # Errors
+/// [`RunError::Io`] when the file cannot be read, else `bad`'s error.
+pub(crate) fn read_typed<T: DeserializeOwned>(
+    path: &Path,
+    bad: impl FnOnce(String, serde_json::Error) -> RunError,
+) -> Result<T, RunError> {
+    let bytes = std::fs::read(path).map_err(|source| RunError::Io { path: path.to_path_buf(), source })?;
+    let mut de = serde_json::Deserializer::from_slice(&bytes);
+    serde_path_to_error::deserialize(&mut de).map_err(|e| bad(e.path().to_string(), e.into_inner()))
 }
 
 /// Writes a run's `config.json` (pretty, one trailing newline).

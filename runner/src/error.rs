@@ -232,6 +232,14 @@ pub enum RunError {
     Shards(String),
 }
 
+impl RunError {
+    /// A [`RunError::File`] builder for `map_err`: `doing` says what was being done,
+    /// naming the path (`creating DIR`, `writing FILE`).
+    pub(crate) fn file(doing: String) -> impl FnOnce(std::io::Error) -> Self {
+        move |source| Self::File { doing, source }
+    }
+}
+
 impl From<engine::EngineError> for RunError {
     fn from(e: engine::EngineError) -> Self {
         Self::Engine(Box::new(e))

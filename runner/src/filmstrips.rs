@@ -22,12 +22,10 @@ pub struct Filmstrip {
 /// [`RunError::Io`] when it cannot be read; [`RunError::Index`] naming the entry and
 /// field where it stops being a list of filmstrips.
 pub fn read(path: &Path) -> Result<Vec<Filmstrip>, RunError> {
-    let bytes = std::fs::read(path).map_err(|source| RunError::Io { path: path.to_path_buf(), source })?;
-    let mut de = serde_json::Deserializer::from_slice(&bytes);
-    serde_path_to_error::deserialize(&mut de).map_err(|e| RunError::Index {
+    crate::config::read_typed(path, |field, source| RunError::Index {
         path: path.to_path_buf(),
-        field: e.path().to_string(),
-        source: e.into_inner(),
+        field,
+        source,
     })
 }
 

@@ -3,6 +3,7 @@
 //! content fingerprints, which `config.json` records so that `--resume` and `merge`
 //! refuse rows of changed models.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
@@ -12,10 +13,6 @@ use policies::judge::{FrameJudge, Label};
 use world_model::model::WorldModel;
 
 use crate::error::RunError;
-
-/// An input of a run, as `config.json`'s fingerprints name it: (name, path, the
-/// SHA-256 of its content).
-pub type Fingerprinted = (String, PathBuf, String);
 
 /// Loads the world model in `dir`, with `--alpha` and `--noise-scale` applied when given.
 ///
@@ -81,44 +78,46 @@ pub fn load_judge(dir: &Path, task: &dyn Task, device: &Device) -> Result<FrameJ
     Ok(j)
 }
 
-/// The model folders a run depends on, fingerprinted: the world model (when the run
-/// uses one, with its folder) and its autoencoder, and every policy checkpoint.
+/// The content fingerprints of everything a run reads, by the names `config.json`
+/// records them under: the world model (when the run uses one) and its autoencoder
+/// (`world_model`, `autoencoder`), every policy checkpoint (`policy NAME`), the learned
+/// judge (`judge`), and the scenario file (`scenario`; none for a task given by name).
 ///
 /// # Errors
-/// [`RunError::Fingerprint`]: a folder that cannot be read, naming it.
-pub fn model_inputs(
+/// [`RunError::Fingerprint`]: a folder or file that cannot be read, naming it.
+pub fn fingerprints(
     wm: Option<(&Path, &WorldModel)>,
-    dirs: &[PathBuf],
-) -> Result<Vec<Fingerprinted>, RunError> {
-    let mut out = Vec::new();
+    policies: &[PathBuf],
+    judge: Option<&Path>,
+    scenario: &str,
+) -> Result<BTreeMap<String, String>, RunError> {
+    let mut out = BTreeMap::new();
     if let Some((wm_dir, wm)) = wm {
-        out.push(("world_model".to_string(), wm_dir.to_path_buf()));
+        out.insert("world_model".to_string(), harness::fingerprint::folder(wm_dir)?);
         if let Some(ae) = &wm.cfg.autoencoder {
-            out.push(("autoencoder".to_string(), wm_dir.join(ae)));
+            out.insert("autoencoder".to_string(), harness::fingerprint::folder(&wm_dir.join(ae))?);
         }
     }
-    out.extend(dirs.iter().map(|d| (format!("policy {}", checkpoint_name(d)), d.clone())));
-    out.into_iter()
-        .map(|(k, d)| {
-            let f = harness::fingerprint::folder(&d)?;
-            Ok((k, d, f))
-        })
-        .collect()
+    for d in policies {
+        out.insert(format!("policy {}", checkpoint_name(d)), harness::fingerprint::folder(d)?);
+    }
+    if let Some(dir) = judge {
+        out.insert("judge".to_string(), harness::fingerprint::folder(dir)?);
+    }
+    if let Some(sha) = scenario_file(scenario)? {
+        out.insert("scenario".to_string(), sha);
+    }
+    Ok(out)
 }
 
-/// The scenario file a run reads, fingerprinted (`scenario`, its path, the SHA-256 of
-/// its bytes), so that `--resume` and `merge` refuse rows of a changed scene; none for a
-/// built-in scenario given by name.
-///
-/// # Errors
-/// [`RunError::Fingerprint`]: a scenario file that cannot be read.
-pub fn scenario_input(scenario: &str) -> Result<Option<Fingerprinted>, RunError> {
+/// The SHA-256 of the scenario file a run reads, so that `--resume` and `merge` refuse
+/// rows of a changed scene; none for a built-in scenario given by name.
+fn scenario_file(scenario: &str) -> Result<Option<String>, RunError> {
     let path = Path::new(scenario);
     if !path.is_file() {
         return Ok(None);
     }
-    let f = harness::fingerprint::file(path)?;
-    Ok(Some(("scenario".to_string(), path.to_path_buf(), f)))
+    Ok(Some(harness::fingerprint::file(path)?))
 }
 
 #[cfg(test)]
@@ -130,10 +129,15 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join("scene.toml");
         std::fs::write(&file, "x = 1\n").unwrap();
-        let (name, path, sha) = scenario_input(file.to_str().unwrap()).unwrap().unwrap();
-        assert_eq!((name.as_str(), path), ("scenario", file.clone()));
+        let sha = scenario_file(file.to_str().unwrap()).unwrap().unwrap();
         assert!(sha.starts_with("sha256:"), "{sha}");
-        assert!(scenario_input("lift").unwrap().is_none());
+        assert!(scenario_file("lift").unwrap().is_none());
+        // Everything else a run reads is named as config.json records it.
+        let policy = dir.path().join("epoch-0007");
+        std::fs::create_dir_all(&policy).unwrap();
+        let all = fingerprints(None, std::slice::from_ref(&policy), Some(dir.path()), file.to_str().unwrap());
+        let names: Vec<String> = all.unwrap().into_keys().collect();
+        assert_eq!(names, ["judge", "policy epoch-0007", "scenario"]);
     }
 
     #[test]

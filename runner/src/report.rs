@@ -15,11 +15,6 @@ use serde::Serialize;
 use crate::config::RankConfig;
 use crate::error::RunError;
 
-/// A [`RunError::File`] builder.
-fn io(doing: String) -> impl FnOnce(std::io::Error) -> RunError {
-    move |source| RunError::File { doing, source }
-}
-
 /// A checkpoint's provenance as the report shows it: `provenance.json` if present,
 /// else `policy.json`'s epoch, step and provenance entry.
 fn provenance(dir: &Path) -> String {
@@ -78,9 +73,11 @@ pub fn write_report(out: &Path) -> Result<PathBuf, RunError> {
         plots.push(write_time_plot(&out.join("plots"), &series)?);
     }
     let table = out.join("table.tex");
-    std::fs::write(&table, latex_table(&summary)).map_err(io(format!("writing {}", table.display())))?;
+    std::fs::write(&table, latex_table(&summary))
+        .map_err(RunError::file(format!("writing {}", table.display())))?;
     let csv = out.join("summary.csv");
-    std::fs::write(&csv, summary_csv(&summary)).map_err(io(format!("writing {}", csv.display())))?;
+    std::fs::write(&csv, summary_csv(&summary))
+        .map_err(RunError::file(format!("writing {}", csv.display())))?;
     let (filmstrips, filmstrip_problems) = filmstrips(out);
     let mut prov: Vec<(String, String)> = Vec::new();
     prov.push((format!("world model {}", config.world_model.display()), provenance(&config.world_model)));
@@ -111,7 +108,7 @@ pub fn write_report(out: &Path) -> Result<PathBuf, RunError> {
     let extras = Extras { plots, filmstrips, config, provenance: prov, notes };
     let html = out.join("report.html");
     std::fs::write(&html, report_html(&summary, &extras))
-        .map_err(io(format!("writing {}", html.display())))?;
+        .map_err(RunError::file(format!("writing {}", html.display())))?;
     Ok(html)
 }
 

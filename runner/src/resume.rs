@@ -7,7 +7,7 @@ use std::path::Path;
 
 use harness::results::{Branch, EpisodeRow};
 
-use crate::config::{RunSettings, read};
+use crate::config::{RunSettings, differing, read};
 use crate::error::RunError;
 
 /// Settings a resumed run may change: the bootstrap count (the statistics are
@@ -56,13 +56,10 @@ pub fn check<C: RunSettings>(path: &Path, now: &C) -> Result<(), RunError> {
 
 /// Every setting of `a` and `b` but those in `skip` that differs, as `name (saved: A,
 /// now: B)`, each value cut at 60 characters.
-pub(crate) fn differences<C: RunSettings>(a: &C, b: &C, skip: &[&str]) -> Vec<String> {
-    let theirs = b.settings();
-    a.settings()
+fn differences<C: RunSettings>(a: &C, b: &C, skip: &[&str]) -> Vec<String> {
+    differing(a, b, skip)
         .into_iter()
-        .zip(theirs)
-        .filter(|((name, x), (_, y))| !skip.contains(name) && x != y)
-        .map(|((name, x), (_, y))| format!("{name} (saved: {}, now: {})", short(&x), short(&y)))
+        .map(|(name, x, y)| format!("{name} (saved: {}, now: {})", short(&x), short(&y)))
         .collect()
 }
 

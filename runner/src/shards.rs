@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use harness::results::{Branch, EpisodeRow, FailedPolicy};
 use serde::Deserialize;
 
-use crate::config::{RankConfig, RunSettings};
+use crate::config::{RankConfig, differing};
 use crate::error::RunError;
 use crate::resume::RANK_KINDS;
 
@@ -34,13 +34,8 @@ pub fn check_complete_set(shards: &[PathBuf], configs: &[RankConfig]) -> Result<
                 first_dir.display()
             )));
         }
-        let differs: Vec<&str> = first
-            .settings()
-            .into_iter()
-            .zip(cfg.settings())
-            .filter(|((name, a), (_, b))| *name != "shard" && a != b)
-            .map(|((name, _), _)| name)
-            .collect();
+        let differs: Vec<&str> =
+            differing(first, cfg, &["shard"]).into_iter().map(|(name, ..)| name).collect();
         if !differs.is_empty() {
             return Err(RunError::Shards(format!(
                 "{}: not a shard of the same run as {} (they differ in {})",

@@ -97,16 +97,16 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     let record = sink.is_some();
     let work = |&(p, batch): &(usize, &[u64])| {
         let (name, policy) = &policies[p];
-        let out =
-            three_ways(policy.as_ref(), batch, &setup, &wm, record).with_context(|| format!("policy {name}"));
-        // The unit's frames were rendered on this worker's thread: what the thread holds
-        // for the task goes with the unit (`Task::release_thread`).
-        task.release_thread();
-        out
+        three_ways(policy.as_ref(), batch, &setup, &wm, record).with_context(|| format!("policy {name}"))
     };
+    // The units' frames are rendered on the workers' threads: what each holds for the task
+    // goes when it is done (`Task::release_thread`).
+    let release = || task.release_thread();
     let mut summary = Vec::new();
     let (mut real, mut imagined, mut replayed) = (Vec::new(), Vec::new(), Vec::new());
-    engine::schedule::run_ordered(&units, c.jobs, &work, &mut |i, unit: Result<Unit>| -> Result<()> {
+    engine::schedule::run_ordered(&units, c.jobs, &work, &release, &mut |i,
+                                                                         unit: Result<Unit>|
+     -> Result<()> {
         let unit = unit?;
         let name = &policies[units[i].0].0;
         for ((row, t), imagined_row) in unit.replayed.into_iter().zip(&unit.imagined) {

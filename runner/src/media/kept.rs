@@ -19,11 +19,6 @@ use crate::error::RunError;
 
 type Result<T, E = RunError> = std::result::Result<T, E>;
 
-/// A [`RunError::File`] builder.
-fn io(doing: String) -> impl FnOnce(std::io::Error) -> RunError {
-    move |source| RunError::File { doing, source }
-}
-
 /// The folder of a run's kept frames.
 pub const FOLDER: &str = "filmstrip-frames";
 
@@ -138,10 +133,10 @@ pub fn gather(shards: &[PathBuf], out: &Path) -> Result<()> {
         }
         for policy in read_dir(&from)? {
             let to = out.join(FOLDER).join(policy.file_name());
-            std::fs::create_dir_all(&to).map_err(io(format!("creating {}", to.display())))?;
+            std::fs::create_dir_all(&to).map_err(RunError::file(format!("creating {}", to.display())))?;
             for f in read_dir(&policy.path())? {
                 let dest = to.join(f.file_name());
-                std::fs::rename(f.path(), &dest).map_err(io(format!(
+                std::fs::rename(f.path(), &dest).map_err(RunError::file(format!(
                     "moving {} to {}",
                     f.path().display(),
                     dest.display()
@@ -157,7 +152,7 @@ fn file(dir: &Path, policy: &str, seed: u64) -> PathBuf {
 }
 
 fn read_dir(dir: &Path) -> Result<Vec<std::fs::DirEntry>> {
-    let reading = || io(format!("reading {}", dir.display()));
+    let reading = || RunError::file(format!("reading {}", dir.display()));
     let mut v: Vec<std::fs::DirEntry> =
         std::fs::read_dir(dir).map_err(reading())?.collect::<std::io::Result<_>>().map_err(reading())?;
     v.sort_by_key(std::fs::DirEntry::file_name);
@@ -167,7 +162,7 @@ fn read_dir(dir: &Path) -> Result<Vec<std::fs::DirEntry>> {
 fn remove(path: &Path) -> Result<()> {
     match std::fs::remove_file(path) {
         Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-            Err(io(format!("removing {}", path.display()))(e))
+            Err(RunError::file(format!("removing {}", path.display()))(e))
         }
         _ => Ok(()),
     }
@@ -177,7 +172,7 @@ fn remove(path: &Path) -> Result<()> {
 fn write(path: &Path, f: &EpisodeFrames) -> Result<()> {
     let bad = |why: String| RunError::Kept { path: path.to_path_buf(), why };
     let dir = path.parent().ok_or_else(|| bad("it has no folder".into()))?;
-    std::fs::create_dir_all(dir).map_err(io(format!("creating {}", dir.display())))?;
+    std::fs::create_dir_all(dir).map_err(RunError::file(format!("creating {}", dir.display())))?;
     let len = f.real.iter().chain(&f.imagined).map(Vec::len).max().unwrap_or(0);
     if f.real.iter().chain(&f.imagined).any(|x| x.len() != len) {
         return Err(bad(format!("the frames of seed {} differ in size", f.seed)));
@@ -190,9 +185,14 @@ fn write(path: &Path, f: &EpisodeFrames) -> Result<()> {
     }
     f.real.iter().chain(&f.imagined).for_each(|x| bytes.extend_from_slice(x));
     let tmp = path.with_extension("tmp");
-    let mut out = std::fs::File::create(&tmp).map_err(io(format!("creating {}", tmp.display())))?;
-    out.write_all(&bytes).map_err(io(format!("writing {}", tmp.display())))?;
-    std::fs::rename(&tmp, path).map_err(io(format!("renaming {} to {}", tmp.display(), path.display())))
+    let mut out =
+        std::fs::File::create(&tmp).map_err(RunError::file(format!("creating {}", tmp.display())))?;
+    out.write_all(&bytes).map_err(RunError::file(format!("writing {}", tmp.display())))?;
+    std::fs::rename(&tmp, path).map_err(RunError::file(format!(
+        "renaming {} to {}",
+        tmp.display(),
+        path.display()
+    )))
 }
 
 /// Reads a file [`write`] wrote; its seed is its name.
@@ -204,7 +204,7 @@ fn read(path: &Path) -> Result<EpisodeFrames> {
         .and_then(|s| s.parse().ok())
         .filter(|_| path.extension().is_some_and(|e| e == "frames"))
         .ok_or_else(|| bad("its name is not <seed>.frames"))?;
-    let bytes = std::fs::read(path).map_err(io(format!("reading {}", path.display())))?;
+    let bytes = std::fs::read(path).map_err(RunError::file(format!("reading {}", path.display())))?;
     let rest = bytes.strip_prefix(MAGIC).ok_or_else(|| bad("no magic"))?;
     if rest.len() < 12 {
         return Err(bad("truncated header"));

@@ -141,8 +141,7 @@ pub fn write_rollouts(
     picks: &[(u64, &'static str)],
     src: &Sources,
 ) -> Result<Vec<(PathBuf, String)>> {
-    std::fs::create_dir_all(dir)
-        .map_err(|source| RunError::File { doing: format!("creating {}", dir.display()), source })?;
+    std::fs::create_dir_all(dir).map_err(RunError::file(format!("creating {}", dir.display())))?;
     if picks.is_empty() {
         return Ok(Vec::new());
     }
@@ -213,8 +212,7 @@ pub fn write_filmstrips(
             crate::filmstrips::Filmstrip { png, caption }
         })
         .collect();
-    std::fs::create_dir_all(dir)
-        .map_err(|source| RunError::File { doing: format!("creating {}", dir.display()), source })?;
+    std::fs::create_dir_all(dir).map_err(RunError::file(format!("creating {}", dir.display())))?;
     crate::config::write(&dir.join("index.json"), &index)
 }
 

@@ -143,14 +143,12 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         None => None,
     };
     // Every input is checked; only now is the output folder touched.
-    let mut inputs = runner::inputs::model_inputs(
+    let fingerprints = runner::inputs::fingerprints(
         wm.as_ref().map(|w| (a.world_model.as_path(), w)),
         std::slice::from_ref(&a.policy),
+        a.judge.as_deref(),
+        &a.scenario,
     )?;
-    inputs.extend(runner::inputs::scenario_input(&a.scenario)?);
-    if let Some(dir) = &a.judge {
-        inputs.push(("judge".to_string(), dir.clone(), harness::fingerprint::folder(dir)?));
-    }
     let mut listed = crate::output::Inputs::new().scenario(&a.scenario).add("--policy", &a.policy);
     if let Some(dir) = &a.judge {
         listed = listed.add("--judge", dir);
@@ -184,7 +182,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         seed: a.seed,
         bootstrap: a.bootstrap,
         record: a.record,
-        fingerprints: inputs.iter().map(|(k, _, f)| (k.clone(), f.clone())).collect(),
+        fingerprints,
     };
     let config_file = a.out.join("config.json");
     if a.resume {

@@ -110,12 +110,8 @@ fn run_with(
         j.file.persist_frames = k;
     }
     let dirs = checkpoint_dirs(&r.policies)?;
-    let mut inputs = runner::inputs::model_inputs(Some((&r.world_model, &wm)), &dirs)?;
-    if let Some(d) = &r.judge {
-        let f = harness::fingerprint::folder(d)?;
-        inputs.push(("judge".to_string(), d.clone(), f));
-    }
-    inputs.extend(runner::inputs::scenario_input(&a.scenario)?);
+    let fingerprints =
+        runner::inputs::fingerprints(Some((&r.world_model, &wm)), &dirs, r.judge.as_deref(), &a.scenario)?;
     // Each checkpoint too: one linked into --policies lies elsewhere on disk.
     let listed = crate::output::Inputs::new()
         .scenario(&a.scenario)
@@ -138,7 +134,7 @@ fn run_with(
         bootstrap: a.bootstrap,
         shard: (shard, shards),
         checkpoints: dirs.clone(),
-        fingerprints: inputs.iter().map(|(k, _, f)| (k.clone(), f.clone())).collect(),
+        fingerprints,
         judge: r.judge.as_ref().zip(judge.as_ref()).map(|(dir, j)| runner::JudgeSettings {
             path: dir.clone(),
             label: j.file.label,
@@ -276,7 +272,7 @@ fn run_with(
 }
 
 /// Checks that `out` stays apart from every input `listed` (every folder of
-/// [`runner::inputs::model_inputs`] among them), then prepares it for a run that appends rows (see
+/// [`runner::inputs::fingerprints`] among them), then prepares it for a run that appends rows (see
 /// [`crate::output::RunDir::prepare_episodes`]); returns it and its `episodes.jsonl`.
 ///
 /// # Errors
