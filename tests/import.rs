@@ -256,6 +256,18 @@ fn gpc_and_lerobot_policies_become_checkpoints_that_rank_runs() {
     let p = read_json(&bn.join("policy.json"));
     assert_eq!(p["config"]["backbone_norm"], "folded-batch", "{p}");
 
+    // One resizing its frames before the crop (LeRobot 0.4's `resize_shape` and `crop_ratio`).
+    let rs = set.join("lerobot-resize");
+    let src = lerobot.with_file_name("pretrained_model_resize");
+    expect_code(&run(&["import", "policy", "--format", "lerobot", s(&src), "--out", s(&rs)]), 0);
+    let p = read_json(&rs.join("policy.json"));
+    let c = &p["config"];
+    assert_eq!(
+        (&c["input_size"], &c["antialias"], &c["crop"]),
+        (&72.into(), &true.into(), &64.into()),
+        "{p}"
+    );
+
     let wm = dir.path().join("wm");
     expect_code(&import(&fixture("wm.pth"), &wm, &[]), 0);
     let out = dir.path().join("rank");
@@ -263,7 +275,7 @@ fn gpc_and_lerobot_policies_become_checkpoints_that_rank_runs() {
     let args = with_flag(&with_flag(&args, "--episodes", "2"), "--max-steps", "4");
     expect_code(&run(&[&args[..], &["--scenario", "pusht-gpc"]].concat()), 0);
     let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
-    for name in ["\"ckpt-ep50\"", "\"lerobot-pusht\"", "\"lerobot-bn\""] {
+    for name in ["\"ckpt-ep50\"", "\"lerobot-pusht\"", "\"lerobot-bn\"", "\"lerobot-resize\""] {
         let n = rows.lines().filter(|l| l.contains(name)).count();
         assert_eq!(n, 4, "{name}: two episodes in each branch:\n{rows}");
     }

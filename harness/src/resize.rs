@@ -70,6 +70,40 @@ pub fn torch_taps(src: usize, dst: usize) -> Vec<(usize, usize, f32)> {
         .collect()
 }
 
+/// PyTorch's antialiased bilinear taps (`F.interpolate(mode="bilinear", align_corners=False,
+/// antialias=True)`, what torchvision's `Resize` does to float tensors) of `dst` outputs from
+/// `src` inputs: per output, the first source index and the normalised weights from it on.
+///
+/// The filter is the triangle `1 − |x|` stretched by the reduction `s = src / dst` when `s > 1`
+/// (so a reduction averages over `s` inputs instead of reading two), centred at `s·(i + ½)`; its
+/// taps are the inputs `j` in `[⌊c − support + ½⌋, ⌊c + support + ½⌋)` (support `s`, or 1 when
+/// enlarging), weighted `tri((j − c + ½)/max(s, 1))` and divided by their sum, in single
+/// precision as PyTorch's CPU kernel computes them for float images.
+pub fn torch_aa_taps(src: usize, dst: usize) -> Vec<(usize, Vec<f32>)> {
+    let scale = src as f32 / dst as f32;
+    let (support, invscale) = if scale >= 1.0 { (scale, 1.0 / scale) } else { (1.0, 1.0) };
+    let max_taps = (support.ceil() as usize) * 2 + 1;
+    (0..dst)
+        .map(|i| {
+            let centre = scale * (i as f32 + 0.5);
+            let lo = ((centre - support + 0.5) as i64).max(0) as usize;
+            let hi = ((centre + support + 0.5) as i64).min(src as i64).max(lo as i64) as usize;
+            let n = (hi - lo).min(max_taps);
+            let mut w: Vec<f32> = (0..n)
+                .map(|j| {
+                    let x = ((j + lo) as f32 - centre + 0.5) * invscale;
+                    (1.0 - x.abs()).max(0.0)
+                })
+                .collect();
+            let total: f32 = w.iter().sum();
+            if total != 0.0 {
+                w.iter_mut().for_each(|v| *v /= total);
+            }
+            (lo, w)
+        })
+        .collect()
+}
+
 /// Resizes an `h × w × c` 8-bit image to `oh × ow × c` as PyTorch's
 /// `F.interpolate(mode="bilinear", align_corners=False)` does on its float values, then
 /// `round()` (half to even) and clamp to bytes: how DriftWorld's robomimic data brought 84²
@@ -168,5 +202,66 @@ mod tests {
             differ.first()
         );
         assert_eq!(resize_bilinear_torch_u8(&[0; 5], 2, 2, 3, 4, 4), None);
+    }
+
+    /// The pattern resized with [`torch_aa_taps`], width first then height, as PyTorch's
+    /// separable CPU kernel does.
+    fn aa_resize(src: usize, dst: usize) -> Vec<f32> {
+        let img: Vec<f32> = pattern(src).into_iter().map(f32::from).collect();
+        let taps = torch_aa_taps(src, dst);
+        let mut rows = vec![0.0f32; src * dst * 3]; // [src rows, dst cols, 3]
+        for y in 0..src {
+            for (x, (lo, w)) in taps.iter().enumerate() {
+                for c in 0..3 {
+                    rows[(y * dst + x) * 3 + c] =
+                        w.iter().enumerate().map(|(j, w)| w * img[(y * src + lo + j) * 3 + c]).sum();
+                }
+            }
+        }
+        let mut out = vec![0.0f32; dst * dst * 3];
+        for (y, (lo, w)) in taps.iter().enumerate() {
+            for x in 0..dst {
+                for c in 0..3 {
+                    out[(y * dst + x) * 3 + c] =
+                        w.iter().enumerate().map(|(j, w)| w * rows[((lo + j) * dst + x) * 3 + c]).sum();
+                }
+            }
+        }
+        out
+    }
+
+    fn read_f32(name: &str) -> Vec<f32> {
+        let path = format!("{}/tests/fixtures/{name}", env!("CARGO_MANIFEST_DIR"));
+        let bytes = std::fs::read(&path).unwrap_or_default();
+        bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+    }
+
+    #[test]
+    fn antialiased_resizing_is_pytorchs() {
+        // torch_aa_*.f32: scripts/fixtures/torch_resize.py (torch 2.15.0), the pattern as floats
+        // through F.interpolate(bilinear, align_corners=False, antialias=True). Values are in
+        // [0, 255]; f32 sums of up to 5 taps agree to about 1e-4 whatever the order.
+        for (src, dst) in [(96, 72), (84, 96)] {
+            let want = read_f32(&format!("torch_aa_{src}_to_{dst}.f32"));
+            let got = aa_resize(src, dst);
+            assert_eq!(got.len(), want.len(), "{src} -> {dst}");
+            let max = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+            assert!(max < 2e-3, "{src} -> {dst}: max |diff| {max}");
+        }
+        // A reduction by 4/3 reads the inputs in a window of 2 · 4/3 around each output's
+        // centre: 2 or 3 of them, some of them 3 (plain bilinear always reads 2); enlarging
+        // reads at most two with weight, as plain bilinear does.
+        let lens: Vec<usize> = torch_aa_taps(96, 72).iter().map(|(_, w)| w.len()).collect();
+        assert!(lens.iter().all(|n| (2..=3).contains(n)) && lens.contains(&3), "{lens:?}");
+        assert!(torch_aa_taps(84, 96).iter().all(|(_, w)| w.iter().filter(|&&v| v > 0.0).count() <= 2));
+        // Enlarging with antialiasing is plain bilinear: the same weights as torch_taps.
+        for ((lo, w), (i0, i1, l1)) in torch_aa_taps(84, 96).into_iter().zip(torch_taps(84, 96)) {
+            let mut dense = vec![0.0f32; 84];
+            w.iter().enumerate().for_each(|(j, v)| dense[lo + j] += v);
+            let mut plain = vec![0.0f32; 84];
+            plain[i0] += 1.0 - l1;
+            plain[i1] += l1;
+            assert!(dense.iter().zip(&plain).all(|(a, b)| (a - b).abs() < 1e-6), "{lo} {w:?} {i0} {i1} {l1}");
+        }
     }
 }

@@ -254,6 +254,7 @@ fn config_from(src: &Model, image_size: usize, obs_horizon: usize) -> Result<Imp
         backbone_norm: BackboneNorm::Group,
         pool: Pool::Average,
         input_size: None,
+        antialias: false,
         crop: None,
         image_norm: None,
         position_first: false,

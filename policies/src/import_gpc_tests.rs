@@ -106,6 +106,7 @@ fn the_official_pusht_manifest_is_the_parameter_order() {
         backbone_norm: crate::resnet_gn::BackboneNorm::Group,
         pool: crate::imported_policy::Pool::Average,
         input_size: None,
+        antialias: false,
         crop: None,
         image_norm: None,
         position_first: false,

@@ -224,13 +224,15 @@ pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError>
             ),
         });
     }
+    let (resize, crop) = crate::lerobot_config::resize_and_crop(&c);
     let backbone_norm = if c.use_group_norm { BackboneNorm::Group } else { BackboneNorm::FoldedBatch };
     let cfg = ImportedConfig {
         resnet_base: base,
         backbone_norm,
         pool: Pool::SpatialSoftmax { keypoints: k, features: None },
-        input_size: None,
-        crop: c.crop_shape.map(|[h, _]| h),
+        input_size: resize,
+        antialias: resize.is_some(),
+        crop,
         image_norm: Some(image_norm),
         position_first: true,
         robot_keys: Vec::new(),

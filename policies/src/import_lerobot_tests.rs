@@ -3,10 +3,12 @@
 //! `DiffusionModel` at ResNet base 64: the same 213 names and shapes, identical conditioning and
 //! noise prediction), reduced to ResNet base 16, 4 keypoints and U-Net levels 16/32/64, in both
 //! of LeRobot's layouts (statistics in `model.safetensors`, or in the preprocessor's file), and
-//! with torchvision's BatchNorms (`pretrained_model_bn`, `use_group_norm: false`).
+//! with torchvision's BatchNorms (`pretrained_model_bn`, `use_group_norm: false`), and with
+//! LeRobot 0.4's antialiased resize before the crop (`pretrained_model_resize`).
 
 use std::path::{Path, PathBuf};
 
+use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::*;
@@ -106,6 +108,35 @@ fn a_batch_norm_backbone_is_folded_and_predicts_what_pytorch_predicts() {
     assert!(serde_json::to_string(&p.cfg).unwrap().contains("\"backbone_norm\":\"folded-batch\""));
     let gn = import(&fixture("pretrained_model"), &device).unwrap_or_else(|e| panic!("{e}"));
     assert!(!serde_json::to_string(&gn.cfg).unwrap().contains("backbone_norm"));
+}
+
+#[test]
+fn a_resize_shape_resizes_with_antialiasing_then_crops_as_pytorch_does() {
+    // `resize_shape` [72, 72] with `crop_ratio` 0.9 (LeRobot 0.4 on): 96² frames resized to 72²
+    // with torchvision's antialiased bilinear, then centre-cropped to ⌊72 · 0.9⌋ = 64.
+    let device = Device::flex();
+    let p = import(&fixture("pretrained_model_resize"), &device).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((p.cfg.input_size, p.cfg.antialias, p.cfg.crop), (Some(72), true, Some(64)));
+    let d = max_abs(&cond_by(&p, &device), &io_of("io_resize.safetensors", "cond"));
+    assert!(d <= 1e-5, "conditioning differs from PyTorch by {d}");
+    let eps = unet_out(&p.net, &io_of("io_resize.safetensors", "cond"), &io("x"), [2, 16, 2], 3);
+    let d = max_abs(&eps[..32], &io_of("io_resize.safetensors", "eps")[..32]);
+    assert!(d <= 1e-5, "noise prediction differs from PyTorch by {d}");
+    // The same network resizing without antialiasing reads other features: the setting matters.
+    let mut plain = p.cfg.clone();
+    plain.antialias = false;
+    let mut net = ImportedNet::new(&plain, &device);
+    net = net.load_record(p.net.clone().into_record());
+    let state = io("state");
+    let pos: Vec<f32> =
+        state.chunks(2).flat_map(|s| p.norm.agent_pos.normalise(s).collect::<Vec<_>>()).collect();
+    let cond = net.obs_cond(frames01(&device), Tensor::from_data(TensorData::new(pos, [2, 2, 2]), &device));
+    let cond = cond.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+    assert!(max_abs(&cond, &io_of("io_resize.safetensors", "cond")) > 1e-3);
+    // Recorded in policy.json; a policy without a resize leaves it as it was.
+    assert!(serde_json::to_string(&p.cfg).unwrap().contains("\"antialias\":true"));
+    let gn = import(&fixture("pretrained_model"), &device).unwrap_or_else(|e| panic!("{e}"));
+    assert!(!serde_json::to_string(&gn.cfg).unwrap().contains("antialias"));
 }
 
 #[test]
@@ -226,6 +257,8 @@ fn unsupported_settings_and_missing_statistics_are_refused_by_name() {
         ("noise_scheduler_type", serde_json::json!("PNDM")),
         ("prediction_type", serde_json::json!("v_prediction")),
         ("vision_backbone", serde_json::json!("resnet34")),
+        ("resize_shape", serde_json::json!([72, 64])),
+        ("crop_ratio", serde_json::json!(1.5)),
     ] {
         let dir = edited(tmp.path(), |v| v[field] = value.clone());
         let err = import(&dir, &device).err().map(|e| e.to_string()).unwrap_or_default();

@@ -337,6 +337,7 @@ pub fn import(
         backbone_norm: BackboneNorm::Group,
         pool: Pool::SpatialSoftmax { keypoints, features: Some(features) },
         input_size: (side != scene_size).then_some(side),
+        antialias: false,
         crop,
         image_norm: None,
         position_first: image_last,

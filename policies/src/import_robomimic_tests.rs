@@ -188,7 +188,7 @@ fn the_expected_names_are_the_fixtures_keys() {
 fn bilinear_weights_are_pytorchs() {
     // 96 → 84: scale 8/7; output 0 samples 8/7 · 0.5 − 0.5 = 0.0714 → taps 0 and 1 with weights
     // 0.9286 and 0.0714; output 83 samples 8/7 · 83.5 − 0.5 = 94.93 → taps 94, 95.
-    let w = bilinear_weights(96, 84);
+    let w = bilinear_weights(96, 84, false);
     assert!((w[0] - 0.928_571_4).abs() < 1e-6 && (w[1] - 0.071_428_6).abs() < 1e-6);
     assert!((w[83 * 96 + 94] - 0.071_428_6).abs() < 1e-5 && (w[83 * 96 + 95] - 0.928_571_4).abs() < 1e-5);
     assert!(w.chunks(96).all(|r| (r.iter().sum::<f32>() - 1.0).abs() < 1e-6));

@@ -134,6 +134,10 @@ pub struct ImportedConfig {
     /// renders another (robomimic's 84 against evalharness's 96; absent: none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub input_size: Option<usize>,
+    /// Whether that resize is antialiased, as torchvision's `Resize` treats float tensors
+    /// (LeRobot's `resize_shape`), rather than plain bilinear (robomimic's; absent: plain).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub antialias: bool,
     /// The side of the centre crop of each frame before the ResNet (absent: none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub crop: Option<usize>,
@@ -227,6 +231,7 @@ pub struct ImportedNet {
     pub unet: CondUnet1d,
     /// Resize, centre crop, image normalisation and the order of each frame's conditioning.
     input_size: Option<usize>,
+    antialias: bool,
     crop: Option<usize>,
     image_norm: Option<([f32; 3], [f32; 3])>,
     position_first: bool,
@@ -249,6 +254,7 @@ impl ImportedNet {
             head,
             unet: CondUnet1d::new(&cfg.net, device),
             input_size: cfg.input_size,
+            antialias: cfg.antialias,
             crop: cfg.crop,
             image_norm: cfg.image_norm.as_ref().map(|m| (m.mean, m.std)),
             position_first: cfg.position_first,
@@ -271,7 +277,7 @@ impl ImportedNet {
             x = (x - m) / s;
         }
         if let Some(r) = self.input_size {
-            x = resize_bilinear(x, r);
+            x = resize_bilinear(x, r, self.antialias);
         }
         if let Some(c) = self.crop {
             let [_, _, h, w] = x.dims();
@@ -295,10 +301,19 @@ pub fn centre_offset(margin: usize) -> usize {
     if margin % 2 == 1 && (margin / 2) % 2 == 1 { margin / 2 + 1 } else { margin / 2 }
 }
 
-/// The weights of PyTorch's bilinear resampling (`align_corners=False`, no antialiasing) of
-/// `from` samples to `to`: `[to, from]`, each row two taps summing to 1.
-pub fn bilinear_weights(from: usize, to: usize) -> Vec<f32> {
+/// The weights of PyTorch's bilinear resampling (`align_corners=False`) of `from` samples to
+/// `to`: `[to, from]`, each row summing to 1; two taps a row without antialiasing, or the
+/// stretched triangle of `antialias=True` ([`harness::resize::torch_aa_taps`]).
+pub fn bilinear_weights(from: usize, to: usize, antialias: bool) -> Vec<f32> {
     let mut w = vec![0.0f32; to * from];
+    if antialias {
+        for (i, (lo, taps)) in harness::resize::torch_aa_taps(from, to).into_iter().enumerate() {
+            for (j, v) in taps.into_iter().enumerate() {
+                w[i * from + lo + j] += v;
+            }
+        }
+        return w;
+    }
     for (i, (i0, i1, l1)) in harness::resize::torch_taps(from, to).into_iter().enumerate() {
         w[i * from + i0] += 1.0 - l1;
         w[i * from + i1] += l1;
@@ -308,14 +323,14 @@ pub fn bilinear_weights(from: usize, to: usize) -> Vec<f32> {
 
 /// Resizes `[n, c, h, w]` frames to `[n, c, side, side]` with [`bilinear_weights`] along each
 /// axis.
-pub fn resize_bilinear(x: Tensor<4>, side: usize) -> Tensor<4> {
+pub fn resize_bilinear(x: Tensor<4>, side: usize, antialias: bool) -> Tensor<4> {
     let [n, c, h, w] = x.dims();
     if (h, w) == (side, side) {
         return x;
     }
     let dev = x.device();
-    let wy = Tensor::<2>::from_data(TensorData::new(bilinear_weights(h, side), [side, h]), &dev);
-    let wx = Tensor::<2>::from_data(TensorData::new(bilinear_weights(w, side), [side, w]), &dev);
+    let wy = Tensor::<2>::from_data(TensorData::new(bilinear_weights(h, side, antialias), [side, h]), &dev);
+    let wx = Tensor::<2>::from_data(TensorData::new(bilinear_weights(w, side, antialias), [side, w]), &dev);
     let cols = x.matmul(wx.transpose().unsqueeze::<4>().expand([n, c, w, side])); // [n, c, h, side]
     wy.unsqueeze::<4>().expand([n, c, side, h]).matmul(cols) // [n, c, side, side]
 }

@@ -49,6 +49,7 @@ fn leading_spacing_steps_from_the_last_multiple_down_to_zero() {
         backbone_norm: crate::resnet_gn::BackboneNorm::Group,
         pool: Pool::Average,
         input_size: None,
+        antialias: false,
         crop: None,
         image_norm: None,
         position_first: false,

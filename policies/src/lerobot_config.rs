@@ -42,6 +42,9 @@ pub(crate) struct LeRobotConfig {
     pub(crate) crop_shape: Option<[usize; 2]>,
     #[serde(default)]
     pub(crate) resize_shape: Option<Vec<usize>>,
+    /// The crop's share of `resize_shape` (LeRobot 0.4 on; absent: 1, no crop after a resize).
+    #[serde(default)]
+    pub(crate) crop_ratio: Option<f64>,
     pub(crate) use_group_norm: bool,
     pub(crate) spatial_softmax_num_keypoints: usize,
     #[serde(default)]
@@ -123,6 +126,20 @@ pub(crate) fn features(
     Ok(((*image).clone(), (*shape).clone(), state, action))
 }
 
+/// The side frames are resized to before the crop (antialiased, as torchvision's `Resize`
+/// treats float tensors) and the crop's side, as LeRobot's `DiffusionConfig.__post_init__`
+/// derives them: with `resize_shape`, the crop is `⌊side · crop_ratio⌋` when the ratio is below 1
+/// and none at 1 (whatever `crop_shape` says); without it, `crop_shape`. Call after [`check`].
+pub(crate) fn resize_and_crop(c: &LeRobotConfig) -> (Option<usize>, Option<usize>) {
+    match c.resize_shape.as_deref() {
+        Some(&[side, _]) => {
+            let ratio = c.crop_ratio.unwrap_or(1.0);
+            (Some(side), (ratio < 1.0).then(|| (side as f64 * ratio) as usize))
+        }
+        _ => (None, c.crop_shape.map(|[h, _]| h)),
+    }
+}
+
 /// Refuses settings this importer does not implement, naming the `config.json` field.
 pub(crate) fn check(c: &LeRobotConfig, path: &Path) -> Result<(), ImportError> {
     let refuse = |field: &str, value: String, supported: &str| {
@@ -137,8 +154,15 @@ pub(crate) fn check(c: &LeRobotConfig, path: &Path) -> Result<(), ImportError> {
     if c.use_separate_rgb_encoder_per_camera {
         return refuse("use_separate_rgb_encoder_per_camera", "true".into(), "false");
     }
-    if c.resize_shape.is_some() {
-        return refuse("resize_shape", format!("{:?}", c.resize_shape), "none");
+    if let Some(r) = &c.resize_shape
+        && !(r.len() == 2 && r[0] == r[1] && r[0] > 0)
+    {
+        return refuse("resize_shape", format!("{r:?}"), "a square [side, side] or none");
+    }
+    if let Some(q) = c.crop_ratio
+        && !(q > 0.0 && q <= 1.0)
+    {
+        return refuse("crop_ratio", q.to_string(), "in (0, 1]");
     }
     if !c.use_film_scale_modulation {
         return refuse("use_film_scale_modulation", "false".into(), "true");
