@@ -134,7 +134,7 @@ pub(crate) fn resize_and_crop(c: &LeRobotConfig) -> (Option<usize>, Option<usize
     match c.resize_shape.as_deref() {
         Some(&[side, _]) => {
             let ratio = c.crop_ratio.unwrap_or(1.0);
-            (Some(side), (ratio < 1.0).then(|| (side as f64 * ratio) as usize))
+            (Some(side), (ratio < 1.0).then_some((side as f64 * ratio) as usize))
         }
         _ => (None, c.crop_shape.map(|[h, _]| h)),
     }
