@@ -52,6 +52,7 @@ fn observation() -> Observation {
         robot: vec![Vec::new(); 2],
         size: 96,
         exact: None,
+        native: None,
     }
 }
 

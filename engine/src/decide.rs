@@ -59,7 +59,13 @@ mod tests {
 
     #[test]
     fn only_the_chunks_active_episodes_are_recorded() {
-        let seen = |v: u8| Seen { frame: vec![v], proprio: Vec::new(), robot: Vec::new(), exact: None };
+        let seen = |v: u8| Seen {
+            frame: vec![v],
+            proprio: Vec::new(),
+            robot: Vec::new(),
+            exact: None,
+            native: None,
+        };
         let hist: Vec<VecDeque<Seen>> = vec![[seen(1)].into(), [seen(2)].into(), [seen(3)].into()];
         let mut rec = vec![vec![vec![0]]; 3];
         record_chunk(&mut rec, &hist, &[0, 2]);

@@ -128,6 +128,7 @@ pub fn wm_branch(
                                 proprio: imagine[i].proprio(),
                                 robot: imagine[i].robot(),
                                 exact: x,
+                                native: None,
                             };
                             push(&mut hist[i], seen, o);
                         }

@@ -107,6 +107,7 @@ mod tests {
             proprio: vec![vec![0.0]],
             robot: vec![Vec::new()],
             exact: None,
+            native: None,
         }
     }
 

@@ -247,6 +247,8 @@ pub fn obs_of(hist: &VecDeque<Seen>, size: usize) -> Observation {
                 })
                 .collect()
         }),
+        // Where every frame has the camera's own, the observation carries them.
+        native: hist.iter().map(|s| s.native.clone()).collect(),
     }
 }
 
@@ -371,7 +373,13 @@ mod tests {
 
     #[test]
     fn observations_carry_the_proprioception_of_any_size() {
-        let seen = |p: Vec<f32>| Seen { frame: vec![0; 3], proprio: p, robot: Vec::new(), exact: None };
+        let seen = |p: Vec<f32>| Seen {
+            frame: vec![0; 3],
+            proprio: p,
+            robot: Vec::new(),
+            exact: None,
+            native: None,
+        };
         let hist: VecDeque<Seen> = [seen(vec![1.0, 2.0]), seen(vec![3.0, 4.0])].into();
         let obs = obs_of(&hist, 1);
         assert_eq!(obs.proprio, vec![vec![1.0, 2.0], vec![3.0, 4.0]]);

@@ -87,6 +87,7 @@ impl Env for ReachEnv {
             proprio: vec![self.x as f32],
             robot: Vec::new(),
             exact: None,
+            native: None,
         }
     }
     fn step(&mut self, action: &[f32]) -> Result<f64, TaskError> {

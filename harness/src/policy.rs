@@ -26,6 +26,10 @@ pub struct Observation {
     /// frames are a world model's and the run keeps them (`rank --float-frames`); policies
     /// that read floats use them, the others read `frames`.
     pub exact: Option<Vec<Vec<f32>>>,
+    /// Every frame at the side the camera rendered it at, oldest first, where the scene
+    /// renders at another side and resizes ([`crate::task::Seen::native`]): a policy trained
+    /// at that side reads these instead of resizing `frames` back. Absent in imagination.
+    pub native: Option<Vec<crate::task::NativeFrame>>,
 }
 
 /// Actions to execute in order, each with the task's action dimension (Push-T: a

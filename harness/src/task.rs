@@ -167,6 +167,20 @@ pub struct Seen {
     /// A generated frame's values before rounding to bytes (HWC, [0, 1], unclamped), where
     /// the run feeds a world model's frames to policies as floats (`rank --float-frames`).
     pub exact: Option<Vec<f32>>,
+    /// The camera's frame at the side it was rendered at, where the scene renders at another
+    /// side than the observation's and resizes (Lift and Can with `[visual] render_size`):
+    /// the bytes `frame` was made from. A policy trained at that side reads it instead of
+    /// resizing `frame` back. Only a simulator has one.
+    pub native: Option<NativeFrame>,
+}
+
+/// A frame at the side its camera rendered it at ([`Seen::native`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NativeFrame {
+    /// Side in pixels.
+    pub side: usize,
+    /// `side x side x 3` bytes, HWC RGB.
+    pub bytes: Vec<u8>,
 }
 
 /// An error of a task's simulator (a diverging step, a bad action, an impossible

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use burn::tensor::{Device, Tensor, TensorData};
 use harness::policy::{Observation, Policy};
 use harness::rng::Rng;
+use harness::task::NativeFrame;
 
 use super::*;
 use crate::imported_policy::{ImportedDiffusion, bilinear_weights, ddpm_sample, replayed, unet_out};
@@ -150,6 +151,7 @@ fn the_policy_reads_its_keys_from_the_robot_state_and_the_training_copy_differs(
             .collect(),
         size: 96,
         exact: None,
+        native: None,
     };
     let act = |extra| policy.act(&[ob(0, extra)], &mut [Rng::new(3)]).unwrap_or_else(|e| panic!("{e}"));
     let a = act(0.0);
@@ -158,6 +160,52 @@ fn the_policy_reads_its_keys_from_the_robot_state_and_the_training_copy_differs(
     let short = Observation { robot: vec![vec![0.0; 4]; 2], ..ob(0, 0.0) };
     let err = policy.act(&[short], &mut [Rng::new(3)]).err().map(|e| e.to_string()).unwrap_or_default();
     assert!(err.contains("robot0_eef_pos"), "{err}");
+}
+
+#[test]
+fn the_cameras_own_frames_at_the_policys_size_are_read_instead_of_resized_ones() {
+    // A scene rendering at 84 and upsampling (`[visual] render_size = 84`) hands the camera's
+    // own 84² frames beside the 96² ones; the policy (trained at 84) reads those, not a resize.
+    let p = imported(RobomimicWeights::Ema);
+    let mut policy = ImportedDiffusion::new(
+        "rm".into(),
+        p.cfg,
+        p.norm,
+        (vec![-1.0; 7], vec![1.0; 7]),
+        p.net,
+        &Device::flex(),
+    );
+    policy.robot = vec![(0, 3), (3, 4), (7, 2)];
+    let bytes = frames();
+    let f96: Vec<Vec<u8>> = bytes.chunks(96 * 96 * 3).take(2).map(<[u8]>::to_vec).collect();
+    let ob = |frames: Vec<Vec<u8>>, native: Option<Vec<NativeFrame>>| Observation {
+        frames,
+        proprio: vec![vec![0.0; 7]; 2],
+        robot: io("robot")[..18].chunks(9).map(<[f32]>::to_vec).collect(),
+        size: 96,
+        exact: None,
+        native,
+    };
+    // Native frames unlike the 96² ones (the fixture's second episode, at `side`).
+    let other = |side: usize| -> Vec<NativeFrame> {
+        bytes
+            .chunks(96 * 96 * 3)
+            .skip(2)
+            .map(|f| NativeFrame {
+                side,
+                bytes: harness::resize::resize_bilinear_torch_u8(f, 96, 96, 3, side, side)
+                    .unwrap_or_default(),
+            })
+            .collect()
+    };
+    let act = |o: Observation| policy.act(&[o], &mut [Rng::new(3)]).unwrap_or_else(|e| panic!("{e}"));
+    let resized = act(ob(f96.clone(), None));
+    let native = act(ob(f96.clone(), Some(other(84))));
+    assert_ne!(resized, native, "the camera's own frames are read");
+    // With them the 96² frames are not read at all.
+    assert_eq!(act(ob(vec![vec![128; 96 * 96 * 3]; 2], Some(other(84)))), native);
+    // Frames of another side than the policy's are not what it was trained on: resized as before.
+    assert_eq!(act(ob(f96, Some(other(80)))), resized);
 }
 
 #[test]

@@ -454,6 +454,24 @@ impl ImportedDiffusion {
             .collect()
     }
 
+    /// Every episode's last `obs_horizon` frames at the side the camera rendered them at, when
+    /// that side is the one the policy resizes to ([`ImportedConfig::input_size`]) and every
+    /// observation carries them ([`Observation::native`]; a simulator rendering at that side);
+    /// `None` otherwise, and the scene's frames are resized.
+    fn native_frames<'a>(&self, obs: &'a [Observation]) -> Option<(usize, Vec<&'a [u8]>)> {
+        let (side, o) = (self.cfg.input_size?, self.cfg.net.obs_horizon);
+        let mut out = Vec::with_capacity(obs.len() * o);
+        for ob in obs {
+            let native = ob.native.as_ref()?;
+            let last = native.get(native.len().checked_sub(o)?..)?;
+            if last.iter().any(|f| f.side != side || f.bytes.len() != side * side * 3) {
+                return None;
+            }
+            out.extend(last.iter().map(|f| f.bytes.as_slice()));
+        }
+        Some((side, out))
+    }
+
     /// The noise prediction for `x` (`[b, horizon, action_dim]`) at step `t` under `cond`.
     fn eps(&self, cond: &[f32], x: &[f32], b: usize, t: usize) -> Vec<f32> {
         self.cfg.prediction.noise(x, self.net_out(cond, x, b, t), self.ac[t])
@@ -515,7 +533,14 @@ impl Policy for ImportedDiffusion {
             .map(|v| v.into_iter().flatten().collect());
         let x01 = match exact.filter(|e| e.len() == frames.len() && e.iter().all(|f| f.len() == s * s * 3)) {
             Some(e) => world_model::data::unit_floats_to_tensor(&e, s, &self.device),
-            None => world_model::data::frames_to_tensor(&frames, s, &self.device) * 0.5 + 0.5,
+            None => match self.native_frames(obs) {
+                // The camera's own frames at the policy's size (`[visual] render_size`): what
+                // the policy was trained on, where resizing the scene's frames back would not be.
+                Some((side, native)) => {
+                    world_model::data::frames_to_tensor(&native, side, &self.device) * 0.5 + 0.5
+                }
+                None => world_model::data::frames_to_tensor(&frames, s, &self.device) * 0.5 + 0.5,
+            },
         };
         let pos = Tensor::from_data(TensorData::new(pos, [b, o, p]), &self.device);
         let cond = self

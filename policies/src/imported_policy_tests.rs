@@ -92,6 +92,7 @@ fn unrounded_frames_are_read_when_the_observation_has_them() {
         robot: vec![Vec::new(); 2],
         size: 96,
         exact: None,
+        native: None,
     };
     let unit: Vec<f32> = frame.iter().map(|&b| f32::from(b) / 255.0).collect();
     let same = Observation { exact: Some(vec![unit.clone(); 2]), ..bytes.clone() };

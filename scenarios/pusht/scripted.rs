@@ -244,6 +244,7 @@ mod tests {
             robot: vec![Vec::new(); 2],
             size: 96,
             exact: None,
+            native: None,
         }
     }
 

@@ -135,6 +135,7 @@ impl Env for PushTEpisode {
             proprio: st.agent.map(|v| v as f32).to_vec(),
             robot: Vec::new(),
             exact: None,
+            native: None,
         }
     }
 

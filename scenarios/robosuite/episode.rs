@@ -237,17 +237,33 @@ impl ArmEpisode {
     /// With a render size ([`ArmEpisode::with_render_size`]) the camera renders at that side
     /// and the frame is upsampled to `size` as PyTorch's bilinear interpolation does.
     pub fn render(&mut self, size: usize) -> Result<Vec<u8>, ScenarioError> {
+        self.render_native(size).map(|(frame, _)| frame)
+    }
+
+    /// [`Self::render`], and the camera's own frame at the render size where that is not
+    /// `size` (the bytes the frame was upsampled from; `None` when rendered at `size`).
+    ///
+    /// # Errors
+    /// As [`Self::render`].
+    pub fn render_native(&mut self, size: usize) -> Result<(Vec<u8>, Option<Vec<u8>>), ScenarioError> {
         let side = self.render_from.unwrap_or(size);
         let raw = match (super::render_pool::active(), &self.key) {
             (true, Some(key)) => super::render_pool::render(key, &self.shown, side)?,
             _ => render_agentview(&mut self.data, side)?,
         };
         if side == size {
-            return Ok(raw);
+            return Ok((raw, None));
         }
-        harness::resize::resize_bilinear_torch_u8(&raw, side, side, 3, size, size).ok_or_else(|| {
-            ScenarioError::Render { message: format!("a {side}² frame that is not {side}² RGB") }
-        })
+        let frame =
+            harness::resize::resize_bilinear_torch_u8(&raw, side, side, 3, size, size).ok_or_else(|| {
+                ScenarioError::Render { message: format!("a {side}² frame that is not {side}² RGB") }
+            })?;
+        Ok((frame, Some(raw)))
+    }
+
+    /// The side frames are rendered at before resizing ([`Self::with_render_size`]), if any.
+    pub fn render_size(&self) -> Option<usize> {
+        self.render_from
     }
 
     /// Renders frames at `side` and upsamples them to the asked size (`None`: render at it).

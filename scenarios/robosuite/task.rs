@@ -21,7 +21,8 @@ use std::cell::RefCell;
 
 use harness::judge::Judge;
 use harness::task::{
-    ActionKind, ActionSpec, Env, Imagination, ModelView, ObservationSpec, ScoreKind, Seen, Task, TaskError,
+    ActionKind, ActionSpec, Env, Imagination, ModelView, NativeFrame, ObservationSpec, ScoreKind, Seen, Task,
+    TaskError,
 };
 
 use super::episode::ROBOT_COLUMNS;
@@ -177,17 +178,24 @@ impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
 struct ArmEnv<E> {
     seed: u64,
     ep: RefCell<E>,
-    frame: RefCell<Option<Vec<u8>>>,
+    frame: RefCell<Option<Rendered>>,
     cmd: Commanded,
 }
 
+/// A state's frame, and the camera's own where it renders at another side.
+type Rendered = (Vec<u8>, Option<NativeFrame>);
+
 impl<E: TaskEpisode> ArmEnv<E> {
     /// The current frame, rendered once per state.
-    fn frame(&self) -> Result<Vec<u8>, ScenarioError> {
+    fn frame(&self) -> Result<Rendered, ScenarioError> {
         if let Some(f) = self.frame.borrow().as_ref() {
             return Ok(f.clone());
         }
-        let f = self.ep.borrow_mut().arm_mut().render(IMAGE_SIZE)?;
+        let mut ep = self.ep.borrow_mut();
+        let arm = ep.arm_mut();
+        let side = arm.render_size();
+        let (frame, raw) = arm.render_native(IMAGE_SIZE)?;
+        let f = (frame, raw.zip(side).map(|(bytes, side)| NativeFrame { side, bytes }));
         *self.frame.borrow_mut() = Some(f.clone());
         Ok(f)
     }
@@ -201,12 +209,12 @@ impl<E: TaskEpisode + Send + 'static> Env for ArmEnv<E> {
     fn observe(&self) -> Seen {
         // A renderer that cannot start fails on the first frame of every episode; an
         // empty frame then makes the policy refuse it with an error naming its size.
-        let frame = self.frame().unwrap_or_else(|e| {
+        let (frame, native) = self.frame().unwrap_or_else(|e| {
             tracing::error!(seed = self.seed, "rendering: {e}");
-            Vec::new()
+            (Vec::new(), None)
         });
         let robot = robot_state::measured(self.ep.borrow().arm());
-        Seen { frame, proprio: self.cmd.vector(), robot, exact: None }
+        Seen { frame, proprio: self.cmd.vector(), robot, exact: None, native }
     }
 
     fn step(&mut self, action: &[f32]) -> Result<f64, TaskError> {
@@ -245,7 +253,7 @@ impl<E: TaskEpisode + Send + 'static> Env for ArmEnv<E> {
 
     fn imagination(&self, _view: ModelView) -> Box<dyn Imagination> {
         // The scenes have no goal drawn in them, so both views are the observation.
-        let first = self.frame().unwrap_or_default();
+        let first = self.frame().map(|(frame, _)| frame).unwrap_or_default();
         let robot = RobotEstimate::at_reset(self.ep.borrow().arm());
         Box::new(ArmImagination { first, cmd: self.cmd, robot })
     }

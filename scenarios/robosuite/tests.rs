@@ -189,6 +189,17 @@ fn frames_rendered_at_84_are_upsampled_as_driftworlds_robomimic_data() {
     let mean =
         frame.iter().zip(&direct).map(|(x, y)| f64::from(x.abs_diff(*y))).sum::<f64>() / frame.len() as f64;
     assert!(mean > 0.1, "upsampled and direct renders should differ ({mean})");
+    // What a policy observes: the upsampled frame and, beside it, the camera's own 84² frame
+    // (a policy trained at 84 reads it instead of resizing the frame back); a scene rendering at
+    // the observation's size gives none.
+    use harness::task::Task;
+    let task = crate::robosuite::task::RobosuiteTask::new(sim);
+    let seen = task.reset(5).unwrap().observe();
+    assert_eq!(seen.frame, want);
+    let native = seen.native.expect("the camera's own frame");
+    assert_eq!((native.side, native.bytes == small), (84, true));
+    let plain = crate::robosuite::task::RobosuiteTask::new(plain);
+    assert_eq!(plain.reset(5).unwrap().observe().native, None);
 }
 
 #[test]
