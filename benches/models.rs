@@ -12,7 +12,7 @@
 //! shipped model's architecture as DriftWorld (one pass) and as the K-step diffusion
 //! baseline (`BENCH_DIFFUSION_STEPS`, default 10), random weights, at batch 1 unless
 //! `BENCH_OBJECTIVE_BATCHES=1,100`. The device is `EVALHARNESS_DEVICE` (see
-//! `world_model::device`). `decoder` times the frame decoder alone, burn's
+//! `nn::device`). `decoder` times the frame decoder alone, burn's
 //! convolutions against the CPU kernels (`world_model::cpu_decoder`; Winograd's
 //! algorithm since 2026-11-24, the direct 3x3 kernel under `EVALHARNESS_CONV=direct`), at
 //! batch 1 and 50 on the shipped autoencoder (`BENCH_AUTOENCODER=DIR`);
@@ -59,7 +59,7 @@ fn observation() -> Observation {
 fn policy(c: &mut Criterion) {
     let dir = path("BENCH_POLICY", "checkpoints/pusht/policies");
     let first = checkpoint_dirs(&dir).ok().and_then(|d| d.into_iter().next()).unwrap_or(dir);
-    let device = world_model::device::selected().expect("EVALHARNESS_DEVICE");
+    let device = nn::device::selected().expect("EVALHARNESS_DEVICE");
     let p = load_policy(&first, &Expectations::pusht(96), &device)
         .unwrap_or_else(|e| panic!("benchmark needs a policy checkpoint: {e}"));
     let mut g = c.benchmark_group("policy_decision");
@@ -76,7 +76,7 @@ fn policy(c: &mut Criterion) {
 
 fn world_model(c: &mut Criterion) {
     let dir = path("BENCH_WORLD_MODEL", "checkpoints/pusht/world_model");
-    let device = world_model::device::selected().expect("EVALHARNESS_DEVICE");
+    let device = nn::device::selected().expect("EVALHARNESS_DEVICE");
     let wm = WorldModel::load(&dir, &device)
         .unwrap_or_else(|e| panic!("benchmark needs a world-model checkpoint: {e}"));
     chunk(c, "world_model_chunk", &wm, &env_batches("BENCH_WM_BATCHES", &BATCHES));
@@ -86,7 +86,7 @@ fn world_model(c: &mut Criterion) {
 /// in the layout of an imported official checkpoint (attention norms per frame); or the
 /// world-model folder `BENCH_PIXEL_WORLD_MODEL` names (`evalharness import world-model`).
 fn pixel_world_model(c: &mut Criterion) {
-    let device = world_model::device::selected().expect("device");
+    let device = nn::device::selected().expect("device");
     let wm = match std::env::var("BENCH_PIXEL_WORLD_MODEL") {
         Ok(dir) => {
             WorldModel::load(std::path::Path::new(&dir), &device).expect("BENCH_PIXEL_WORLD_MODEL loads")
@@ -112,7 +112,7 @@ fn env_batches(var: &str, default: &[usize]) -> Vec<usize> {
 /// Only the U-Net passes are timed: decoding costs the same for both.
 fn objectives(c: &mut Criterion) {
     let dir = path("BENCH_WORLD_MODEL", "checkpoints/pusht/world_model");
-    let device = world_model::device::selected().expect("EVALHARNESS_DEVICE");
+    let device = nn::device::selected().expect("EVALHARNESS_DEVICE");
     let shipped =
         WorldModelConfig::read(&dir).unwrap_or_else(|e| panic!("benchmark needs a world-model config: {e}"));
     let steps: usize = std::env::var("BENCH_DIFFUSION_STEPS").ok().and_then(|v| v.parse().ok()).unwrap_or(10);

@@ -77,7 +77,7 @@ fn a_damaged_checkpoint_is_refused_by_key_and_the_existing_folder_is_kept() {
 #[test]
 fn gpc_reward_predictors_become_a_judge_that_rank_uses_with_an_imported_world_model() {
     let dir = tempfile::tempdir().unwrap();
-    let reward = Path::new(env!("CARGO_MANIFEST_DIR")).join("policies/tests/fixtures/gpc_reward");
+    let reward = Path::new(env!("CARGO_MANIFEST_DIR")).join("judges/tests/fixtures/gpc_reward");
     let judge = dir.path().join("judge");
     let (xy, angle) = (reward.join("reward_predictor_xy.pth"), reward.join("reward_predictor_angle.pth"));
     let args = ["import", "judge", "--format", "gpc-reward-predictor", "--xy", s(&xy), "--angle", s(&angle)];

@@ -5,7 +5,7 @@
 //! burn-flex runs each layer as separate passes over small tensors; these kernels
 //! fuse them, and use Winograd's algorithm where it needs fewer multiply-adds.
 //! Everything here works on `f32` slices: no burn types, so the crates that copy
-//! burn's weights into these kernels (`world_model::weights`) do the copying and
+//! burn's weights into these kernels (`nn::weights`) do the copying and
 //! this crate only computes.
 //!
 //! - [`elementwise`]: the vectorisable `exp`, GroupNorm statistics, the AVX2 + FMA check;

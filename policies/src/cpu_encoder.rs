@@ -14,8 +14,8 @@ use burn::nn::conv::Conv2d;
 use kernels::direct_conv::{Conv3x3, Norm};
 use kernels::matrix::{Conv2dShape, matmul};
 use kernels::padded::Padded;
-use world_model::cpu_decoder::{conv3x3_of, norm_of};
-use world_model::error::UnsupportedLayer;
+use nn::UnsupportedLayer;
+use nn::weights::{bias_values, conv3x3_of, norm_of, values};
 
 use crate::net::{ObsEncoder, Res2d};
 
@@ -30,7 +30,7 @@ struct Down {
 }
 
 impl Down {
-    fn new(c: &Conv2d, layer: &str) -> Result<Self, String> {
+    fn new(c: &Conv2d, layer: &str) -> Result<Self, UnsupportedLayer> {
         let padded_one = matches!(c.padding, PaddingConfig2d::Explicit(1, 1, 1, 1));
         if c.kernel_size != [3, 3]
             || c.stride != [2, 2]
@@ -38,15 +38,15 @@ impl Down {
             || c.groups != 1
             || !padded_one
         {
-            return Err(format!("{layer}: only 3x3 convolutions with stride 2 and padding 1 are supported"));
+            return Err(UnsupportedLayer::new(
+                layer,
+                "only 3x3 convolutions with stride 2 and padding 1 are supported",
+            ));
         }
         let w = c.weight.val(); // [cout, cin, 3, 3]
         let [cout, cin, _, _] = w.dims();
-        let w = w.into_data().try_to_vec::<f32>().map_err(|e| format!("{layer}: {e:?}"))?;
-        let b = match &c.bias {
-            Some(b) => b.val().into_data().try_to_vec::<f32>().map_err(|e| format!("{layer}: {e:?}"))?,
-            None => vec![0.0; cout],
-        };
+        let w = values(w, layer)?;
+        let b = bias_values(&c.bias, cout, layer)?;
         Ok(Self { cin, cout, w, b })
     }
 
@@ -87,24 +87,20 @@ impl CpuEncoder {
     /// Copies `e`'s weights.
     ///
     /// # Errors
-    /// A message naming the layer these kernels cannot run.
-    pub fn new(e: &ObsEncoder) -> Result<Self, String> {
-        let err = |x: UnsupportedLayer| x.to_string();
-        let block = |b: &Res2d, i: usize| -> Result<Block, String> {
+    /// [`UnsupportedLayer`] naming the layer these kernels cannot run.
+    pub fn new(e: &ObsEncoder) -> Result<Self, UnsupportedLayer> {
+        let block = |b: &Res2d, i: usize| -> Result<Block, UnsupportedLayer> {
             Ok(Block {
-                n1: norm_of(&b.n1, &format!("blocks.{i}.n1")).map_err(err)?,
-                c1: conv3x3_of(&b.c1, &format!("blocks.{i}.c1")).map_err(err)?,
-                n2: norm_of(&b.n2, &format!("blocks.{i}.n2")).map_err(err)?,
-                c2: conv3x3_of(&b.c2, &format!("blocks.{i}.c2")).map_err(err)?,
+                n1: norm_of(&b.n1, &format!("blocks.{i}.n1"))?,
+                c1: conv3x3_of(&b.c1, &format!("blocks.{i}.c1"))?,
+                n2: norm_of(&b.n2, &format!("blocks.{i}.n2"))?,
+                c2: conv3x3_of(&b.c2, &format!("blocks.{i}.c2"))?,
             })
         };
         let w = e.out.weight.val();
         let [_, features] = w.dims();
-        let out_w = w.into_data().try_to_vec::<f32>().map_err(|x| format!("out: {x:?}"))?;
-        let out_b = match &e.out.bias {
-            Some(b) => b.val().into_data().try_to_vec::<f32>().map_err(|x| format!("out: {x:?}"))?,
-            None => vec![0.0; features],
-        };
+        let out_w = values(w, "out")?;
+        let out_b = bias_values(&e.out.bias, features, "out")?;
         Ok(Self {
             downs: e
                 .downs
@@ -113,7 +109,7 @@ impl CpuEncoder {
                 .map(|(i, d)| Down::new(d, &format!("downs.{i}")))
                 .collect::<Result<_, _>>()?,
             blocks: e.blocks.iter().enumerate().map(|(i, b)| block(b, i)).collect::<Result<_, _>>()?,
-            norm: norm_of(&e.norm, "norm").map_err(err)?,
+            norm: norm_of(&e.norm, "norm")?,
             out_w,
             out_b,
             features,
@@ -165,7 +161,7 @@ fn residual(b: &Block, x: Vec<f32>, side: usize) -> Vec<f32> {
 mod tests {
     use burn::module::Module;
     use burn::tensor::{Device, Distribution, Tensor};
-    use world_model::weights::Jitter;
+    use nn::weights::Jitter;
 
     use super::*;
     use crate::net::NetConfig;

@@ -19,18 +19,18 @@ use burn::nn::{GroupNorm, Linear, PaddingConfig1d};
 
 use kernels::direct_conv::Norm;
 use kernels::matrix::{Dense, group_norm_cols, matmul};
-use world_model::cpu_decoder::norm_of;
-use world_model::weights::{bias_values, dense_of, values};
+use nn::weights::norm_of;
+use nn::weights::{bias_values, dense_of, values};
 
 use crate::net::{CondRes1d, CondUnet1d, Conv1dBlock, Level1d};
 
 /// Why a U-Net cannot be run by these kernels (a layer they do not support).
 #[derive(Debug, thiserror::Error)]
 #[error("policy U-Net {0}")]
-pub struct UnsupportedLayer(#[from] world_model::error::UnsupportedLayer);
+pub struct UnsupportedLayer(#[from] nn::UnsupportedLayer);
 
 fn unsupported(layer: &str, message: impl Into<String>) -> UnsupportedLayer {
-    UnsupportedLayer(world_model::error::UnsupportedLayer::new(layer, message))
+    UnsupportedLayer(nn::UnsupportedLayer::new(layer, message))
 }
 
 /// A dense layer, its errors named for this network.
@@ -396,7 +396,7 @@ impl CpuUnet1d {
 mod tests {
     use burn::module::Module;
     use burn::tensor::{Device, Distribution, Tensor};
-    use world_model::weights::Jitter;
+    use nn::weights::Jitter;
 
     use super::*;
     use crate::net::NetConfig;

@@ -115,7 +115,8 @@ impl Demos {
             return Err(err(format!("data/state has {sdim} columns, label {name} is column {c}")));
         }
         let proprio_dim = task.observation_spec().proprio.len();
-        let behaviours = r.attrs["evalharness"]["episodes"].as_array().cloned().unwrap_or_default();
+        let behaviours =
+            harness::replay::origin::episodes_in(path, &r.attrs).map_err(|e| err(e.to_string()))?;
         let state = r.state.read_f64().map_err(|e| err(e.to_string()))?;
         let action = r.action.read_f64().map_err(|e| err(e.to_string()))?;
         let (mut block, mut goal, mut columns) = (Vec::new(), Vec::new(), Vec::new());
@@ -134,7 +135,7 @@ impl Demos {
                 break;
             }
             if let Some(want) = behaviour {
-                let got = behaviours.get(i).and_then(|e| e["behaviour"].as_str());
+                let got = behaviours.get(i).and_then(|e| e.behaviour.as_deref());
                 if got != Some(want) {
                     continue;
                 }

@@ -328,7 +328,7 @@ impl DiffusionPolicy {
     }
 }
 
-pub use world_model::data::{frames_to_tensor, frames_to_vec};
+pub use nn::frames::{frames_to_tensor, frames_to_vec};
 
 impl Policy for DiffusionPolicy {
     fn name(&self) -> &str {

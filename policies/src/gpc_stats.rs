@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use world_model::import::ImportError;
+use nn::ImportError;
 
 use crate::diffusion::{Normalisation, Range};
 

@@ -19,9 +19,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use burn::tensor::{Device, TensorData};
-use world_model::import::ImportError;
-use world_model::import::place::{place_all, shapes, transpose};
-use world_model::import::tensors::{Source, top_level_int};
+use nn::ImportError;
+use nn::import::place::{place_all, shapes, transpose};
+use nn::import::tensors::{Source, top_level_int};
 
 use crate::import_keys::{UnetNames, UnetSizes, cond_unet, norm, resnet_block, unet_sizes};
 use crate::imported_policy::{ImportedConfig, ImportedNet, Pool, Sampler};

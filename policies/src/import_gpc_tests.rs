@@ -37,7 +37,7 @@ fn cond_of(net: &ImportedNet, device: &Device) -> Vec<f32> {
     let r = pytorch_reader::PytorchReader::new(fixture("policy_io.pth")).unwrap_or_else(|e| panic!("{e}"));
     let bytes = r.get("frames").and_then(|t| t.read().ok()).unwrap_or_default(); // [2, 2, 96, 96, 3] u8
     let frames: Vec<&[u8]> = bytes.chunks(96 * 96 * 3).collect();
-    let x01 = world_model::data::frames_to_tensor(&frames, 96, device) * 0.5 + 0.5;
+    let x01 = nn::frames::frames_to_tensor(&frames, 96, device) * 0.5 + 0.5;
     let pos = Tensor::from_data(TensorData::new(read(&io(), "pos"), [2, 2, 2]), device);
     vec2(net.obs_cond(x01, pos))
 }

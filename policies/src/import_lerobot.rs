@@ -18,9 +18,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use burn::tensor::{Device, TensorData};
-use world_model::import::ImportError;
-use world_model::import::place::{place_all, shapes, transpose};
-use world_model::import::safe::SafeSource;
+use nn::ImportError;
+use nn::import::place::{place_all, shapes, transpose};
+use nn::import::safe::SafeSource;
 
 use crate::diffusion::{Normalisation, Range};
 use crate::import_keys::{UnetNames, cond_unet, resnet_children};

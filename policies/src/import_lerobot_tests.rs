@@ -38,7 +38,7 @@ fn frames01(device: &Device) -> Tensor<4> {
     let src = SafeSource::open(&fixture("io.safetensors")).unwrap_or_else(|e| panic!("{e}"));
     let f = src.u8s("frames").unwrap_or_else(|e| panic!("{e}"));
     let frames: Vec<&[u8]> = f.chunks(96 * 96 * 3).collect();
-    world_model::data::frames_to_tensor(&frames, 96, device) * 0.5 + 0.5
+    nn::frames::frames_to_tensor(&frames, 96, device) * 0.5 + 0.5
 }
 
 /// The imported U-Net's noise prediction for the fixture's two `[16, 2]` sequences `x` at step

@@ -25,9 +25,9 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use burn::tensor::{Device, TensorData};
-use world_model::import::ImportError;
-use world_model::import::place::{place_all, shapes, transpose};
-use world_model::import::tensors::Source;
+use nn::ImportError;
+use nn::import::place::{place_all, shapes, transpose};
+use nn::import::tensors::Source;
 
 use crate::diffusion::{Normalisation, Range};
 use crate::import_gpc::official_names;

@@ -48,11 +48,25 @@ fn cond_of(p: &RobomimicPolicy) -> Vec<f32> {
     let device = Device::flex();
     let bytes = frames();
     let f: Vec<&[u8]> = bytes.chunks(96 * 96 * 3).collect();
-    let x01 = world_model::data::frames_to_tensor(&f, 96, &device) * 0.5 + 0.5;
+    let x01 = nn::frames::frames_to_tensor(&f, 96, &device) * 0.5 + 0.5;
     let pos: Vec<f32> =
         io("robot").chunks(9).flat_map(|s| p.norm.agent_pos.normalise(s).collect::<Vec<_>>()).collect();
     let pos = Tensor::from_data(TensorData::new(pos, [2, 2, 9]), &device);
     p.net.obs_cond(x01, pos).into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
+}
+
+/// The imported networks as a Lift policy whose robot-state keys lie at `robot` (offset, width).
+fn as_policy(p: RobomimicPolicy, robot: Vec<(usize, usize)>) -> ImportedDiffusion {
+    let mut policy = ImportedDiffusion::new(
+        "rm".into(),
+        p.cfg,
+        p.norm,
+        (vec![-1.0; 7], vec![1.0; 7]),
+        p.net,
+        &Device::flex(),
+    );
+    policy.robot = robot;
+    policy
 }
 
 #[test]
@@ -130,15 +144,7 @@ fn the_policy_reads_its_keys_from_the_robot_state_and_the_training_copy_differs(
     assert_eq!(raw.weights, "model.nets");
     assert!(max_abs(&cond_of(&p), &cond_of(&raw)) > 1e-4, "the two copies read the same");
     // As a policy: the task's robot state laid out with an extra key first, which it skips.
-    let mut policy = ImportedDiffusion::new(
-        "rm".into(),
-        p.cfg,
-        p.norm,
-        (vec![-1.0; 7], vec![1.0; 7]),
-        p.net,
-        &Device::flex(),
-    );
-    policy.robot = vec![(2, 3), (5, 4), (9, 2)];
+    let policy = as_policy(p, vec![(2, 3), (5, 4), (9, 2)]);
     let bytes = frames();
     let ob = |e: usize, extra: f32| Observation {
         frames: (0..2)
@@ -166,16 +172,7 @@ fn the_policy_reads_its_keys_from_the_robot_state_and_the_training_copy_differs(
 fn the_cameras_own_frames_at_the_policys_size_are_read_instead_of_resized_ones() {
     // A scene rendering at 84 and upsampling (`[visual] render_size = 84`) hands the camera's
     // own 84² frames beside the 96² ones; the policy (trained at 84) reads those, not a resize.
-    let p = imported(RobomimicWeights::Ema);
-    let mut policy = ImportedDiffusion::new(
-        "rm".into(),
-        p.cfg,
-        p.norm,
-        (vec![-1.0; 7], vec![1.0; 7]),
-        p.net,
-        &Device::flex(),
-    );
-    policy.robot = vec![(0, 3), (3, 4), (7, 2)];
+    let policy = as_policy(imported(RobomimicWeights::Ema), vec![(0, 3), (3, 4), (7, 2)]);
     let bytes = frames();
     let f96: Vec<Vec<u8>> = bytes.chunks(96 * 96 * 3).take(2).map(<[u8]>::to_vec).collect();
     let ob = |frames: Vec<Vec<u8>>, native: Option<Vec<NativeFrame>>| Observation {

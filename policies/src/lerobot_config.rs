@@ -6,8 +6,8 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use nn::ImportError;
 use serde::Deserialize;
-use world_model::import::ImportError;
 
 /// A feature of LeRobot's 2025 config (`{"type": "VISUAL", "shape": [3, 96, 96]}`).
 #[derive(Clone, Debug, Deserialize)]

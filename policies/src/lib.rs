@@ -13,9 +13,9 @@
 //! - [`imported_policy`], [`import_gpc`], [`import_lerobot`], [`resnet_gn`]: diffusion policies
 //!   trained elsewhere (DriftWorld/GPC's Push-T policies, LeRobot's), imported once: the
 //!   `gpc-diffusion` and `lerobot-diffusion` kinds, DDPM sampling;
-//! - [`judge`], [`judge_train`]: a learned judge of imagined frames (the same frame
-//!   encoder and one logit) and its trainer; [`judge_pose`]: GPC's reward predictors
-//!   ([`resnet`]) imported as a judge that reads the block's pose.
+//! - [`resnet`]: torchvision's ResNet-18 with BatchNorms folded, which GPC's reward
+//!   predictors use (imported as a judge by the `judges` crate, which also builds its learned
+//!   judges on [`net`]'s frame encoder).
 
 pub mod cpu_encoder;
 pub mod cpu_unet;
@@ -28,12 +28,6 @@ mod import_keys;
 pub mod import_lerobot;
 pub mod import_robomimic;
 pub mod imported_policy;
-pub mod judge;
-pub mod judge_metrics;
-pub mod judge_pose;
-pub mod judge_read;
-pub mod judge_rule;
-pub mod judge_train;
 mod lerobot_config;
 pub mod net;
 pub mod pretrain;

@@ -13,7 +13,7 @@ use burn::nn::conv::Conv2d;
 use burn::nn::pool::{AdaptiveAvgPool2d, AdaptiveAvgPool2dConfig, MaxPool2d, MaxPool2dConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
-use world_model::autoencoder::conv;
+use nn::layers::conv;
 
 /// torchvision's base width (stage widths 64, 128, 256, 512).
 pub const BASE: usize = 64;

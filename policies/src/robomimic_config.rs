@@ -14,9 +14,9 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use nn::ImportError;
 use pytorch_reader::{PickleValue, PytorchReader};
 use serde::Deserialize;
-use world_model::import::ImportError;
 
 use crate::diffusion::Range;
 

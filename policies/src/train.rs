@@ -29,7 +29,7 @@ use crate::dir::{
     PolicyFile, PolicyLoadError, diffusion_config, diffusion_weights, read_policy_file, write_policy,
 };
 use crate::pretrain::{Pretrain, encode_frames, pretrain_encoder};
-use world_model::optim::Ema;
+use nn::optim::Ema;
 
 /// Training hyper-parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -157,7 +157,7 @@ pub struct PolicyOutcome {
 }
 
 /// Trains (or resumes) a diffusion policy into `out` on `inner` (its autodiff
-/// wrapper for the gradients; see `world_model::device`).
+/// wrapper for the gradients; see `nn::device`).
 ///
 /// # Errors
 /// [`PolicyLoadError`] naming the file for unreadable state or I/O failures, or a

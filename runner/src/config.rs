@@ -10,8 +10,8 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use policies::judge::Label;
-use policies::judge_metrics::JudgeMetrics;
+use judges::folder::Label;
+use judges::metrics::JudgeMetrics;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use world_model::model::WorldModelConfig;

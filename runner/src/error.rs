@@ -52,6 +52,14 @@ pub enum RunError {
         /// Each differing setting, `name (saved: …, now: …)`.
         differs: Vec<String>,
     },
+    /// A task's `rank.toml` that is not one (an unknown key, a wrong type).
+    #[error("{}: invalid rank defaults: {source}", path.display())]
+    Defaults {
+        /// The file.
+        path: PathBuf,
+        /// The parser's error.
+        source: toml::de::Error,
+    },
     /// A model folder's content changed since the saved run.
     #[error(
         "--resume: the content of {} changed since {} was written (its rows came from the \
@@ -209,13 +217,8 @@ pub enum RunError {
         error: world_model::SettingError,
     },
     /// A judge folder that cannot be loaded.
-    #[error("--judge {}: {message}", path.display())]
-    JudgeFolder {
-        /// The folder or file at fault.
-        path: PathBuf,
-        /// The loader's message.
-        message: String,
-    },
+    #[error("--judge {0}")]
+    JudgeFolder(#[source] judges::JudgeError),
     /// A judge that reads other frames or scores another thing than the task.
     #[error("--judge {}: {what}", dir.display())]
     JudgeMismatch {

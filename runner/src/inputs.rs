@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 
 use burn::tensor::Device;
 use harness::task::{ScoreKind, Task};
+use judges::folder::{FrameJudge, Label};
 use policies::dir::checkpoint_name;
-use policies::judge::{FrameJudge, Label};
 use world_model::model::WorldModel;
 
 use crate::error::RunError;
@@ -44,7 +44,7 @@ pub fn load_world_model(
 /// # Errors
 /// [`RunError::JudgeFolder`]: a missing or invalid judge folder.
 pub fn read_judge_folder(dir: &Path, device: &Device) -> Result<FrameJudge, RunError> {
-    FrameJudge::load(dir, device).map_err(|e| RunError::JudgeFolder { path: e.path, message: e.message })
+    FrameJudge::load(dir, device).map_err(RunError::JudgeFolder)
 }
 
 /// Loads `--judge`'s folder and checks that it reads the task's frames and scores what

@@ -10,7 +10,8 @@
 //! processes of one run share out as they go ([`claims`]); and the report's filmstrips,
 //! from the frames a run keeps or replays ([`media`]), and its report ([`report`]); and
 //! the batches one process of a run runs, appended as they finish ([`batches`]), and the
-//! models a run reads, loaded, checked and fingerprinted ([`inputs`]).
+//! models a run reads, loaded, checked and fingerprinted ([`inputs`]); and what a bare
+//! `rank --scenario NAME` runs, from the task's shipped folder and `rank.toml` ([`defaults`]).
 //!
 //! Why a crate of its own: the configuration is the contract between the processes of
 //! one run (the shards of `rank --processes`, `merge`, `report`, a later `--resume`),
@@ -21,6 +22,7 @@ pub mod batches;
 pub mod check;
 pub mod claims;
 pub mod config;
+pub mod defaults;
 pub mod error;
 pub mod filmstrips;
 pub mod inputs;

@@ -24,10 +24,10 @@ pub struct ReadJudgeArgs {
     pub persist: Vec<usize>,
     /// Actions executed per policy decision; `rank` judges the first frame and the
     /// last `--seen` of every chunk.
-    #[arg(long, default_value_t = policies::judge_metrics::RANK_CHUNK)]
+    #[arg(long, default_value_t = judges::metrics::RANK_CHUNK)]
     pub chunk: usize,
     /// Frames the policy sees at the end of each chunk (its observation horizon).
-    #[arg(long, default_value_t = policies::judge_metrics::RANK_SEEN)]
+    #[arg(long, default_value_t = judges::metrics::RANK_SEEN)]
     pub seen: usize,
     /// Read at most this many episodes (the first ones).
     #[arg(long)]
@@ -48,6 +48,6 @@ pub struct ReadJudgeArgs {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum JudgeRule {
     /// Lift: the red cube's median row at or above row 40 of the 96 × 96 agentview
-    /// (`policies::judge_rule::ColourHeight::lift_red`).
+    /// (`judges::rule::ColourHeight::lift_red`).
     LiftRed,
 }

@@ -81,7 +81,7 @@ fn roll_out(
 ) -> Result<(Vec<Value>, Vec<Value>)> {
     let c = &args.common;
     let setup = Setup::new(task, 0, max_steps, None);
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
     let expect = expectations(task);
     let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();

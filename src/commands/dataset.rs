@@ -87,10 +87,11 @@ pub fn info(path: &Path, as_json: bool) -> Result<ExitCode> {
             json!(scores.iter().filter(|s| s.1).count() as f64 / scores.len().max(1) as f64);
         out["score"] = score;
         // Per-behaviour breakdown when the dataset records who acted in each episode.
-        if let Some(eps) = r.attrs["evalharness"]["episodes"].as_array().filter(|e| e.len() == scores.len()) {
+        let eps = harness::replay::origin::episodes_in(path, &r.attrs)?;
+        if eps.len() == scores.len() {
             let mut by: BTreeMap<String, Vec<(f64, bool)>> = BTreeMap::new();
             for (e, s) in eps.iter().zip(&scores) {
-                let name = e["behaviour"].as_str().unwrap_or("unknown").to_string();
+                let name = e.behaviour.clone().unwrap_or_else(|| "unknown".into());
                 by.entry(name).or_default().push(*s);
             }
             let b: serde_json::Map<String, Value> = by

@@ -7,9 +7,9 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use policies::judge::{FrameJudge, JudgeFile, Label};
-use policies::judge_metrics::JudgeMetrics;
-use policies::judge_pose::{import_gpc, write_pose_weights};
+use judges::folder::{FrameJudge, JudgeFile, Label};
+use judges::metrics::JudgeMetrics;
+use judges::pose::{import_gpc, write_pose_weights};
 use policies::net::NetConfig;
 use serde_json::json;
 
@@ -24,7 +24,7 @@ pub fn run(a: &ImportJudgeArgs) -> Result<ExitCode> {
     let staged = Staged::new(&a.out, a.force, &inputs)?;
     let sha = |p: &std::path::Path| harness::fingerprint::file(p).with_context(|| format!("{}", p.display()));
     let (xy_sha, angle_sha) = (sha(&a.xy)?, sha(&a.angle)?);
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let (pose, base) = import_gpc(&a.xy, &a.angle, &device)?;
     let file = JudgeFile {
         kind: "gpc_pose".into(),
@@ -49,7 +49,7 @@ pub fn run(a: &ImportJudgeArgs) -> Result<ExitCode> {
         }),
     };
     write_pose_weights(staged.dir(), &pose).map_err(anyhow::Error::msg)?;
-    policies::judge::write_judge(staged.dir(), None, &file)?;
+    judges::folder::write_judge(staged.dir(), None, &file)?;
     let out = staged.commit()?;
     FrameJudge::load(&out, &device)
         .with_context(|| format!("{}: the imported judge does not load", out.display()))?;

@@ -56,7 +56,7 @@ fn lerobot(a: &ImportPolicyArgs) -> Result<ExitCode> {
         harness::fingerprint::file(&p).with_context(|| format!("{}", p.display()))
     };
     let (cfg_sha, model_sha) = (sha("config.json")?, sha("model.safetensors")?);
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let p = policies::import_lerobot::import(&a.file, &device)?;
     let stats_sha = harness::fingerprint::file(&p.stats_from)?;
     let file = PolicyFile {
@@ -119,7 +119,7 @@ fn gpc(a: &ImportPolicyArgs) -> Result<ExitCode> {
     } else {
         sha.into_iter().next().map(|(_, v)| v).unwrap_or_default()
     };
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let weights = match a.weights {
         PolicyWeights::Ema => GpcWeights::Ema,
         PolicyWeights::Model => GpcWeights::Model,

@@ -35,7 +35,7 @@ pub fn run(a: &ImportPolicyArgs) -> Result<ExitCode> {
     }
     let declared = declared(&a.file)?;
     let keys = declared.low_dim;
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let weights = match a.weights {
         PolicyWeights::Ema => RobomimicWeights::Ema,
         PolicyWeights::Model => RobomimicWeights::Model,

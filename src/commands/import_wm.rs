@@ -60,7 +60,7 @@ pub fn run(a: &ImportWorldModelArgs) -> Result<ExitCode> {
         &Provenance { command, commit: git_commit(), import: &m.record },
     )?;
     let out = staged.commit()?;
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     WorldModel::load(&out, &device)
         .with_context(|| format!("{}: the imported model does not load", out.display()))?;
     tracing::info!(

@@ -8,10 +8,10 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use policies::judge::{FrameJudge, JudgeFile, Label, write_judge};
-use policies::judge_metrics::{EpisodeReading, JudgeMetrics, Reading};
-use policies::judge_read::{JudgeData, judge_episodes, judged_frame_metrics, read_judged};
-use policies::judge_rule::ColourHeight;
+use judges::folder::{FrameJudge, JudgeFile, Label, write_judge};
+use judges::metrics::{EpisodeReading, JudgeMetrics, Reading};
+use judges::read::{JudgeData, judge_episodes, judged_frame_metrics, read_judged};
+use judges::rule::ColourHeight;
 use policies::net::NetConfig;
 use serde::Serialize;
 use serde_json::json;
@@ -51,7 +51,7 @@ fn rule_file(rule: ColourHeight) -> JudgeFile {
         persist_frames: 1,
         steps: 0,
         heldout: JudgeMetrics::default(),
-        provenance: json!({"hand_written": "policies::judge_rule::ColourHeight", "commit": git_commit()}),
+        provenance: json!({"hand_written": "judges::rule::ColourHeight", "commit": git_commit()}),
     }
 }
 

@@ -31,7 +31,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let task = load_task(&c.scenario)?;
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
     let setup = Setup::new(task.as_ref(), args.seed.unwrap_or(0), max_steps, None);
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let dirs = checkpoint_dirs(dir)?;
     let observe = match &args.observe_through {
         Some(wm) => Some(through_autoencoder(wm, task.observation_spec().image_size, &device)?),

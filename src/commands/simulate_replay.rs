@@ -51,7 +51,7 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     let c = &args.common;
     let (task, layout) = Layout::load(&c.scenario)?;
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let wm = load_world_model(wm_dir, None, args.noise_scale, &device)?;
     let (judge_dir, own) = defaults::judge(args.judge.as_deref(), task.as_ref(), Path::new("checkpoints"));
     if judge_dir.is_none() && !own {

@@ -216,21 +216,14 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
         extend: a.steps.is_some(),
         max_minutes: a.session.max_minutes,
     };
-    let outcome = train_autoencoder(
-        &data,
-        &a.out,
-        &model_cfg,
-        &cfg,
-        run,
-        &world_model::device::selected()?,
-        &mut |p| {
+    let outcome =
+        train_autoencoder(&data, &a.out, &model_cfg, &cfg, run, &nn::device::selected()?, &mut |p| {
             pb.set_position(p.step);
             match p.psnr {
                 Some(v) => pb.set_message(format!("loss {:.5} psnr {v:.2}", p.loss)),
                 None => pb.set_message(format!("loss {:.5}", p.loss)),
             }
-        },
-    )?;
+        })?;
     pb.finish_and_clear();
     // Filmstrip: held-out frames (top) over their reconstructions (bottom).
     let size = model_cfg.image_size;

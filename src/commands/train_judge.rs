@@ -6,10 +6,10 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use policies::judge::{JudgeFile, Label, write_judge};
-use policies::judge_metrics::JudgeMetrics;
-use policies::judge_read::JudgeData;
-use policies::judge_train::{JudgeTrainConfig, train_judge};
+use judges::folder::{JudgeFile, Label, write_judge};
+use judges::metrics::JudgeMetrics;
+use judges::read::JudgeData;
+use judges::train::{JudgeTrainConfig, train_judge};
 use policies::net::NetConfig;
 use serde_json::json;
 
@@ -99,7 +99,7 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     let clock = harness::driver::Clock::start(a.max_minutes);
     let mut out_of_time = || clock.out_of_time();
     let pb = progress::bar(a.steps, "judge", quiet);
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let outcome = train_judge(
         &data,
         &a.data,

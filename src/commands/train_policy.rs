@@ -120,7 +120,7 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         max_minutes: a.session.max_minutes,
         ema: a.ema,
     };
-    let outcome = train_policy(&demos, &a.out, &configs, run, &world_model::device::selected()?, &mut |p| {
+    let outcome = train_policy(&demos, &a.out, &configs, run, &nn::device::selected()?, &mut |p| {
         pb.set_length(p.total);
         pb.set_position(p.step);
         pb.set_message(match p.phase {

@@ -141,7 +141,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     if let (true, Some(decay)) = (a.session.resume, a.ema_decay) {
         set_saved_ema_decay(&a.out, decay)?;
     }
-    let inner = world_model::device::selected()?;
+    let inner = nn::device::selected()?;
     // A resumed run keeps its saved config (and so its codec); a fresh one builds it.
     let saved = if a.session.resume { Some(saved_model_config(&a.out)?) } else { None };
     let codec = match &saved {

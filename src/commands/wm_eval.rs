@@ -97,7 +97,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         })
         .maybe("--judge", a.judge.as_deref());
     inputs.refuse(&a.out, ".partial")?;
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let models: Vec<(String, WorldModel)> = a
         .world_models
         .iter()

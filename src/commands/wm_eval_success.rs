@@ -19,10 +19,10 @@ use std::path::Path;
 
 use anyhow::{Result, bail};
 use harness::replay::ReplayReader;
-use policies::judge::FrameJudge;
-use policies::judge_metrics::Reading;
-use policies::judge_read::held_success;
-use serde::{Deserialize, Serialize};
+use judges::folder::FrameJudge;
+use judges::metrics::Reading;
+use judges::read::held_success;
+use serde::Serialize;
 use world_model::data::EpisodeData;
 use world_model::eval::Video;
 
@@ -83,12 +83,6 @@ pub struct SuccessRow {
     pub pearson: Option<f64>,
 }
 
-/// The per-episode attributes `collect` writes (only the behaviour is read here).
-#[derive(Deserialize)]
-struct EpisodeAttr {
-    behaviour: Option<String>,
-}
-
 /// The judge, and what the dataset says of each episode.
 pub struct SuccessCheck {
     judge: FrameJudge,
@@ -111,8 +105,7 @@ impl SuccessCheck {
         }
         let r = ReplayReader::open(path)?;
         let labels = r.extra("success")?;
-        let attrs: Vec<EpisodeAttr> =
-            serde_json::from_value(r.attrs["evalharness"]["episodes"].clone()).unwrap_or_default();
+        let attrs = harness::replay::origin::episodes_in(path, &r.attrs)?;
         let episodes = data
             .episodes
             .iter()

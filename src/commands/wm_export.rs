@@ -53,7 +53,7 @@ fn check_same_encoder(trained_on: &Path, other: &Path, device: &burn::tensor::De
 
 /// `evalharness wm export`.
 pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let mut source =
         WorldModel::load(&a.from, &device).with_context(|| format!("--from {}", a.from.display()))?;
     if let Some(alpha) = a.alpha {

@@ -8,17 +8,12 @@
 //! it; training (which needs gradients) and GPU devices keep burn's path. The
 //! two agree to float rounding (tested below).
 
-use burn::module::Param;
-use burn::nn::conv::Conv2d;
-use burn::nn::{GroupNorm, PaddingConfig2d};
-use burn::tensor::Tensor;
-
 use crate::autoencoder::{Autoencoder, ResBlock};
-use crate::error::UnsupportedLayer;
-use crate::weights::values;
 use kernels::direct_conv::{Conv3x3, Norm, winograd_enabled};
 use kernels::padded::Padded;
 use kernels::winograd::upsample::Upsample3x3;
+use nn::weights::{UnsupportedLayer, conv3x3_weights};
+pub use nn::weights::{conv3x3_of, norm_of};
 
 /// GroupNorm -> SiLU -> conv, twice, plus the input (as [`ResBlock`]).
 #[derive(Clone, Debug)]
@@ -154,61 +149,11 @@ impl CpuDecoder {
     }
 }
 
-/// The weights of a 3x3, stride-1, padding-1 burn convolution for [`Conv3x3`].
-///
-/// # Errors
-/// [`UnsupportedLayer`] for any other convolution or non-f32 weights.
-pub fn conv3x3_of(c: &Conv2d, layer: &str) -> Result<Conv3x3, UnsupportedLayer> {
-    let w = conv3x3_weights(c, layer)?;
-    Ok(Conv3x3::new(w.cin, w.cout, &w.weight, w.bias.as_deref()))
-}
-
-/// A 3x3 convolution's weights as burn holds them.
-struct ConvWeights {
-    cin: usize,
-    cout: usize,
-    /// `[cout, cin, 3, 3]`
-    weight: Vec<f32>,
-    bias: Option<Vec<f32>>,
-}
-
-/// The weights of a 3x3, stride-1, padding-1 burn convolution.
-///
-/// # Errors
-/// [`UnsupportedLayer`] for any other convolution or non-f32 weights.
-fn conv3x3_weights(c: &Conv2d, layer: &str) -> Result<ConvWeights, UnsupportedLayer> {
-    let err = |message: &str| UnsupportedLayer::new(layer, message);
-    let padded_one = matches!(c.padding, PaddingConfig2d::Explicit(1, 1, 1, 1));
-    if c.kernel_size != [3, 3] || c.stride != [1, 1] || c.dilation != [1, 1] || c.groups != 1 || !padded_one {
-        return Err(err("only 3x3 convolutions with stride 1 and padding 1 are supported"));
-    }
-    let w = c.weight.val(); // [cout, cin, 3, 3]
-    let [cout, cin, _, _] = w.dims();
-    let weight = values(w, layer)?;
-    let bias = c.bias.as_ref().map(|b| values(b.val(), layer)).transpose()?;
-    Ok(ConvWeights { cin, cout, weight, bias })
-}
-
-/// A burn GroupNorm's parameters as a [`Norm`].
-///
-/// # Errors
-/// [`UnsupportedLayer`] for non-f32 parameters.
-pub fn norm_of(n: &GroupNorm, layer: &str) -> Result<Norm, UnsupportedLayer> {
-    let param = |p: &Option<Param<Tensor<1>>>, fill: f32| match p {
-        Some(p) => values(p.val(), layer),
-        None => Ok(vec![fill; n.num_channels]),
-    };
-    Ok(Norm {
-        groups: n.num_groups,
-        gamma: param(&n.gamma, 1.0)?,
-        beta: param(&n.beta, 0.0)?,
-        eps: n.epsilon,
-    })
-}
-
 #[cfg(test)]
 mod tests {
-    use burn::tensor::{Device, Distribution, TensorData};
+    use burn::module::Param;
+    use burn::nn::GroupNorm;
+    use burn::tensor::{Device, Distribution, Tensor, TensorData};
 
     use super::*;
     use crate::autoencoder::AutoencoderConfig;

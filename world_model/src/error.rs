@@ -100,17 +100,4 @@ pub enum SettingError {
     },
 }
 
-/// Why a network cannot be run by the direct kernels (a layer they do not support).
-#[derive(Debug, thiserror::Error)]
-#[error("layer {layer}: {message}")]
-pub struct UnsupportedLayer {
-    layer: String,
-    message: String,
-}
-
-impl UnsupportedLayer {
-    /// `layer` cannot run on these kernels, because of `message`.
-    pub fn new(layer: &str, message: impl Into<String>) -> Self {
-        Self { layer: layer.into(), message: message.into() }
-    }
-}
+pub use nn::UnsupportedLayer;

@@ -7,8 +7,8 @@
 //! - [`autoencoder`] + [`train_ae`]: the frame autoencoder and its trainer; [`codec`]:
 //!   autoencoder latents or pixels, the space the U-Net works in;
 //! - CPU inference on the [`kernels`] crate: [`cpu_decoder`], the decoder, and
-//!   [`unet::cpu`], the U-Net; [`weights`] copies burn's weights into the kernels;
-//! - [`latents`], [`train_wm`], [`optim`]: latent windows and the U-Net trainer
+//!   [`unet::cpu`], the U-Net (burn's weights copied by [`nn::weights`]);
+//! - [`latents`], [`train_wm`]: latent windows and the U-Net trainer
 //!   (drifting, MSE and diffusion objectives); [`context_noise`]: corrupted training histories;
 //! - [`model`]: a trained world model for inference; [`rollout`]: autoregressive
 //!   generation, chunk by chunk; [`eval`]: video-quality metrics;
@@ -21,7 +21,6 @@ pub mod codec;
 pub mod context_noise;
 pub mod cpu_decoder;
 pub mod data;
-pub mod device;
 pub mod drift;
 pub mod drift_step;
 pub mod error;
@@ -30,11 +29,11 @@ pub mod import;
 pub mod latents;
 pub mod model;
 pub mod motion;
-pub mod optim;
 pub mod rollout;
 pub mod train_ae;
 pub mod train_wm;
 pub mod unet;
-pub mod weights;
 
 pub use error::{SettingError, WorldModelError};
+#[cfg(all(test, feature = "wgpu"))]
+mod gpu_tests;

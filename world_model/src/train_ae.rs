@@ -285,7 +285,7 @@ pub fn train_autoencoder(
                 train_idx[(rng % train_idx.len() as u64) as usize]
             })
             .collect();
-        let lr = crate::optim::warmup_lr(step, cfg.lr, cfg.warmup);
+        let lr = nn::optim::warmup_lr(step, cfg.lr, cfg.warmup);
         let x = data.frames_tensor(&idx, &device);
         let recon = match cfg.encoder_from {
             // A fixed encoder: it encodes on the inner backend, so no gradient reaches it

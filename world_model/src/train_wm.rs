@@ -30,9 +30,9 @@ use crate::error::WorldModelError;
 use crate::latents::{Latents, Window, window, window_starts};
 use crate::model::{Objective, Prediction, WorldModel, WorldModelConfig, alpha_bar};
 use crate::motion::MotionWeighting;
-use crate::optim::{Ema, clip_global_norm, warmup_lr};
 use crate::train_ae::{Configs, RunOptions, State, ckpt, run_configs};
 use crate::unet::UNet;
+use nn::optim::{Ema, clip_global_norm, warmup_lr};
 
 /// Training hyper-parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -202,7 +202,7 @@ fn evaluate(model: &WorldModel, latents: &mut Latents, codec: &FrameCodec, windo
     (pred - truth).powf_scalar(2.0).mean().into_scalar::<f32>().into()
 }
 
-/// Trains (or resumes) into `out` on `device` (see [`crate::device`]). The codec of
+/// Trains (or resumes) into `out` on `device` (see [`nn::device`]). The codec of
 /// `frames` must be the one `model_cfg` names (the autoencoder at
 /// `out/model.autoencoder`, or pixels), loaded on the same device.
 ///

@@ -46,6 +46,43 @@ pub fn scenario_in(path: &Path, attrs: &Value) -> Result<String, ReplayError> {
     }
 }
 
+/// One episode's entry in a dataset's `evalharness.episodes` attributes: the fields read back
+/// (the collectors also record its steps and success).
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+pub struct EpisodeEntry {
+    /// The behaviour that acted (`expert`, `miss`, …), where the collector recorded one.
+    #[serde(default)]
+    pub behaviour: Option<String>,
+    /// The episode's seed, where recorded.
+    #[serde(default)]
+    pub seed: Option<u64>,
+}
+
+/// The per-episode entries of a dataset's root attributes `attrs`: none for a dataset
+/// without evalharness attributes or without the list.
+///
+/// # Errors
+/// [`ReplayError::Layout`] naming `path` when the list is there but not a list of entries
+/// (never read as absent).
+pub fn episodes_in(path: &Path, attrs: &Value) -> Result<Vec<EpisodeEntry>, ReplayError> {
+    #[derive(Deserialize)]
+    struct Root {
+        evalharness: Option<Listed>,
+    }
+    #[derive(Deserialize)]
+    struct Listed {
+        #[serde(default)]
+        episodes: Vec<EpisodeEntry>,
+    }
+    match Root::deserialize(attrs) {
+        Ok(Root { evalharness }) => Ok(evalharness.map(|l| l.episodes).unwrap_or_default()),
+        Err(e) => Err(ReplayError::Layout {
+            path: path.to_path_buf(),
+            reason: format!("its evalharness attributes' \"episodes\" cannot be read: {e}"),
+        }),
+    }
+}
+
 /// The task a dataset (a group, or a folder of groups: its first) was collected in.
 ///
 /// # Errors
@@ -71,6 +108,22 @@ mod tests {
         assert!(err.contains("d.zarr") && err.contains("missing field `scenario`"), "{err}");
         let err = scenario_in(p, &json!({"evalharness": {"scenario": 3}})).unwrap_err().to_string();
         assert!(err.contains("invalid type"), "{err}");
+    }
+
+    #[test]
+    fn episode_entries_are_read_or_refused_never_guessed() {
+        let p = Path::new("d.zarr");
+        let attrs = json!({"evalharness": {"scenario": "lift", "episodes": [
+            {"behaviour": "expert", "seed": 7, "steps": 51, "success": true}, {"seed": 8}]}});
+        let e = episodes_in(p, &attrs).unwrap();
+        assert_eq!(e[0], EpisodeEntry { behaviour: Some("expert".into()), seed: Some(7) });
+        assert_eq!(e[1], EpisodeEntry { behaviour: None, seed: Some(8) });
+        // No list, or no evalharness attributes: none.
+        assert!(episodes_in(p, &json!({"evalharness": {"scenario": "lift"}})).unwrap().is_empty());
+        assert!(episodes_in(p, &json!({})).unwrap().is_empty());
+        // A list that is not one of entries is refused, naming the dataset.
+        let err = episodes_in(p, &json!({"evalharness": {"episodes": [{"behaviour": 3}]}})).unwrap_err();
+        assert!(err.to_string().contains("d.zarr") && err.to_string().contains("episodes"), "{err}");
     }
 
     #[test]

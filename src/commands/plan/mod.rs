@@ -120,7 +120,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     if (a.judge.is_none() && probe.plan_cost().is_none()) || probe.fork().is_none() {
         return Err(engine::EngineError::CannotPlan { task: task.name().to_string() }.into());
     }
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let wm = if planners.contains(&Planner::WorldModel) {
         let wm = runner::inputs::load_world_model(&a.world_model, a.alpha, None, &device)?;
         if wm.image_size() != size {

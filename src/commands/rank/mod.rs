@@ -96,7 +96,7 @@ fn run_with(
         }
         _ => {}
     }
-    let device = world_model::device::selected()?;
+    let device = nn::device::selected()?;
     let wm = runner::inputs::load_world_model(&r.world_model, a.alpha, a.noise_scale, &device)?;
     if a.float_frames && wm.cfg.is_goal_free() {
         bail!(

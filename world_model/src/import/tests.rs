@@ -187,7 +187,7 @@ fn qkv_rows_move_from_head_major_to_qkv_major() {
 fn the_imported_model_predicts_on_wgpu_what_it_predicts_on_the_cpu() {
     let m = import(&fixture("wm.pth"), Weights::Ema, Preset::Pusht, Some(16), "test".into())
         .unwrap_or_else(|e| panic!("{e}"));
-    let gpu = crate::device::parse("wgpu").expect("built with wgpu");
+    let gpu = nn::device::parse("wgpu").expect("built with wgpu");
     let (noise, history, actions) = (tensor::<5>("noise"), tensor::<5>("history"), tensor::<3>("actions"));
     let cpu_out = m.unet.forward(noise.clone(), history.clone(), actions.clone(), None, None);
     let cpu_out = cpu_out.into_data().try_to_vec::<f32>().unwrap_or_default();

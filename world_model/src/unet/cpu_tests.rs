@@ -5,7 +5,7 @@ use burn::tensor::{Device, Distribution, Tensor};
 
 use super::cpu::CpuUNet;
 use super::{UNet, UNetConfig};
-use crate::weights::Jitter;
+use nn::weights::Jitter;
 
 fn vec_of<const D: usize>(t: Tensor<D>) -> Vec<f32> {
     t.into_data().try_to_vec::<f32>().unwrap_or_default()

@@ -1,5 +1,5 @@
-//! What a judge is scored by, shared by the judge itself ([`crate::judge`]), the reading of
-//! recorded episodes ([`crate::judge_read`]) and training ([`crate::judge_train`]): which
+//! What a judge is scored by, shared by the judge itself ([`crate::folder`]), the reading of
+//! recorded episodes ([`crate::read`]) and training ([`crate::train`]): which
 //! frames of an episode `rank` judges ([`Reading`]), a judge's metrics on real frames and
 //! episodes, and those metrics computed from estimates and labels. Its own module so that
 //! those three depend on it and not on each other.

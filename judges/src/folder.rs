@@ -6,7 +6,7 @@
 //! imagined branch with it instead of the task's hand-written pixel rules, and the
 //! engine reports its error against the exact score on the simulator branch's real
 //! frames in every run, as it does for any judge. It is trained by
-//! `evalharness train judge` ([`crate::judge_train`]) on simulator frames labelled
+//! `evalharness train judge` ([`crate::train`]) on simulator frames labelled
 //! with the exact score.
 //!
 //! The network is the diffusion policy's frame encoder ([`ObsEncoder`]: 4 stride-2
@@ -24,13 +24,15 @@ use burn::tensor::{Device, Tensor};
 use harness::judge::Judge;
 use serde::{Deserialize, Serialize};
 
-use crate::cpu_encoder::CpuEncoder;
-use crate::diffusion::{frames_to_tensor, frames_to_vec};
-use crate::dir::{PolicyLoadError, load_weights, save_f16};
-use crate::judge_metrics::JudgeMetrics;
-use crate::judge_pose::{GpcPose, PoseNet};
-use crate::judge_rule::ColourHeight;
-use crate::net::{NetConfig, ObsEncoder};
+use nn::frames::{frames_to_tensor, frames_to_vec};
+use policies::cpu_encoder::CpuEncoder;
+use policies::dir::{load_weights, save_f16};
+
+use crate::error::JudgeError;
+use crate::metrics::JudgeMetrics;
+use crate::pose::{GpcPose, PoseNet};
+use crate::rule::ColourHeight;
+use policies::net::{NetConfig, ObsEncoder};
 
 /// The judge's network: frame encoder and a one-logit head.
 #[derive(Module, Debug)]
@@ -92,7 +94,7 @@ pub struct JudgeFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rule: Option<ColourHeight>,
     /// The backbones' base width of a `"gpc_pose"` judge (GPC's reward predictors,
-    /// [`crate::judge_pose`]; torchvision's 64).
+    /// [`crate::pose`]; torchvision's 64).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pose_base: Option<usize>,
     /// What it estimates.
@@ -119,18 +121,17 @@ fn one_frame() -> usize {
 /// atomically.
 ///
 /// # Errors
-/// [`PolicyLoadError`] naming the file that could not be written.
-pub fn write_judge(dir: &Path, net: Option<&JudgeNet>, file: &JudgeFile) -> Result<(), PolicyLoadError> {
-    std::fs::create_dir_all(dir).map_err(|e| PolicyLoadError::new(dir, e.to_string()))?;
+/// [`JudgeError`] naming the file that could not be written.
+pub fn write_judge(dir: &Path, net: Option<&JudgeNet>, file: &JudgeFile) -> Result<(), JudgeError> {
+    std::fs::create_dir_all(dir).map_err(|source| JudgeError::Io { path: dir.into(), source })?;
     if let Some(net) = net {
         let weights = dir.join("model.bpk");
         let tmp = dir.join(".model.bpk.tmp");
-        save_f16(net, &tmp).map_err(|e| PolicyLoadError::new(&weights, e.to_string()))?;
-        std::fs::rename(&tmp, &weights).map_err(|e| PolicyLoadError::new(&weights, e.to_string()))?;
+        save_f16(net, &tmp).map_err(|source| JudgeError::Weights { path: weights.clone(), source })?;
+        std::fs::rename(&tmp, &weights).map_err(|source| JudgeError::Io { path: weights, source })?;
     }
     let text = serde_json::to_string_pretty(file).unwrap_or_default() + "\n";
-    harness::runfile::write_atomic(&dir.join("judge.json"), &text)
-        .map_err(|e| PolicyLoadError::new(&e.path, e.message))
+    Ok(harness::runfile::write_atomic(&dir.join("judge.json"), &text)?)
 }
 
 /// A judge folder, for inference: a trained network or a hand-written rule.
@@ -150,40 +151,40 @@ impl FrameJudge {
     /// Loads a judge folder.
     ///
     /// # Errors
-    /// [`PolicyLoadError`] naming the folder for a missing or invalid `judge.json`,
+    /// [`JudgeError`] naming the file for a missing or invalid `judge.json`,
     /// a rule without its parameters or of another frame size, or weights that are
     /// missing, truncated or do not match it.
-    pub fn load(dir: &Path, device: &Device) -> Result<Self, PolicyLoadError> {
-        let err = |m: String| PolicyLoadError::new(dir, m);
+    pub fn load(dir: &Path, device: &Device) -> Result<Self, JudgeError> {
         let path = dir.join("judge.json");
-        let text = std::fs::read_to_string(&path).map_err(|e| err(format!("judge.json: {e}")))?;
-        let file: JudgeFile = serde_json::from_str(&text).map_err(|e| err(format!("judge.json: {e}")))?;
+        let err = |what: String| JudgeError::Invalid { path: path.clone(), what };
+        let text =
+            std::fs::read_to_string(&path).map_err(|source| JudgeError::Io { path: path.clone(), source })?;
+        let file: JudgeFile =
+            serde_json::from_str(&text).map_err(|source| JudgeError::File { path: path.clone(), source })?;
+        fn weights<M: Module>(net: M, dir: &Path, name: &str) -> Result<M, JudgeError> {
+            let path = dir.join(name);
+            load_weights(net, &path).map_err(|source| JudgeError::Weights { path, source })
+        }
         match (file.kind.as_str(), file.rule) {
             ("learned", _) => {
-                let net = load_weights(JudgeNet::new(&file.net, device), &dir.join("model.bpk"))
-                    .map_err(|e| err(format!("model.bpk: {e}")))?;
+                let net = weights(JudgeNet::new(&file.net, device), dir, "model.bpk")?;
                 Ok(Self::new(file, net, device))
             }
             ("gpc_pose", _) => {
-                let base = file
-                    .pose_base
-                    .ok_or_else(|| err("judge.json: kind \"gpc_pose\" without pose_base".into()))?;
-                let net = |name: &str| {
-                    load_weights(PoseNet::new(base, device), &dir.join(name))
-                        .map_err(|e| err(format!("{name}: {e}")))
-                };
+                let base = file.pose_base.ok_or_else(|| err("kind \"gpc_pose\" without pose_base".into()))?;
+                let net = |name: &str| weights(PoseNet::new(base, device), dir, name);
                 let pose = GpcPose::new(net("xy.bpk")?, net("angle.bpk")?, device);
                 Ok(Self { file, net: None, cpu: None, pose: Some(pose), device: device.clone() })
             }
             ("colour_height", Some(r)) if r.image_size == file.net.image_size => Ok(Self::rule(file)),
             ("colour_height", Some(r)) => Err(err(format!(
-                "judge.json: rule.image_size {} differs from net.image_size {}",
+                "rule.image_size {} differs from net.image_size {}",
                 r.image_size, file.net.image_size
             ))),
-            ("colour_height", None) => Err(err("judge.json: kind \"colour_height\" without a rule".into())),
-            (k, _) => Err(err(format!(
-                "judge.json: kind \"{k}\", expected \"learned\", \"colour_height\" or \"gpc_pose\""
-            ))),
+            ("colour_height", None) => Err(err("kind \"colour_height\" without a rule".into())),
+            (k, _) => {
+                Err(err(format!("kind \"{k}\", expected \"learned\", \"colour_height\" or \"gpc_pose\"")))
+            }
         }
     }
 
@@ -329,7 +330,7 @@ mod tests {
             assert!((a - b).abs() < 1e-2, "{a} vs {b}");
         }
         // A rule's folder: no weights; a rule of another frame size, or none, is refused.
-        let rule = crate::judge_rule::ColourHeight::lift_red();
+        let rule = crate::rule::ColourHeight::lift_red();
         let mut f = JudgeFile { kind: "colour_height".into(), rule: Some(rule), ..file(NetConfig::new()) };
         let rdir = dir.join("rule");
         write_judge(&rdir, None, &f).unwrap();

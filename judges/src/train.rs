@@ -1,11 +1,11 @@
-//! Training a learned judge ([`crate::judge`]) on simulator frames labelled with the
+//! Training a learned judge ([`crate::folder`]) on simulator frames labelled with the
 //! exact score: Push-T's `data/coverage`, robomimic's `data/success`.
 //!
 //! Every 10th episode (index % 10 == 9) is held out; the judge's reading of those
 //! frames ([`JudgeMetrics`]: mean absolute error, accuracy, recall and precision at
 //! the success threshold) is logged while training and stored in `judge.json`. The
 //! last evaluation also reads each held-out episode whole, as `rank` reads an
-//! imagined one ([`EpisodeReading`], [`crate::judge_read`]: the frames the policy
+//! imagined one ([`EpisodeReading`], [`crate::read`]: the frames the policy
 //! sees, `persist_frames` in a row): a judge may misplace the frame where success
 //! begins and still call every episode right, or the reverse.
 //! Successes are rare in most datasets (a frame above coverage 0.95, a lifted
@@ -30,12 +30,12 @@ use harness::rng::Rng;
 use harness::seed::derive;
 use serde::{Deserialize, Serialize};
 
-use crate::diffusion::frames_to_tensor;
-use crate::dir::PolicyLoadError;
-use crate::judge::{FrameJudge, JudgeFile, JudgeNet};
-use crate::judge_metrics::{EpisodeReading, JudgeMetrics, Reading, metrics};
-use crate::judge_read::{JudgeData, judge_episodes, read_judged};
-use crate::symmetry::augment_frame;
+use crate::error::JudgeError;
+use crate::folder::{FrameJudge, JudgeFile, JudgeNet};
+use crate::metrics::{EpisodeReading, JudgeMetrics, Reading, metrics};
+use crate::read::{JudgeData, judge_episodes, read_judged};
+use nn::frames::frames_to_tensor;
+use policies::symmetry::augment_frame;
 
 /// Linear warm-up steps of the learning rate.
 const WARMUP: u64 = 100;
@@ -94,7 +94,7 @@ pub fn evaluate(judge: &FrameJudge, data: &JudgeData, steps: &[usize], threshold
 /// stopped (Ctrl-C) or out of time before the first step.
 ///
 /// # Errors
-/// [`PolicyLoadError`] naming `log` for an unwritable log, or the dataset for a
+/// [`JudgeError`] naming `log` for an unwritable log, or the dataset for a
 /// non-finite loss (naming the step) or too few episodes to hold any out.
 #[allow(clippy::too_many_arguments)]
 pub fn train_judge(
@@ -106,8 +106,8 @@ pub fn train_judge(
     out_of_time: &mut dyn FnMut() -> bool,
     inner: &Device,
     on_step: &mut dyn FnMut(u64, f64),
-) -> Result<Option<(JudgeNet, JudgeMetrics, u64)>, PolicyLoadError> {
-    let err = |m: String| PolicyLoadError::new(dataset, m);
+) -> Result<Option<(JudgeNet, JudgeMetrics, u64)>, JudgeError> {
+    let err = |what: String| JudgeError::Dataset { path: dataset.into(), what };
     let threshold = judge.threshold;
     let (train, held) = data.split();
     if train.is_empty() || held.is_empty() {
@@ -125,7 +125,8 @@ pub fn train_judge(
     device.seed(derive(cfg.seed, &[0x6a75_6467]));
     let mut net = JudgeNet::new(&judge.net, &device);
     let mut optim = AdamWConfig::new().with_weight_decay(1e-6).init();
-    let mut logf = std::fs::File::create(log).map_err(|e| PolicyLoadError::new(log, e.to_string()))?;
+    let mut logf =
+        std::fs::File::create(log).map_err(|source| JudgeError::Io { path: log.into(), source })?;
     let s = data.size;
     let eval = |net: &JudgeNet| {
         evaluate(&FrameJudge::new(judge.clone(), net.valid(), inner), data, &held, threshold)
@@ -144,7 +145,8 @@ pub fn train_judge(
         m
     };
     let mut log_line = |line: serde_json::Value| {
-        harness::runfile::append_line(&mut logf, &line).map_err(|e| PolicyLoadError::new(log, e.to_string()))
+        harness::runfile::append_line(&mut logf, &line)
+            .map_err(|source| JudgeError::Io { path: log.into(), source })
     };
     let (mut lv, mut done) = (f64::NAN, 0);
     for step in 0..cfg.steps {
@@ -198,8 +200,8 @@ pub fn train_judge(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::judge::Label;
-    use crate::net::NetConfig;
+    use crate::folder::Label;
+    use policies::net::NetConfig;
 
     #[test]
     fn metrics_count_each_side_of_the_threshold() {

@@ -6,7 +6,7 @@
 //!
 //! `evalharness import judge --format gpc-reward-predictor --xy FILE --angle FILE` reads the
 //! two `state_dict` files (`resnet18.{0..7}.*` then `mlp.{1,3,5}.*`, 126 tensors each), folds
-//! every BatchNorm into the convolution before it ([`crate::resnet`]) and writes a judge folder:
+//! every BatchNorm into the convolution before it ([`policies::resnet`]) and writes a judge folder:
 //! `judge.json` (kind `gpc_pose`) with `xy.bpk` and `angle.bpk` (f32).
 //!
 //! Input: the frame in [0, 1] (bytes / 255), as the official code feeds it.
@@ -17,11 +17,12 @@ use burn::module::Module;
 use burn::nn::{Linear, LinearConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
-use world_model::import::ImportError;
-use world_model::import::place::{place_all, shapes, transpose};
-use world_model::import::tensors::Source;
+use nn::ImportError;
+use nn::import::place::{place_all, shapes, transpose};
+use nn::import::tensors::Source;
 
-use crate::resnet::{ConvSite, ResNet18, batch_norm_sites, fold_batch_norm};
+use crate::error::JudgeError;
+use policies::resnet::{ConvSite, ResNet18, batch_norm_sites, fold_batch_norm};
 
 /// One reward predictor: ResNet-18 features, then 512 → 256 → 128 → 2 with ReLUs (8·base
 /// → 256 at another base width).
@@ -74,7 +75,7 @@ impl GpcPose {
     /// Block poses `[x, y, θ]` (θ = atan2(sin, cos) in [0, 2π)) of `frames`, each
     /// `s × s × 3` bytes.
     pub fn poses(&self, frames: &[&[u8]], s: usize) -> Vec<[f64; 3]> {
-        let x = world_model::data::frames_to_tensor(frames, s, &self.device) * 0.5 + 0.5; // [n, 3, s, s] in [0, 1]
+        let x = nn::frames::frames_to_tensor(frames, s, &self.device) * 0.5 + 0.5; // [n, 3, s, s] in [0, 1]
         let v = |t: Tensor<2>| t.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
         let (xy, cs) = (v(self.xy.forward(x.clone())), v(self.angle.forward(x)));
         xy.chunks_exact(2)
@@ -184,11 +185,11 @@ pub fn import_gpc(xy: &Path, angle: &Path, device: &Device) -> Result<(GpcPose, 
 /// Writes a `"gpc_pose"` judge folder's weights (`xy.bpk`, `angle.bpk`, f32).
 ///
 /// # Errors
-/// The file that could not be written, with the reason.
-pub fn write_pose_weights(dir: &Path, pose: &GpcPose) -> Result<(), String> {
+/// [`JudgeError::Weights`] naming the file that could not be written.
+pub fn write_pose_weights(dir: &Path, pose: &GpcPose) -> Result<(), JudgeError> {
     for (name, net) in [("xy.bpk", &pose.xy), ("angle.bpk", &pose.angle)] {
         let path = dir.join(name);
-        net.clone().save_file(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        net.clone().save_file(&path).map_err(|source| JudgeError::Weights { path, source })?;
     }
     Ok(())
 }
@@ -221,7 +222,7 @@ mod tests {
         assert!(e.contains("u8"), "{e}");
         let bytes = pytorch_frames(&fixture("reward_io.pth"));
         let frames: Vec<&[u8]> = bytes.chunks(96 * 96 * 3).collect();
-        let x = world_model::data::frames_to_tensor(&frames, 96, &device) * 0.5 + 0.5;
+        let x = nn::frames::frames_to_tensor(&frames, 96, &device) * 0.5 + 0.5;
         let v = |t: Tensor<2>| t.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
         for (net, key) in [(&pose.xy, "xy"), (&pose.angle, "angle")] {
             let (got, want) = (v(net.forward(x.clone())), read(key).unwrap_or_else(|e| panic!("{e}")));

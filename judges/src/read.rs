@@ -14,9 +14,9 @@ use std::path::Path;
 use harness::judge::Sustained;
 use harness::replay::ReplayReader;
 
-use crate::dir::PolicyLoadError;
-use crate::judge::{FrameJudge, Label};
-use crate::judge_metrics::{EpisodeReading, JudgeMetrics, Reading, metrics};
+use crate::error::JudgeError;
+use crate::folder::{FrameJudge, Label};
+use crate::metrics::{EpisodeReading, JudgeMetrics, Reading, metrics};
 
 /// Frames and labels of a dataset.
 pub struct JudgeData {
@@ -35,12 +35,13 @@ impl JudgeData {
     /// `data/<label>` array.
     ///
     /// # Errors
-    /// [`PolicyLoadError`] naming the dataset for an unreadable layout, a missing
+    /// [`JudgeError`] naming the dataset for an unreadable layout, a missing
     /// label array, non-finite labels or no episodes.
-    pub fn load(path: &Path, label: Label, limit: Option<usize>) -> Result<Self, PolicyLoadError> {
-        let err = |m: String| PolicyLoadError::new(path, m);
-        let r = ReplayReader::open(path).map_err(|e| err(e.to_string()))?;
-        let Some(all) = r.extra(label.array()).map_err(|e| err(e.to_string()))? else {
+    pub fn load(path: &Path, label: Label, limit: Option<usize>) -> Result<Self, JudgeError> {
+        let err = |what: String| JudgeError::Dataset { path: path.into(), what };
+        let replay = |source| JudgeError::Replay { path: path.into(), source };
+        let r = ReplayReader::open(path).map_err(replay)?;
+        let Some(all) = r.extra(label.array()).map_err(replay)? else {
             return Err(err(format!("no data/{} array to learn from", label.array())));
         };
         if let Some(t) = all.iter().position(|v| !v.is_finite()) {
@@ -52,7 +53,7 @@ impl JudgeData {
         }
         let episodes: Vec<_> = (0..n).map(|i| r.episode_range(i)).collect();
         let end = episodes.last().map_or(0, |e| e.end);
-        let frames = r.img.read_rows(0, end).map_err(|e| err(e.to_string()))?;
+        let frames = r.img.read_rows(0, end).map_err(replay)?;
         let labels = all[..end].iter().map(|&v| v as f32).collect();
         Ok(Self { frames, labels, size: r.img.shape()[1], episodes })
     }

@@ -1,0 +1,21 @@
+//! Judges of imagined frames: what scores a world model's frames where the task has no
+//! hand-written judge of its own (Lift, Can), or where a researcher brings GPC's.
+//!
+//! - [`folder`]: a judge folder (`judge.json` and its weights) and [`folder::FrameJudge`],
+//!   which implements [`harness::judge::Judge`]: a learned network ([`folder::JudgeNet`], the
+//!   policies' frame encoder and a one-logit head), a hand-written [`rule`], or GPC's reward
+//!   predictors imported by [`pose`];
+//! - [`train`]: the learned judge's trainer; [`read`]: a recorded episode read as `rank` reads an
+//!   imagined one; [`metrics`]: which frames `rank` judges and a judge's metrics, shared by the
+//!   three so that none imports another in a circle;
+//! - [`error`]: [`JudgeError`], naming the folder, file or dataset.
+
+pub mod error;
+pub mod folder;
+pub mod metrics;
+pub mod pose;
+pub mod read;
+pub mod rule;
+pub mod train;
+
+pub use error::JudgeError;
