@@ -23,7 +23,7 @@ pub fn load_any(
     task: &dyn Task,
 ) -> Result<Box<dyn Policy>, PolicyLoadError> {
     if policies::dir::policy_kind(dir).as_deref() == Some("scripted") {
-        return task.scripted_policy(dir).map_err(|m| PolicyLoadError::new(dir, m));
+        return task.scripted_policy(dir).map_err(|e| PolicyLoadError::new(dir, e.to_string()));
     }
     load_policy(dir, expect, device)
 }

@@ -142,5 +142,8 @@ fn scripted_policies_act_from_frames_and_grade_with_noise() {
     expect_code(&run(&args), 1);
     let summary = read_json(&out.join("summary.json"));
     let err = summary["policies"][1]["error"].as_str().unwrap();
-    assert!(err.contains("noise200-lag0") && err.contains("\"lag\" (8)"), "{err}");
+    assert!(
+        err.contains("noise200-lag0/policy.json") && err.contains("'config.lag': 8 must be below"),
+        "{err}"
+    );
 }

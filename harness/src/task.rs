@@ -183,6 +183,16 @@ pub struct NativeFrame {
     pub bytes: Vec<u8>,
 }
 
+/// A `scripted` policy folder for a task that has none ([`Task::scripted_policy`]).
+#[derive(Debug, thiserror::Error)]
+#[error("{}: task {task} has no scripted policies", dir.display())]
+pub struct NoScriptedPolicies {
+    /// The policy folder.
+    pub dir: std::path::PathBuf,
+    /// The task.
+    pub task: String,
+}
+
 /// An error of a task's simulator (a diverging step, a bad action, an impossible
 /// reset), naming the task, seed and step where the task knows them.
 #[derive(Debug, thiserror::Error)]
@@ -325,9 +335,10 @@ pub trait Task: Send + Sync {
     /// tasks without scripted policies refuse.
     ///
     /// # Errors
-    /// An unreadable or invalid `policy.json`, naming it.
-    fn scripted_policy(&self, dir: &Path) -> Result<Box<dyn Policy>, String> {
-        Err(format!("{}: task {} has no scripted policies", dir.display(), self.name()))
+    /// An unreadable or invalid `policy.json`, naming it; [`NoScriptedPolicies`] for a task
+    /// without them.
+    fn scripted_policy(&self, dir: &Path) -> Result<Box<dyn Policy>, TaskError> {
+        Err(TaskError::new(NoScriptedPolicies { dir: dir.to_path_buf(), task: self.name().to_string() }))
     }
 }
 

@@ -36,6 +36,7 @@ use super::expert::Expert;
 use super::perceive::Perceiver;
 use super::physics::PushTState;
 use super::{PushTConfig, PushTEnv};
+use crate::error::ScenarioError;
 
 /// The kind's configuration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -83,22 +84,30 @@ impl ScriptedPolicy {
     /// A policy named `name` for frames of `size` pixels.
     ///
     /// # Errors
-    /// A message when the configuration is unusable (negative or non-finite noise,
-    /// a lag that leaves no action, a zero horizon).
+    /// [`ScenarioError::InvalidField`] (naming `policy.json`) when the configuration is
+    /// unusable: negative or non-finite noise, a lag that leaves no action, a zero horizon.
     pub fn new(
         name: &str,
         cfg: ScriptedConfig,
         scenario: &PushTConfig,
         model: Arc<MjModel>,
         size: usize,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, ScenarioError> {
+        let bad = |field: &str, reason: String| ScenarioError::InvalidField {
+            path: "policy.json".into(),
+            field: format!("config.{field}"),
+            reason,
+        };
         if !(cfg.noise.is_finite() && cfg.noise >= 0.0) {
-            return Err(format!("\"noise\" must be a finite number >= 0, got {}", cfg.noise));
+            return Err(bad("noise", format!("must be a finite number >= 0, got {}", cfg.noise)));
         }
         if cfg.action_horizon == 0 || cfg.lag >= cfg.action_horizon {
-            return Err(format!(
-                "\"lag\" ({}) must be below \"action_horizon\" ({}), which must be positive",
-                cfg.lag, cfg.action_horizon
+            return Err(bad(
+                "lag",
+                format!(
+                    "{} must be below \"action_horizon\" ({}), which must be positive",
+                    cfg.lag, cfg.action_horizon
+                ),
             ));
         }
         let perceiver = Perceiver::new(scenario, size);
@@ -108,23 +117,35 @@ impl ScriptedPolicy {
     /// Loads `dir/policy.json` (kind `scripted`); the policy is named after `dir`.
     ///
     /// # Errors
-    /// A message naming the file for unreadable JSON, another kind, or a bad config.
+    /// [`ScenarioError`] naming the file: [`ScenarioError::Io`] unreadable,
+    /// [`ScenarioError::Parse`] not JSON of a scripted policy, [`ScenarioError::InvalidField`]
+    /// another kind or a bad config.
     pub fn load(
         dir: &Path,
         scenario: &PushTConfig,
         model: Arc<MjModel>,
         size: usize,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, ScenarioError> {
         let path = dir.join("policy.json");
-        let text = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let file: ScriptedFile =
-            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        let text = std::fs::read_to_string(&path)
+            .map_err(|source| ScenarioError::Io { path: path.clone(), source })?;
+        let file: ScriptedFile = serde_json::from_str(&text)
+            .map_err(|e| ScenarioError::Parse { path: path.clone(), message: e.to_string() })?;
         if file.kind != "scripted" {
-            return Err(format!("{}: kind \"{}\" is not \"scripted\"", path.display(), file.kind));
+            return Err(ScenarioError::InvalidField {
+                path,
+                field: "kind".into(),
+                reason: format!("\"{}\" is not \"scripted\"", file.kind),
+            });
         }
         let name =
             dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
-        Self::new(&name, file.config, scenario, model, size).map_err(|e| format!("{}: {e}", path.display()))
+        Self::new(&name, file.config, scenario, model, size).map_err(|e| match e {
+            ScenarioError::InvalidField { field, reason, .. } => {
+                ScenarioError::InvalidField { path, field, reason }
+            }
+            other => other,
+        })
     }
 
     /// The expert's plan for one observation (before lag and noise).

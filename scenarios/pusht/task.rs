@@ -104,8 +104,9 @@ impl Task for PushTTask {
         states.iter().map(|s| s.iter().take(2).map(|&v| v as f32).collect()).collect()
     }
 
-    fn scripted_policy(&self, dir: &Path) -> Result<Box<dyn Policy>, String> {
-        let p = ScriptedPolicy::load(dir, &self.cfg, self.model.clone(), self.raster.size())?;
+    fn scripted_policy(&self, dir: &Path) -> Result<Box<dyn Policy>, TaskError> {
+        let p = ScriptedPolicy::load(dir, &self.cfg, self.model.clone(), self.raster.size())
+            .map_err(TaskError::new)?;
         Ok(Box::new(p))
     }
 }
