@@ -16,19 +16,41 @@ const FLAG_MEMCPYED: u8 = 0x02;
 const FLAG_BITSHUFFLE: u8 = 0x04;
 const FLAG_DONT_SPLIT: u8 = 0x10;
 
-fn u32_at(b: &[u8], at: usize) -> Result<usize, String> {
+/// Why a Blosc1 frame cannot be decoded.
+#[derive(Debug, thiserror::Error)]
+pub enum BloscError {
+    /// The frame ends before what its header or tables say it holds.
+    #[error("truncated blosc frame: {0}")]
+    Truncated(String),
+    /// A feature this decoder does not implement (bit-shuffle, a codec).
+    #[error("blosc {0} is not supported")]
+    Unsupported(String),
+    /// A block whose compressed stream does not decode.
+    #[error("{codec}: {message}")]
+    Codec {
+        /// `lz4` or `zlib`.
+        codec: &'static str,
+        /// The codec's message.
+        message: String,
+    },
+    /// A block that decoded to another size than the header says, or a block size of 0.
+    #[error("blosc {0}")]
+    Size(String),
+}
+
+fn u32_at(b: &[u8], at: usize) -> Result<usize, BloscError> {
     b.get(at..at + 4)
         .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]) as usize)
-        .ok_or_else(|| format!("truncated blosc frame at byte {at}"))
+        .ok_or_else(|| BloscError::Truncated(format!("at byte {at}")))
 }
 
 /// Decompresses one Blosc1 frame.
 ///
 /// # Errors
-/// A message describing a truncated frame, an unsupported feature or a codec failure.
-pub fn decompress(frame: &[u8]) -> Result<Vec<u8>, String> {
+/// [`BloscError`]: a truncated frame, an unsupported feature or a codec failure.
+pub fn decompress(frame: &[u8]) -> Result<Vec<u8>, BloscError> {
     if frame.len() < HEADER {
-        return Err("blosc frame shorter than its header".into());
+        return Err(BloscError::Truncated("shorter than its header".into()));
     }
     let flags = frame[2];
     let typesize = usize::from(frame[3]).max(1);
@@ -38,18 +60,18 @@ pub fn decompress(frame: &[u8]) -> Result<Vec<u8>, String> {
         return frame
             .get(HEADER..HEADER + nbytes)
             .map(<[u8]>::to_vec)
-            .ok_or_else(|| "truncated memcpyed blosc frame".into());
+            .ok_or_else(|| BloscError::Truncated("a memcpyed frame".into()));
     }
     if flags & FLAG_BITSHUFFLE != 0 && flags & FLAG_SHUFFLE == 0 {
-        return Err("blosc bit-shuffle is not supported".into());
+        return Err(BloscError::Unsupported("bit-shuffle".into()));
     }
     let codec = flags >> 5;
     if codec != 1 && codec != 3 {
         let name = ["blosclz", "lz4", "snappy", "zlib", "zstd"].get(usize::from(codec)).unwrap_or(&"unknown");
-        return Err(format!("blosc codec '{name}' is not supported (lz4 and zlib are)"));
+        return Err(BloscError::Unsupported(format!("codec '{name}' (lz4 and zlib are)")));
     }
     if blocksize == 0 {
-        return Err("blosc block size 0".into());
+        return Err(BloscError::Size("block size 0".into()));
     }
     let nblocks = nbytes.div_ceil(blocksize);
     let mut out = vec![0u8; nbytes];
@@ -64,23 +86,29 @@ pub fn decompress(frame: &[u8]) -> Result<Vec<u8>, String> {
         for _ in 0..nstreams {
             let csize = u32_at(frame, at)?;
             at += 4;
-            let data = frame.get(at..at + csize).ok_or("truncated blosc stream")?;
+            let data = frame
+                .get(at..at + csize)
+                .ok_or_else(|| BloscError::Truncated(format!("a stream at byte {at}")))?;
             at += csize;
             if csize == neblock {
                 block.extend_from_slice(data);
             } else if codec == 1 {
-                let dec = lz4_flex::block::decompress(data, neblock).map_err(|e| format!("lz4: {e}"))?;
+                let dec = lz4_flex::block::decompress(data, neblock)
+                    .map_err(|e| BloscError::Codec { codec: "lz4", message: e.to_string() })?;
                 block.extend_from_slice(&dec);
             } else {
                 let mut dec = Vec::with_capacity(neblock);
                 flate2::read::ZlibDecoder::new(data)
                     .read_to_end(&mut dec)
-                    .map_err(|e| format!("zlib: {e}"))?;
+                    .map_err(|e| BloscError::Codec { codec: "zlib", message: e.to_string() })?;
                 block.extend_from_slice(&dec);
             }
         }
         if block.len() != bsize {
-            return Err(format!("blosc block {j} decoded to {} bytes, expected {bsize}", block.len()));
+            return Err(BloscError::Size(format!(
+                "block {j} decoded to {} bytes, expected {bsize}",
+                block.len()
+            )));
         }
         let dst = &mut out[j * blocksize..j * blocksize + bsize];
         if flags & FLAG_SHUFFLE != 0 && typesize > 1 {
@@ -128,6 +156,20 @@ mod tests {
 
     #[test]
     fn truncated_frame_is_an_error() {
-        assert!(decompress(&[2, 1, 0]).is_err());
+        let e = decompress(&[2, 1, 0]).unwrap_err();
+        assert_eq!(e.to_string(), "truncated blosc frame: shorter than its header");
+        // A header saying 3 memcpyed bytes, with none after it.
+        let mut f = vec![2, 1, FLAG_MEMCPYED, 1];
+        f.extend_from_slice(&3u32.to_le_bytes());
+        f.extend_from_slice(&3u32.to_le_bytes());
+        f.extend_from_slice(&19u32.to_le_bytes());
+        assert!(matches!(decompress(&f), Err(BloscError::Truncated(_))));
+        // zstd (codec 4, the flags' top three bits) is named, not guessed at.
+        let mut z = vec![2, 1, 4 << 5, 1];
+        z.extend_from_slice(&[0; 12]);
+        assert_eq!(
+            decompress(&z).unwrap_err().to_string(),
+            "blosc codec 'zstd' (lz4 and zlib are) is not supported"
+        );
     }
 }

@@ -76,12 +76,25 @@ impl StateKey {
     }
 }
 
+/// A robot-state key a policy reads that the scenario does not give.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error(
+    "reads `{key}`, which the scenario does not give (it gives: {})",
+    if gives.is_empty() { "nothing".to_string() } else { gives.join(", ") }
+)]
+pub struct MissingStateKey {
+    /// The key asked for.
+    pub key: String,
+    /// The keys the scenario gives, in its order.
+    pub gives: Vec<String>,
+}
+
 /// Where each of `wanted`'s keys lies in a robot-state vector laid out as `keys`: the
 /// `(offset, width)` of each, in `wanted`'s order.
 ///
 /// # Errors
-/// The first wanted key the layout lacks, named, with the keys it has.
-pub fn robot_slices(keys: &[StateKey], wanted: &[String]) -> Result<Vec<(usize, usize)>, String> {
+/// [`MissingStateKey`]: the first wanted key the layout lacks, with the keys it has.
+pub fn robot_slices(keys: &[StateKey], wanted: &[String]) -> Result<Vec<(usize, usize)>, MissingStateKey> {
     let mut at = std::collections::BTreeMap::new();
     let mut offset = 0;
     for k in keys {
@@ -91,12 +104,9 @@ pub fn robot_slices(keys: &[StateKey], wanted: &[String]) -> Result<Vec<(usize, 
     wanted
         .iter()
         .map(|w| {
-            at.get(w.as_str()).copied().ok_or_else(|| {
-                let have: Vec<&str> = keys.iter().map(|k| k.name.as_str()).collect();
-                format!(
-                    "reads `{w}`, which the scenario does not give (it gives: {})",
-                    if have.is_empty() { "nothing".to_string() } else { have.join(", ") }
-                )
+            at.get(w.as_str()).copied().ok_or_else(|| MissingStateKey {
+                key: w.clone(),
+                gives: keys.iter().map(|k| k.name.clone()).collect(),
             })
         })
         .collect()
@@ -375,8 +385,8 @@ mod tests {
         // Offsets: eef_pos 0..3, eef_quat 3..7, qpos 7..9.
         let got = robot_slices(&keys, &["qpos".into(), "eef_pos".into()]).unwrap();
         assert_eq!(got, vec![(7, 2), (0, 3)]);
-        let err = robot_slices(&keys, &["object".into()]).unwrap_err();
+        let err = robot_slices(&keys, &["object".into()]).unwrap_err().to_string();
         assert!(err.contains("`object`") && err.contains("eef_pos, eef_quat, qpos"), "{err}");
-        assert!(robot_slices(&[], &["x".into()]).unwrap_err().contains("gives: nothing"));
+        assert!(robot_slices(&[], &["x".into()]).unwrap_err().to_string().contains("gives: nothing"));
     }
 }

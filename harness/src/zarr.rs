@@ -62,6 +62,15 @@ pub enum ZarrError {
         /// What is wrong.
         message: String,
     },
+    /// A Blosc-compressed chunk that does not decode.
+    #[error("{path}: corrupt chunk: {source}")]
+    Blosc {
+        /// The chunk file.
+        path: PathBuf,
+        /// The decoder's error.
+        #[source]
+        source: crate::blosc::BloscError,
+    },
 }
 
 /// The largest chunk this reader decodes (1 GiB; evalharness writes ~2.8 MB image

@@ -616,7 +616,7 @@ pub fn load_returning(
     let robot = if cfg.robot_keys.is_empty() {
         Vec::new()
     } else {
-        harness::task::robot_slices(&expect.robot, &cfg.robot_keys).map_err(err)?
+        harness::task::robot_slices(&expect.robot, &cfg.robot_keys).map_err(|e| err(e.to_string()))?
     };
     let reads = if robot.is_empty() { expect.proprio_dim } else { robot.iter().map(|(_, w)| w).sum() };
     if n.action_dim != expect.action_dim() || n.proprio() != reads {

@@ -81,13 +81,11 @@ enum Targets<'a> {
 }
 
 impl<'a> Targets<'a> {
-    /// The targets of `demos`, columns standardised over the steps `train`.
-    ///
-    /// # Errors
-    /// A message when the demonstrations carry no labels.
-    fn of(demos: &'a Demos, train: &[usize]) -> Result<Self, String> {
+    /// The targets of `demos`, columns standardised over the steps `train`; `None` when the
+    /// demonstrations carry no labels.
+    fn of(demos: &'a Demos, train: &[usize]) -> Option<Self> {
         match &demos.labels {
-            FrameLabels::PushT { block, goal } => Ok(Targets::PushT { block, goal }),
+            FrameLabels::PushT { block, goal } => Some(Targets::PushT { block, goal }),
             FrameLabels::Columns { names, values } => {
                 let k = names.len();
                 let n = train.len().max(1) as f64;
@@ -101,9 +99,9 @@ impl<'a> Targets<'a> {
                 }
                 // A constant column keeps unit scale instead of dividing by zero.
                 let std = var.iter().map(|v| if v.sqrt() > 1e-9 { v.sqrt() as f32 } else { 1.0 }).collect();
-                Ok(Targets::Columns { names, values, mean: mean.iter().map(|&m| m as f32).collect(), std })
+                Some(Targets::Columns { names, values, mean: mean.iter().map(|&m| m as f32).collect(), std })
             }
-            FrameLabels::None => Err("the dataset's task names no frame labels to pre-train on".into()),
+            FrameLabels::None => None,
         }
     }
 
@@ -237,7 +235,9 @@ pub fn pretrain_encoder(
     if train.is_empty() {
         return Err(err(dir, "encoder pre-training: no training episodes (every 20th is held out)".into()));
     }
-    let targets = Targets::of(demos, &train).map_err(|m| err(dir, format!("encoder pre-training: {m}")))?;
+    let targets = Targets::of(demos, &train).ok_or_else(|| {
+        err(dir, "encoder pre-training: the dataset's task names no frame labels to pre-train on".into())
+    })?;
     let mut probe = PoseProbe::new(cfg, targets.dim(), &device);
     let mut optim = AdamWConfig::new().with_weight_decay(1e-6).init();
     let mut state = PretrainState::default();
@@ -457,7 +457,7 @@ mod tests {
         assert_eq!(targets.at(&d, 0, 0), vec![-1.0, 0.0]);
         assert_eq!(targets.at(&d, 2, 0), vec![98.0, 0.0]);
         let none = Demos { labels: FrameLabels::None, ..d };
-        assert!(Targets::of(&none, &[0]).is_err());
+        assert!(Targets::of(&none, &[0]).is_none());
     }
 
     #[test]

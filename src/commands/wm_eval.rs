@@ -177,8 +177,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
     for (name, wm) in &models {
         let view = view_for(wm);
         tracing::info!(model = %name, videos = short.len(), "64-frame rollouts");
-        let (row, videos) =
-            evaluate(wm, (name, view), &data, &short, "64", a.batch, a.seed).map_err(anyhow::Error::msg)?;
+        let (row, videos) = evaluate(wm, (name, view), &data, &short, "64", a.batch, a.seed)?;
         if strip_rows.is_empty() {
             strip_rows.push(videos[0].real.iter().step_by(STRIP_EVERY).cloned().collect());
         }
@@ -187,8 +186,7 @@ pub fn run(a: &WmEvalArgs) -> Result<ExitCode> {
         rows.push(row);
         if !full.is_empty() {
             tracing::info!(model = %name, videos = full.len(), "full-episode rollouts");
-            let (row, videos) = evaluate(wm, (name, view), &data, &full, "episode", a.batch, a.seed)
-                .map_err(anyhow::Error::msg)?;
+            let (row, videos) = evaluate(wm, (name, view), &data, &full, "episode", a.batch, a.seed)?;
             print_row(&row, "");
             rows.push(row);
             if let Ok(sc) = &scoring {

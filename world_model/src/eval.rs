@@ -15,7 +15,7 @@ use serde::Serialize;
 
 use crate::data::{EpisodeData, tensor_to_frames};
 use crate::model::WorldModel;
-use crate::rollout::Rollout;
+use crate::rollout::{Rollout, RolloutError};
 
 /// The metrics of one model at one horizon.
 #[derive(Clone, Debug, Serialize)]
@@ -88,11 +88,28 @@ pub struct Video {
 /// One video's frames, HWC bytes each.
 pub type Frames = Vec<Vec<u8>>;
 
+/// A batch of evaluation videos whose rollout failed (non-finite latents, or actions the
+/// model does not read), naming the model and the videos.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "world model {model}, a batch of videos whose context starts at steps {}: {source}",
+    starts.iter().map(usize::to_string).collect::<Vec<_>>().join(", ")
+)]
+pub struct EvalError {
+    /// The model's name (empty from [`rollout`], which does not know it).
+    pub model: String,
+    /// Each video's first context step.
+    pub starts: Vec<usize>,
+    /// Why the rollout stopped.
+    #[source]
+    pub source: RolloutError,
+}
+
 /// Rolls out `len` frames after a 4-frame real context for each start step in
 /// `starts` (batched); returns the generated frames per video and the seconds spent.
 ///
 /// # Errors
-/// Non-finite latents, naming the video (its first context step) and the frames.
+/// [`EvalError`] for non-finite latents, naming the videos (their first context steps).
 ///
 /// # Panics
 /// Never for valid inputs; `starts` must leave `3 + len` frames in each episode.
@@ -102,7 +119,7 @@ pub fn rollout(
     starts: &[usize],
     len: usize,
     seed: u64,
-) -> Result<(Vec<Frames>, f64), String> {
+) -> Result<(Vec<Frames>, f64), EvalError> {
     let device = wm.device().clone();
     let (k, f_max) = (wm.cfg.unet.history, wm.cfg.future);
     let b = starts.len();
@@ -132,9 +149,10 @@ pub fn rollout(
             let t = starts[r] + k - 1 + done + j;
             &data.actions[t * d..(t + 1) * d]
         };
-        let pred = roll.step(wm, f, action, &mut rngs).map_err(|e| {
-            let videos: Vec<String> = starts.iter().map(usize::to_string).collect();
-            format!("{e} (a batch of videos whose context starts at steps {})", videos.join(", "))
+        let pred = roll.step(wm, f, action, &mut rngs).map_err(|source| EvalError {
+            model: String::new(),
+            starts: starts.to_vec(),
+            source,
         })?; // [b, f, C, s, s]
         let frames = tensor_to_frames(wm.decode(pred.reshape([b * f, c, s, s])));
         for (i, fr) in frames.into_iter().enumerate() {
@@ -284,7 +302,7 @@ pub struct View<'a> {
 /// comparison with `data`'s.
 ///
 /// # Errors
-/// A rollout with non-finite latents, naming the model and the videos.
+/// [`EvalError`]: a rollout with non-finite latents, naming the model and the videos.
 pub fn evaluate(
     wm: &WorldModel,
     (name, view): (&str, Option<&View>),
@@ -293,7 +311,7 @@ pub fn evaluate(
     horizon: &str,
     batch: usize,
     seed: u64,
-) -> Result<(EvalRow, Vec<Video>), String> {
+) -> Result<(EvalRow, Vec<Video>), EvalError> {
     let k = wm.cfg.unet.history;
     let (mut tally, mut secs) = (Tally::default(), 0.0);
     let mut videos = Vec::new();
@@ -305,7 +323,7 @@ pub fn evaluate(
             let len = chunk[0].1;
             let st: Vec<usize> = chunk.iter().map(|&(t, _)| t).collect();
             let (videos_gen, s) = rollout(wm, view.map_or(data, |v| v.inputs), &st, len, seed)
-                .map_err(|e| format!("world model {name}: {e}"))?;
+                .map_err(|e| EvalError { model: name.to_string(), ..e })?;
             secs += s;
             for (&t, mut g) in st.iter().zip(videos_gen) {
                 if let Some(v) = view {

@@ -62,7 +62,8 @@ pub(super) fn decode(
                     declared.map_or_else(|| "no size (truncated)".to_string(), |d| format!("{d} bytes"));
                 return Err(corrupt(format!("blosc header declares {declared}, expected {expected} bytes")));
             }
-            out = crate::blosc::decompress(bytes).map_err(corrupt)?;
+            out = crate::blosc::decompress(bytes)
+                .map_err(|source| ZarrError::Blosc { path: path.to_path_buf(), source })?;
         }
         other => {
             return Err(ZarrError::Unsupported {
