@@ -229,7 +229,7 @@ fn config_from(src: &Model, image_size: usize, obs_horizon: usize) -> Result<Imp
     let unet: BTreeMap<String, Vec<usize>> =
         s.iter().filter_map(|(k, v)| Some((k.strip_prefix("invariant.")?.to_string(), v.clone()))).collect();
     let UnetSizes { dims, action, kernel, step_embed: e, cond } =
-        unet_sizes(&unet, "blocks.0").map_err(|m| layout(format!("`{}*`: {m}", src.shown("invariant."))))?;
+        unet_sizes(&unet, "blocks.0", src.path(), &src.shown("invariant."))?;
     let features = 8 * base;
     let proprio =
         (cond / obs_horizon.max(1)).checked_sub(features).filter(|_| cond % obs_horizon.max(1) == 0);

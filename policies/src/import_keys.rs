@@ -8,6 +8,8 @@
 //! Each function returns the path and whether the tensor is a Linear weight (stored
 //! transposed in burn), or `None` for a name with no place.
 
+use nn::ImportError;
+
 /// A GroupNorm or BatchNorm parameter's burn name (`weight` → `gamma`, `bias` → `beta`).
 pub(crate) fn norm(path: &str) -> String {
     path.replace(".weight", ".gamma").replace(".bias", ".beta")
@@ -61,20 +63,27 @@ pub(crate) struct UnetSizes {
     pub cond: usize,
 }
 
-/// Reads [`UnetSizes`] from `shapes` (names inside the U-Net module).
+/// Reads [`UnetSizes`] from `shapes` (names inside the U-Net module, found in `path` under the
+/// shown prefix `shown`).
 ///
 /// # Errors
-/// The first name missing (without the prefix the caller adds), or why the shapes do not
-/// make a U-Net.
+/// [`ImportError::Layout`] naming `path` and the U-Net's keys: the first name missing, or why
+/// the shapes do not make a U-Net.
 pub(crate) fn unet_sizes(
     shapes: &std::collections::BTreeMap<String, Vec<usize>>,
     first_conv: &str,
-) -> Result<UnetSizes, String> {
+    path: &std::path::Path,
+    shown: &str,
+) -> Result<UnetSizes, ImportError> {
+    let bad = |m: String| ImportError::Layout { path: path.into(), what: format!("`{shown}*`: {m}") };
     let mut dims = Vec::new();
     let (mut action, mut kernel) = (0, 0);
     while let Some(w) = shapes.get(&format!("down_modules.{}.0.{first_conv}.block.0.weight", dims.len())) {
         if w.len() != 3 {
-            return Err(format!("down_modules.{}.0.{first_conv}.block.0.weight has shape {w:?}", dims.len()));
+            return Err(bad(format!(
+                "down_modules.{}.0.{first_conv}.block.0.weight has shape {w:?}",
+                dims.len()
+            )));
         }
         if dims.is_empty() {
             (action, kernel) = (w[1], w[2]);
@@ -82,15 +91,16 @@ pub(crate) fn unet_sizes(
         dims.push(w[0]);
     }
     if dims.is_empty() {
-        return Err(format!("missing down_modules.0.0.{first_conv}.block.0.weight"));
+        return Err(bad(format!("missing down_modules.0.0.{first_conv}.block.0.weight")));
     }
-    let get =
-        |k: &str| shapes.get(k).filter(|s| s.len() == 2).ok_or_else(|| format!("missing {k} (or not 2-D)"));
+    let get = |k: &str| {
+        shapes.get(k).filter(|s| s.len() == 2).ok_or_else(|| bad(format!("missing {k} (or not 2-D)")))
+    };
     let e = get("diffusion_step_encoder.1.weight")?[1];
     let film = get("down_modules.0.0.cond_encoder.1.weight")?[1];
     let cond = film
         .checked_sub(e)
-        .ok_or_else(|| format!("FiLM input {film} narrower than the step embedding {e}"))?;
+        .ok_or_else(|| bad(format!("FiLM input {film} narrower than the step embedding {e}")))?;
     Ok(UnetSizes { dims, action, kernel, step_embed: e, cond })
 }
 

@@ -305,7 +305,7 @@ pub fn import(
     let unet: BTreeMap<String, Vec<usize>> =
         s.iter().filter_map(|(k, v)| Some((k.strip_prefix(UNET)?.to_string(), v.clone()))).collect();
     let UnetSizes { dims, action, kernel, step_embed, cond } =
-        unet_sizes(&unet, "blocks.0").map_err(|m| layout(path, format!("`{}*`: {m}", src.shown(UNET))))?;
+        unet_sizes(&unet, "blocks.0", path, &src.shown(UNET))?;
     let h = &c.algo.horizon;
     let o = h.observation_horizon.max(1);
     let state = (cond % o == 0).then(|| (cond / o).checked_sub(features)).flatten().ok_or_else(|| {
@@ -480,8 +480,7 @@ fn weights_of(
             }
             Some(grid @ ("pool.pos_x" | "pool.pos_y")) => {
                 let v = f32s(key)?;
-                check_grid(&v, grid == "pool.pos_x")
-                    .map_err(|m| layout(path, format!("`{}`: {m}", src.shown(key))))?;
+                check_grid(&v, grid == "pool.pos_x", path, &src.shown(key))?;
                 originals.insert(key.clone(), v);
                 continue;
             }
@@ -525,18 +524,22 @@ fn weights_of(
     Ok((values, n))
 }
 
-/// Checks a SpatialSoftmax grid buffer (`[1, h·w]`, a square map): robomimic's
-/// `meshgrid(linspace(-1, 1, w), linspace(-1, 1, h))`, x varying along a row.
-fn check_grid(v: &[f32], is_x: bool) -> Result<(), String> {
+/// Checks a SpatialSoftmax grid buffer (`[1, h·w]`, a square map; key `shown` of `path`):
+/// robomimic's `meshgrid(linspace(-1, 1, w), linspace(-1, 1, h))`, x varying along a row.
+///
+/// # Errors
+/// [`ImportError::Layout`] naming the file and key: not a square map, or another grid.
+fn check_grid(v: &[f32], is_x: bool, path: &Path, shown: &str) -> Result<(), ImportError> {
+    let bad = |m: String| ImportError::Layout { path: path.into(), what: format!("`{shown}`: {m}") };
     let side = (v.len() as f64).sqrt().round() as usize;
     if side * side != v.len() || side == 0 {
-        return Err(format!("{} positions are not a square map", v.len()));
+        return Err(bad(format!("{} positions are not a square map", v.len())));
     }
     let lin = |i: usize| if side > 1 { -1.0 + 2.0 * i as f32 / (side - 1) as f32 } else { 0.0 };
     for (i, &got) in v.iter().enumerate() {
         let want = if is_x { lin(i % side) } else { lin(i / side) };
         if (got - want).abs() > 1e-6 {
-            return Err(format!("position {i} is {got}, robomimic's grid has {want}"));
+            return Err(bad(format!("position {i} is {got}, robomimic's grid has {want}")));
         }
     }
     Ok(())
