@@ -22,7 +22,7 @@ use harness::results::Branch;
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
 use harness::task::{Imagination, ModelView, Seen};
-use world_model::data::{frames_to_tensor, tensor_to_frames, tensor_to_unit_floats};
+use nn::frames::{frames_to_tensor, tensor_to_frames, tensor_to_unit_floats};
 use world_model::model::WorldModel;
 use world_model::rollout::Rollout;
 

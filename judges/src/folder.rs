@@ -27,12 +27,12 @@ use serde::{Deserialize, Serialize};
 use nn::frames::{frames_to_tensor, frames_to_vec};
 use policies::cpu_encoder::CpuEncoder;
 use policies::dir::{load_weights, save_f16};
+use policies::net::{NetConfig, ObsEncoder};
 
 use crate::error::JudgeError;
 use crate::metrics::JudgeMetrics;
 use crate::pose::{GpcPose, PoseNet};
 use crate::rule::ColourHeight;
-use policies::net::{NetConfig, ObsEncoder};
 
 /// The judge's network: frame encoder and a one-logit head.
 #[derive(Module, Debug)]

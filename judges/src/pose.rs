@@ -20,9 +20,9 @@ use burn::tensor::{Device, Tensor, TensorData};
 use nn::ImportError;
 use nn::import::place::{place_all, shapes, transpose};
 use nn::import::tensors::Source;
+use policies::resnet::{ConvSite, ResNet18, batch_norm_sites, fold_batch_norm};
 
 use crate::error::JudgeError;
-use policies::resnet::{ConvSite, ResNet18, batch_norm_sites, fold_batch_norm};
 
 /// One reward predictor: ResNet-18 features, then 512 → 256 → 128 → 2 with ReLUs (8·base
 /// → 256 at another base width).

@@ -30,12 +30,13 @@ use harness::rng::Rng;
 use harness::seed::derive;
 use serde::{Deserialize, Serialize};
 
+use nn::frames::frames_to_tensor;
+use policies::symmetry::augment_frame;
+
 use crate::error::JudgeError;
 use crate::folder::{FrameJudge, JudgeFile, JudgeNet};
 use crate::metrics::{EpisodeReading, JudgeMetrics, Reading, metrics};
 use crate::read::{JudgeData, judge_episodes, read_judged};
-use nn::frames::frames_to_tensor;
-use policies::symmetry::augment_frame;
 
 /// Linear warm-up steps of the learning rate.
 const WARMUP: u64 = 100;

@@ -68,7 +68,7 @@ pub fn dense_of(l: &Linear, layer: &str) -> Result<Dense, UnsupportedLayer> {
 /// # Errors
 /// [`UnsupportedLayer`] for any other convolution or non-f32 weights.
 pub fn conv3x3_of(c: &Conv2d, layer: &str) -> Result<Conv3x3, UnsupportedLayer> {
-    let w = conv3x3_weights(c, layer)?;
+    let w = conv3x3_weights(c, layer, 1)?;
     Ok(Conv3x3::new(w.cin, w.cout, &w.weight, w.bias.as_deref()))
 }
 
@@ -84,15 +84,22 @@ pub struct ConvWeights {
     pub bias: Option<Vec<f32>>,
 }
 
-/// The weights of a 3x3, stride-1, padding-1 burn convolution.
+/// The weights of a 3x3, padding-1 burn convolution of stride `stride`.
 ///
 /// # Errors
 /// [`UnsupportedLayer`] for any other convolution or non-f32 weights.
-pub fn conv3x3_weights(c: &Conv2d, layer: &str) -> Result<ConvWeights, UnsupportedLayer> {
-    let err = |message: &str| UnsupportedLayer::new(layer, message);
+pub fn conv3x3_weights(c: &Conv2d, layer: &str, stride: usize) -> Result<ConvWeights, UnsupportedLayer> {
     let padded_one = matches!(c.padding, PaddingConfig2d::Explicit(1, 1, 1, 1));
-    if c.kernel_size != [3, 3] || c.stride != [1, 1] || c.dilation != [1, 1] || c.groups != 1 || !padded_one {
-        return Err(err("only 3x3 convolutions with stride 1 and padding 1 are supported"));
+    if c.kernel_size != [3, 3]
+        || c.stride != [stride, stride]
+        || c.dilation != [1, 1]
+        || c.groups != 1
+        || !padded_one
+    {
+        return Err(UnsupportedLayer::new(
+            layer,
+            format!("only 3x3 convolutions with stride {stride} and padding 1 are supported"),
+        ));
     }
     let w = c.weight.val(); // [cout, cin, 3, 3]
     let [cout, cin, _, _] = w.dims();

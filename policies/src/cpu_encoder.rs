@@ -9,13 +9,12 @@
 //! encodes with this; training keeps burn's path. The two agree to float rounding
 //! (tested below).
 
-use burn::nn::PaddingConfig2d;
 use burn::nn::conv::Conv2d;
 use kernels::direct_conv::{Conv3x3, Norm};
 use kernels::matrix::{Conv2dShape, matmul};
 use kernels::padded::Padded;
 use nn::UnsupportedLayer;
-use nn::weights::{bias_values, conv3x3_of, norm_of, values};
+use nn::weights::{ConvWeights, bias_values, conv3x3_of, conv3x3_weights, norm_of, values};
 
 use crate::net::{ObsEncoder, Res2d};
 
@@ -31,23 +30,8 @@ struct Down {
 
 impl Down {
     fn new(c: &Conv2d, layer: &str) -> Result<Self, UnsupportedLayer> {
-        let padded_one = matches!(c.padding, PaddingConfig2d::Explicit(1, 1, 1, 1));
-        if c.kernel_size != [3, 3]
-            || c.stride != [2, 2]
-            || c.dilation != [1, 1]
-            || c.groups != 1
-            || !padded_one
-        {
-            return Err(UnsupportedLayer::new(
-                layer,
-                "only 3x3 convolutions with stride 2 and padding 1 are supported",
-            ));
-        }
-        let w = c.weight.val(); // [cout, cin, 3, 3]
-        let [cout, cin, _, _] = w.dims();
-        let w = values(w, layer)?;
-        let b = bias_values(&c.bias, cout, layer)?;
-        Ok(Self { cin, cout, w, b })
+        let ConvWeights { cin, cout, weight, bias } = conv3x3_weights(c, layer, 2)?; // weight: [cout, cin, 3, 3]
+        Ok(Self { cin, cout, w: weight, b: bias.unwrap_or_else(|| vec![0.0; cout]) })
     }
 
     /// `[c_in, s, s] -> [c_out, s/2, s/2]` (s even).

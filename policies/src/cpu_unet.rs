@@ -19,8 +19,7 @@ use burn::nn::{GroupNorm, Linear, PaddingConfig1d};
 
 use kernels::direct_conv::Norm;
 use kernels::matrix::{Dense, group_norm_cols, matmul};
-use nn::weights::norm_of;
-use nn::weights::{bias_values, dense_of, values};
+use nn::weights::{bias_values, dense_of, norm_of, values};
 
 use crate::net::{CondRes1d, CondUnet1d, Conv1dBlock, Level1d};
 

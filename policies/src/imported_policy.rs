@@ -533,12 +533,12 @@ impl Policy for ImportedDiffusion {
             .map(|v| v.into_iter().flatten().collect());
         let x01 = match exact.filter(|e| e.len() == frames.len() && e.iter().all(|f| f.len() == s * s * 3)) {
             Some(e) => nn::frames::unit_floats_to_tensor(&e, s, &self.device),
-            None => match self.native_frames(obs) {
+            None => {
                 // The camera's own frames at the policy's size (`[visual] render_size`): what
                 // the policy was trained on, where resizing the scene's frames back would not be.
-                Some((side, native)) => nn::frames::frames_to_tensor(&native, side, &self.device) * 0.5 + 0.5,
-                None => nn::frames::frames_to_tensor(&frames, s, &self.device) * 0.5 + 0.5,
-            },
+                let (side, bytes) = self.native_frames(obs).unwrap_or((s, frames));
+                nn::frames::frames_to_tensor(&bytes, side, &self.device) * 0.5 + 0.5
+            }
         };
         let pos = Tensor::from_data(TensorData::new(pos, [b, o, p]), &self.device);
         let cond = self

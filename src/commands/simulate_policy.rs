@@ -9,9 +9,9 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
 use engine::{Observe, Setup, Start, Timing, sim_branch};
+use nn::frames::{frames_to_tensor, tensor_to_frames};
 use policies::dir::checkpoint_dirs;
 use serde_json::{Value, json};
-use world_model::data::{frames_to_tensor, tensor_to_frames};
 use world_model::model::WorldModel;
 
 use super::git_commit;

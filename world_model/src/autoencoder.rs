@@ -13,6 +13,7 @@ use burn::nn::interpolate::{Interpolate2d, Interpolate2dConfig, InterpolateMode}
 use burn::nn::{GroupNorm, GroupNormConfig};
 use burn::tensor::activation::silu;
 use burn::tensor::{Device, Tensor};
+use nn::layers::conv;
 
 /// Autoencoder hyper-parameters.
 #[derive(Config, Debug, PartialEq)]
@@ -88,8 +89,6 @@ impl AutoencoderConfig {
         }
     }
 }
-
-pub use nn::layers::conv;
 
 /// GroupNorm -> SiLU -> conv, twice, plus the input.
 #[derive(Module, Debug)]

@@ -12,8 +12,7 @@ use crate::autoencoder::{Autoencoder, ResBlock};
 use kernels::direct_conv::{Conv3x3, Norm, winograd_enabled};
 use kernels::padded::Padded;
 use kernels::winograd::upsample::Upsample3x3;
-use nn::weights::{UnsupportedLayer, conv3x3_weights};
-pub use nn::weights::{conv3x3_of, norm_of};
+use nn::weights::{UnsupportedLayer, conv3x3_of, conv3x3_weights, norm_of};
 
 /// GroupNorm -> SiLU -> conv, twice, plus the input (as [`ResBlock`]).
 #[derive(Clone, Debug)]
@@ -87,7 +86,7 @@ impl CpuDecoder {
             ups: (ae.dec_up.iter().enumerate())
                 .map(|(i, c)| {
                     let layer = format!("dec_up.{i}");
-                    let w = conv3x3_weights(c, &layer)?;
+                    let w = conv3x3_weights(c, &layer, 1)?;
                     Ok(UpConv {
                         conv: Conv3x3::new(w.cin, w.cout, &w.weight, w.bias.as_deref()),
                         phases: Upsample3x3::new(w.cin, w.cout, &w.weight, w.bias.as_deref()),

@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor};
 use harness::replay::ReplayReader;
 
 use crate::error::WorldModelError;
@@ -103,26 +103,12 @@ impl EpisodeData {
 
     /// Frames `idx` as a `[b, 3, h, w]` tensor in [-1, 1].
     pub fn frames_tensor(&self, idx: &[usize], device: &Device) -> Tensor<4> {
-        let s = self.size;
-        let plane = s * s;
-        let mut v = vec![0f32; idx.len() * 3 * plane];
-        for (k, &i) in idx.iter().enumerate() {
-            let src = &self.frames[i * plane * 3..(i + 1) * plane * 3];
-            let dst = &mut v[k * 3 * plane..(k + 1) * 3 * plane];
-            for p in 0..plane {
-                for c in 0..3 {
-                    dst[c * plane + p] = f32::from(src[p * 3 + c]) / 127.5 - 1.0;
-                }
-            }
-        }
-        Tensor::from_data(TensorData::new(v, [idx.len(), 3, s, s]), device)
+        let frames: Vec<&[u8]> = idx.iter().map(|&i| self.frame(i)).collect();
+        nn::frames::frames_to_tensor(&frames, self.size, device)
     }
 }
 
 pub use harness::image::psnr;
-pub use nn::frames::{
-    frames_to_tensor, frames_to_vec, tensor_to_frames, tensor_to_unit_floats, unit_floats_to_tensor,
-};
 
 #[cfg(test)]
 mod tests {
@@ -145,7 +131,7 @@ mod tests {
             source: std::path::PathBuf::new(),
         };
         let t = data.frames_tensor(&[1, 0], &Device::flex());
-        let back = tensor_to_frames(t);
+        let back = nn::frames::tensor_to_frames(t);
         assert_eq!(back[0], data.frames[48..96]);
         assert_eq!(back[1], data.frames[..48]);
     }

@@ -99,5 +99,3 @@ pub enum SettingError {
         reads: usize,
     },
 }
-
-pub use nn::UnsupportedLayer;

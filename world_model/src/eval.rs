@@ -13,9 +13,10 @@ use harness::rng::Rng;
 use harness::seed::derive;
 use serde::Serialize;
 
-use crate::data::{EpisodeData, tensor_to_frames};
+use crate::data::EpisodeData;
 use crate::model::WorldModel;
 use crate::rollout::{Rollout, RolloutError};
+use nn::frames::tensor_to_frames;
 
 /// The metrics of one model at one horizon.
 #[derive(Clone, Debug, Serialize)]

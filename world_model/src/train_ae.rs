@@ -19,8 +19,9 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::autoencoder::{Autoencoder, AutoencoderConfig};
-use crate::data::{EpisodeData, Split, psnr, tensor_to_frames};
+use crate::data::{EpisodeData, Split, psnr};
 use crate::error::WorldModelError;
+use nn::frames::tensor_to_frames;
 
 /// Training hyper-parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -11,8 +11,8 @@ use harness::policy::ActionChunk;
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
 use harness::task::{Env, PlanCost};
+use nn::frames::{frames_to_tensor, tensor_to_frames};
 use rayon::prelude::*;
-use world_model::data::{frames_to_tensor, tensor_to_frames};
 use world_model::model::WorldModel;
 use world_model::rollout::Rollout;
 

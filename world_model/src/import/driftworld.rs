@@ -21,12 +21,12 @@ use std::path::{Path, PathBuf};
 use burn::tensor::{Device, TensorData};
 use serde::{Deserialize, Serialize};
 
-use super::ImportError;
-use super::place::{place_all, shapes as module_shapes, transpose};
-use super::tensors::{Source, top_level_int};
 use crate::action::ActionScale;
 use crate::model::WorldModelConfig;
 use crate::unet::{UNet, UNetConfig};
+use nn::ImportError;
+use nn::import::place::{place_all, shapes as module_shapes, transpose};
+use nn::import::tensors::{Source, top_level_int};
 
 /// GroupNorm groups of the official code (`GroupNorm32`: 32 groups everywhere).
 pub const GROUPS: usize = 32;

@@ -3,15 +3,12 @@
 //!
 //! - [`driftworld`]: the official DriftWorld code's `torch.save` checkpoints (its U-Net is
 //!   evalharness's [`crate::unet::UNet`] with per-frame attention norms and head-major qkv rows).
-//! - [`tensors`], [`safe`], [`place`] and [`ImportError`]: the readers every importer shares
-//!   ([`nn::import`]).
+//! - the readers every importer shares are [`nn::import`]'s.
 //!
 //! An import refuses a missing, unexpected or mis-shaped key, a tensor that is not float32 and
 //! a non-finite value, naming the key; nothing is written then (the binary stages the output).
 
 pub mod driftworld;
-
-pub use nn::import::{ImportError, place, safe, tensors};
 
 #[cfg(test)]
 mod tests;

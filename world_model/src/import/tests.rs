@@ -8,9 +8,10 @@ use std::path::{Path, PathBuf};
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 
-use super::ImportError;
+use nn::ImportError;
+use nn::import::tensors::Source;
+
 use super::driftworld::{Preset, Weights, import, permute_qkv, plan};
-use super::tensors::Source;
 use crate::unet::UNetConfig;
 use crate::unet::cpu::CpuUNet;
 
@@ -159,7 +160,7 @@ fn the_official_pusht_manifest_maps_every_key_once() {
     // Every parameter of the full-size U-Net (8,375,201) gets exactly one key, of its shape.
     let unet = p.unet.init(&Device::flex());
     assert_eq!(unet.num_params(), 8_375_201);
-    let ours = super::place::shapes(&unet);
+    let ours = nn::import::place::shapes(&unet);
     let targets: BTreeSet<&str> = p.entries.iter().map(|e| e.ours.as_str()).collect();
     assert_eq!(targets, ours.keys().map(String::as_str).collect::<BTreeSet<_>>());
     for e in &p.entries {

@@ -22,14 +22,14 @@ use burn::nn::PaddingConfig2d;
 
 use super::blocks::{Attention, Conv3dF, ResBlock};
 use super::{Level, UNet};
-use crate::cpu_decoder::norm_of;
-use crate::error::UnsupportedLayer;
 use kernels::attention::{Heads, attend};
 use kernels::direct_conv::{Norm, winograd_enabled};
 use kernels::matrix::{
     Conv2dShape, Dense, Film, View, ViewMut, group_norm_cols, matmul, matmul_strided, silu,
 };
 use kernels::winograd_batch::BatchWinograd;
+use nn::UnsupportedLayer;
+use nn::weights::norm_of;
 use nn::weights::{bias_values, dense_of, values};
 
 /// Elements of one im2col chunk (16 MB of f32).
