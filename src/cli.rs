@@ -187,7 +187,7 @@ pub struct AgreementArgs {
 #[derive(Debug, Subcommand)]
 pub enum WmCommand {
     /// Video quality (MSE, PSNR, SSIM, ms/frame) of world models on held-out episodes.
-    Eval(WmEvalArgs),
+    Eval(wm_eval::Options),
     /// Copy a training run's inference files (EMA weights, config, logs, provenance)
     /// into a folder to ship, its autoencoder path rewritten.
     Export(WmExportArgs),
@@ -215,65 +215,6 @@ pub struct WmExportArgs {
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,
-}
-
-/// `evalharness wm eval`.
-#[derive(Debug, Args)]
-pub struct WmEvalArgs {
-    /// World-model folders to compare (repeat the flag).
-    #[arg(long = "world-model", required = true)]
-    pub world_models: Vec<PathBuf>,
-    /// Dataset; only held-out episodes (index % 10 == 9) are used, unless `--all-episodes`.
-    #[arg(long)]
-    pub data: PathBuf,
-    /// Use every episode, not only the held-out tenth: for a dataset no compared model
-    /// was trained on (e.g. `collect --policy` rollouts kept for diagnosis).
-    #[arg(long)]
-    pub all_episodes: bool,
-    /// 64-frame videos to roll out (4 real + 60 generated), one per held-out episode
-    /// with `--windows first`.
-    #[arg(long, default_value_t = 20)]
-    pub episodes: usize,
-    /// Where the 64-frame videos start: `first` = each episode's opening (approach and
-    /// first contact, the hardest stretch); `random` = windows drawn uniformly over
-    /// every position of the held-out episodes from `--seed` (the authors' protocol,
-    /// the one paper numbers are measured on).
-    #[arg(long, value_enum, default_value_t = Windows::First)]
-    pub windows: Windows,
-    /// Roll out the 64-frame video whose context starts at this dataset step instead
-    /// (repeat the flag; e.g. a `start` from `eval.json`'s `per_video`, to see one
-    /// failure's filmstrip). Overrides `--windows` and `--episodes`.
-    #[arg(long = "start")]
-    pub starts: Vec<usize>,
-    /// Held-out episodes rolled out from start to end.
-    #[arg(long, default_value_t = 4)]
-    pub full_episodes: usize,
-    /// Videos generated together.
-    #[arg(long, default_value_t = 20, value_parser = bounds::count(1, 1000))]
-    pub batch: usize,
-    /// Seed of the generator noise.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Output folder (eval.json, filmstrip.png).
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Replace an existing `--out`.
-    #[arg(long)]
-    pub force: bool,
-    /// Action-accentuation strength α for accentuated models (default: each model's
-    /// configured α).
-    #[arg(long)]
-    pub alpha: Option<f32>,
-    /// The sampling-noise scale (temperature, in [0, 1]) of every compared model, as `rank
-    /// --noise-scale` [default: each model's, else 1].
-    #[arg(long, value_name = "T")]
-    pub noise_scale: Option<f32>,
-    /// A learned judge (from `train judge`): read the whole-episode videos for success
-    /// as `rank` reads imagined episodes, with the recorded actions replayed and no
-    /// policy in the loop, grouped by the dataset's behaviour (on `collect --policy`
-    /// rollouts, the checkpoint), against the dataset's exact success.
-    #[arg(long)]
-    pub judge: Option<PathBuf>,
 }
 
 /// `evalharness rank`.

@@ -13,6 +13,7 @@ pub mod expert;
 pub mod explore;
 pub mod frame_score;
 pub mod geometry;
+pub mod goal_free;
 pub mod gpc_render;
 #[cfg(feature = "mujoco-render")]
 pub mod mj_render;

@@ -11,14 +11,3 @@ pub enum RendererKind {
     /// MuJoCo's OpenGL renderer beside the rasteriser (frames twice as wide).
     Mujoco,
 }
-
-/// How `wm eval` picks its 64-frame windows.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Windows {
-    /// The first frames of each of the first `--episodes` long-enough episodes.
-    First,
-    /// `--episodes` windows drawn without replacement, uniformly over every start
-    /// position of every long-enough episode, from `--seed` (spec §9's protocol).
-    Random,
-}

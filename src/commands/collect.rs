@@ -168,4 +168,45 @@ mod tests {
         assert!((7800..8200).contains(&experts), "{experts}");
         assert_eq!(draw(&m, 17), draw(&m, 17));
     }
+
+    /// Goal-free frames (`scenarios::pusht::goal_free`) of a dataset `collect` wrote: the
+    /// recorded frames without their goal, and drawing it back gives them again.
+    #[test]
+    fn stripped_frames_are_the_scenes_without_their_goal() {
+        use clap::Parser;
+        use scenarios::pusht::frame_score::FrameScorer;
+        use scenarios::pusht::goal_free::{DatasetScene, strip_goal};
+        use world_model::data::EpisodeData;
+
+        use crate::cli::{Cli, Command};
+
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("d.zarr");
+        let p = path.to_str().unwrap();
+        let args =
+            ["evalharness", "-q", "collect", "--episodes", "2", "--max-steps", "12", "--mix", "explore=1"];
+        let cli = Cli::try_parse_from([&args[..], &["--jobs", "1", "--out", p]].concat()).unwrap();
+        let Command::Collect(c) = cli.command else { unreachable!() };
+        run(&c, true).unwrap();
+        let mut data = EpisodeData::load(&path, 96).unwrap();
+        let original = data.frames.clone();
+        let loaded = DatasetScene::load(&path).unwrap();
+        let scene = strip_goal(&path, &loaded, &mut data.frames, 96).unwrap();
+        assert_eq!(scene.len(), data.len());
+        let n = 96 * 96 * 3;
+        for i in 0..data.len() {
+            let (with, without) = (&original[i * n..(i + 1) * n], data.frame(i));
+            assert!(!without.chunks_exact(3).any(|p| p == [0, 0, 0]), "frame {i}: goal pixels left");
+            // Drawing the goal back gives the recorded frame (mean error below one grey
+            // level: the state is stored as f32, and the goal's rim where the block or
+            // agent crosses it is approximate). Wrong state columns would move the block
+            // or the agent and fail this by far.
+            let mut drawn = without.to_vec();
+            FrameScorer::new(&scene.cfg, &scene.goal(i), 96).draw_goal(&mut drawn);
+            let mean =
+                with.iter().zip(&drawn).map(|(a, b)| f64::from(a.abs_diff(*b))).sum::<f64>() / n as f64;
+            assert!(mean < 1.0, "frame {i}: mean |difference| {mean:.3}");
+            assert!(with != without, "frame {i}: the goal was not removed");
+        }
+    }
 }

@@ -9,7 +9,6 @@ mod dataset;
 mod dataset_merge;
 mod episodes;
 mod export_policies;
-mod goal_free;
 mod import_judge;
 mod import_policy;
 mod import_robomimic;
@@ -30,11 +29,6 @@ mod train;
 mod train_judge;
 mod train_policy;
 mod train_wm;
-mod wm_eval;
-mod wm_eval_motion;
-mod wm_eval_score;
-mod wm_eval_success;
-pub mod wm_eval_windows;
 mod wm_export;
 
 use std::process::ExitCode;
@@ -86,7 +80,11 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
             outln!("{}", html.display());
             Ok(ExitCode::SUCCESS)
         }
-        Command::Wm(WmCommand::Eval(a)) => wm_eval::run(a),
+        Command::Wm(WmCommand::Eval(a)) => {
+            let out = wm_eval::run(a, &mut |line| outln!("{line}"))?;
+            outln!("-> {}", out.display());
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Wm(WmCommand::Export(a)) => wm_export::run(a),
         Command::Import(ImportCommand::WorldModel(a)) => import_wm::run(a),
         Command::Import(ImportCommand::Judge(a)) => import_judge::run(a),

@@ -8,6 +8,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use burn::tensor::Device;
+use scenarios::pusht::goal_free::{self, DatasetScene};
 use serde_json::json;
 use world_model::codec::FrameCodec;
 use world_model::data::EpisodeData;
@@ -154,8 +155,9 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     let goal_free = saved.as_ref().map_or(a.goal_free, WorldModelConfig::is_goal_free);
     if goal_free {
         tracing::info!("re-rendering the frames without the goal (from data/state)");
-        let scene = super::goal_free::DatasetScene::load(&a.data)?;
-        super::goal_free::strip_goal(&a.data, &scene, &mut data)?;
+        let scene = DatasetScene::load(&a.data)?;
+        let size = data.size;
+        goal_free::strip_goal(&a.data, &scene, &mut data.frames, size)?;
     }
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let model_cfg = match saved {

@@ -17,7 +17,6 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use anyhow::{Result, bail};
 use harness::replay::ReplayReader;
 use judges::folder::FrameJudge;
 use judges::metrics::Reading;
@@ -25,6 +24,8 @@ use judges::read::held_success;
 use serde::Serialize;
 use world_model::data::EpisodeData;
 use world_model::eval::Video;
+
+use crate::WmEvalError;
 
 /// What `eval.json`'s `open_loop_success` says it measured.
 pub const SUCCESS_NOTE: &str = "whole-episode videos: the recorded actions replayed from 4 real frames (no \
@@ -97,11 +98,15 @@ impl SuccessCheck {
     /// # Errors
     /// An unreadable judge, one that reads frames of another size, or an unreadable
     /// `data/success` array.
-    pub fn load(dir: &Path, path: &Path, data: &EpisodeData) -> Result<Self> {
+    pub fn load(dir: &Path, path: &Path, data: &EpisodeData) -> Result<Self, WmEvalError> {
         let judge = runner::inputs::read_judge_folder(dir, &burn::tensor::Device::flex())?;
         if judge.image_size() != data.size {
-            let (j, d) = (judge.image_size(), data.size);
-            bail!("--judge {}: it reads {j}x{j} frames, and {} has {d}x{d}", dir.display(), path.display());
+            return Err(WmEvalError::JudgeSize {
+                judge: dir.to_path_buf(),
+                data: path.to_path_buf(),
+                judged: judge.image_size(),
+                frames: data.size,
+            });
         }
         let r = ReplayReader::open(path)?;
         let labels = r.extra("success")?;
@@ -191,8 +196,8 @@ fn summarise(name: &str, outcomes: &[Outcome]) -> SuccessRow {
     }
 }
 
-/// Prints `row` as a few lines of text.
-pub fn print(row: &SuccessRow) {
+/// `row` as a few lines of text.
+pub fn lines(row: &SuccessRow) -> Vec<String> {
     let line = |r: &Rates| {
         let exact = r.exact.map_or_else(|| "n/a".to_string(), |e| format!("{e:.2}"));
         format!(
@@ -208,10 +213,10 @@ pub fn print(row: &SuccessRow) {
         )
     };
     let r = row.pearson.map_or_else(|| "n/a".to_string(), |p| format!("{p:.3}"));
-    outln!("{:<20} open-loop success, by behaviour (r over behaviours {r}):", row.name);
-    for g in row.groups.iter().chain([&row.all]) {
-        outln!("{:<20} {}", "", line(g));
-    }
+    let head = format!("{:<20} open-loop success, by behaviour (r over behaviours {r}):", row.name);
+    std::iter::once(head)
+        .chain(row.groups.iter().chain([&row.all]).map(|g| format!("{:<20} {}", "", line(g))))
+        .collect()
 }
 
 #[cfg(test)]

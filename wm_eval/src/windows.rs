@@ -9,14 +9,28 @@
 
 use std::ops::Range;
 
-use crate::cli::Windows;
 use harness::rng::Rng;
 use harness::seed::derive;
+
+use crate::WmEvalError;
+
+/// How `wm eval` picks its 64-frame windows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Windows {
+    /// The first frames of each of the first `--episodes` long-enough episodes.
+    First,
+    /// `--episodes` windows drawn without replacement, uniformly over every start
+    /// position of every long-enough episode, from `--seed` (spec §9's protocol).
+    Random,
+}
 
 /// One chosen window: the episode's index in the dataset and its first frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Window {
+    /// The episode's index in the dataset.
     pub episode: usize,
+    /// The dataset step of its first (context) frame.
     pub start: usize,
 }
 
@@ -60,27 +74,27 @@ pub fn choose(
 /// shows the first).
 ///
 /// # Errors
-/// A step outside every episode, or too close to its episode's end, named with the
-/// episode's range.
+/// [`WmEvalError::Start`]: a step outside every episode, or too close to its episode's
+/// end, named with the episode's range.
 pub fn at(
     episodes: &[(usize, Range<usize>)],
     len: usize,
     starts: &[usize],
     which: &str,
-) -> Result<Vec<Window>, String> {
+) -> Result<Vec<Window>, WmEvalError> {
     starts
         .iter()
         .map(|&start| {
             let Some((i, r)) = episodes.iter().find(|(_, r)| r.contains(&start)) else {
-                return Err(format!("--start {start}: no {which} holds step {start}"));
+                return Err(WmEvalError::Start(format!("--start {start}: no {which} holds step {start}")));
             };
             if start + len > r.end {
-                return Err(format!(
+                return Err(WmEvalError::Start(format!(
                     "--start {start}: {which} {i} (steps {}..{}) ends {} steps after it; a video needs {len}",
                     r.start,
                     r.end,
                     r.end - start
-                ));
+                )));
             }
             Ok(Window { episode: *i, start })
         })
@@ -113,9 +127,9 @@ mod tests {
         let w = at(&episodes(), 3, &[8, 1], "held-out episode").unwrap();
         assert_eq!(w, vec![Window { episode: 0, start: 1 }, Window { episode: 2, start: 8 }]);
         // Step 9 leaves 2 frames (9, 10) in episode 2; step 11 is in no episode.
-        let err = at(&episodes(), 3, &[9], "held-out episode").unwrap_err();
+        let err = at(&episodes(), 3, &[9], "held-out episode").unwrap_err().to_string();
         assert_eq!(err, "--start 9: held-out episode 2 (steps 7..11) ends 2 steps after it; a video needs 3");
-        let err = at(&episodes(), 3, &[11], "held-out episode").unwrap_err();
+        let err = at(&episodes(), 3, &[11], "held-out episode").unwrap_err().to_string();
         assert_eq!(err, "--start 11: no held-out episode holds step 11");
     }
 

@@ -11,11 +11,10 @@
 //! shows, without the closed loop, whether a model follows what weak policies do.
 
 use scenarios::pusht::frame_score::FrameScorer;
+use scenarios::pusht::goal_free::DatasetScene;
 use serde::Serialize;
 use world_model::data::EpisodeData;
 use world_model::eval::Video;
-
-use super::goal_free::DatasetScene;
 
 /// What scoring a dataset's frames needs: its scenario and the goal at every step.
 pub struct Scoring<'s> {
