@@ -201,6 +201,7 @@ impl ReplayWriter {
     }
 }
 
+pub mod attrs;
 mod column;
 pub mod origin;
 mod reader;

@@ -14,9 +14,9 @@
 
 use std::path::{Path, PathBuf};
 
+use harness::replay::attrs::DatasetAttrs;
 use harness::replay::{ReplayError, ReplayReader};
 use rayon::prelude::*;
-use serde::Deserialize;
 
 use super::physics::PushTState;
 use super::render::Rasterizer;
@@ -73,28 +73,15 @@ pub struct DatasetScene {
     dim: usize,
 }
 
-/// The part of a dataset's attributes read here.
-#[derive(Deserialize)]
-struct Root {
-    evalharness: Option<Recorded>,
-}
-
-/// The scenario evalharness records with a dataset.
-#[derive(Deserialize)]
-struct Recorded {
-    scenario: Option<String>,
-    scenario_config: Option<serde_json::Value>,
-}
-
 impl DatasetScene {
     /// Reads the scenario and the state rows of the dataset at `path`; `Ok(Err(why))`
     /// for a dataset without them (not collected by evalharness, or another task's).
     ///
     /// # Errors
-    /// An unreadable dataset or state array.
+    /// An unreadable dataset, attributes or state array.
     pub fn load(path: &Path) -> Result<Result<Self, NoScene>, ReplayError> {
         let r = ReplayReader::open(path)?;
-        let cfg = match Self::from_attrs(&r.attrs) {
+        let cfg = match Self::from_attrs(DatasetAttrs::from_root(path, &r.attrs)?) {
             Ok(cfg) => cfg,
             Err(why) => return Ok(Err(why)),
         };
@@ -107,8 +94,8 @@ impl DatasetScene {
 
     /// The Push-T scenario a dataset's attributes record, or why there is none: no
     /// evalharness scenario at all, or another task's (whose scenes are not re-rendered).
-    fn from_attrs(attrs: &serde_json::Value) -> Result<PushTConfig, NoScene> {
-        let Ok(Root { evalharness: Some(recorded) }) = Root::deserialize(attrs) else {
+    fn from_attrs(attrs: Option<DatasetAttrs>) -> Result<PushTConfig, NoScene> {
+        let Some(recorded) = attrs else {
             return Err(NoScene::Unrecorded);
         };
         if let Some(name) = recorded.scenario.filter(|n| n != "pusht") {
@@ -178,17 +165,18 @@ mod tests {
     /// Regression: a Lift dataset was said to record no evalharness scenario.
     #[test]
     fn another_tasks_dataset_is_named_by_its_scenario() {
+        let read = |v: serde_json::Value| DatasetAttrs::from_root(Path::new("d.zarr"), &v).unwrap();
         let lift = serde_json::json!({"evalharness": {"scenario": "lift", "scenario_config": {}}});
-        let why = DatasetScene::from_attrs(&lift).unwrap_err();
+        let why = DatasetScene::from_attrs(read(lift)).unwrap_err();
         assert_eq!(why.to_string(), "the dataset's scenario is lift; only Push-T scenes are re-rendered");
         let none = serde_json::json!({});
         assert_eq!(
-            DatasetScene::from_attrs(&none).unwrap_err().to_string(),
+            DatasetScene::from_attrs(read(none)).unwrap_err().to_string(),
             "the dataset records no evalharness scenario"
         );
         let pusht = serde_json::json!({"evalharness": {"scenario": "pusht",
             "scenario_config": serde_json::to_value(PushTConfig::default()).unwrap()}});
-        assert_eq!(DatasetScene::from_attrs(&pusht).unwrap(), PushTConfig::default());
+        assert_eq!(DatasetScene::from_attrs(read(pusht)).unwrap(), PushTConfig::default());
     }
 
     #[test]

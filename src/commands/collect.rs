@@ -9,10 +9,10 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
+use harness::replay::attrs::{DatasetAttrs, EpisodeEntry, Source};
 use harness::replay::{EpisodeArrays, ReplaySpec};
 
 use crate::output::dataset::StagedDataset;
-use serde_json::{Value, json};
 
 use scenarios::pusht::PushTConfig;
 use scenarios::pusht::rollout::Episode;
@@ -61,8 +61,15 @@ pub(super) fn episode_arrays(ep: &Episode) -> EpisodeArrays {
 }
 
 /// An episode's entry in the dataset attributes.
-pub(super) fn episode_attr(ep: &Episode, behaviour: &str) -> Value {
-    json!({"seed": ep.seed, "behaviour": behaviour, "steps": ep.rows.len(), "score": ep.score, "success": ep.success})
+pub(super) fn episode_attr(ep: &Episode, behaviour: &str) -> EpisodeEntry {
+    EpisodeEntry {
+        seed: Some(ep.seed),
+        behaviour: Some(behaviour.to_string()),
+        steps: Some(ep.rows.len() as u64),
+        score: Some(ep.score),
+        success: Some(ep.success),
+        ..EpisodeEntry::default()
+    }
 }
 
 /// The dataset attributes: the layout and scenario, the seeds, how the episodes were
@@ -71,20 +78,19 @@ pub(super) fn episode_attr(ep: &Episode, behaviour: &str) -> Value {
 pub(super) fn dataset_attrs(
     cfg: &PushTConfig,
     seed_start: u64,
-    source: Value,
-    max_steps: impl Into<Value>,
-    episodes: Vec<Value>,
-) -> Value {
-    let e = json!({
-        "version": env!("CARGO_PKG_VERSION"),
-        "scenario": "pusht",
-        "scenario_config": cfg,
-        "state_columns": STATE_COLUMNS,
-        "action": "absolute agent target position, world units",
-        "coverage": "data/coverage: coverage after each action",
-        "seed_start": seed_start,
-    });
-    with_source(e, source, max_steps, episodes)
+    source: Source,
+    max_steps: usize,
+    episodes: Vec<EpisodeEntry>,
+) -> DatasetAttrs {
+    let header = DatasetAttrs {
+        scenario: Some("pusht".into()),
+        scenario_config: serde_json::to_value(cfg).ok(),
+        state_columns: Some(STATE_COLUMNS.iter().map(|c| (*c).to_string()).collect()),
+        action: Some("absolute agent target position, world units".into()),
+        coverage: Some("data/coverage: coverage after each action".into()),
+        ..DatasetAttrs::new()
+    };
+    with_source(header, seed_start, source, max_steps, episodes)
 }
 
 /// `--no-early-stop` on Push-T (`collect`, `collect --policy`, `simulate`): refused, since
@@ -138,9 +144,14 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     )?;
     pb.finish_and_clear();
     let n = episodes.len();
-    let steps: u64 = episodes.iter().filter_map(|e| e["steps"].as_u64()).sum();
-    let source = json!({"mix": mix_text, "noise": c.noise, "lag": c.lag});
-    let attrs = dataset_attrs(&runner.cfg, c.seed_start, source, runner.max_steps, episodes);
+    let source = Source {
+        mix: Some(mix_text.to_string()),
+        noise: Some(c.noise),
+        lag: Some(c.lag as u64),
+        ..Source::default()
+    };
+    let attrs = dataset_attrs(&runner.cfg, c.seed_start, source, runner.max_steps as usize, episodes);
+    let steps = attrs.total_steps();
     let path = writer.finish(&attrs)?;
     outln!("pusht dataset: {n} episodes, {steps} steps -> {}", path.display());
     Ok(ExitCode::SUCCESS)

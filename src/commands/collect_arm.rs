@@ -17,11 +17,11 @@
 use std::process::ExitCode;
 
 use anyhow::{Result, bail};
+use harness::replay::attrs::{DatasetAttrs, EpisodeEntry, Source};
 use harness::replay::{EpisodeArrays, ReplaySpec};
 
 use crate::output::dataset::StagedDataset;
 use scenarios::robosuite::rollout::{ArmTask, Episode, Perturbation};
-use serde_json::{Value, json};
 
 use super::collect_mix::{draw, parse_mix_with, with_source};
 use super::simulate_arm::{ArmRun, behaviour};
@@ -75,39 +75,28 @@ pub(super) fn replay_spec(size: usize, columns: usize) -> ReplaySpec {
 pub(super) fn dataset_attrs<T: ArmTask>(
     task: &T,
     seed_start: u64,
-    source: Value,
+    source: Source,
     max_steps: usize,
-    episodes: Vec<Value>,
-) -> Value {
-    with_header(dataset_header(task), seed_start, source, max_steps, episodes)
-}
-
-/// [`dataset_attrs`] from a task's [`dataset_header`].
-pub(super) fn with_header(
-    mut header: Value,
-    seed_start: u64,
-    source: Value,
-    max_steps: usize,
-    episodes: Vec<Value>,
-) -> Value {
-    if let Some(m) = header.as_object_mut() {
-        m.insert("seed_start".into(), seed_start.into());
-    }
-    with_source(header, source, max_steps, episodes)
+    episodes: Vec<EpisodeEntry>,
+) -> DatasetAttrs {
+    with_source(dataset_header(task), seed_start, source, max_steps, episodes)
 }
 
 /// A robosuite dataset's own attributes: the task, its config and the meaning of
 /// each array.
-pub(super) fn dataset_header<T: ArmTask>(task: &T) -> Value {
-    json!({
-        "version": env!("CARGO_PKG_VERSION"),
-        "scenario": task.name(),
-        "scenario_config": task.config_json(),
-        "state_columns": task.state_columns(),
-        "action": "robomimic OSC_POSE: delta position (x0.05 m), delta axis-angle (x0.5 rad), gripper (+1 close)",
-        "success": "data/success: 1 while the task's success check holds, after each action",
-        "image": "agentview, upright",
-    })
+pub(super) fn dataset_header<T: ArmTask>(task: &T) -> DatasetAttrs {
+    DatasetAttrs {
+        scenario: Some(task.name().to_string()),
+        scenario_config: Some(task.config_json()),
+        state_columns: Some(task.state_columns().iter().map(ToString::to_string).collect()),
+        action: Some(
+            "robomimic OSC_POSE: delta position (x0.05 m), delta axis-angle (x0.5 rad), gripper (+1 close)"
+                .into(),
+        ),
+        success: Some("data/success: 1 while the task's success check holds, after each action".into()),
+        image: Some("agentview, upright".into()),
+        ..DatasetAttrs::new()
+    }
 }
 
 /// Runs the command.
@@ -137,22 +126,28 @@ pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<Exit
         |_| Some(IMAGE_SIZE),
         |_, ep| {
             writer.append(&episode_arrays(&ep))?;
-            episodes.push(json!({
-                "seed": ep.seed,
-                "behaviour": task.behaviour_name(ep.behaviour),
-                "steps": ep.rows.len(),
-                "success": ep.success,
-            }));
+            episodes.push(EpisodeEntry {
+                seed: Some(ep.seed),
+                behaviour: Some(task.behaviour_name(ep.behaviour).to_string()),
+                steps: Some(ep.rows.len() as u64),
+                success: Some(ep.success),
+                ..EpisodeEntry::default()
+            });
             pb.inc(1);
             Ok(())
         },
     )?;
     pb.finish_and_clear();
     let n = episodes.len();
-    let steps: u64 = episodes.iter().filter_map(|e| e["steps"].as_u64()).sum();
-    let source =
-        json!({"mix": mix_text, "noise": c.noise, "lag": c.lag, "no_early_stop": args.no_early_stop});
+    let source = Source {
+        mix: Some(mix_text),
+        noise: Some(c.noise),
+        lag: Some(c.lag as u64),
+        no_early_stop: Some(args.no_early_stop),
+        ..Source::default()
+    };
     let attrs = dataset_attrs(task, c.seed_start, source, max_steps, episodes);
+    let steps = attrs.total_steps();
     let path = writer.finish(&attrs)?;
     outln!("{name} dataset: {n} episodes, {steps} steps -> {}", path.display());
     Ok(ExitCode::SUCCESS)

@@ -4,8 +4,8 @@
 //! other.
 
 use anyhow::{Result, bail};
+use harness::replay::attrs::{DatasetAttrs, EpisodeEntry, Source};
 use harness::seed::{derive, fnv1a};
-use serde_json::{Value, json};
 
 /// Parses `name=weight` pairs, naming behaviours with `parse`, into normalised weights.
 pub(super) fn parse_mix_with<K>(text: &str, parse: impl Fn(&str) -> Result<K>) -> Result<Vec<(K, f64)>> {
@@ -42,18 +42,20 @@ pub(super) fn draw<K: Copy>(mix: &[(K, f64)], seed: u64) -> K {
     mix.last().map(|m| m.0).expect("a parsed mix has an entry")
 }
 
-/// A dataset's attributes from its task's own (`e`): how the episodes were made
-/// (`source`'s entries), the step limit and one entry per episode, under `evalharness`.
+/// A dataset's attributes from its task's own (`header`): the first seed, how the episodes
+/// were made (`source`), the step limit and one entry per episode.
 pub(super) fn with_source(
-    mut e: Value,
-    source: Value,
-    max_steps: impl Into<Value>,
-    episodes: Vec<Value>,
-) -> Value {
-    if let (Some(map), Value::Object(src)) = (e.as_object_mut(), source) {
-        map.extend(src);
-        map.insert("max_steps".into(), max_steps.into());
-        map.insert("episodes".into(), Value::Array(episodes));
+    header: DatasetAttrs,
+    seed_start: u64,
+    source: Source,
+    max_steps: usize,
+    episodes: Vec<EpisodeEntry>,
+) -> DatasetAttrs {
+    DatasetAttrs {
+        seed_start: Some(seed_start),
+        source,
+        max_steps: Some(max_steps as u64),
+        episodes,
+        ..header
     }
-    json!({ "evalharness": e })
 }

@@ -22,9 +22,9 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use engine::{Setup, Start, Timing, sim_branch};
+use harness::replay::attrs::{CheckpointEntry, EpisodeEntry, Source};
 use harness::task::Task;
 use policies::dir::checkpoint_dirs;
-use serde_json::{Value, json};
 
 use super::record::{Layout, Sink};
 use crate::cli::CollectArgs;
@@ -53,16 +53,22 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
     let (episodes, checkpoints) = roll_out(args, dir, task.as_ref(), max_steps, &mut sink, quiet)?;
     let (n, steps) = (episodes.len(), total_steps(&episodes));
     // Push-T datasets say how the expert was perturbed (not at all here), as `collect`'s do.
+    let n_checkpoints = checkpoints.len();
+    let source = Source {
+        policy: Some(dir.display().to_string()),
+        checkpoints: Some(checkpoints),
+        ..Source::default()
+    };
     let source = if task.name() == "pusht" {
-        json!({"policy": dir, "checkpoints": checkpoints, "noise": 0.0, "lag": 0})
+        Source { noise: Some(0.0), lag: Some(0), ..source }
     } else {
-        json!({"policy": dir, "checkpoints": checkpoints, "no_early_stop": args.no_early_stop})
+        Source { no_early_stop: Some(args.no_early_stop), ..source }
     };
     let path = sink.finish(c.seed_start, source, max_steps, episodes)?;
     outln!(
         "{} dataset: {n} episodes of {} checkpoint(s), {steps} steps -> {}",
         task.name(),
-        checkpoints.len(),
+        n_checkpoints,
         path.display()
     );
     Ok(ExitCode::SUCCESS)
@@ -78,7 +84,7 @@ fn roll_out(
     max_steps: usize,
     sink: &mut Sink,
     quiet: bool,
-) -> Result<(Vec<Value>, Vec<Value>)> {
+) -> Result<(Vec<EpisodeEntry>, Vec<CheckpointEntry>)> {
     let c = &args.common;
     let setup = Setup::new(task, 0, max_steps, None);
     let device = nn::device::selected()?;
@@ -112,12 +118,17 @@ fn roll_out(
         }
         let mean = score / seeds.len().max(1) as f64;
         tracing::info!("{name}: {} episodes, mean score {mean:.3}", seeds.len());
-        checkpoints.push(json!({"name": name, "path": d, "episodes": seeds.len(), "mean_score": mean}));
+        checkpoints.push(CheckpointEntry {
+            name,
+            path: d.clone(),
+            episodes: seeds.len() as u64,
+            mean_score: mean,
+        });
     }
     pb.finish_and_clear();
     Ok((episodes, checkpoints))
 }
 
-fn total_steps(episodes: &[Value]) -> u64 {
-    episodes.iter().filter_map(|e| e["steps"].as_u64()).sum()
+fn total_steps(episodes: &[EpisodeEntry]) -> u64 {
+    episodes.iter().filter_map(|e| e.steps).sum()
 }

@@ -38,9 +38,13 @@ fn stats(values: &[f64]) -> Value {
 pub fn info(path: &Path, as_json: bool) -> Result<ExitCode> {
     let r = ReplayReader::open(path).with_context(|| format!("opening dataset {}", path.display()))?;
     let cfg = PushTConfig::default();
-    let threshold = r.attrs["evalharness"]["scenario_config"]["task"]["success_coverage"]
-        .as_f64()
-        .unwrap_or(cfg.task.success_coverage);
+    // A Push-T dataset's own success coverage; the default for others (which record
+    // data/success, so it is not read) and for datasets without evalharness attributes.
+    let recorded =
+        harness::replay::attrs::DatasetAttrs::from_root(path, &r.attrs)?.and_then(|a| a.scenario_config);
+    let threshold = recorded
+        .and_then(|c| serde_json::from_value::<PushTConfig>(c).ok())
+        .map_or(cfg.task.success_coverage, |c| c.task.success_coverage);
     let state_dim = r.state.row_len();
     let success = r.extra("success")?;
     let (source, coverage) = if success.is_some() {

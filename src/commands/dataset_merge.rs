@@ -17,12 +17,17 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use harness::replay::ReplayReader;
+use harness::replay::attrs::{DatasetAttrs, EpisodeEntry, MergedPart};
 
 use crate::output::dataset::StagedDataset;
-use serde_json::{Value, json};
 
 use super::episodes::{BehaviourKind, Perturbation, behaviour_label};
 use crate::progress;
+
+/// An input's evalharness attributes (none for a dataset without them).
+fn attrs_of(r: &ReplayReader) -> Result<Option<DatasetAttrs>> {
+    Ok(DatasetAttrs::from_root(&r.path, &r.attrs)?)
+}
 
 /// Checks that `r` matches the first input in everything a consumer relies on.
 fn check_compatible(first: &ReplayReader, r: &ReplayReader) -> Result<()> {
@@ -44,30 +49,30 @@ fn check_compatible(first: &ReplayReader, r: &ReplayReader) -> Result<()> {
     if a.extras != b.extras {
         bail!("{name}: extra arrays {:?} differ from {}'s {:?}", b.extras, first.path.display(), a.extras);
     }
-    let (ea, eb) = (&first.attrs["evalharness"], &r.attrs["evalharness"]);
-    for field in ["scenario", "scenario_config", "state_columns"] {
-        if ea[field] != eb[field] {
-            bail!("{name}: attribute evalharness.{field} differs from {}'s", first.path.display());
-        }
+    let (ea, eb) = (attrs_of(first)?.unwrap_or_default(), attrs_of(r)?.unwrap_or_default());
+    let differs = [
+        ("scenario", ea.scenario != eb.scenario),
+        ("scenario_config", ea.scenario_config != eb.scenario_config),
+        ("state_columns", ea.state_columns != eb.state_columns),
+    ];
+    if let Some((field, _)) = differs.iter().find(|(_, d)| *d) {
+        bail!("{name}: attribute evalharness.{field} differs from {}'s", first.path.display());
     }
     Ok(())
 }
 
-/// An input's episode attributes, relabelled and tagged with their source index.
-fn episode_attrs(r: &ReplayReader, source: usize) -> Vec<Value> {
-    let e = &r.attrs["evalharness"];
-    let p = Perturbation {
-        noise: e["noise"].as_f64().unwrap_or(0.0),
-        lag: e["lag"].as_u64().unwrap_or(0) as usize,
-    };
-    let listed = e["episodes"].as_array().filter(|l| l.len() == r.episodes());
+/// An input's episode attributes (`e`, of the input `r`), relabelled and tagged with their
+/// source index.
+fn episode_attrs(r: &ReplayReader, e: &DatasetAttrs, source: usize) -> Vec<EpisodeEntry> {
+    let p = Perturbation { noise: e.source.noise.unwrap_or(0.0), lag: e.source.lag.unwrap_or(0) as usize };
+    let listed = Some(&e.episodes).filter(|l| l.len() == r.episodes());
     (0..r.episodes())
         .map(|i| {
-            let mut ep = listed.map_or_else(|| json!({}), |l| l[i].clone());
-            if ep["behaviour"] == "expert" {
-                ep["behaviour"] = json!(behaviour_label(BehaviourKind::Expert, p));
+            let mut ep = listed.map_or_else(EpisodeEntry::default, |l| l[i].clone());
+            if ep.behaviour.as_deref() == Some("expert") {
+                ep.behaviour = Some(behaviour_label(BehaviourKind::Expert, p));
             }
-            ep["source"] = json!(source);
+            ep.source = Some(source as u64);
             ep
         })
         .collect()
@@ -102,26 +107,25 @@ pub fn run(inputs: &[PathBuf], out: &Path, force: bool, quiet: bool) -> Result<E
             writer.append(&ep)?;
             pb.inc(1);
         }
-        episodes.extend(episode_attrs(r, k));
-        let mut attrs = r.attrs["evalharness"].clone();
-        if let Some(obj) = attrs.as_object_mut() {
-            obj.remove("episodes");
-        }
-        sources.push(json!({"path": r.path.display().to_string(), "episodes": r.episodes(), "attrs": attrs}));
+        let attrs = attrs_of(r)?;
+        episodes.extend(episode_attrs(r, &attrs.clone().unwrap_or_default(), k));
+        let path = r.path.display().to_string();
+        let attrs = attrs.map(|a| DatasetAttrs { episodes: Vec::new(), ..a });
+        sources.push(MergedPart { path, episodes: r.episodes() as u64, attrs });
     }
     pb.finish_and_clear();
-    let first = &readers[0].attrs["evalharness"];
-    let mut attrs = json!({
-        "version": env!("CARGO_PKG_VERSION"),
-        "merged_from": sources,
-        "episodes": episodes,
-    });
-    for field in ["scenario", "scenario_config", "state_columns", "action", "coverage"] {
-        if !first[field].is_null() {
-            attrs[field] = first[field].clone();
-        }
-    }
-    let path = writer.finish(&json!({ "evalharness": attrs }))?;
+    let first = attrs_of(&readers[0])?.unwrap_or_default();
+    let attrs = DatasetAttrs {
+        merged_from: Some(sources),
+        episodes,
+        scenario: first.scenario,
+        scenario_config: first.scenario_config,
+        state_columns: first.state_columns,
+        action: first.action,
+        coverage: first.coverage,
+        ..DatasetAttrs::new()
+    };
+    let path = writer.finish(&attrs)?;
     let steps: usize = readers.iter().map(ReplayReader::steps).sum();
     outln!("merged {} datasets: {total} episodes, {steps} steps -> {}", readers.len(), path.display());
     Ok(ExitCode::SUCCESS)

@@ -15,20 +15,21 @@ use harness::replay::EpisodeArrays;
 
 use crate::output::Inputs;
 use crate::output::dataset::StagedDataset;
+use harness::replay::attrs::{DatasetAttrs, EpisodeEntry, Source};
 use harness::task::Task;
 use scenarios::pusht::rollout::{Episode, StepRow};
 use scenarios::pusht::{Pose2, PushTConfig, PushTTask};
 use scenarios::robosuite::task::{ArmEngine, RobosuiteTask};
-use serde_json::{Value, json};
 
 use super::collect::{dataset_attrs, episode_arrays, episode_attr, replay_spec};
+use super::collect_mix::with_source;
 
 /// How a scenario's recorded episodes are laid out in a dataset.
 pub(super) enum Layout {
     /// Push-T's layout.
     PushT(Box<PushTConfig>),
     /// A robosuite task's layout; `header` holds the task's dataset attributes.
-    Arm { size: usize, columns: usize, threshold: f64, header: Value },
+    Arm { size: usize, columns: usize, threshold: f64, header: Box<DatasetAttrs> },
 }
 
 impl Layout {
@@ -52,7 +53,7 @@ impl Layout {
             size: task.observation_spec().image_size,
             columns: task.sim().state_columns().len(),
             threshold: task.score_kind().threshold(),
-            header: super::collect_arm::dataset_header(task.sim()),
+            header: Box::new(super::collect_arm::dataset_header(task.sim())),
         };
         (Box::new(task), layout)
     }
@@ -78,7 +79,7 @@ impl Sink {
 
     /// Appends one episode, labelled `behaviour`; returns its score and its entry in
     /// the dataset's attributes.
-    pub fn append(&mut self, t: &Trajectory, behaviour: &str) -> Result<(f64, Value)> {
+    pub fn append(&mut self, t: &Trajectory, behaviour: &str) -> Result<(f64, EpisodeEntry)> {
         match &self.layout {
             Layout::PushT(_) => {
                 let ep = pusht_episode(t)?;
@@ -87,7 +88,13 @@ impl Sink {
             }
             Layout::Arm { size, columns, threshold, .. } => {
                 self.writer.append(&arm_arrays(t, *size, *columns, *threshold)?)?;
-                let attr = json!({"seed": t.seed, "behaviour": behaviour, "steps": t.actions.len(), "success": t.success});
+                let attr = EpisodeEntry {
+                    seed: Some(t.seed),
+                    behaviour: Some(behaviour.to_string()),
+                    steps: Some(t.actions.len() as u64),
+                    success: Some(t.success),
+                    ..EpisodeEntry::default()
+                };
                 Ok((t.score, attr))
             }
         }
@@ -98,15 +105,13 @@ impl Sink {
     pub fn finish(
         self,
         seed_start: u64,
-        source: Value,
+        source: Source,
         max_steps: usize,
-        episodes: Vec<Value>,
+        episodes: Vec<EpisodeEntry>,
     ) -> Result<PathBuf> {
         let attrs = match self.layout {
             Layout::PushT(cfg) => dataset_attrs(&cfg, seed_start, source, max_steps, episodes),
-            Layout::Arm { header, .. } => {
-                super::collect_arm::with_header(header, seed_start, source, max_steps, episodes)
-            }
+            Layout::Arm { header, .. } => with_source(*header, seed_start, source, max_steps, episodes),
         };
         Ok(self.writer.finish(&attrs)?)
     }

@@ -15,6 +15,7 @@ use std::sync::Arc;
 use anyhow::{Context, Result, bail};
 use engine::{Setup, Start, Timing, Trajectory, replay_in_sim, sim_branch, wm_branch};
 use harness::policy::Policy;
+use harness::replay::attrs::Source;
 use harness::results::{EpisodeRow, PairedSuccess};
 use harness::rows::append_rows;
 use policies::dir::{checkpoint_dirs, checkpoint_name};
@@ -114,7 +115,7 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
                 let label = format!("{name}/imagined-actions");
                 let (_, mut attr) =
                     sink.append(&t, &label).with_context(|| format!("recording {label}, seed {}", t.seed))?;
-                attr["imagined_success"] = imagined_row.success.into();
+                attr.imagined_success = Some(imagined_row.success);
                 attrs.push(attr);
             }
             replayed.push(row);
@@ -150,8 +151,18 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     )?;
     if let Some((sink, episodes)) = sink {
         let n = episodes.len();
-        let source = serde_json::json!({"policy": args.policy, "replay_imagined": wm_dir, "judge": judge_dir,
-            "noise_scale": wm.noise_scale(), "seed": setup.master_seed, "what": "each imagined episode's executed actions, stepped in MuJoCo from the same initial state"});
+        let source = Source {
+            policy: Some(args.policy.clone()),
+            replay_imagined: Some(wm_dir.to_path_buf()),
+            judge: judge_dir.clone(),
+            noise_scale: Some(wm.noise_scale()),
+            seed: Some(setup.master_seed),
+            what: Some(
+                "each imagined episode's executed actions, stepped in MuJoCo from the same initial state"
+                    .into(),
+            ),
+            ..Source::default()
+        };
         let path = sink.finish(c.seed_start, source, max_steps, episodes)?;
         outln!("{} dataset: {n} replayed episodes -> {}", c.scenario, path.display());
     }

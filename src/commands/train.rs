@@ -7,6 +7,7 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
+use harness::replay::attrs::{DatasetAttrs, Recipe};
 use serde_json::json;
 use world_model::autoencoder::AutoencoderConfig;
 use world_model::data::EpisodeData;
@@ -30,52 +31,14 @@ pub(super) fn dataset_task(data: &std::path::Path) -> Result<Box<dyn harness::ta
 
 /// How an evalharness dataset was collected (from its attributes), to regenerate it:
 /// `collect` is deterministic, so the same arguments give the same bytes. A merged
-/// dataset lists the origin of each of its inputs, in order.
-pub(super) fn dataset_origin(data: &std::path::Path) -> serde_json::Value {
-    let attrs = harness::zarr::read_attrs(data).unwrap_or_default();
-    origin_of(&attrs["evalharness"], None)
-}
-
-/// [`dataset_origin`] from a dataset's `evalharness` attributes; `episodes` overrides
-/// the count (a merge input's attributes no longer list its episodes).
-fn origin_of(e: &serde_json::Value, episodes: Option<u64>) -> serde_json::Value {
-    if e.is_null() {
-        return serde_json::Value::Null;
-    }
-    if let Some(parts) = e["merged_from"].as_array() {
-        let paths: Vec<&str> = parts.iter().filter_map(|p| p["path"].as_str()).collect();
-        return json!({
-            "command": format!("evalharness dataset merge {} --out DATASET", paths.join(" ")),
-            "inputs": parts.iter().map(|p| origin_of(&p["attrs"], p["episodes"].as_u64())).collect::<Vec<_>>(),
-            "evalharness_version": e["version"],
-        });
-    }
-    let episodes = episodes.unwrap_or_else(|| e["episodes"].as_array().map_or(0, |l| l.len() as u64));
-    // Push-T is the default scenario; Lift and Can datasets name theirs.
-    let scenario = match e["scenario"].as_str() {
-        Some(name) if name != "pusht" => format!(" --scenario {name}"),
-        _ => String::new(),
-    };
-    let run_on = if e["no_early_stop"] == true { " --no-early-stop" } else { "" };
-    if let Some(policy) = e["policy"].as_str() {
-        // `collect --policy`: `--episodes` counts per checkpoint.
-        let per = episodes / e["checkpoints"].as_array().map_or(1, |c| c.len().max(1) as u64);
-        return json!({
-            "command": format!(
-                "evalharness collect{scenario} --policy {policy} --episodes {per} --seed-start {} --max-steps {}{run_on}",
-                e["seed_start"], e["max_steps"]
-            ),
-            "checkpoints": e["checkpoints"],
-            "evalharness_version": e["version"],
-        });
-    }
-    json!({
-        "command": format!(
-            "evalharness collect{scenario} --episodes {episodes} --seed-start {} --mix {} --noise {} --lag {} --max-steps {}{run_on}",
-            e["seed_start"], e["mix"].as_str().unwrap_or("?"), e["noise"], e["lag"], e["max_steps"]
-        ),
-        "evalharness_version": e["version"],
-    })
+/// dataset lists the recipe of each of its inputs, in order. `None` for a dataset
+/// evalharness did not make.
+///
+/// # Errors
+/// A dataset whose attributes cannot be read (never taken for one without them).
+pub(super) fn dataset_origin(data: &std::path::Path) -> Result<Option<Recipe>> {
+    let attrs = harness::zarr::read_attrs(data)?;
+    Ok(DatasetAttrs::from_root(data, &attrs)?.map(|a| a.recipe(None)))
 }
 
 /// Ctrl-C / SIGTERM during training: the first asks the trainer to stop after the
@@ -160,14 +123,14 @@ pub(super) fn prepare_out(
 }
 
 /// The `data` entry of a world-model or autoencoder provenance file.
-pub fn data_provenance(path: &std::path::Path, episodes: usize, frames: usize) -> serde_json::Value {
-    json!({
+pub fn data_provenance(path: &std::path::Path, episodes: usize, frames: usize) -> Result<serde_json::Value> {
+    Ok(json!({
         "path": path.display().to_string(),
         "episodes": episodes,
         "frames": frames,
         "held_out": "episodes with index % 10 == 9",
-        "collected_with": dataset_origin(path),
-    })
+        "collected_with": dataset_origin(path)?,
+    }))
 }
 
 /// `evalharness train autoencoder`.
@@ -207,6 +170,8 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     }
     tracing::info!(data = %a.data.display(), "loading frames");
     let data = EpisodeData::load(&a.data, model_cfg.image_size)?;
+    // Read before training, so that unreadable attributes stop the run before it starts.
+    let data_prov = data_provenance(&a.data, data.episodes.len(), data.len())?;
     tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");
     let args: Vec<String> = crate::stdout::command_line();
     open_session(&a.out, &args.join(" "), from_step)?;
@@ -252,7 +217,7 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
             "sessions": sessions,
             "seed": a.seed,
             "commit": super::git_commit(),
-            "data": data_provenance(&a.data, data.episodes.len(), data.len()),
+            "data": data_prov,
             "steps": outcome.step,
             "finished": outcome.finished,
             "elapsed_s": outcome.elapsed_s,
@@ -270,43 +235,4 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     );
     out_dir.finish(outcome.finished)?;
     Ok(ExitCode::SUCCESS)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn origin_regenerates_scripted_and_policy_datasets() {
-        let mix = json!({"seed_start": 0, "mix": "expert=1", "noise": 0.0, "lag": 0, "max_steps": 300,
-                         "episodes": [{}, {}, {}], "version": "0.1.0"});
-        assert_eq!(
-            origin_of(&mix, None)["command"],
-            "evalharness collect --episodes 3 --seed-start 0 --mix expert=1 --noise 0.0 --lag 0 --max-steps 300"
-        );
-        // `collect --policy`: 4 episodes of 2 checkpoints are `--episodes 2`.
-        let pol = json!({"seed_start": 7, "policy": "runs/p", "checkpoints": [{"name": "a"}, {"name": "b"}],
-                         "max_steps": 24, "episodes": [{}, {}, {}, {}], "version": "0.1.0"});
-        let o = origin_of(&pol, None);
-        assert_eq!(
-            o["command"],
-            "evalharness collect --policy runs/p --episodes 2 --seed-start 7 --max-steps 24"
-        );
-        assert_eq!(o["checkpoints"][1]["name"], "b");
-        assert!(origin_of(&serde_json::Value::Null, None).is_null());
-        // Regression: a Lift dataset's command lacked `--scenario lift` and `--no-early-stop`,
-        // so it regenerated Push-T data.
-        let lift = json!({"scenario": "lift", "seed_start": 5, "mix": "expert=1", "noise": 0.0, "lag": 0,
-                          "max_steps": 150, "no_early_stop": true, "episodes": [{}], "version": "0.1.0"});
-        assert_eq!(
-            origin_of(&lift, None)["command"],
-            "evalharness collect --scenario lift --episodes 1 --seed-start 5 --mix expert=1 --noise 0.0 --lag 0 --max-steps 150 --no-early-stop"
-        );
-        let lift_pol = json!({"scenario": "lift", "seed_start": 7, "policy": "p", "checkpoints": [{}],
-                              "max_steps": 9, "episodes": [{}], "version": "0.1.0"});
-        assert_eq!(
-            origin_of(&lift_pol, None)["command"],
-            "evalharness collect --scenario lift --policy p --episodes 1 --seed-start 7 --max-steps 9"
-        );
-    }
 }

@@ -92,7 +92,7 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
                 "episodes": data.episodes.len(),
                 "frames": frames,
                 "held_out": "episodes with index % 10 == 9",
-                "collected_with": dataset_origin(&a.data),
+                "collected_with": dataset_origin(&a.data)?,
             },
         }),
     };

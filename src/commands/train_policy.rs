@@ -83,7 +83,7 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
                 "behaviour": a.behaviour,
                 "episodes": demos.episodes.len(),
                 "samples": demos.len(),
-                "collected_with": dataset_origin(&a.data),
+                "collected_with": dataset_origin(&a.data)?,
             },
             "encoder_from": a.encoder_from.as_ref().map(|p| p.display().to_string()),
             "init_from": start.as_ref().map(|s| json!({

@@ -151,6 +151,8 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     };
     tracing::info!(data = %a.data.display(), "loading frames");
     let mut data = EpisodeData::load(&a.data, codec.image_size())?;
+    // Read before training, so that unreadable attributes stop the run before it starts.
+    let data_prov = data_provenance(&a.data, data.episodes.len(), data.len())?;
     tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");
     let goal_free = saved.as_ref().map_or(a.goal_free, WorldModelConfig::is_goal_free);
     if goal_free {
@@ -254,7 +256,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             "seed": a.seed,
             "commit": git_commit(),
             "autoencoder": saved.autoencoder,
-            "data": data_provenance(&a.data, data.episodes.len(), data.len()),
+            "data": data_prov,
             "frames": if goal_free { "re-rendered without the goal from data/state (--goal-free)" } else { "data/img as stored" },
             "steps": outcome.step,
             "finished": outcome.finished,

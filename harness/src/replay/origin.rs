@@ -8,79 +8,40 @@
 
 use std::path::Path;
 
-use serde::Deserialize;
 use serde_json::Value;
 
 use super::ReplayError;
+use super::attrs::DatasetAttrs;
+pub use super::attrs::EpisodeEntry;
 use super::reader::group_paths;
 use crate::zarr::read_attrs;
 
 /// The task of datasets without evalharness attributes.
 pub const FOREIGN_TASK: &str = "pusht";
 
-/// The part of a dataset's root attributes read here.
-#[derive(Deserialize)]
-struct Root {
-    evalharness: Option<Origin>,
-}
-
-/// The part of the `evalharness` attributes read here.
-#[derive(Deserialize)]
-struct Origin {
-    scenario: String,
-}
-
 /// The task named in root attributes `attrs` of the dataset group `path`.
 ///
 /// # Errors
-/// [`ReplayError::Layout`] naming `path` when the `evalharness` attributes name no
-/// scenario (or not as a string).
+/// [`ReplayError::Layout`] naming `path` when the `evalharness` attributes cannot be read
+/// or name no scenario.
 pub fn scenario_in(path: &Path, attrs: &Value) -> Result<String, ReplayError> {
-    match Root::deserialize(attrs) {
-        Ok(Root { evalharness: None }) => Ok(FOREIGN_TASK.to_string()),
-        Ok(Root { evalharness: Some(o) }) => Ok(o.scenario),
-        Err(e) => Err(ReplayError::Layout {
+    match DatasetAttrs::from_root(path, attrs)? {
+        None => Ok(FOREIGN_TASK.to_string()),
+        Some(a) => a.scenario.ok_or_else(|| ReplayError::Layout {
             path: path.to_path_buf(),
-            reason: format!("its evalharness attributes name no task (\"scenario\"): {e}"),
+            reason: "its evalharness attributes name no task (\"scenario\")".into(),
         }),
     }
-}
-
-/// One episode's entry in a dataset's `evalharness.episodes` attributes: the fields read back
-/// (the collectors also record its steps and success).
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
-pub struct EpisodeEntry {
-    /// The behaviour that acted (`expert`, `miss`, …), where the collector recorded one.
-    #[serde(default)]
-    pub behaviour: Option<String>,
-    /// The episode's seed, where recorded.
-    #[serde(default)]
-    pub seed: Option<u64>,
 }
 
 /// The per-episode entries of a dataset's root attributes `attrs`: none for a dataset
 /// without evalharness attributes or without the list.
 ///
 /// # Errors
-/// [`ReplayError::Layout`] naming `path` when the list is there but not a list of entries
-/// (never read as absent).
+/// [`ReplayError::Layout`] naming `path` when the attributes (the list among them) cannot be
+/// read (never read as absent).
 pub fn episodes_in(path: &Path, attrs: &Value) -> Result<Vec<EpisodeEntry>, ReplayError> {
-    #[derive(Deserialize)]
-    struct Root {
-        evalharness: Option<Listed>,
-    }
-    #[derive(Deserialize)]
-    struct Listed {
-        #[serde(default)]
-        episodes: Vec<EpisodeEntry>,
-    }
-    match Root::deserialize(attrs) {
-        Ok(Root { evalharness }) => Ok(evalharness.map(|l| l.episodes).unwrap_or_default()),
-        Err(e) => Err(ReplayError::Layout {
-            path: path.to_path_buf(),
-            reason: format!("its evalharness attributes' \"episodes\" cannot be read: {e}"),
-        }),
-    }
+    Ok(DatasetAttrs::from_root(path, attrs)?.map(|a| a.episodes).unwrap_or_default())
 }
 
 /// The task a dataset (a group, or a folder of groups: its first) was collected in.
@@ -105,7 +66,7 @@ mod tests {
         assert_eq!(scenario_in(p, &json!({"evalharness": {"scenario": "lift", "seed": 1}})).unwrap(), "lift");
         assert_eq!(scenario_in(p, &json!({})).unwrap(), "pusht");
         let err = scenario_in(p, &json!({"evalharness": {"seed": 1}})).unwrap_err().to_string();
-        assert!(err.contains("d.zarr") && err.contains("missing field `scenario`"), "{err}");
+        assert!(err.contains("d.zarr") && err.contains("name no task"), "{err}");
         let err = scenario_in(p, &json!({"evalharness": {"scenario": 3}})).unwrap_err().to_string();
         assert!(err.contains("invalid type"), "{err}");
     }
@@ -116,14 +77,21 @@ mod tests {
         let attrs = json!({"evalharness": {"scenario": "lift", "episodes": [
             {"behaviour": "expert", "seed": 7, "steps": 51, "success": true}, {"seed": 8}]}});
         let e = episodes_in(p, &attrs).unwrap();
-        assert_eq!(e[0], EpisodeEntry { behaviour: Some("expert".into()), seed: Some(7) });
-        assert_eq!(e[1], EpisodeEntry { behaviour: None, seed: Some(8) });
+        let expert = EpisodeEntry {
+            behaviour: Some("expert".into()),
+            seed: Some(7),
+            steps: Some(51),
+            success: Some(true),
+            ..EpisodeEntry::default()
+        };
+        assert_eq!(e[0], expert);
+        assert_eq!(e[1], EpisodeEntry { seed: Some(8), ..EpisodeEntry::default() });
         // No list, or no evalharness attributes: none.
         assert!(episodes_in(p, &json!({"evalharness": {"scenario": "lift"}})).unwrap().is_empty());
         assert!(episodes_in(p, &json!({})).unwrap().is_empty());
         // A list that is not one of entries is refused, naming the dataset.
         let err = episodes_in(p, &json!({"evalharness": {"episodes": [{"behaviour": 3}]}})).unwrap_err();
-        assert!(err.to_string().contains("d.zarr") && err.to_string().contains("episodes"), "{err}");
+        assert!(err.to_string().contains("d.zarr") && err.to_string().contains("behaviour"), "{err}");
     }
 
     #[test]

@@ -4,8 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
+use harness::replay::attrs::DatasetAttrs;
 use harness::replay::{EpisodeArrays, ReplaySpec, ReplayWriter};
-use serde_json::Value;
 
 use super::{Inputs, OutputError, Staged};
 
@@ -39,13 +39,14 @@ impl StagedDataset {
         self.writer.append(ep).map_err(|source| OutputError::Dataset { dir: dir.to_path_buf(), source })
     }
 
-    /// Writes the metadata and `attrs`, then moves the dataset into place.
+    /// Writes the metadata and `attrs` (under the root's `evalharness`), then moves the
+    /// dataset into place.
     ///
     /// # Errors
     /// An I/O failure; the old `out` is then as it was.
-    pub fn finish(self, attrs: &Value) -> Result<PathBuf> {
+    pub fn finish(self, attrs: &DatasetAttrs) -> Result<PathBuf> {
         let dir = self.staged.dir().to_path_buf();
-        self.writer.finish(attrs).map_err(|source| OutputError::Dataset { dir, source })?;
+        self.writer.finish(&attrs.to_root()).map_err(|source| OutputError::Dataset { dir, source })?;
         self.staged.commit()
     }
 }
