@@ -36,6 +36,7 @@ pub mod rng;
 pub mod rows;
 pub mod runfile;
 pub mod seed;
+pub mod sessions;
 pub mod stop;
 pub mod summarise;
 pub mod task;

@@ -13,7 +13,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use harness::replay::ReplayReader;
 use scenarios::pusht::{Pose2, PushTConfig, score};
-use serde_json::{Value, json};
+use serde::Serialize;
 
 /// Per-episode score and success from per-step coverage.
 fn episode_scores(r: &ReplayReader, coverage: &[f64], threshold: f64) -> Vec<(f64, bool)> {
@@ -25,13 +25,55 @@ fn episode_scores(r: &ReplayReader, coverage: &[f64], threshold: f64) -> Vec<(f6
         .collect()
 }
 
-fn stats(values: &[f64]) -> Value {
+/// Mean, spread and range of a set of values.
+#[derive(Debug, Serialize)]
+struct Stats {
+    mean: f64,
+    std: f64,
+    min: f64,
+    max: f64,
+}
+
+fn stats(values: &[f64]) -> Stats {
     let n = values.len().max(1) as f64;
     let mean = values.iter().sum::<f64>() / n;
     let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
     let min = values.iter().copied().fold(f64::INFINITY, f64::min);
     let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    json!({"mean": mean, "std": var.sqrt(), "min": min, "max": max})
+    Stats { mean, std: var.sqrt(), min, max }
+}
+
+/// The episodes' scores: their statistics and success rate.
+#[derive(Debug, Serialize)]
+struct Scores {
+    #[serde(flatten)]
+    stats: Stats,
+    success_rate: f64,
+}
+
+/// One behaviour's episodes.
+#[derive(Debug, Serialize)]
+struct Behaviour {
+    episodes: usize,
+    mean_score: f64,
+    success_rate: f64,
+}
+
+/// What `dataset info` reports (`--json` writes it with keys in alphabetical order).
+#[derive(Debug, Serialize)]
+struct Info {
+    path: String,
+    episodes: usize,
+    steps: usize,
+    steps_per_episode: Stats,
+    image: [usize; 3],
+    action_dim: usize,
+    state_dim: usize,
+    score_source: &'static str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    score: Option<Scores>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    behaviours: Option<BTreeMap<String, Behaviour>>,
 }
 
 /// Runs the command.
@@ -66,17 +108,6 @@ pub fn info(path: &Path, as_json: bool) -> Result<ExitCode> {
         ("unavailable (no data/coverage, no goal in data/state)", None)
     };
     let lengths: Vec<f64> = (0..r.episodes()).map(|i| r.episode_range(i).len() as f64).collect();
-    let shape = r.img.shape();
-    let mut out = json!({
-        "path": path.display().to_string(),
-        "episodes": r.episodes(),
-        "steps": r.steps(),
-        "steps_per_episode": stats(&lengths),
-        "image": [shape[1], shape[2], shape[3]],
-        "action_dim": r.action.row_len(),
-        "state_dim": state_dim,
-        "score_source": source,
-    });
     let scores = match (&success, coverage) {
         (Some(s), _) => Some(
             episode_scores(&r, s, 0.5).into_iter().map(|(_, hit)| (f64::from(u8::from(hit)), hit)).collect(),
@@ -84,73 +115,78 @@ pub fn info(path: &Path, as_json: bool) -> Result<ExitCode> {
         (None, Some(c)) => Some(episode_scores(&r, &c, threshold)),
         (None, None) => None,
     };
-    if let Some(scores) = scores {
+    let rate = |s: &[(f64, bool)]| s.iter().filter(|s| s.1).count() as f64 / s.len().max(1) as f64;
+    let score = scores.as_ref().map(|scores: &Vec<(f64, bool)>| {
         let values: Vec<f64> = scores.iter().map(|s| s.0).collect();
-        let mut score = stats(&values);
-        score["success_rate"] =
-            json!(scores.iter().filter(|s| s.1).count() as f64 / scores.len().max(1) as f64);
-        out["score"] = score;
-        // Per-behaviour breakdown when the dataset records who acted in each episode.
-        let eps = harness::replay::origin::episodes_in(path, &r.attrs)?;
-        if eps.len() == scores.len() {
-            let mut by: BTreeMap<String, Vec<(f64, bool)>> = BTreeMap::new();
-            for (e, s) in eps.iter().zip(&scores) {
-                let name = e.behaviour.clone().unwrap_or_else(|| "unknown".into());
-                by.entry(name).or_default().push(*s);
-            }
-            let b: serde_json::Map<String, Value> = by
-                .into_iter()
-                .map(|(k, v)| {
-                    let n = v.len() as f64;
-                    let mean = v.iter().map(|s| s.0).sum::<f64>() / n;
-                    let succ = v.iter().filter(|s| s.1).count() as f64 / n;
-                    (k, json!({"episodes": v.len(), "mean_score": mean, "success_rate": succ}))
-                })
-                .collect();
-            out["behaviours"] = Value::Object(b);
+        Scores { stats: stats(&values), success_rate: rate(scores) }
+    });
+    // Per-behaviour breakdown when the dataset records who acted in each episode.
+    let eps = harness::replay::origin::episodes_in(path, &r.attrs)?;
+    let behaviours = scores.as_ref().filter(|s| eps.len() == s.len()).map(|scores| {
+        let mut by: BTreeMap<String, Vec<(f64, bool)>> = BTreeMap::new();
+        for (e, s) in eps.iter().zip(scores) {
+            by.entry(e.behaviour.clone().unwrap_or_else(|| "unknown".into())).or_default().push(*s);
         }
-    }
+        by.into_iter()
+            .map(|(k, v)| {
+                let mean_score = v.iter().map(|s| s.0).sum::<f64>() / v.len() as f64;
+                (k, Behaviour { episodes: v.len(), mean_score, success_rate: rate(&v) })
+            })
+            .collect()
+    });
+    let shape = r.img.shape();
+    let out = Info {
+        path: path.display().to_string(),
+        episodes: r.episodes(),
+        steps: r.steps(),
+        steps_per_episode: stats(&lengths),
+        image: [shape[1], shape[2], shape[3]],
+        action_dim: r.action.row_len(),
+        state_dim,
+        score_source: source,
+        score,
+        behaviours,
+    };
     if as_json {
-        outln!("{}", serde_json::to_string_pretty(&out)?);
+        // Through a JSON value, whose maps keep keys in alphabetical order.
+        outln!("{}", serde_json::to_string_pretty(&serde_json::to_value(&out)?)?);
     } else {
         print_text(&out);
     }
     Ok(ExitCode::SUCCESS)
 }
 
-fn print_text(v: &Value) {
-    let f = |x: &Value| x.as_f64().unwrap_or(f64::NAN);
-    let s = &v["steps_per_episode"];
-    outln!("dataset    {}", v["path"].as_str().unwrap_or(""));
+fn print_text(v: &Info) {
+    let s = &v.steps_per_episode;
+    outln!("dataset    {}", v.path);
     outln!(
         "episodes   {}   steps {} (per episode: min {}, mean {:.1}, max {})",
-        v["episodes"],
-        v["steps"],
-        f(&s["min"]),
-        f(&s["mean"]),
-        f(&s["max"])
+        v.episodes,
+        v.steps,
+        s.min,
+        s.mean,
+        s.max
     );
-    outln!("arrays     img {}   action {}   state {}", v["image"], v["action_dim"], v["state_dim"]);
-    match v.get("score") {
+    let [h, w, c] = v.image;
+    outln!("arrays     img [{h},{w},{c}]   action {}   state {}", v.action_dim, v.state_dim);
+    match &v.score {
         Some(sc) => outln!(
             "score      mean {:.3}  std {:.3}  min {:.3}  max {:.3}  success {:.1}%   (from {})",
-            f(&sc["mean"]),
-            f(&sc["std"]),
-            f(&sc["min"]),
-            f(&sc["max"]),
-            100.0 * f(&sc["success_rate"]),
-            v["score_source"].as_str().unwrap_or("")
+            sc.stats.mean,
+            sc.stats.std,
+            sc.stats.min,
+            sc.stats.max,
+            100.0 * sc.success_rate,
+            v.score_source
         ),
-        None => outln!("score      {}", v["score_source"].as_str().unwrap_or("")),
+        None => outln!("score      {}", v.score_source),
     }
-    if let Some(b) = v["behaviours"].as_object() {
-        for (name, s) in b {
-            outln!(
-                "behaviour  {name:<8} {:>5} episodes   mean score {:.3}   success {:.1}%",
-                s["episodes"],
-                f(&s["mean_score"]),
-                100.0 * f(&s["success_rate"])
-            );
-        }
+    for (name, s) in v.behaviours.iter().flatten() {
+        outln!(
+            "behaviour  {name:<8} {:>5} episodes   mean score {:.3}   success {:.1}%",
+            s.episodes,
+            s.mean_score,
+            100.0 * s.success_rate
+        );
     }
 }

@@ -19,7 +19,6 @@ pub(crate) mod rank;
 mod read_judge;
 mod record;
 mod scripted;
-mod sessions;
 mod simulate;
 mod simulate_arm;
 mod simulate_policy;

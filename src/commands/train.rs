@@ -13,10 +13,10 @@ use world_model::autoencoder::AutoencoderConfig;
 use world_model::data::EpisodeData;
 use world_model::train_ae::{AeTrainConfig, RunOptions, train_autoencoder};
 
-use super::sessions::{open_session, read_step, record_session};
 use crate::cli::TrainAutoencoderArgs;
 use crate::output::write_json;
 use crate::progress;
+use harness::sessions::{open_session, read_step, record_session};
 
 /// The task a dataset was collected in ([`harness::replay::origin`]: its attributes name
 /// it; another codebase's Push-T replay buffer has none).
@@ -138,7 +138,7 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     let mut inputs: Vec<(&str, &std::path::Path)> = vec![("--data", &a.data)];
     inputs.extend(a.encoder_from.as_deref().map(|p| ("--encoder-from", p)));
     let out_dir = prepare_out(&a.out, a.session.resume, a.session.force, "state.json", &inputs)?;
-    let from_step = read_step(&a.out);
+    let from_step = read_step(&a.out)?;
     let decoder_channels = match a.decoder_channels.as_deref() {
         None => None,
         Some(&[c0, c1, c2, c3]) if [c0, c1, c2, c3].iter().all(|&c| c >= 8 && c % 8 == 0) => {
@@ -174,7 +174,7 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     let data_prov = data_provenance(&a.data, data.episodes.len(), data.len())?;
     tracing::info!(frames = data.len(), episodes = data.episodes.len(), "loaded");
     let args: Vec<String> = crate::stdout::command_line();
-    open_session(&a.out, &args.join(" "), from_step)?;
+    open_session(&a.out, &args.join(" "), &super::git_commit(), from_step)?;
     let pb = progress::bar(cfg.steps, "autoencoder", quiet);
     let run = RunOptions {
         resume: a.session.resume,
@@ -196,7 +196,13 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
     let strip = reports::png::filmstrip(&[top, bottom], size, size);
     let strip_path = a.out.join("reconstructions.png");
     reports::png::write_png(&strip_path, &strip.pixels, strip.width, strip.height)?;
-    let sessions = record_session(&a.out, &args.join(" "), from_step, outcome.step, outcome.elapsed_s)?;
+    let sessions = record_session(
+        &a.out,
+        &args.join(" "),
+        &super::git_commit(),
+        (from_step, outcome.step),
+        outcome.elapsed_s,
+    )?;
     // The saved config is the run's (a resumed run keeps it).
     let saved = crate::output::read_json(&a.out.join("config.json"))?;
     let encoder_from = saved["train"].get("encoder_from").map(|dir| {

@@ -12,10 +12,10 @@ use policies::train::{Phase, PolicyRun, PolicyTrainConfig, RunConfigs, train_pol
 use serde_json::json;
 
 use super::git_commit;
-use super::sessions::{open_session, read_step, record_session};
 use super::train::{dataset_origin, dataset_task, fixed_fields, prepare_out, refuse_contradicting_flags};
 use crate::cli::TrainPolicyArgs;
 use crate::progress;
+use harness::sessions::{open_session, read_step, record_session};
 
 /// `evalharness train policy`.
 pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
@@ -111,8 +111,8 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
     // Its sessions (command, commit, first and last step) in `.train/sessions.jsonl`,
     // as for the other trainers.
     let train_dir = a.out.join(".train");
-    let from_step = if a.session.resume { read_step(&train_dir) } else { 0 };
-    open_session(&train_dir, &args.join(" "), from_step)?;
+    let from_step = if a.session.resume { read_step(&train_dir)? } else { 0 };
+    open_session(&train_dir, &args.join(" "), &git_commit(), from_step)?;
     let pb = progress::bar(1, "policy", quiet);
     let run = PolicyRun {
         resume: a.session.resume,
@@ -129,7 +129,7 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         });
     })?;
     pb.finish_and_clear();
-    record_session(&train_dir, &args.join(" "), from_step, outcome.step, outcome.elapsed_s)?;
+    record_session(&train_dir, &args.join(" "), &git_commit(), (from_step, outcome.step), outcome.elapsed_s)?;
     for ck in &outcome.saved {
         outln!("saved {}", ck.display());
     }

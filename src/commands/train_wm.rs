@@ -21,11 +21,11 @@ use world_model::train_wm::{TrainingFrames, WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
 use super::git_commit;
-use super::sessions::{open_session, read_step, record_session};
 use super::train::{data_provenance, fixed_fields, prepare_out, refuse_contradicting_flags};
 use crate::cli::{FieldArg, ObjectiveArg, PredictionArg, TrainWorldModelArgs, WmConfigArg};
 use crate::output::{read_json, write_json};
 use crate::progress;
+use harness::sessions::{open_session, read_step, record_session};
 
 /// `target` relative to the folder `base` (both must exist), e.g. `../autoencoder`.
 pub(super) fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
@@ -135,7 +135,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     inputs.extend(a.autoencoder.as_deref().map(|p| ("--autoencoder", p)));
     inputs.extend(a.init_from.as_deref().map(|p| ("--init-from", p)));
     let out_dir = prepare_out(&a.out, a.session.resume, a.session.force, "state.json", &inputs)?;
-    let from_step = read_step(&a.out);
+    let from_step = read_step(&a.out)?;
     if a.session.resume {
         check_resume_flags(a, &cfg)?;
     }
@@ -218,7 +218,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         }
     };
     let args: Vec<String> = crate::stdout::command_line();
-    open_session(&a.out, &args.join(" "), from_step)?;
+    open_session(&a.out, &args.join(" "), &git_commit(), from_step)?;
     let pb = progress::bar(cfg.steps, objective.name(), quiet);
     let run = RunOptions {
         resume: a.session.resume,
@@ -241,7 +241,8 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         },
     )?;
     pb.finish_and_clear();
-    let sessions = record_session(&a.out, &args.join(" "), from_step, outcome.step, outcome.elapsed_s)?;
+    let sessions =
+        record_session(&a.out, &args.join(" "), &git_commit(), (from_step, outcome.step), outcome.elapsed_s)?;
     let saved = saved_model_config(&a.out)?;
     write_json(
         &a.out.join("provenance.json"),

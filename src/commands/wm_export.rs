@@ -23,10 +23,10 @@ use world_model::train_ae::load_autoencoder;
 
 use super::export_policies::append;
 use super::git_commit;
-use super::sessions::stale_provenance;
 use super::train_wm::relative_to;
 use crate::cli::WmExportArgs;
 use crate::output::{Staged, read_json, write_json};
+use harness::sessions::stale_provenance;
 
 /// Copied when present; `ema.bpk` is required.
 const FILES: [&str; 5] =
@@ -71,7 +71,8 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
         );
     }
     let mut provenance = read_json(&prov_path)?;
-    if let Some(why) = stale_provenance(&a.from, &provenance) {
+    if let Some(why) = stale_provenance(&a.from, provenance.get("steps").and_then(serde_json::Value::as_u64))?
+    {
         bail!(
             "--from {why}; `train world-model --out {} --resume --max-minutes 0` records that session \
              and rewrites provenance.json without training",
