@@ -127,4 +127,30 @@ pub enum ScenarioError {
         /// What it cannot do.
         what: String,
     },
+    /// A scripted behaviour's name the task does not have.
+    #[error("unknown {what} '{name}' (built-in{listed})")]
+    UnknownBehaviour {
+        /// What was asked for ("policy", "lift behaviour", …).
+        what: String,
+        /// The name.
+        name: String,
+        /// The behaviours there are, as the message lists them.
+        listed: String,
+    },
+    /// The worker threads could not be started.
+    #[error("starting worker threads: {0}")]
+    Threads(#[source] rayon::ThreadPoolBuildError),
+    /// One episode of a batch failed.
+    #[error("{scenario}episode seed {seed} ({behaviour})")]
+    Episode {
+        /// The task's name and a space, or nothing (Push-T's episodes say only their seed).
+        scenario: String,
+        /// The episode's seed.
+        seed: u64,
+        /// Its behaviour.
+        behaviour: String,
+        /// What went wrong.
+        #[source]
+        source: Box<ScenarioError>,
+    },
 }

@@ -25,6 +25,7 @@ pub mod plan_cost;
 pub mod pygame_raster;
 pub mod render;
 pub mod rollout;
+pub mod runs;
 pub mod scripted;
 pub mod task;
 

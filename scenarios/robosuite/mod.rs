@@ -14,6 +14,7 @@ pub mod osc;
 pub mod render_pool;
 pub mod robot_state;
 pub mod rollout;
+pub mod runs;
 pub mod scene;
 pub mod task;
 pub mod visual;

@@ -18,10 +18,9 @@ use scenarios::pusht::PushTConfig;
 use scenarios::pusht::rollout::Episode;
 
 use super::collect_mix::{draw, parse_mix_with, with_source};
-use super::episodes::{BehaviourKind, FrameSpec, Perturbation, Runner, behaviour_label};
 use crate::cli::CollectArgs;
-use crate::cli::RendererKind;
 use crate::progress;
+use scenarios::pusht::runs::{BehaviourKind, FrameSpec, Perturbation, Runner, behaviour_label};
 
 /// Names of the state columns, stored in the dataset's attributes.
 pub const STATE_COLUMNS: [&str; 8] =
@@ -32,7 +31,27 @@ pub const PUSHT_MIX: &str = "expert=0.8,explore=0.2";
 
 /// Parses `expert=0.8,explore=0.2` into normalised weights.
 fn parse_mix(text: &str) -> Result<Vec<(BehaviourKind, f64)>> {
-    parse_mix_with(text, BehaviourKind::parse)
+    parse_mix_with(text, |name| Ok(BehaviourKind::parse(name)?))
+}
+
+/// Push-T's scripted runner for `collect` and `simulate`, its flags checked first.
+///
+/// # Errors
+/// A `--noise` that is not a finite number of at least 0, a `--max-steps` of 0, or a
+/// runner that cannot be built.
+pub(super) fn pusht_runner(
+    cfg: PushTConfig,
+    jobs: usize,
+    max_steps: Option<u32>,
+    perturbation: Perturbation,
+) -> Result<Runner> {
+    if !(perturbation.noise.is_finite() && perturbation.noise >= 0.0) {
+        bail!("--noise must be a finite number >= 0, got {}", perturbation.noise);
+    }
+    if max_steps == Some(0) {
+        bail!("--max-steps must be at least 1");
+    }
+    Ok(Runner::new(cfg, jobs, max_steps, perturbation)?)
 }
 
 /// The dataset layout: `size`² RGB images, 2-D actions, 8 state columns, coverage.
@@ -124,7 +143,7 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     let mix_text = args.mix.as_deref().unwrap_or(PUSHT_MIX);
     let mix = parse_mix(mix_text)?;
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };
-    let runner = Runner::new(cfg, c.jobs, c.max_steps, perturbation)?;
+    let runner = pusht_runner(cfg, c.jobs, c.max_steps, perturbation)?;
     let size = runner.cfg.render.size as usize;
     let work: Vec<(u64, BehaviourKind)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, draw(&mix, seed))).collect();
@@ -134,12 +153,12 @@ pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     let mut episodes = Vec::new();
     runner.run(
         &work,
-        |_| Some(FrameSpec { size, renderer: RendererKind::Raster }),
+        |_| Some(FrameSpec { size, beside_mujoco: false }),
         |i, ep| {
             writer.append(&episode_arrays(&ep))?;
             episodes.push(episode_attr(&ep, &behaviour_label(work[i].1, perturbation)));
             pb.inc(1);
-            Ok(())
+            anyhow::Ok(())
         },
     )?;
     pb.finish_and_clear();

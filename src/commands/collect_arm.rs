@@ -24,9 +24,9 @@ use crate::output::dataset::StagedDataset;
 use scenarios::robosuite::rollout::{ArmTask, Episode, Perturbation};
 
 use super::collect_mix::{draw, parse_mix_with, with_source};
-use super::simulate_arm::{ArmRun, behaviour};
 use crate::cli::CollectArgs;
 use crate::progress;
+use scenarios::robosuite::runs::{ArmRun, behaviour};
 
 /// Behaviours left out of the default mix: `explore` came after the shipped Lift
 /// models' datasets, which were collected with the default, so the default stays
@@ -107,7 +107,7 @@ pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<Exit
         bail!("--noise must be a finite std >= 0, got {}", c.noise);
     }
     let mix_text = args.mix.clone().unwrap_or_else(|| default_mix(task));
-    let mix = parse_mix_with(&mix_text, |n| behaviour(task, n))?;
+    let mix = parse_mix_with(&mix_text, |n| Ok(behaviour(task, n)?))?;
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
     if max_steps == 0 {
         bail!("--max-steps must be at least 1");
@@ -134,7 +134,7 @@ pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<Exit
                 ..EpisodeEntry::default()
             });
             pb.inc(1);
-            Ok(())
+            anyhow::Ok(())
         },
     )?;
     pb.finish_and_clear();

@@ -21,8 +21,8 @@ use harness::replay::attrs::{DatasetAttrs, EpisodeEntry, MergedPart};
 
 use crate::output::dataset::StagedDataset;
 
-use super::episodes::{BehaviourKind, Perturbation, behaviour_label};
 use crate::progress;
+use scenarios::pusht::runs::{BehaviourKind, Perturbation, behaviour_label};
 
 /// An input's evalharness attributes (none for a dataset without them).
 fn attrs_of(r: &ReplayReader) -> Result<Option<DatasetAttrs>> {

@@ -7,7 +7,6 @@ mod collect_mix;
 mod collect_policy;
 mod dataset;
 mod dataset_merge;
-mod episodes;
 mod export_policies;
 mod import_judge;
 mod import_policy;

@@ -10,11 +10,11 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use serde_json::json;
 
-use super::episodes::{BehaviourKind, FrameSpec, Perturbation, Runner};
 use crate::cli::RendererKind;
 use crate::cli::SimulateArgs;
 use crate::output::{Staged, write_json};
 use crate::progress;
+use scenarios::pusht::runs::{BehaviourKind, FrameSpec, Perturbation};
 
 /// Mean absolute difference between the left (MuJoCo) and right (raster) halves.
 fn side_by_side_difference(frames: &[Vec<u8>], size: usize) -> f64 {
@@ -85,7 +85,8 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     if !(16..=1024).contains(&args.gif_size) {
         anyhow::bail!("--gif-size must be in 16..=1024, got {}", args.gif_size);
     }
-    let runner = Runner::new(cfg, c.jobs, c.max_steps, Perturbation { noise: c.noise, lag: c.lag })?;
+    let runner =
+        super::collect::pusht_runner(cfg, c.jobs, c.max_steps, Perturbation { noise: c.noise, lag: c.lag })?;
     let work: Vec<(u64, BehaviourKind)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, kind)).collect();
     let out = Staged::new(&args.out, c.force, &inputs(args))?;
@@ -114,7 +115,10 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let gif_size = args.gif_size;
     runner.run(
         &work,
-        |i| (i == 0).then_some(FrameSpec { size: gif_size, renderer: args.renderer }),
+        |i| {
+            (i == 0)
+                .then_some(FrameSpec { size: gif_size, beside_mujoco: args.renderer == RendererKind::Mujoco })
+        },
         |i, ep| {
             for r in &ep.rows {
                 let line = json!({
@@ -144,7 +148,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
                 "steps": ep.rows.len(),
             }));
             pb.inc(1);
-            Ok(())
+            anyhow::Ok(())
         },
     )?;
     pb.finish_and_clear();

@@ -17,9 +17,8 @@ use std::io::{BufWriter, Write};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use rayon::prelude::*;
-use scenarios::robosuite::episode::release_renderer;
-use scenarios::robosuite::rollout::{ArmTask, Episode, Perturbation, RunLimits};
+use scenarios::robosuite::rollout::{ArmTask, Perturbation};
+use scenarios::robosuite::runs::{ArmRun, behaviour};
 use serde::Serialize;
 use serde_json::json;
 
@@ -43,81 +42,6 @@ struct InitLine<'a, I: Serialize> {
     seed: u64,
     #[serde(flatten)]
     init: &'a I,
-}
-
-/// Parses a behaviour name (`--policy`, `--mix`) for `task`.
-pub fn behaviour<T: ArmTask>(task: &T, name: &str) -> Result<T::Behaviour> {
-    let all = task.behaviours();
-    all.iter().find(|(n, _)| *n == name).map(|(_, b)| *b).with_context(|| {
-        let names: Vec<&str> = all.iter().map(|(n, _)| *n).collect();
-        format!("unknown {} behaviour '{name}' (built-in: {})", task.name(), names.join(", "))
-    })
-}
-
-/// How a batch of episodes runs.
-pub struct ArmRun<'a, T: ArmTask> {
-    /// The task.
-    pub task: &'a T,
-    /// Noise and lag on the behaviours' actions.
-    pub perturbation: Perturbation,
-    /// Step limit per episode.
-    pub max_steps: usize,
-    /// End an episode at its first success.
-    pub stop_at_success: bool,
-    /// Worker threads.
-    pub jobs: usize,
-}
-
-impl<T: ArmTask> ArmRun<'_, T> {
-    /// Runs `work` on the worker threads in batches, handing the episodes to
-    /// `done` in order; `frames(i)` asks episode `i` for frames of that side.
-    pub fn run(
-        &self,
-        work: &[(u64, T::Behaviour)],
-        frames: impl Fn(usize) -> Option<usize> + Sync,
-        mut done: impl FnMut(usize, Episode<T::Init, T::Behaviour>) -> Result<()>,
-    ) -> Result<()> {
-        let jobs = self.jobs.max(1);
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build()?;
-        let result = self.run_in(&pool, jobs, work, frames, &mut done);
-        // Free every worker's GL context while the workers are alive.
-        pool.broadcast(|_| release_renderer());
-        result
-    }
-
-    fn run_in(
-        &self,
-        pool: &rayon::ThreadPool,
-        jobs: usize,
-        work: &[(u64, T::Behaviour)],
-        frames: impl Fn(usize) -> Option<usize> + Sync,
-        done: &mut impl FnMut(usize, Episode<T::Init, T::Behaviour>) -> Result<()>,
-    ) -> Result<()> {
-        let batch = jobs * 4;
-        for (b, chunk) in work.chunks(batch).enumerate() {
-            let results: Vec<Result<Episode<T::Init, T::Behaviour>>> = pool.install(|| {
-                chunk
-                    .par_iter()
-                    .enumerate()
-                    .map(|(k, &(seed, kind))| {
-                        let limits = RunLimits {
-                            max_steps: self.max_steps,
-                            stop_at_success: self.stop_at_success,
-                            frame_size: frames(b * batch + k),
-                        };
-                        let name = self.task.behaviour_name(kind);
-                        self.task
-                            .episode(seed, kind, self.perturbation, limits)
-                            .with_context(|| format!("{} episode seed {seed} ({name})", self.task.name()))
-                    })
-                    .collect()
-            });
-            for (k, r) in results.into_iter().enumerate() {
-                done(b * batch + k, r?)?;
-            }
-        }
-        Ok(())
-    }
 }
 
 /// Runs the command.
@@ -203,7 +127,7 @@ pub fn run<T: ArmTask>(args: &SimulateArgs, task: &T, quiet: bool) -> Result<Exi
                 "steps_to_success": first,
             }));
             pb.inc(1);
-            Ok(())
+            anyhow::Ok(())
         },
     )?;
     pb.finish_and_clear();

@@ -1,4 +1,5 @@
-//! Running many scripted Push-T episodes in parallel, deterministically.
+//! Push-T's scripted behaviours by name, and many episodes of them run in parallel,
+//! deterministically (`collect`, `simulate`; Lift's and Can's are `robosuite::runs`).
 //!
 //! Episodes are processed in batches; inside a batch rayon runs them on
 //! `--jobs` threads, each with its own MuJoCo data on the shared model, and the
@@ -7,18 +8,18 @@
 
 use std::sync::Arc;
 
-use crate::cli::RendererKind;
-use anyhow::{Context, Result, bail};
 use harness::seed::{derive, fnv1a};
 use mujoco_rs::prelude::MjModel;
 use rayon::prelude::*;
-use scenarios::pusht::decoy::Decoy;
-use scenarios::pusht::expert::Expert;
-use scenarios::pusht::explore::Explorer;
-use scenarios::pusht::mj_render::{MujocoRenderer, SideBySide};
-use scenarios::pusht::render::Rasterizer;
-use scenarios::pusht::rollout::{Behaviour, Episode, FrameSource, Noisy, Record, run_episode};
-use scenarios::pusht::{PushTConfig, PushTEnv, PushTPhysics};
+
+use super::decoy::Decoy;
+use super::expert::Expert;
+use super::explore::Explorer;
+use super::mj_render::{MujocoRenderer, SideBySide};
+use super::render::Rasterizer;
+use super::rollout::{Behaviour, Episode, FrameSource, Noisy, Record, run_episode};
+use super::{PushTConfig, PushTEnv, PushTPhysics};
+use crate::error::ScenarioError;
 
 /// The scripted behaviours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -33,14 +34,20 @@ pub enum BehaviourKind {
 
 impl BehaviourKind {
     /// Parses a behaviour name.
-    pub fn parse(name: &str) -> Result<Self> {
+    ///
+    /// # Errors
+    /// [`ScenarioError::UnknownBehaviour`] listing the behaviours (or a checkpoint folder,
+    /// which the commands that take a name also take).
+    pub fn parse(name: &str) -> Result<Self, ScenarioError> {
         match name {
             "expert" => Ok(Self::Expert),
             "explore" => Ok(Self::Explore),
             "decoy" => Ok(Self::Decoy),
-            other => bail!(
-                "unknown policy '{other}' (built-in behaviours: expert, explore, decoy; or a checkpoint folder)"
-            ),
+            other => Err(ScenarioError::UnknownBehaviour {
+                what: "policy".into(),
+                name: other.into(),
+                listed: " behaviours: expert, explore, decoy; or a checkpoint folder".into(),
+            }),
         }
     }
 
@@ -102,18 +109,21 @@ fn behaviour(kind: BehaviourKind, env: &PushTEnv, seed: u64, p: Perturbation) ->
 pub struct FrameSpec {
     /// Side in pixels.
     pub size: usize,
-    /// Renderer.
-    pub renderer: RendererKind,
+    /// Also MuJoCo's OpenGL rendering, beside the rasteriser's (frames twice as wide).
+    pub beside_mujoco: bool,
 }
 
-fn frame_source(model: &Arc<MjModel>, cfg: &PushTConfig, spec: FrameSpec) -> Result<Box<dyn FrameSource>> {
+fn frame_source(
+    model: &Arc<MjModel>,
+    cfg: &PushTConfig,
+    spec: FrameSpec,
+) -> Result<Box<dyn FrameSource>, ScenarioError> {
     let raster = Rasterizer::with_size(cfg, spec.size);
-    Ok(match spec.renderer {
-        RendererKind::Raster => Box::new(raster),
-        RendererKind::Mujoco => {
-            let mujoco = MujocoRenderer::new(model.clone(), spec.size)?;
-            Box::new(SideBySide { mujoco, raster })
-        }
+    Ok(if spec.beside_mujoco {
+        let mujoco = MujocoRenderer::new(model.clone(), spec.size)?;
+        Box::new(SideBySide { mujoco, raster })
+    } else {
+        Box::new(raster)
     })
 }
 
@@ -130,40 +140,43 @@ pub struct Runner {
 }
 
 impl Runner {
-    /// Compiles the model and builds a pool of `jobs` threads.
+    /// Compiles the model and builds a pool of `jobs` threads; episodes end at
+    /// `max_steps` (the task's limit if `None`). The caller checks the settings (a finite
+    /// noise of at least 0, a positive step limit) and names the flags that set them.
+    ///
+    /// # Errors
+    /// A model that does not compile, or threads that cannot be started.
     pub fn new(
         cfg: PushTConfig,
         jobs: usize,
         max_steps: Option<u32>,
         perturbation: Perturbation,
-    ) -> Result<Self> {
-        if !(perturbation.noise.is_finite() && perturbation.noise >= 0.0) {
-            bail!("--noise must be a finite number >= 0, got {}", perturbation.noise);
-        }
+    ) -> Result<Self, ScenarioError> {
         let model = PushTPhysics::compile(&cfg)?;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(jobs.max(1))
             .build()
-            .context("starting worker threads")?;
+            .map_err(ScenarioError::Threads)?;
         let max_steps = max_steps.unwrap_or(cfg.task.max_steps);
-        if max_steps == 0 {
-            bail!("--max-steps must be at least 1");
-        }
         Ok(Self { cfg, model, pool, max_steps, perturbation })
     }
 
     /// Runs one episode per `(seed, behaviour)` in `work`, calling `done` with each
     /// result in input order. `frames(i)` says whether to render episode i's
     /// observations, and at what size.
-    pub fn run(
+    ///
+    /// # Errors
+    /// The first episode that fails ([`ScenarioError::Episode`], naming its seed and
+    /// behaviour), or what `done` returns.
+    pub fn run<E: From<ScenarioError>>(
         &self,
         work: &[(u64, BehaviourKind)],
         frames: impl Fn(usize) -> Option<FrameSpec> + Sync,
-        mut done: impl FnMut(usize, Episode) -> Result<()>,
-    ) -> Result<()> {
+        mut done: impl FnMut(usize, Episode) -> Result<(), E>,
+    ) -> Result<(), E> {
         let batch = self.pool.current_num_threads() * 4;
         for (b, chunk) in work.chunks(batch).enumerate() {
-            let results: Vec<Result<Episode>> = self.pool.install(|| {
+            let results: Vec<Result<Episode, ScenarioError>> = self.pool.install(|| {
                 chunk
                     .par_iter()
                     .enumerate()
@@ -178,8 +191,14 @@ impl Runner {
                             // Shorten the trait object's lifetime (no coercion happens inside an Option).
                             let frames = source.as_deref_mut().map(|s| s as &mut dyn FrameSource);
                             let record = Record { frames };
-                            run_episode(env, beh.as_mut(), seed, self.max_steps, record)
-                                .with_context(|| format!("episode seed {seed} ({})", kind.name()))
+                            run_episode(env, beh.as_mut(), seed, self.max_steps, record).map_err(|e| {
+                                ScenarioError::Episode {
+                                    scenario: String::new(),
+                                    seed,
+                                    behaviour: kind.name().into(),
+                                    source: Box::new(e),
+                                }
+                            })
                         },
                     )
                     .collect()
