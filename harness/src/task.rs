@@ -44,6 +44,22 @@ pub struct ActionSpec {
     pub kind: ActionKind,
 }
 
+/// Where a planar pushing task's state rows hold the poses its frames show ([`Task::pose_labels`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PoseColumns {
+    /// The pushed object's x, y, θ.
+    pub object: [usize; 3],
+    /// The goal's x, y, θ.
+    pub goal: [usize; 3],
+}
+
+impl PoseColumns {
+    /// The state columns a row must have for both poses.
+    pub fn columns_needed(&self) -> usize {
+        self.object.iter().chain(&self.goal).max().map_or(0, |m| m + 1)
+    }
+}
+
 /// What a policy observes in a task.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct ObservationSpec {
@@ -336,6 +352,12 @@ pub trait Task: Send + Sync {
     fn frame_labels(&self) -> Vec<(usize, String)> {
         Vec::new()
     }
+    /// The state columns of the poses a frame of a planar pushing task shows: the pushed
+    /// object's and the goal's (x, y, θ), labels a policy's frame encoder may be pre-trained
+    /// to regress through the square world's symmetries (Push-T). `None` by default.
+    fn pose_labels(&self) -> Option<PoseColumns> {
+        None
+    }
     /// Frees what the calling thread holds for this task's episodes, before the thread
     /// ends: a thread that ran episodes calls it when it is done (robosuite's tasks drop
     /// the thread's GL context, which torn down at process exit instead corrupted the
@@ -369,6 +391,15 @@ mod tests {
         assert_eq!(ScoreKind::Success.reward(0.7), 1.0);
         assert_eq!(ScoreKind::Success.reward(0.5), 0.0);
         assert_eq!(ScoreKind::Success.threshold(), 0.5);
+    }
+
+    #[test]
+    fn pose_columns_need_a_row_past_their_last_column() {
+        // Push-T's: object 2, 3, 4 and goal 5, 6, 7 need 8 columns; a GPC-like row of 5
+        // (agent x, y, block x, y, θ) lacks the goal.
+        let p = PoseColumns { object: [2, 3, 4], goal: [5, 6, 7] };
+        assert_eq!(p.columns_needed(), 8);
+        assert_eq!(PoseColumns { object: [0, 1, 2], goal: [9, 4, 3] }.columns_needed(), 10);
     }
 
     #[test]

@@ -104,10 +104,13 @@ impl Demos {
                 task.action_spec().dim
             )));
         }
-        let pusht = task.name() == "pusht";
-        if pusht && sdim < 8 {
+        let poses = task.pose_labels();
+        if let Some(p) = poses.filter(|p| sdim < p.columns_needed()) {
             return Err(err(format!(
-                "data/state has {sdim} columns, expected agent x, y, block x, y, θ, goal x, y, θ"
+                "data/state has {sdim} columns; {}'s poses are columns {:?} (object) and {:?} (goal)",
+                task.name(),
+                p.object,
+                p.goal
             )));
         }
         let named = task.frame_labels();
@@ -158,9 +161,9 @@ impl Demos {
             d.proprio.extend(proprio.into_iter().flatten());
             d.actions.extend(acts.into_iter().flatten());
             for row in &states {
-                if pusht {
-                    block.push([row[2] as f32, row[3] as f32, row[4] as f32]);
-                    goal.push([row[5] as f32, row[6] as f32, row[7] as f32]);
+                if let Some(p) = poses {
+                    block.push(p.object.map(|c| row[c] as f32));
+                    goal.push(p.goal.map(|c| row[c] as f32));
                 } else {
                     columns.extend(named.iter().map(|(c, _)| row[*c] as f32));
                 }
@@ -170,7 +173,7 @@ impl Demos {
         if d.episodes.is_empty() {
             return Err(err(format!("no episodes with behaviour {behaviour:?}")));
         }
-        d.labels = if pusht {
+        d.labels = if poses.is_some() {
             FrameLabels::PushT { block, goal }
         } else if named.is_empty() {
             FrameLabels::None

@@ -29,25 +29,28 @@ pub fn register_fonts() {
     });
 }
 
+/// What a drawing backend (or the file system under it) reported.
+pub type DrawError = Box<dyn std::error::Error + Send + Sync>;
+
 /// A plotting failure, naming the file.
 #[derive(Debug, thiserror::Error)]
-#[error("{path}: {message}")]
+#[error("{}: {source}", path.display())]
 pub struct PlotError {
     /// The file.
     pub path: PathBuf,
     /// What failed.
-    pub message: String,
+    pub source: DrawError,
 }
 
 const SIM: RGBColor = RGBColor(31, 119, 180);
 const WM: RGBColor = RGBColor(214, 39, 40);
 
-type Res = Result<(), String>;
+type Res = Result<(), DrawError>;
 
-/// A plotting error as its message (`Drawing backend error: …`), not the nested
-/// `BackendError(DrawingError(…))` of its debug form.
-fn e<T: std::fmt::Display>(x: T) -> String {
-    x.to_string()
+/// A backend's error, kept as the plot's error source (its message reads `Drawing backend
+/// error: …`).
+fn e<T: std::error::Error + Send + Sync + 'static>(x: T) -> DrawError {
+    Box::new(x)
 }
 
 /// Least-squares line y = a + b x (None for fewer than 2 distinct x).
@@ -63,7 +66,7 @@ pub fn least_squares(pts: &[(f64, f64)]) -> Option<(f64, f64)> {
 }
 
 /// The series legend, upper left, in the house style.
-fn legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
+fn legend<'a, DB: DrawingBackend<ErrorType: 'static> + 'a, CT: plotters::coord::CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
 ) -> Res {
     chart
@@ -81,7 +84,7 @@ fn caption(s: &Summary) -> String {
     format!("r = {}   ρ = {}   τ = {}", f(s.pearson), f(s.spearman), f(s.kendall))
 }
 
-fn scatter<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, s: &Summary) -> Res {
+fn scatter<DB: DrawingBackend<ErrorType: 'static>>(root: &DrawingArea<DB, Shift>, s: &Summary) -> Res {
     root.fill(&WHITE).map_err(e)?;
     let mut chart = ChartBuilder::on(root)
         .caption(caption(s), ("sans-serif", 16))
@@ -141,7 +144,7 @@ fn scatter<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, s: &Summary) -> Re
 
 /// The policies' names beside their points, placed so that they never overprint
 /// (see [`crate::labels`]); a label moved away from its point gets a leader line.
-fn point_labels<DB: DrawingBackend>(
+fn point_labels<DB: DrawingBackend<ErrorType: 'static>>(
     root: &DrawingArea<DB, Shift>,
     chart: &ChartContext<
         '_,
@@ -185,7 +188,7 @@ fn by_sim(s: &Summary) -> Vec<usize> {
     idx
 }
 
-fn bars<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, s: &Summary) -> Res {
+fn bars<DB: DrawingBackend<ErrorType: 'static>>(root: &DrawingArea<DB, Shift>, s: &Summary) -> Res {
     root.fill(&WHITE).map_err(e)?;
     let order = by_sim(s);
     let n = order.len().max(1);
@@ -253,7 +256,7 @@ fn ranks(v: &[f64]) -> Vec<usize> {
     r
 }
 
-fn bump<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, s: &Summary) -> Res {
+fn bump<DB: DrawingBackend<ErrorType: 'static>>(root: &DrawingArea<DB, Shift>, s: &Summary) -> Res {
     root.fill(&WHITE).map_err(e)?;
     let n = s.policies.len().max(1);
     let sim = ranks(&s.policies.iter().map(|p| p.sim.mean.value).collect::<Vec<_>>());
@@ -279,7 +282,11 @@ fn bump<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, s: &Summary) -> Res {
     root.present().map_err(e)
 }
 
-fn draw<DB: DrawingBackend>(name: &str, root: &DrawingArea<DB, Shift>, s: &Summary) -> Res {
+fn draw<DB: DrawingBackend<ErrorType: 'static>>(
+    name: &str,
+    root: &DrawingArea<DB, Shift>,
+    s: &Summary,
+) -> Res {
     match name {
         "scatter" => scatter(root, s),
         "bars" => bars(root, s),
@@ -293,11 +300,10 @@ fn draw<DB: DrawingBackend>(name: &str, root: &DrawingArea<DB, Shift>, s: &Summa
 /// [`PlotError`] naming the file that failed.
 pub fn write_plots(dir: &Path, s: &Summary) -> Result<Vec<PathBuf>, PlotError> {
     register_fonts();
-    std::fs::create_dir_all(dir)
-        .map_err(|x| PlotError { path: dir.to_path_buf(), message: x.to_string() })?;
+    std::fs::create_dir_all(dir).map_err(|x| PlotError { path: dir.to_path_buf(), source: Box::new(x) })?;
     let mut out = Vec::new();
     for (name, size) in [("scatter", (640, 600)), ("bars", (760, 480)), ("bump", (640, 420))] {
-        let err = |path: &Path, message: String| PlotError { path: path.to_path_buf(), message };
+        let err = |path: &Path, source: DrawError| PlotError { path: path.to_path_buf(), source };
         let png = dir.join(format!("{name}.png"));
         draw(name, &BitMapBackend::new(&png, size).into_drawing_area(), s).map_err(|m| err(&png, m))?;
         let svg = dir.join(format!("{name}.svg"));

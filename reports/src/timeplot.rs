@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::plots::{PlotError, register_fonts};
+use crate::plots::{DrawError, PlotError, register_fonts};
 
 /// One policy's curves.
 #[derive(Clone, Debug, PartialEq)]
@@ -43,15 +43,19 @@ pub fn band(traces: &[&[f64]]) -> Vec<[f64; 3]> {
         .collect()
 }
 
+/// A backend's error, kept as the plot's error source.
+fn boxed<T: std::error::Error + Send + Sync + 'static>(x: T) -> DrawError {
+    Box::new(x)
+}
+
 const SIM: RGBColor = RGBColor(31, 119, 180);
 const WM: RGBColor = RGBColor(214, 39, 40);
 
-fn panel<DB: DrawingBackend>(
+fn panel<DB: DrawingBackend<ErrorType: 'static>>(
     area: &DrawingArea<DB, Shift>,
     ts: &TimeSeries,
     max_step: f64,
-) -> Result<(), String> {
-    let e = |x: &dyn std::fmt::Debug| format!("{x:?}");
+) -> Result<(), DrawError> {
     let mut chart = ChartBuilder::on(area)
         .caption(&ts.policy, ("sans-serif", 13))
         .margin(6)
@@ -59,7 +63,7 @@ fn panel<DB: DrawingBackend>(
         .x_label_area_size(26)
         .y_label_area_size(34)
         .build_cartesian_2d(0f64..max_step, 0f64..1f64)
-        .map_err(|x| e(&x))?;
+        .map_err(boxed)?;
     chart
         .configure_mesh()
         .x_labels(4)
@@ -68,22 +72,24 @@ fn panel<DB: DrawingBackend>(
         .light_line_style(WHITE.mix(0.0))
         .label_style(("sans-serif", 10))
         .draw()
-        .map_err(|x| e(&x))?;
+        .map_err(boxed)?;
     for (vals, color) in [(&ts.sim, SIM), (&ts.world_model, WM)] {
         let pts = || ts.steps.iter().copied().zip(vals.iter());
         let mut poly: Vec<(f64, f64)> = pts().map(|(x, v)| (x, v[2])).collect();
         poly.extend(pts().rev().map(|(x, v)| (x, v[1])));
-        chart.draw_series([Polygon::new(poly, color.mix(0.18).filled())]).map_err(|x| e(&x))?;
+        chart.draw_series([Polygon::new(poly, color.mix(0.18).filled())]).map_err(boxed)?;
         chart
             .draw_series(LineSeries::new(pts().map(|(x, v)| (x, v[0])), color.stroke_width(2)))
-            .map_err(|x| e(&x))?;
+            .map_err(boxed)?;
     }
     Ok(())
 }
 
-fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, series: &[TimeSeries]) -> Result<(), String> {
-    let e = |x: &dyn std::fmt::Debug| format!("{x:?}");
-    root.fill(&WHITE).map_err(|x| e(&x))?;
+fn draw<DB: DrawingBackend<ErrorType: 'static>>(
+    root: &DrawingArea<DB, Shift>,
+    series: &[TimeSeries],
+) -> Result<(), DrawError> {
+    root.fill(&WHITE).map_err(boxed)?;
     let (title, body) = root.split_vertically(34);
     title
         .draw(&Text::new(
@@ -91,14 +97,14 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, series: &[TimeSeries]
             (10, 8),
             ("sans-serif", 15),
         ))
-        .map_err(|x| e(&x))?;
+        .map_err(boxed)?;
     let cols = 4.min(series.len().max(1));
     let rows = series.len().div_ceil(cols).max(1);
     let max_step = series.iter().flat_map(|s| s.steps.iter().copied()).fold(1.0, f64::max);
     for (area, ts) in body.split_evenly((rows, cols)).iter().zip(series) {
         panel(area, ts, max_step)?;
     }
-    root.present().map_err(|x| e(&x))
+    root.present().map_err(boxed)
 }
 
 /// Writes `dir/score_over_time.{png,svg}`; returns the PNG path.
@@ -111,7 +117,7 @@ pub fn write_time_plot(dir: &Path, series: &[TimeSeries]) -> Result<PathBuf, Plo
     let rows = series.len().div_ceil(cols as usize).max(1) as u32;
     let size = (240 * cols + 20, 190 * rows + 40);
     let png = dir.join("score_over_time.png");
-    let err = |p: &Path, m: String| PlotError { path: p.to_path_buf(), message: m };
+    let err = |p: &Path, source: DrawError| PlotError { path: p.to_path_buf(), source };
     draw(&BitMapBackend::new(&png, size).into_drawing_area(), series).map_err(|m| err(&png, m))?;
     let svg = dir.join("score_over_time.svg");
     draw(&SVGBackend::new(&svg, size).into_drawing_area(), series).map_err(|m| err(&svg, m))?;
@@ -130,5 +136,23 @@ mod tests {
             (b[0][0] - 0.3).abs() < 1e-12 && (b[0][1] - 0.104).abs() < 1e-3 && (b[0][2] - 0.496).abs() < 1e-3
         );
         assert_eq!(b[1], [0.5, 0.5, 0.5]);
+    }
+
+    /// A plot that cannot be written names its file and keeps the backend's error as its
+    /// source (a string before, which lost it).
+    #[test]
+    fn an_unwritable_plot_names_its_file_and_keeps_the_cause() {
+        let dir = tempfile::tempdir().unwrap();
+        let not_a_dir = dir.path().join("file");
+        std::fs::write(&not_a_dir, b"x").unwrap();
+        let ts = TimeSeries {
+            policy: "p".into(),
+            steps: vec![8.0, 16.0],
+            sim: vec![[0.2, 0.1, 0.3]; 2],
+            world_model: vec![[0.3, 0.2, 0.4]; 2],
+        };
+        let e = write_time_plot(&not_a_dir, &[ts]).unwrap_err();
+        assert!(e.to_string().contains("score_over_time.png"), "{e}");
+        assert!(std::error::Error::source(&e).is_some());
     }
 }

@@ -16,8 +16,8 @@ use std::sync::Arc;
 use harness::judge::Judge;
 use harness::policy::Policy;
 use harness::task::{
-    ActionKind, ActionSpec, Env, Imagination, ModelView, ObservationSpec, PlanCost, ScoreKind, Seen, Task,
-    TaskError,
+    ActionKind, ActionSpec, Env, Imagination, ModelView, ObservationSpec, PlanCost, PoseColumns, ScoreKind,
+    Seen, Task, TaskError,
 };
 use mujoco_rs::prelude::MjModel;
 
@@ -60,6 +60,11 @@ impl PushTTask {
 impl Task for PushTTask {
     fn name(&self) -> &str {
         "pusht"
+    }
+
+    fn pose_labels(&self) -> Option<PoseColumns> {
+        // `collect`'s state columns: agent x, y; block x, y, θ; goal x, y, θ.
+        Some(PoseColumns { object: [2, 3, 4], goal: [5, 6, 7] })
     }
 
     fn action_spec(&self) -> ActionSpec {

@@ -251,7 +251,13 @@ pub fn serve(
                 output.write_all(b"K")?;
                 output.write_all(&f)?;
             }
-            Err(m) => {
+            Err(e) => {
+                // The reply crosses the pipe as text, which the caller makes a render error
+                // again: a render error's own message, so that it is not wrapped twice.
+                let m = match e {
+                    ScenarioError::Render { message } => message,
+                    other => other.to_string(),
+                };
                 output.write_all(b"E")?;
                 output.write_all(&(m.len() as u32).to_le_bytes())?;
                 output.write_all(m.as_bytes())?;
@@ -269,10 +275,11 @@ fn frame(
     build: &dyn Fn(&ModelKey) -> Result<MjModel, ScenarioError>,
     qpos: &[f64],
     size: usize,
-) -> Result<Vec<u8>, String> {
+) -> Result<Vec<u8>, ScenarioError> {
+    let err = |message: String| ScenarioError::Render { message };
     if !held.contains_key(text) {
-        let key: ModelKey = serde_json::from_str(text).map_err(|e| format!("a request's model: {e}"))?;
-        let model = build(&key).map_err(|e| e.to_string())?;
+        let key: ModelKey = serde_json::from_str(text).map_err(|e| err(format!("a request's model: {e}")))?;
+        let model = build(&key)?;
         if held.len() >= KEEP {
             let oldest = held.iter().min_by_key(|(_, (t, _))| *t).map(|(k, _)| k.clone());
             if let Some(k) = oldest {
@@ -281,12 +288,12 @@ fn frame(
         }
         held.insert(text.to_string(), (clock, MjData::new(Arc::new(model))));
     }
-    let Some((used, data)) = held.get_mut(text) else { return Err("no model".into()) };
+    let Some((used, data)) = held.get_mut(text) else { return Err(err("no model".into())) };
     *used = clock;
     if data.qpos().len() != qpos.len() {
-        return Err(format!("{} joint positions for a model of {}", qpos.len(), data.qpos().len()));
+        return Err(err(format!("{} joint positions for a model of {}", qpos.len(), data.qpos().len())));
     }
     data.qpos_mut().copy_from_slice(qpos);
     data.forward();
-    super::episode::render_agentview(data, size).map_err(|e| e.to_string())
+    super::episode::render_agentview(data, size)
 }

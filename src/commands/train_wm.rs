@@ -64,9 +64,12 @@ fn action_scale_of(data: &Path, action_dim: usize) -> Result<Option<world_model:
     Ok(spec.map(|s| world_model::action::ActionScale { low: s.low, high: s.high }))
 }
 
-/// `evalharness train world-model`.
-pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
-    let objective = fresh_objective(a.objective);
+/// The training settings the flags ask for, every flag checked against the others (before
+/// `--force` clears the output folder, so a refused run keeps it).
+///
+/// # Errors
+/// A flag out of range, or one that the objective, field or other flags rule out.
+fn train_config(a: &TrainWorldModelArgs, objective: Objective) -> Result<WmTrainConfig> {
     let defaults = WmTrainConfig::for_objective(objective);
     let cfg = WmTrainConfig {
         steps: a.steps.unwrap_or(defaults.steps),
@@ -131,6 +134,78 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
             bail!("--init-from {} is the output folder itself", dir.display());
         }
     }
+    Ok(cfg)
+}
+
+/// A fresh run's world-model configuration: the U-Net the flags ask for on `data`'s actions,
+/// the latents' statistics (measured through `codec`, or the warm start's), and the sampling
+/// settings.
+///
+/// # Errors
+/// Flags the data or the family rule out, or a warm start that cannot be read.
+fn fresh_model_config(
+    a: &TrainWorldModelArgs,
+    objective: Objective,
+    data: &EpisodeData,
+    codec: &FrameCodec,
+    inner: &Device,
+) -> Result<WorldModelConfig> {
+    let actions = action_scale_of(&a.data, data.action_dim)?;
+    if actions.is_some() && a.action_maps {
+        bail!(
+            "--action-maps draws Push-T's 2-D targets onto the frame; {} holds other actions",
+            a.data.display()
+        );
+    }
+    let family = match a.config {
+        WmConfigArg::PushtLatent => UNetConfig::pusht_latent(codec.channels()),
+        WmConfigArg::PushtPixel => UNetConfig::pusht_pixel(),
+    };
+    let unet = UNetConfig {
+        model_channels: a.base_channels.unwrap_or(match a.config {
+            WmConfigArg::PushtLatent => 32,
+            WmConfigArg::PushtPixel => family.model_channels,
+        }),
+        timestep_embedding: objective == Objective::Diffusion,
+        action_maps: a.action_maps.then_some(true),
+        anchor: a.anchor.then_some(true),
+        accentuation: a.accentuation.then_some(true),
+        action_dim: data.action_dim,
+        ..family
+    };
+    if let Err(e) = unet.check() {
+        bail!("--base-channels {}: {e}", unet.model_channels);
+    }
+    let stats = match &a.init_from {
+        Some(dir) => warm_start_stats(dir, &unet, a.autoencoder.as_deref())?,
+        None => {
+            tracing::info!("measuring the encoded frames' statistics");
+            Latents::measure_stats(data, codec, 2048, inner)
+        }
+    };
+    let autoencoder = match &a.autoencoder {
+        Some(ae) => Some(relative_to(&a.out, ae)?),
+        None => None,
+    };
+    Ok(WorldModelConfig {
+        objective,
+        unet,
+        latents: stats,
+        autoencoder,
+        future: 4,
+        sample_steps: if objective == Objective::Diffusion { a.sample_steps.max(1) } else { 1 },
+        prediction: fresh_prediction(a),
+        alpha: a.accentuation.then_some(a.alpha.unwrap_or(DEFAULT_ALPHA)),
+        goal_free: a.goal_free.then_some(true),
+        actions,
+        noise_scale: None,
+    })
+}
+
+/// `evalharness train world-model`.
+pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
+    let objective = fresh_objective(a.objective);
+    let cfg = train_config(a, objective)?;
     let mut inputs: Vec<(&str, &Path)> = vec![("--data", &a.data)];
     inputs.extend(a.autoencoder.as_deref().map(|p| ("--autoencoder", p)));
     inputs.extend(a.init_from.as_deref().map(|p| ("--init-from", p)));
@@ -164,58 +239,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let model_cfg = match saved {
         Some(saved) => saved,
-        None => {
-            let actions = action_scale_of(&a.data, data.action_dim)?;
-            if actions.is_some() && a.action_maps {
-                bail!(
-                    "--action-maps draws Push-T's 2-D targets onto the frame; {} holds other actions",
-                    a.data.display()
-                );
-            }
-            let family = match a.config {
-                WmConfigArg::PushtLatent => UNetConfig::pusht_latent(codec.channels()),
-                WmConfigArg::PushtPixel => UNetConfig::pusht_pixel(),
-            };
-            let unet = UNetConfig {
-                model_channels: a.base_channels.unwrap_or(match a.config {
-                    WmConfigArg::PushtLatent => 32,
-                    WmConfigArg::PushtPixel => family.model_channels,
-                }),
-                timestep_embedding: objective == Objective::Diffusion,
-                action_maps: a.action_maps.then_some(true),
-                anchor: a.anchor.then_some(true),
-                accentuation: a.accentuation.then_some(true),
-                action_dim: data.action_dim,
-                ..family
-            };
-            if let Err(e) = unet.check() {
-                bail!("--base-channels {}: {e}", unet.model_channels);
-            }
-            let stats = match &a.init_from {
-                Some(dir) => warm_start_stats(dir, &unet, a.autoencoder.as_deref())?,
-                None => {
-                    tracing::info!("measuring the encoded frames' statistics");
-                    Latents::measure_stats(&data, &codec, 2048, &inner)
-                }
-            };
-            let autoencoder = match &a.autoencoder {
-                Some(ae) => Some(relative_to(&a.out, ae)?),
-                None => None,
-            };
-            WorldModelConfig {
-                objective,
-                unet,
-                latents: stats,
-                autoencoder,
-                future: 4,
-                sample_steps: if objective == Objective::Diffusion { a.sample_steps.max(1) } else { 1 },
-                prediction: fresh_prediction(a),
-                alpha: a.accentuation.then_some(a.alpha.unwrap_or(DEFAULT_ALPHA)),
-                goal_free: a.goal_free.then_some(true),
-                actions,
-                noise_scale: None,
-            }
-        }
+        None => fresh_model_config(a, objective, &data, &codec, &inner)?,
     };
     let args: Vec<String> = crate::stdout::command_line();
     open_session(&a.out, &args.join(" "), &git_commit(), from_step)?;
