@@ -31,6 +31,54 @@ fn side_by_side_difference(frames: &[Vec<u8>], size: usize) -> f64 {
     sum / n.max(1) as f64
 }
 
+/// One episode's entry in `summary.json`.
+#[derive(serde::Serialize)]
+struct EpisodeSummary {
+    seed: u64,
+    score: f64,
+    success: bool,
+    steps: usize,
+}
+
+/// Writes `summary.json` (and `render_crosscheck.json` when MuJoCo's frames were drawn beside
+/// the rasteriser's, for the first episode: its frame side and seed); returns the mean score
+/// and the success rate.
+fn write_summaries(
+    out: &Staged,
+    kind: BehaviourKind,
+    per_episode: Vec<EpisodeSummary>,
+    crosscheck: Option<f64>,
+    (gif_size, first_seed): (usize, u64),
+) -> Result<(f64, f64)> {
+    let n = per_episode.len().max(1) as f64;
+    let mean_score = per_episode.iter().map(|e| e.score).sum::<f64>() / n;
+    let success_rate = per_episode.iter().filter(|e| e.success).count() as f64 / n;
+    write_json(
+        &out.file("summary.json"),
+        &json!({
+            "scenario": "pusht",
+            "policy": kind.name(),
+            "episodes": per_episode.len(),
+            "mean_score": mean_score,
+            "success_rate": success_rate,
+            "per_episode": per_episode,
+        }),
+    )?;
+    if let Some(mad) = crosscheck {
+        write_json(
+            &out.file("render_crosscheck.json"),
+            &json!({
+                "what": "mean absolute difference per channel (0-255) between MuJoCo's renderer and \
+                         the rasteriser over the first episode's frames",
+                "size": gif_size,
+                "episode_seed": first_seed,
+                "mean_abs_diff": mad,
+            }),
+        )?;
+    }
+    Ok((mean_score, success_rate))
+}
+
 /// Runs the command.
 pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
     let path = std::path::Path::new(&args.policy);
@@ -80,6 +128,12 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
             }
             scenarios::Scenario::PushT(cfg) => *cfg,
         };
+    run_pusht(args, cfg, quiet)
+}
+
+/// A Push-T scripted behaviour `args` names, simulated with the scenario `cfg`.
+fn run_pusht(args: &SimulateArgs, cfg: scenarios::pusht::PushTConfig, quiet: bool) -> Result<ExitCode> {
+    let c = &args.common;
     super::collect::refuse_run_on_for_pusht(args.no_early_stop)?;
     let kind = BehaviourKind::parse(&args.policy)?;
     if !(16..=1024).contains(&args.gif_size) {
@@ -141,44 +195,20 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
                     crosscheck = Some(side_by_side_difference(&ep.frames, gif_size));
                 }
             }
-            per_episode.push(json!({
-                "seed": ep.seed,
-                "score": ep.score,
-                "success": ep.success,
-                "steps": ep.rows.len(),
-            }));
+            per_episode.push(EpisodeSummary {
+                seed: ep.seed,
+                score: ep.score,
+                success: ep.success,
+                steps: ep.rows.len(),
+            });
             pb.inc(1);
             anyhow::Ok(())
         },
     )?;
     pb.finish_and_clear();
     jsonl.flush().with_context(|| format!("writing {}", jsonl_path.display()))?;
-    let n = per_episode.len().max(1) as f64;
-    let mean_score = per_episode.iter().filter_map(|e| e["score"].as_f64()).sum::<f64>() / n;
-    let success_rate = per_episode.iter().filter(|e| e["success"] == true).count() as f64 / n;
-    write_json(
-        &out.file("summary.json"),
-        &json!({
-            "scenario": "pusht",
-            "policy": kind.name(),
-            "episodes": per_episode.len(),
-            "mean_score": mean_score,
-            "success_rate": success_rate,
-            "per_episode": per_episode,
-        }),
-    )?;
-    if let Some(mad) = crosscheck {
-        write_json(
-            &out.file("render_crosscheck.json"),
-            &json!({
-                "what": "mean absolute difference per channel (0-255) between MuJoCo's renderer and \
-                         the rasteriser over the first episode's frames",
-                "size": gif_size,
-                "episode_seed": c.seed_start,
-                "mean_abs_diff": mad,
-            }),
-        )?;
-    }
+    let (mean_score, success_rate) =
+        write_summaries(&out, kind, per_episode, crosscheck, (gif_size, c.seed_start))?;
     let dir = out.commit()?;
     outln!(
         "pusht {}: {} episodes, mean score {:.3}, success rate {:.1}% -> {}",

@@ -34,6 +34,69 @@ fn label_of(a: &TrainJudgeArgs) -> Result<Label> {
     )
 }
 
+/// The judge file of a run `a` asks for (its label and threshold, its network `net`, trained
+/// with `cfg` on `data`), with its provenance; the metrics are filled in after training.
+///
+/// # Errors
+/// Dataset attributes that cannot be read for the provenance.
+fn judge_file(
+    a: &TrainJudgeArgs,
+    (label, threshold): (Label, f64),
+    data: &JudgeData,
+    net: NetConfig,
+    cfg: &JudgeTrainConfig,
+) -> Result<JudgeFile> {
+    let frames = data.labels.len();
+    let args: Vec<String> = crate::stdout::command_line();
+    Ok(JudgeFile {
+        pose_base: None,
+        kind: "learned".into(),
+        net,
+        rule: None,
+        label,
+        threshold,
+        persist_frames: a.persist,
+        steps: a.steps,
+        heldout: JudgeMetrics::default(),
+        provenance: json!({
+            "command": args.join(" "),
+            "commit": git_commit(),
+            "seed": a.seed,
+            "train": cfg,
+            "data": {
+                "path": a.data.display().to_string(),
+                "fingerprint": harness::fingerprint::folder(&a.data).ok(),
+                "episodes": data.episodes.len(),
+                "frames": frames,
+                "held_out": "episodes with index % 10 == 9",
+                "collected_with": dataset_origin(&a.data)?,
+            },
+        }),
+    })
+}
+
+/// The held-out metrics, said in one line.
+fn say_result(a: &TrainJudgeArgs, (label, threshold): (Label, f64), heldout: &JudgeMetrics) {
+    let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));
+    let whole = heldout.episodes.map_or(String::new(), |e| {
+        format!(
+            "; whole episodes (success held for {} judged frame(s)): {} of {} read right ({} succeed; {} false successes, {} missed)",
+            a.persist, e.agree, e.episodes, e.successes, e.false_successes, e.missed_successes
+        )
+    });
+    outln!(
+        "judge of {}: held-out {} frames ({} above {threshold}): mean abs error {:.4}, accuracy {}, recall {}, precision {}{whole} -> {}",
+        label.array(),
+        heldout.frames,
+        heldout.positives,
+        heldout.mean_abs_error,
+        pct(Some(heldout.accuracy)),
+        pct(heldout.recall),
+        pct(heldout.precision),
+        a.out.display()
+    );
+}
+
 /// `evalharness train judge`.
 pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     if a.steps == 0 || a.batch == 0 || a.eval_every == 0 || a.persist == 0 {
@@ -70,32 +133,7 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
         symmetries: a.symmetries,
         eval_every: a.eval_every,
     };
-    let args: Vec<String> = crate::stdout::command_line();
-    let mut file = JudgeFile {
-        pose_base: None,
-        kind: "learned".into(),
-        net,
-        rule: None,
-        label,
-        threshold,
-        persist_frames: a.persist,
-        steps: a.steps,
-        heldout: JudgeMetrics::default(),
-        provenance: json!({
-            "command": args.join(" "),
-            "commit": git_commit(),
-            "seed": a.seed,
-            "train": cfg,
-            "data": {
-                "path": a.data.display().to_string(),
-                "fingerprint": harness::fingerprint::folder(&a.data).ok(),
-                "episodes": data.episodes.len(),
-                "frames": frames,
-                "held_out": "episodes with index % 10 == 9",
-                "collected_with": dataset_origin(&a.data)?,
-            },
-        }),
-    };
+    let mut file = judge_file(a, (label, threshold), &data, net, &cfg)?;
     let clock = harness::driver::Clock::start(a.max_minutes);
     let mut out_of_time = || clock.out_of_time();
     let pb = progress::bar(a.steps, "judge", quiet);
@@ -130,23 +168,6 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     }
     write_judge(staged.dir(), Some(&net), &file)?;
     staged.commit()?;
-    let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));
-    let whole = heldout.episodes.map_or(String::new(), |e| {
-        format!(
-            "; whole episodes (success held for {} judged frame(s)): {} of {} read right ({} succeed; {} false successes, {} missed)",
-            a.persist, e.agree, e.episodes, e.successes, e.false_successes, e.missed_successes
-        )
-    });
-    outln!(
-        "judge of {}: held-out {} frames ({} above {threshold}): mean abs error {:.4}, accuracy {}, recall {}, precision {}{whole} -> {}",
-        label.array(),
-        heldout.frames,
-        heldout.positives,
-        heldout.mean_abs_error,
-        pct(Some(heldout.accuracy)),
-        pct(heldout.recall),
-        pct(heldout.precision),
-        a.out.display()
-    );
+    say_result(a, (label, threshold), &heldout);
     Ok(ExitCode::SUCCESS)
 }
