@@ -44,6 +44,39 @@ struct InitLine<'a, I: Serialize> {
     init: &'a I,
 }
 
+/// One episode's entry in `summary.json`.
+#[derive(Serialize)]
+struct EpisodeSummary {
+    seed: u64,
+    success: bool,
+    steps: usize,
+    /// Control steps until the first success (none for a failure).
+    steps_to_success: Option<usize>,
+}
+
+/// Writes `config.json`: the resolved scenario and arguments of the run.
+fn write_config<T: ArmTask>(out: &Staged, args: &SimulateArgs, task: &T, max_steps: usize) -> Result<()> {
+    let c = &args.common;
+    write_json(
+        &out.file("config.json"),
+        &json!({
+            "command": "simulate",
+            "scenario": task.name(),
+            "scenario_config": task.config_json(),
+            "policy": args.policy,
+            "episodes": c.episodes,
+            "seed_start": c.seed_start,
+            "max_steps": max_steps,
+            "stop_at_success": !args.no_early_stop,
+            "noise": c.noise,
+            "lag": c.lag,
+            "state_columns": task.state_columns(),
+            "evalharness_version": env!("CARGO_PKG_VERSION"),
+        }),
+    )?;
+    Ok(())
+}
+
 /// Runs the command.
 pub fn run<T: ArmTask>(args: &SimulateArgs, task: &T, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
@@ -63,23 +96,7 @@ pub fn run<T: ArmTask>(args: &SimulateArgs, task: &T, quiet: bool) -> Result<Exi
     let work: Vec<(u64, T::Behaviour)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, kind)).collect();
     let out = Staged::new(&args.out, c.force, &super::simulate::inputs(args))?;
-    write_json(
-        &out.file("config.json"),
-        &json!({
-            "command": "simulate",
-            "scenario": name,
-            "scenario_config": task.config_json(),
-            "policy": args.policy,
-            "episodes": c.episodes,
-            "seed_start": c.seed_start,
-            "max_steps": max_steps,
-            "stop_at_success": !args.no_early_stop,
-            "noise": c.noise,
-            "lag": c.lag,
-            "state_columns": task.state_columns(),
-            "evalharness_version": env!("CARGO_PKG_VERSION"),
-        }),
-    )?;
+    write_config(&out, args, task, max_steps)?;
     let open = |name: &str| -> Result<(std::path::PathBuf, BufWriter<std::fs::File>)> {
         let p = out.file(name);
         let f = std::fs::File::create(&p).with_context(|| format!("creating {}", p.display()))?;
@@ -120,12 +137,12 @@ pub fn run<T: ArmTask>(args: &SimulateArgs, task: &T, quiet: bool) -> Result<Exi
                 )?;
             }
             let first = ep.rows.iter().position(|r| r.success).map(|s| s + 1);
-            per_episode.push(json!({
-                "seed": ep.seed,
-                "success": ep.success,
-                "steps": ep.rows.len(),
-                "steps_to_success": first,
-            }));
+            per_episode.push(EpisodeSummary {
+                seed: ep.seed,
+                success: ep.success,
+                steps: ep.rows.len(),
+                steps_to_success: first,
+            });
             pb.inc(1);
             anyhow::Ok(())
         },
@@ -134,7 +151,7 @@ pub fn run<T: ArmTask>(args: &SimulateArgs, task: &T, quiet: bool) -> Result<Exi
     jsonl.flush().with_context(|| format!("writing {}", jsonl_path.display()))?;
     inits.flush().with_context(|| format!("writing {}", init_path.display()))?;
     let n = per_episode.len().max(1) as f64;
-    let success_rate = per_episode.iter().filter(|e| e["success"] == true).count() as f64 / n;
+    let success_rate = per_episode.iter().filter(|e| e.success).count() as f64 / n;
     write_json(
         &out.file("summary.json"),
         &json!({

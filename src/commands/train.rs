@@ -133,12 +133,13 @@ pub fn data_provenance(path: &std::path::Path, episodes: usize, frames: usize) -
     }))
 }
 
-/// `evalharness train autoencoder`.
-pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
-    let mut inputs: Vec<(&str, &std::path::Path)> = vec![("--data", &a.data)];
-    inputs.extend(a.encoder_from.as_deref().map(|p| ("--encoder-from", p)));
-    let out_dir = prepare_out(&a.out, a.session.resume, a.session.force, "state.json", &inputs)?;
-    let from_step = read_step(&a.out)?;
+/// The autoencoder and training settings the flags ask for; on `--resume`, checked against the
+/// run's saved ones (a flag that contradicts them is refused).
+///
+/// # Errors
+/// `--decoder-channels` that are not four multiples of 8, an unreadable saved config, or a
+/// contradicting flag.
+fn autoencoder_configs(a: &TrainAutoencoderArgs) -> Result<(AutoencoderConfig, AeTrainConfig)> {
     let decoder_channels = match a.decoder_channels.as_deref() {
         None => None,
         Some(&[c0, c1, c2, c3]) if [c0, c1, c2, c3].iter().all(|&c| c >= 8 && c % 8 == 0) => {
@@ -168,6 +169,16 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
         fixed.extend(fixed_fields(&serde_json::to_value(&model_cfg)?, &saved["model"], &model_keys));
         refuse_contradicting_flags(&path, "autoencoder", &fixed)?;
     }
+    Ok((model_cfg, cfg))
+}
+
+/// `evalharness train autoencoder`.
+pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
+    let mut inputs: Vec<(&str, &std::path::Path)> = vec![("--data", &a.data)];
+    inputs.extend(a.encoder_from.as_deref().map(|p| ("--encoder-from", p)));
+    let out_dir = prepare_out(&a.out, a.session.resume, a.session.force, "state.json", &inputs)?;
+    let from_step = read_step(&a.out)?;
+    let (model_cfg, cfg) = autoencoder_configs(a)?;
     tracing::info!(data = %a.data.display(), "loading frames");
     let data = EpisodeData::load(&a.data, model_cfg.image_size)?;
     // Read before training, so that unreadable attributes stop the run before it starts.
