@@ -243,6 +243,14 @@ impl DatasetAttrs {
         };
         let run_on = if self.source.no_early_stop == Some(true) { " --no-early-stop" } else { "" };
         let (seed_start, max_steps) = (js(&self.seed_start), js(&self.max_steps));
+        if let (Some(policy), Some(wm)) = (&self.source.policy, &self.source.replay_imagined) {
+            return Recipe {
+                command: self.replay_command(&scenario, policy, wm, episodes),
+                inputs: None,
+                checkpoints: None,
+                evalharness_version: version,
+            };
+        }
         if let Some(policy) = &self.source.policy {
             // `collect --policy`: `--episodes` counts per checkpoint.
             let per = episodes / self.source.checkpoints.as_ref().map_or(1, |c| c.len().max(1) as u64);
@@ -266,6 +274,27 @@ impl DatasetAttrs {
             checkpoints: None,
             evalharness_version: version,
         }
+    }
+}
+
+impl DatasetAttrs {
+    /// `simulate --replay-imagined --record`'s command for these attributes (`scenario` as
+    /// [`Self::recipe`] writes it): `--episodes` counts per checkpoint, and each checkpoint's
+    /// episodes carry its own behaviour label.
+    fn replay_command(&self, scenario: &str, policy: &str, wm: &Path, episodes: u64) -> String {
+        let labels: std::collections::BTreeSet<&str> =
+            self.episodes.iter().filter_map(|e| e.behaviour.as_deref()).collect();
+        let per = episodes / (labels.len().max(1) as u64);
+        let judge =
+            self.source.judge.as_ref().map(|j| format!(" --judge {}", j.display())).unwrap_or_default();
+        let noise = self.source.noise_scale.map(|t| format!(" --noise-scale {t}")).unwrap_or_default();
+        format!(
+            "evalharness simulate{scenario} --policy {policy} --replay-imagined {}{judge}{noise} --seed {} --episodes {per} --seed-start {} --max-steps {} --record DATASET --out OUT",
+            wm.display(),
+            self.source.seed.unwrap_or(0),
+            js(&self.seed_start),
+            js(&self.max_steps)
+        )
     }
 }
 
@@ -329,6 +358,23 @@ mod tests {
             "evalharness collect --episodes 1 --seed-start 9 --mix explore=1 --noise 80.0 --lag 2 --max-steps 300"
         );
         assert!(inputs[0].command.contains("--episodes 2 "), "{}", inputs[0].command);
+    }
+
+    /// Regression: a `simulate --replay-imagined --record` dataset's recipe read as `collect
+    /// --policy`, which makes other episodes.
+    #[test]
+    fn a_replayed_dataset_is_remade_by_simulate() {
+        // 2 checkpoints' labels over 4 episodes: 2 episodes each.
+        let ep = |b: &str| json!({"behaviour": b, "seed": 1});
+        let a = attrs(json!({"scenario": "lift", "seed_start": 7, "max_steps": 150, "policy": "pol",
+            "replay_imagined": "wm", "judge": "j", "noise_scale": 0.5, "seed": 3, "version": "0.1.0",
+            "episodes": [ep("a/imagined-actions"), ep("a/imagined-actions"), ep("b/imagined-actions"),
+                         ep("b/imagined-actions")]}));
+        assert_eq!(
+            a.recipe(None).command,
+            "evalharness simulate --scenario lift --policy pol --replay-imagined wm --judge j --noise-scale 0.5 \
+             --seed 3 --episodes 2 --seed-start 7 --max-steps 150 --record DATASET --out OUT"
+        );
     }
 
     #[test]
