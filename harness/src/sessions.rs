@@ -35,6 +35,9 @@ pub enum SessionError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// The checkpoint's state file cannot be read or holds no step.
+    #[error(transparent)]
+    State(#[from] crate::runfile::RunFileError),
     /// A file does not parse.
     #[error("{}: {source}", path.display())]
     Parse {
@@ -90,8 +93,7 @@ pub fn checkpoint_at(out: &Path) -> Result<(u64, f64), SessionError> {
     if !path.is_file() {
         return Ok((0, 0.0));
     }
-    let text = std::fs::read_to_string(&path).map_err(io(&path))?;
-    let c: Checkpoint = serde_json::from_str(&text).map_err(parse(&path))?;
+    let c: Checkpoint = crate::driver::read_state(&path)?;
     Ok((c.step, c.elapsed_s))
 }
 

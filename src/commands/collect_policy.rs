@@ -22,7 +22,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use engine::{Setup, Start, Timing, sim_branch};
-use harness::replay::attrs::{CheckpointEntry, EpisodeEntry, Source};
+use harness::replay::attrs::{CheckpointEntry, EpisodeEntry, Source, total_steps};
 use harness::task::Task;
 use policies::dir::checkpoint_dirs;
 
@@ -127,8 +127,4 @@ fn roll_out(
     }
     pb.finish_and_clear();
     Ok((episodes, checkpoints))
-}
-
-fn total_steps(episodes: &[EpisodeEntry]) -> u64 {
-    episodes.iter().filter_map(|e| e.steps).sum()
 }

@@ -82,9 +82,10 @@ pub fn info(path: &Path, as_json: bool) -> Result<ExitCode> {
     let cfg = PushTConfig::default();
     // A Push-T dataset's own success coverage; the default for others (which record
     // data/success, so it is not read) and for datasets without evalharness attributes.
-    let recorded =
-        harness::replay::attrs::DatasetAttrs::from_root(path, &r.attrs)?.and_then(|a| a.scenario_config);
-    let threshold = recorded
+    let attrs = harness::replay::attrs::DatasetAttrs::from_root(path, &r.attrs)?.unwrap_or_default();
+    let threshold = attrs
+        .scenario_config
+        .clone()
         .and_then(|c| serde_json::from_value::<PushTConfig>(c).ok())
         .map_or(cfg.task.success_coverage, |c| c.task.success_coverage);
     let state_dim = r.state.row_len();
@@ -121,7 +122,7 @@ pub fn info(path: &Path, as_json: bool) -> Result<ExitCode> {
         Scores { stats: stats(&values), success_rate: rate(scores) }
     });
     // Per-behaviour breakdown when the dataset records who acted in each episode.
-    let eps = harness::replay::origin::episodes_in(path, &r.attrs)?;
+    let eps = &attrs.episodes;
     let behaviours = scores.as_ref().filter(|s| eps.len() == s.len()).map(|scores| {
         let mut by: BTreeMap<String, Vec<(f64, bool)>> = BTreeMap::new();
         for (e, s) in eps.iter().zip(scores) {

@@ -29,8 +29,12 @@ fn attrs_of(r: &ReplayReader) -> Result<Option<DatasetAttrs>> {
     Ok(DatasetAttrs::from_root(&r.path, &r.attrs)?)
 }
 
-/// Checks that `r` matches the first input in everything a consumer relies on.
-fn check_compatible(first: &ReplayReader, r: &ReplayReader) -> Result<()> {
+/// Checks that `r` (with attributes `eb`) matches the first input (`ea`) in everything a
+/// consumer relies on.
+fn check_compatible(
+    (first, ea): (&ReplayReader, &DatasetAttrs),
+    (r, eb): (&ReplayReader, &DatasetAttrs),
+) -> Result<()> {
     let (a, b) = (first.spec()?, r.spec()?);
     let name = r.path.display();
     if a.image_hw != b.image_hw {
@@ -49,7 +53,6 @@ fn check_compatible(first: &ReplayReader, r: &ReplayReader) -> Result<()> {
     if a.extras != b.extras {
         bail!("{name}: extra arrays {:?} differ from {}'s {:?}", b.extras, first.path.display(), a.extras);
     }
-    let (ea, eb) = (attrs_of(first)?.unwrap_or_default(), attrs_of(r)?.unwrap_or_default());
     let differs = [
         ("scenario", ea.scenario != eb.scenario),
         ("scenario_config", ea.scenario_config != eb.scenario_config),
@@ -90,16 +93,29 @@ pub fn run(inputs: &[PathBuf], out: &Path, force: bool, quiet: bool) -> Result<E
         .iter()
         .map(|p| ReplayReader::open(p).with_context(|| format!("opening dataset {}", p.display())))
         .collect::<Result<Vec<_>>>()?;
-    for r in &readers[1..] {
-        check_compatible(&readers[0], r)?;
+    // Each input's attributes, read once (none for a dataset without them).
+    let all = readers.iter().map(attrs_of).collect::<Result<Vec<_>>>()?;
+    let none = DatasetAttrs::default();
+    let first = all[0].as_ref().unwrap_or(&none);
+    for (r, a) in readers.iter().zip(&all).skip(1) {
+        check_compatible((&readers[0], first), (r, a.as_ref().unwrap_or(&none)))?;
     }
+    // The merged dataset describes its arrays as the first input does.
+    let header = DatasetAttrs {
+        scenario: first.scenario.clone(),
+        scenario_config: first.scenario_config.clone(),
+        state_columns: first.state_columns.clone(),
+        action: first.action.clone(),
+        coverage: first.coverage.clone(),
+        ..DatasetAttrs::new()
+    };
     let spec = readers[0].spec()?;
     let total: usize = readers.iter().map(ReplayReader::episodes).sum();
     let mut writer = StagedDataset::create(out, force, &listed, spec.clone())?;
     let pb = progress::bar(total as u64, "merge", quiet);
     let mut episodes = Vec::with_capacity(total);
     let mut sources = Vec::with_capacity(readers.len());
-    for (k, r) in readers.iter().enumerate() {
+    for (k, (r, attrs)) in readers.iter().zip(all).enumerate() {
         for i in 0..r.episodes() {
             let ep = r
                 .read_episode(i, &spec.extras)
@@ -107,24 +123,13 @@ pub fn run(inputs: &[PathBuf], out: &Path, force: bool, quiet: bool) -> Result<E
             writer.append(&ep)?;
             pb.inc(1);
         }
-        let attrs = attrs_of(r)?;
-        episodes.extend(episode_attrs(r, &attrs.clone().unwrap_or_default(), k));
+        episodes.extend(episode_attrs(r, attrs.as_ref().unwrap_or(&none), k));
         let path = r.path.display().to_string();
         let attrs = attrs.map(|a| DatasetAttrs { episodes: Vec::new(), ..a });
         sources.push(MergedPart { path, episodes: r.episodes() as u64, attrs });
     }
     pb.finish_and_clear();
-    let first = attrs_of(&readers[0])?.unwrap_or_default();
-    let attrs = DatasetAttrs {
-        merged_from: Some(sources),
-        episodes,
-        scenario: first.scenario,
-        scenario_config: first.scenario_config,
-        state_columns: first.state_columns,
-        action: first.action,
-        coverage: first.coverage,
-        ..DatasetAttrs::new()
-    };
+    let attrs = DatasetAttrs { merged_from: Some(sources), episodes, ..header };
     let path = writer.finish(&attrs)?;
     let steps: usize = readers.iter().map(ReplayReader::steps).sum();
     outln!("merged {} datasets: {total} episodes, {steps} steps -> {}", readers.len(), path.display());

@@ -8,10 +8,10 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 use world_model::eval::EvalRow;
 
-use crate::WmEvalError;
 use crate::motion::MotionBin;
 use crate::score::ScoreRow;
 use crate::success::SuccessRow;
+use crate::{Windows, WmEvalError};
 
 /// `eval.json`.
 #[derive(Debug, Serialize)]
@@ -37,8 +37,8 @@ pub struct EvalFile {
     pub data: PathBuf,
     /// Which episodes the videos come from.
     pub episodes_from: &'static str,
-    /// How the 64-frame windows were chosen: `first`, `random` or `given (--start)`.
-    pub windows_64: String,
+    /// How the 64-frame windows were chosen.
+    pub windows_64: WindowsUsed,
     /// Each 64-frame video's episode.
     pub episodes_64: Vec<usize>,
     /// Each 64-frame video's first context step.
@@ -55,6 +55,17 @@ pub struct EvalFile {
     pub seed: u64,
     /// What the filmstrip's rows show.
     pub filmstrip: String,
+}
+
+/// How the 64-frame windows were chosen: `first` or `random` ([`Windows`]), or
+/// `given (--start)`.
+#[derive(Debug, Serialize)]
+#[serde(untagged)]
+pub enum WindowsUsed {
+    /// Chosen by `--windows`.
+    Chosen(Windows),
+    /// Given by `--start`.
+    Given(&'static str),
 }
 
 /// One model's sampling settings.

@@ -12,7 +12,7 @@ use world_model::data::{EpisodeData, Split};
 use world_model::eval::{EvalRow, View, evaluate, persistence, round_trip};
 use world_model::model::WorldModel;
 
-use crate::report::{ByMotion, EvalFile, Sampling};
+use crate::report::{ByMotion, EvalFile, Sampling, WindowsUsed};
 use crate::score::Scoring;
 use crate::success::{self, SuccessCheck};
 use crate::{Options, Windows, WmEvalError, motion, windows};
@@ -234,9 +234,9 @@ fn eval_file(
             "held-out episodes (index % 10 == 9)"
         },
         windows_64: if o.starts.is_empty() {
-            format!("{:?}", o.windows).to_lowercase()
+            WindowsUsed::Chosen(o.windows)
         } else {
-            "given (--start)".into()
+            WindowsUsed::Given("given (--start)")
         },
         episodes_64: v.short_windows.iter().map(|w| w.episode).collect(),
         starts_64: v.short_windows.iter().map(|w| w.start).collect(),

@@ -193,8 +193,13 @@ impl DatasetAttrs {
 
     /// Steps over the episodes that record them.
     pub fn total_steps(&self) -> u64 {
-        self.episodes.iter().filter_map(|e| e.steps).sum()
+        total_steps(&self.episodes)
     }
+}
+
+/// Steps over the `episodes` that record them.
+pub fn total_steps(episodes: &[EpisodeEntry]) -> u64 {
+    episodes.iter().filter_map(|e| e.steps).sum()
 }
 
 /// How to make a dataset again (`collect` is deterministic: the same arguments give the
@@ -245,7 +250,7 @@ impl DatasetAttrs {
         let (seed_start, max_steps) = (js(&self.seed_start), js(&self.max_steps));
         if let (Some(policy), Some(wm)) = (&self.source.policy, &self.source.replay_imagined) {
             return Recipe {
-                command: self.replay_command(&scenario, policy, wm, episodes),
+                command: self.replay_command(&scenario, policy, wm, episodes, (&seed_start, &max_steps)),
                 inputs: None,
                 checkpoints: None,
                 evalharness_version: version,
@@ -275,13 +280,18 @@ impl DatasetAttrs {
             evalharness_version: version,
         }
     }
-}
 
-impl DatasetAttrs {
-    /// `simulate --replay-imagined --record`'s command for these attributes (`scenario` as
-    /// [`Self::recipe`] writes it): `--episodes` counts per checkpoint, and each checkpoint's
-    /// episodes carry its own behaviour label.
-    fn replay_command(&self, scenario: &str, policy: &str, wm: &Path, episodes: u64) -> String {
+    /// `simulate --replay-imagined --record`'s command for these attributes (`scenario`,
+    /// `seed_start` and `max_steps` as [`Self::recipe`] writes them): `--episodes` counts per
+    /// checkpoint, and each checkpoint's episodes carry its own behaviour label.
+    fn replay_command(
+        &self,
+        scenario: &str,
+        policy: &str,
+        wm: &Path,
+        episodes: u64,
+        (seed_start, max_steps): (&str, &str),
+    ) -> String {
         let labels: std::collections::BTreeSet<&str> =
             self.episodes.iter().filter_map(|e| e.behaviour.as_deref()).collect();
         let per = episodes / (labels.len().max(1) as u64);
@@ -289,11 +299,9 @@ impl DatasetAttrs {
             self.source.judge.as_ref().map(|j| format!(" --judge {}", j.display())).unwrap_or_default();
         let noise = self.source.noise_scale.map(|t| format!(" --noise-scale {t}")).unwrap_or_default();
         format!(
-            "evalharness simulate{scenario} --policy {policy} --replay-imagined {}{judge}{noise} --seed {} --episodes {per} --seed-start {} --max-steps {} --record DATASET --out OUT",
+            "evalharness simulate{scenario} --policy {policy} --replay-imagined {}{judge}{noise} --seed {} --episodes {per} --seed-start {seed_start} --max-steps {max_steps} --record DATASET --out OUT",
             wm.display(),
             self.source.seed.unwrap_or(0),
-            js(&self.seed_start),
-            js(&self.max_steps)
         )
     }
 }
