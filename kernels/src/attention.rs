@@ -1,6 +1,13 @@
 //! Multi-head self-attention over each image's positions, the core of the CPU
 //! U-Net's attention layers (`world_model::unet::cpu`): given the projected
 //! queries, keys and values, the heads' outputs before the output projection.
+//!
+//! Per image and head, the scores and the weighted values are two matrix products on the
+//! `gemm` crate (its AVX-512 or AVX2 kernels, chosen at run time), reading queries, keys and
+//! values in place through strides; the softmax runs between them. At the imported U-Net's
+//! 24² maps one head's scores are 576 × 576 floats (1.3 MB): the products block them for the
+//! caches, which the loop version (`attend_loops`, kept as the reference the tests compare
+//! against) did not (BENCHMARKS.md, 2026-12-02).
 
 use crate::elementwise::{exp, has_avx2_fma};
 
@@ -22,29 +29,136 @@ pub struct Heads {
 /// # Shapes
 /// - `qkv`: `[3c, images·positions]` channel-major (queries, then keys, then values)
 /// - returns `[c, images·positions]`
+///
+/// # Panics
+/// If `qkv` is shorter than `3c · images · positions` (a caller's bug).
 pub fn attend(qkv: &[f32], s: Heads) -> Vec<f32> {
+    let (c, t) = (s.channels, s.positions);
+    let cols = s.images * t;
+    assert!(qkv.len() >= 3 * c * cols, "attention: qkv holds {} values, not 3·{c}·{cols}", qkv.len());
+    let d = c / s.heads;
+    let scale = 1.0 / (d as f32).sqrt();
+    let mut o = vec![0.0; c * cols];
+    if t == 0 || d == 0 {
+        return o;
+    }
+    // scores[t1, t2] = Σ_dd q[dd, t1] k[dd, t2]; then each row's softmax of scale · scores.
+    let mut scores = vec![0.0f32; t * t];
+    for img in 0..s.images {
+        for hd in 0..s.heads {
+            let at = |part: usize| (part * c + hd * d) * cols + img * t;
+            // qᵀ: [t, d] (rows step 1, columns step `cols`) times k: [d, t].
+            product(
+                t,
+                d,
+                t,
+                Operand { data: &qkv[at(0)..], rs: 1, cs: cols },
+                Operand { data: &qkv[at(1)..], rs: cols, cs: 1 },
+                &mut scores,
+                t,
+            );
+            softmax_rows(&mut scores, t, scale);
+            // out[dd, t1] = Σ_t2 v[dd, t2] p[t1, t2]: v [d, t] times pᵀ [t, t].
+            let at_out = (hd * d) * cols + img * t;
+            product(
+                d,
+                t,
+                t,
+                Operand { data: &qkv[at(2)..], rs: cols, cs: 1 },
+                Operand { data: &scores, rs: 1, cs: t },
+                &mut o[at_out..],
+                cols,
+            );
+        }
+    }
+    o
+}
+
+/// Each `t`-long row of `scores` replaced by softmax(scale · row) (scale > 0).
+fn softmax_rows(scores: &mut [f32], t: usize, scale: f32) {
     #[cfg(target_arch = "x86_64")]
     if has_avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
         // requirement of calling a function compiled with those features.
         #[allow(unsafe_code)]
-        return unsafe { attend_avx2(qkv, s) };
+        return unsafe { softmax_rows_avx2(scores, t, scale) };
     }
-    attend_impl(qkv, s)
+    softmax_rows_impl(scores, t, scale)
 }
 
-/// [`attend`] compiled for AVX2 + FMA (its loops vectorise 8 wide).
+/// [`softmax_rows`] compiled for AVX2 + FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn attend_avx2(qkv: &[f32], s: Heads) -> Vec<f32> {
-    attend_impl(qkv, s)
+fn softmax_rows_avx2(scores: &mut [f32], t: usize, scale: f32) {
+    softmax_rows_impl(scores, t, scale)
 }
 
-/// Scores row by row (`q·k` accumulated over the head's channels), softmax, then the
+#[inline(always)]
+fn softmax_rows_impl(scores: &mut [f32], t: usize, scale: f32) {
+    for r in scores.chunks_mut(t) {
+        // max(scale · x) = scale · max(x) for scale > 0.
+        let max = r.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        r.iter_mut().for_each(|v| *v = exp((*v - max) * scale));
+        let sum: f32 = r.iter().sum();
+        r.iter_mut().for_each(|v| *v /= sum);
+    }
+}
+
+/// A matrix read in place: element `(r, c)` at `data[r · rs + c · cs]`.
+struct Operand<'a> {
+    data: &'a [f32],
+    rs: usize,
+    cs: usize,
+}
+
+/// `out := a · b` for `a: [m, k]`, `b: [k, n]`, `out: [m, n]` with row stride `ldo`, one
+/// thread.
+fn product(m: usize, k: usize, n: usize, a: Operand, b: Operand, out: &mut [f32], ldo: usize) {
+    let last = |rows: usize, cols: usize, rs: usize, cs: usize| (rows - 1) * rs + (cols - 1) * cs + 1;
+    assert!(
+        m > 0
+            && k > 0
+            && n > 0
+            && a.data.len() >= last(m, k, a.rs, a.cs)
+            && b.data.len() >= last(k, n, b.rs, b.cs)
+            && out.len() >= last(m, n, ldo, 1),
+        "attention product shapes"
+    );
+    // SAFETY: each slice holds every element its shape and strides address (checked
+    // above); `out` is borrowed mutably, so it aliases neither input. gemm computes
+    // dst := α·dst + β·lhs·rhs; α is unread when the destination is not read.
+    #[allow(unsafe_code)]
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            out.as_mut_ptr(),
+            1,
+            ldo as isize,
+            false,
+            a.data.as_ptr(),
+            a.cs as isize,
+            a.rs as isize,
+            b.data.as_ptr(),
+            b.cs as isize,
+            b.rs as isize,
+            0.0,
+            1.0,
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        );
+    }
+}
+
+/// The loop version of [`attend`], the reference its tests compare against: scores
+/// row by row (`q·k` accumulated over the head's channels), softmax, then the
 /// values weighted through the transposed weights so every inner loop runs along
 /// contiguous positions.
-#[inline(always)]
-fn attend_impl(qkv: &[f32], s: Heads) -> Vec<f32> {
+#[cfg(test)]
+fn attend_loops(qkv: &[f32], s: Heads) -> Vec<f32> {
     let (c, t) = (s.channels, s.positions);
     let cols = s.images * t;
     let d = c / s.heads;
@@ -99,7 +213,29 @@ mod tests {
         let qkv = [1.0, 0.0, 0.0, 3f32.ln(), 2.0, 6.0];
         let o = attend(&qkv, Heads { channels: 1, heads: 1, images: 1, positions: 2 });
         assert!((o[0] - 5.0).abs() < 1e-5 && (o[1] - 4.0).abs() < 1e-5, "{o:?}");
-        // The portable path gives the same bytes as the dispatched one.
-        assert_eq!(attend_impl(&qkv, Heads { channels: 1, heads: 1, images: 1, positions: 2 }), o);
+        let o = attend_loops(&qkv, Heads { channels: 1, heads: 1, images: 1, positions: 2 });
+        assert!((o[0] - 5.0).abs() < 1e-5 && (o[1] - 4.0).abs() < 1e-5, "{o:?}");
+    }
+
+    #[test]
+    fn products_match_the_loops() {
+        // Two heads of 3 channels, three images of 7 positions (odd sizes, so no kernel's
+        // block fits exactly), and one head over 40 positions of one image.
+        for s in [
+            Heads { channels: 6, heads: 2, images: 3, positions: 7 },
+            Heads { channels: 4, heads: 1, images: 1, positions: 40 },
+        ] {
+            let qkv = crate::elementwise::test_values(3 * s.channels * s.images * s.positions, 11);
+            let (fast, slow) = (attend(&qkv, s), attend_loops(&qkv, s));
+            let worst = fast.iter().zip(&slow).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+            assert!(worst < 1e-5, "{s:?}: differs by {worst}");
+        }
+    }
+
+    #[test]
+    fn a_short_qkv_is_refused() {
+        let s = Heads { channels: 2, heads: 1, images: 1, positions: 3 };
+        let r = std::panic::catch_unwind(|| attend(&[0.0; 17], s));
+        assert!(r.is_err(), "3·2·3 = 18 values are needed");
     }
 }

@@ -15,14 +15,16 @@
 //!   and fused with nearest 2x upsampling;
 //! - [`winograd_batch`]: Winograd over whole batches of channel-major images;
 //! - [`matrix`]: matrix products, dense layers, GroupNorm with FiLM, im2col convolutions;
+//! - [`avx512_gemm`]: the world model's matrix products on AVX-512 (`matrix::fast_matmul`);
 //! - [`attention`]: multi-head self-attention over each image's positions.
 //!
-//! This crate is the project's one place for `unsafe` code: AVX2 + FMA intrinsics,
+//! This crate is the project's one place for `unsafe` code: AVX2 + FMA and AVX-512 intrinsics,
 //! and calls of functions compiled for those features after a run-time check. Each
 //! block says why it is sound in a `SAFETY:` comment. (The one other block, in
 //! `scenarios`, installs MuJoCo's log hook through its C API.)
 
 pub mod attention;
+pub mod avx512_gemm;
 pub mod direct_conv;
 pub mod elementwise;
 pub mod matrix;

@@ -15,7 +15,7 @@
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 
-use crate::matrix::matmul;
+use crate::matrix::fast_matmul;
 use crate::winograd::{Winograd3x3, input_2d, output_2d, transform_filter};
 
 /// Floats per transformed buffer (`[16, c, tiles]`) per chunk of images: 8 MB.
@@ -94,7 +94,7 @@ impl BatchWinograd {
             for p in 0..16 {
                 let a = &self.u[p * cout * cin..][..cout * cin];
                 let b = &v[p * cin * tiles..][..cin * tiles];
-                matmul(cout, cin, tiles, a, b, &mut m[p * cout * tiles..][..cout * tiles], false);
+                fast_matmul(cout, cin, tiles, a, b, &mut m[p * cout * tiles..][..cout * tiles], false);
             }
             transform_output(&m[..16 * cout * tiles], cout, &geo, &mut buf, out, simd);
         }
@@ -220,7 +220,7 @@ fn transform_output(m: &[f32], c: usize, g: &Geometry, buf: &mut [f32], out: &mu
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::matrix::Conv2dShape;
+    use crate::matrix::{Conv2dShape, matmul};
 
     use crate::elementwise::test_values as values;
 

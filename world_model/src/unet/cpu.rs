@@ -25,7 +25,7 @@ use super::{Level, UNet};
 use kernels::attention::{Heads, attend};
 use kernels::direct_conv::{Norm, winograd_enabled};
 use kernels::matrix::{
-    Conv2dShape, Dense, Film, View, ViewMut, group_norm_cols, matmul, matmul_strided, silu,
+    Conv2dShape, Dense, Film, View, ViewMut, fast_matmul, fast_matmul_strided, group_norm_cols, silu,
 };
 use kernels::winograd_batch::BatchWinograd;
 use nn::UnsupportedLayer;
@@ -179,7 +179,7 @@ impl Conv {
         }
         let Conv2dShape { k, stride, pad } = self.shape;
         if k == 1 && stride == 1 && pad == 0 {
-            matmul(self.cout, self.cin, cols, &self.w, &x.data, out, true);
+            fast_matmul(self.cout, self.cin, cols, &self.w, &x.data, out, true);
             return;
         }
         let kk = self.cin * k * k;
@@ -190,7 +190,15 @@ impl Conv {
             let n = (i1 - i0) * plane;
             self.shape.im2col(&x.data, self.cin, imgs, x.h, x.w, i0, i1, &mut col);
             let (a, b) = (View { data: &self.w, ld: kk }, View { data: &col, ld: n });
-            matmul_strided(self.cout, kk, n, a, b, ViewMut { data: &mut out[i0 * plane..], ld: cols }, true);
+            fast_matmul_strided(
+                self.cout,
+                kk,
+                n,
+                a,
+                b,
+                ViewMut { data: &mut out[i0 * plane..], ld: cols },
+                true,
+            );
         }
     }
 }
@@ -213,7 +221,15 @@ fn temporal_add(t: &Temporal, c: usize, y: &[f32], n: usize, f: usize, plane: us
             let src = smp * f * plane + (lo + j - p) * plane;
             let dst = smp * f * plane + lo * plane;
             let (a, b) = (View { data: tap, ld: c }, View { data: &y[src..], ld: cols });
-            matmul_strided(c, c, (hi - lo) * plane, a, b, ViewMut { data: &mut out[dst..], ld: cols }, true);
+            fast_matmul_strided(
+                c,
+                c,
+                (hi - lo) * plane,
+                a,
+                b,
+                ViewMut { data: &mut out[dst..], ld: cols },
+                true,
+            );
         }
     }
 }
@@ -303,14 +319,14 @@ impl Attn {
         let (samples, frames) = if self.per_frame { (x.n * x.f, 1) } else { (x.n, x.f) };
         group_norm_cols(&mut y, &self.norm, samples, frames, t, None, |v| v);
         let mut qkv: Vec<f32> = self.qkv_b.iter().flat_map(|&b| std::iter::repeat_n(b, cols)).collect();
-        matmul(3 * c, c, cols, &self.qkv_w, &y, &mut qkv, true); // [3c, cols]
+        fast_matmul(3 * c, c, cols, &self.qkv_w, &y, &mut qkv, true); // [3c, cols]
         let heads = Heads { channels: c, heads: self.heads, images: x.n * x.f, positions: t };
         let o = attend(&qkv, heads); // [c, cols]
         let mut out = x.clone();
         for (r, &b) in out.data.chunks_mut(cols).zip(&self.proj_b) {
             r.iter_mut().for_each(|v| *v += b);
         }
-        matmul(c, c, cols, &self.proj_w, &o, &mut out.data, true);
+        fast_matmul(c, c, cols, &self.proj_w, &o, &mut out.data, true);
         out
     }
 }
