@@ -246,7 +246,7 @@ pub struct ScenarioArgs {
     #[arg(long, default_value_t = 100_000)]
     pub seed_start: u64,
     /// Step limit per episode (default: the scenario's, 300 for Push-T).
-    #[arg(long)]
+    #[arg(long, value_parser = bounds::steps())]
     pub max_steps: Option<u32>,
     /// Worker threads (results are identical for any value).
     #[arg(long, default_value_t = default_jobs(), value_parser = bounds::workers())]
@@ -255,7 +255,7 @@ pub struct ScenarioArgs {
     #[arg(long)]
     pub force: bool,
     /// Gaussian noise (std, world units) added to the expert's actions.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = bounds::std_dev)]
     pub noise: f64,
     /// Control-step lag applied to the expert's actions.
     #[arg(long, default_value_t = 0)]

@@ -186,11 +186,17 @@ fn bad_lift_input_is_refused_by_name() {
         .unwrap();
     let (_, stderr) = expect_code(&res, 2);
     assert!(stderr.contains("scripts/setup.sh"), "{stderr}");
-    // A zero step limit would write empty episodes.
+    // A zero step limit would write empty episodes, a negative or NaN noise nonsense: both
+    // are refused at parsing, naming the flag, for every scenario command.
     for cmd in ["simulate", "collect"] {
         let res = run(&[cmd, "--scenario", "lift", "--episodes", "1", "--max-steps", "0", "--out", o]);
         let (_, stderr) = expect_code(&res, 2);
-        assert!(stderr.contains("--max-steps must be at least 1"), "{stderr}");
+        assert!(stderr.contains("invalid value '0' for '--max-steps"), "{stderr}");
+        for noise in ["--noise=-0.1", "--noise=NaN"] {
+            let res = run(&[cmd, "--scenario", "lift", noise, "--out", o]);
+            let (_, stderr) = expect_code(&res, 2);
+            assert!(stderr.contains("'--noise") && stderr.contains("finite std >= 0"), "{stderr}");
+        }
     }
     // An unknown behaviour lists the built-in ones.
     let res = run(&["simulate", "--scenario", "lift", "--policy", "teleop", "--out", o]);

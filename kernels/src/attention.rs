@@ -75,7 +75,17 @@ pub fn attend(qkv: &[f32], s: Heads) -> Vec<f32> {
 }
 
 /// Each `t`-long row of `scores` replaced by softmax(scale · row) (scale > 0).
+///
+/// The same code compiled for AVX-512F, AVX2 + FMA or neither: the operations and their
+/// order are the same (Rust contracts no multiply-add on its own), so the bytes are too.
 fn softmax_rows(scores: &mut [f32], t: usize, scale: f32) {
+    #[cfg(target_arch = "x86_64")]
+    if crate::avx512_gemm::available() {
+        // SAFETY: the CPU supports AVX-512F (checked just above), the requirement of
+        // calling a function compiled with it.
+        #[allow(unsafe_code)]
+        return unsafe { softmax_rows_avx512(scores, t, scale) };
+    }
     #[cfg(target_arch = "x86_64")]
     if has_avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above), the
@@ -90,6 +100,13 @@ fn softmax_rows(scores: &mut [f32], t: usize, scale: f32) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn softmax_rows_avx2(scores: &mut [f32], t: usize, scale: f32) {
+    softmax_rows_impl(scores, t, scale)
+}
+
+/// [`softmax_rows`] compiled for AVX-512F (its loops vectorise 16 wide).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn softmax_rows_avx512(scores: &mut [f32], t: usize, scale: f32) {
     softmax_rows_impl(scores, t, scale)
 }
 
@@ -230,6 +247,18 @@ mod tests {
             let worst = fast.iter().zip(&slow).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
             assert!(worst < 1e-5, "{s:?}: differs by {worst}");
         }
+    }
+
+    #[test]
+    fn every_softmax_build_gives_the_same_bytes() {
+        // 3 rows of 37 scores: a row length no vector width divides.
+        let scores = crate::elementwise::test_values(3 * 37, 5).iter().map(|v| v * 30.0).collect::<Vec<_>>();
+        let mut plain = scores.clone();
+        softmax_rows_impl(&mut plain, 37, 0.25);
+        let mut dispatched = scores.clone();
+        softmax_rows(&mut dispatched, 37, 0.25);
+        assert_eq!(plain, dispatched);
+        assert!(plain.chunks(37).all(|r| (r.iter().sum::<f32>() - 1.0).abs() < 1e-5));
     }
 
     #[test]

@@ -29,6 +29,20 @@ pub fn batch() -> RangedU64ValueParser<usize> {
     count(1, MAX_BATCH)
 }
 
+/// `--max-steps`: at least 1.
+pub fn steps() -> RangedU64ValueParser<u32> {
+    RangedU64ValueParser::<u32>::new().range(1..=u64::from(u32::MAX))
+}
+
+/// A standard deviation (`--noise`): a finite number of at least 0.
+///
+/// # Errors
+/// The text is not a number, or the number is negative, infinite or NaN (clap adds the flag).
+pub fn std_dev(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if v.is_finite() && v >= 0.0 { Ok(v) } else { Err(format!("must be a finite std >= 0, got {s}")) }
+}
+
 /// A network width: 1 to [`MAX_WIDTH`].
 pub fn width() -> RangedU64ValueParser<usize> {
     count(1, MAX_WIDTH)

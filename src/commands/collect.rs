@@ -34,23 +34,17 @@ fn parse_mix(text: &str) -> Result<Vec<(BehaviourKind, f64)>> {
     parse_mix_with(text, |name| Ok(BehaviourKind::parse(name)?))
 }
 
-/// Push-T's scripted runner for `collect` and `simulate`, its flags checked first.
+/// Push-T's scripted runner for `collect` and `simulate` (clap has checked `--noise` and
+/// `--max-steps`: `cli::bounds`).
 ///
 /// # Errors
-/// A `--noise` that is not a finite number of at least 0, a `--max-steps` of 0, or a
-/// runner that cannot be built.
+/// A runner that cannot be built.
 pub(super) fn pusht_runner(
     cfg: PushTConfig,
     jobs: usize,
     max_steps: Option<u32>,
     perturbation: Perturbation,
 ) -> Result<Runner> {
-    if !(perturbation.noise.is_finite() && perturbation.noise >= 0.0) {
-        bail!("--noise must be a finite number >= 0, got {}", perturbation.noise);
-    }
-    if max_steps == Some(0) {
-        bail!("--max-steps must be at least 1");
-    }
     Ok(Runner::new(cfg, jobs, max_steps, perturbation)?)
 }
 

@@ -16,7 +16,7 @@
 
 use std::process::ExitCode;
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use harness::replay::attrs::{DatasetAttrs, EpisodeEntry, Source};
 use harness::replay::{EpisodeArrays, ReplaySpec};
 
@@ -103,15 +103,9 @@ pub(super) fn dataset_header<T: ArmTask>(task: &T) -> DatasetAttrs {
 pub fn run<T: ArmTask>(args: &CollectArgs, task: &T, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
     let name = task.name();
-    if !(c.noise.is_finite() && c.noise >= 0.0) {
-        bail!("--noise must be a finite std >= 0, got {}", c.noise);
-    }
     let mix_text = args.mix.clone().unwrap_or_else(|| default_mix(task));
     let mix = parse_mix_with(&mix_text, |n| Ok(behaviour(task, n)?))?;
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
-    if max_steps == 0 {
-        bail!("--max-steps must be at least 1");
-    }
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };
     let work: Vec<(u64, T::Behaviour)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, draw(&mix, seed))).collect();

@@ -45,8 +45,8 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
         super::collect::refuse_run_on_for_pusht(args.no_early_stop)?;
     }
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
-    if max_steps == 0 || c.episodes == 0 {
-        bail!("--episodes and --max-steps must be at least 1");
+    if c.episodes == 0 {
+        bail!("--episodes must be at least 1");
     }
     let inputs = crate::output::Inputs::new().scenario(&c.scenario).add("--policy", dir);
     let mut sink = Sink::create(layout, &args.out, c.force, &inputs)?;

@@ -85,13 +85,7 @@ pub fn run<T: ArmTask>(args: &SimulateArgs, task: &T, quiet: bool) -> Result<Exi
     if !(16..=1024).contains(&args.gif_size) {
         bail!("--gif-size must be in 16..=1024, got {}", args.gif_size);
     }
-    if !(c.noise.is_finite() && c.noise >= 0.0) {
-        bail!("--noise must be a finite std >= 0, got {}", c.noise);
-    }
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
-    if max_steps == 0 {
-        bail!("--max-steps must be at least 1");
-    }
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };
     let work: Vec<(u64, T::Behaviour)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, kind)).collect();
