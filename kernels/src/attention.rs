@@ -10,6 +10,7 @@
 //! against) did not (BENCHMARKS.md, 2026-12-02).
 
 use crate::elementwise::{exp, has_avx2_fma};
+use crate::matrix::{Strided, ViewMut, matmul_general};
 
 /// The shapes of one attention call.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -48,26 +49,26 @@ pub fn attend(qkv: &[f32], s: Heads) -> Vec<f32> {
         for hd in 0..s.heads {
             let at = |part: usize| (part * c + hd * d) * cols + img * t;
             // qᵀ: [t, d] (rows step 1, columns step `cols`) times k: [d, t].
-            product(
+            matmul_general(
                 t,
                 d,
                 t,
-                Operand { data: &qkv[at(0)..], rs: 1, cs: cols },
-                Operand { data: &qkv[at(1)..], rs: cols, cs: 1 },
-                &mut scores,
-                t,
+                Strided { data: &qkv[at(0)..], rs: 1, cs: cols },
+                Strided { data: &qkv[at(1)..], rs: cols, cs: 1 },
+                ViewMut { data: &mut scores, ld: t },
+                false,
             );
             softmax_rows(&mut scores, t, scale);
             // out[dd, t1] = Σ_t2 v[dd, t2] p[t1, t2]: v [d, t] times pᵀ [t, t].
             let at_out = (hd * d) * cols + img * t;
-            product(
+            matmul_general(
                 d,
                 t,
                 t,
-                Operand { data: &qkv[at(2)..], rs: cols, cs: 1 },
-                Operand { data: &scores, rs: 1, cs: t },
-                &mut o[at_out..],
-                cols,
+                Strided { data: &qkv[at(2)..], rs: cols, cs: 1 },
+                Strided { data: &scores, rs: 1, cs: t },
+                ViewMut { data: &mut o[at_out..], ld: cols },
+                false,
             );
         }
     }
@@ -118,55 +119,6 @@ fn softmax_rows_impl(scores: &mut [f32], t: usize, scale: f32) {
         r.iter_mut().for_each(|v| *v = exp((*v - max) * scale));
         let sum: f32 = r.iter().sum();
         r.iter_mut().for_each(|v| *v /= sum);
-    }
-}
-
-/// A matrix read in place: element `(r, c)` at `data[r · rs + c · cs]`.
-struct Operand<'a> {
-    data: &'a [f32],
-    rs: usize,
-    cs: usize,
-}
-
-/// `out := a · b` for `a: [m, k]`, `b: [k, n]`, `out: [m, n]` with row stride `ldo`, one
-/// thread.
-fn product(m: usize, k: usize, n: usize, a: Operand, b: Operand, out: &mut [f32], ldo: usize) {
-    let last = |rows: usize, cols: usize, rs: usize, cs: usize| (rows - 1) * rs + (cols - 1) * cs + 1;
-    assert!(
-        m > 0
-            && k > 0
-            && n > 0
-            && a.data.len() >= last(m, k, a.rs, a.cs)
-            && b.data.len() >= last(k, n, b.rs, b.cs)
-            && out.len() >= last(m, n, ldo, 1),
-        "attention product shapes"
-    );
-    // SAFETY: each slice holds every element its shape and strides address (checked
-    // above); `out` is borrowed mutably, so it aliases neither input. gemm computes
-    // dst := α·dst + β·lhs·rhs; α is unread when the destination is not read.
-    #[allow(unsafe_code)]
-    unsafe {
-        gemm::gemm(
-            m,
-            n,
-            k,
-            out.as_mut_ptr(),
-            1,
-            ldo as isize,
-            false,
-            a.data.as_ptr(),
-            a.cs as isize,
-            a.rs as isize,
-            b.data.as_ptr(),
-            b.cs as isize,
-            b.rs as isize,
-            0.0,
-            1.0,
-            false,
-            false,
-            false,
-            gemm::Parallelism::None,
-        );
     }
 }
 

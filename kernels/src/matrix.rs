@@ -35,11 +35,34 @@ pub struct ViewMut<'a> {
 /// # Panics
 /// If a slice is too short for its shape and stride (a bug in the caller).
 pub fn matmul_strided(m: usize, k: usize, n: usize, a: View, b: View, c: ViewMut, accumulate: bool) {
+    let (a, b) = (Strided { data: a.data, rs: a.ld, cs: 1 }, Strided { data: b.data, rs: b.ld, cs: 1 });
+    matmul_general(m, k, n, a, b, c, accumulate);
+}
+
+/// A read-only matrix with both strides: element `(r, c)` at `data[r · rs + c · cs]`
+/// (a transposed view is `rs = 1`).
+pub struct Strided<'a> {
+    /// Elements.
+    pub data: &'a [f32],
+    /// Row stride in elements.
+    pub rs: usize,
+    /// Column stride in elements.
+    pub cs: usize,
+}
+
+/// [`matmul_strided`] with inputs of any strides (`c`'s columns are contiguous).
+///
+/// # Panics
+/// If a slice is too short for its shape and strides (a bug in the caller).
+pub fn matmul_general(m: usize, k: usize, n: usize, a: Strided, b: Strided, c: ViewMut, accumulate: bool) {
     let (c, ldc) = (c.data, c.ld);
-    let need =
-        |rows: usize, cols: usize, ld: usize| if rows == 0 || cols == 0 { 0 } else { (rows - 1) * ld + cols };
+    let need = |rows: usize, cols: usize, rs: usize, cs: usize| {
+        if rows == 0 || cols == 0 { 0 } else { (rows - 1) * rs + (cols - 1) * cs + 1 }
+    };
     assert!(
-        a.data.len() >= need(m, k, a.ld) && b.data.len() >= need(k, n, b.ld) && c.len() >= need(m, n, ldc),
+        a.data.len() >= need(m, k, a.rs, a.cs)
+            && b.data.len() >= need(k, n, b.rs, b.cs)
+            && c.len() >= need(m, n, ldc, 1),
         "matmul shapes"
     );
     if m == 0 || n == 0 {
@@ -51,7 +74,7 @@ pub fn matmul_strided(m: usize, k: usize, n: usize, a: View, b: View, c: ViewMut
         }
         return;
     }
-    // SAFETY: each slice holds every element its shape and row stride address (checked
+    // SAFETY: each slice holds every element its shape and strides address (checked
     // above); `c` is borrowed mutably, so it aliases neither input. gemm computes
     // dst := α·dst + β·lhs·rhs.
     #[allow(unsafe_code)]
@@ -65,11 +88,11 @@ pub fn matmul_strided(m: usize, k: usize, n: usize, a: View, b: View, c: ViewMut
             ldc as isize,
             accumulate,
             a.data.as_ptr(),
-            1,
-            a.ld as isize,
+            a.cs as isize,
+            a.rs as isize,
             b.data.as_ptr(),
-            1,
-            b.ld as isize,
+            b.cs as isize,
+            b.rs as isize,
             if accumulate { 1.0 } else { 0.0 },
             1.0,
             false,
