@@ -3,13 +3,14 @@
 //! queries, keys and values, the heads' outputs before the output projection.
 //!
 //! Per image and head, the scores and the weighted values are two matrix products on the
-//! `gemm` crate (its AVX-512 or AVX2 kernels, chosen at run time), reading queries, keys and
-//! values in place through strides; the softmax runs between them. At the imported U-Net's
+//! `gemm` crate's kernels (`matrix::matmul_general`: AVX2 as built here; the AVX-512 kernel
+//! reads row-major operands only), reading queries, keys and values in place through
+//! strides; the softmax runs between them. At the imported U-Net's
 //! 24² maps one head's scores are 576 × 576 floats (1.3 MB): the products block them for the
 //! caches, which the loop version (`attend_loops`, kept as the reference the tests compare
 //! against) did not (BENCHMARKS.md, 2026-12-02).
 
-use crate::elementwise::{exp, has_avx2_fma};
+use crate::elementwise::{exp, has_avx2_fma, has_avx512f};
 use crate::matrix::{Strided, ViewMut, matmul_general};
 
 /// The shapes of one attention call.
@@ -81,7 +82,7 @@ pub fn attend(qkv: &[f32], s: Heads) -> Vec<f32> {
 /// order are the same (Rust contracts no multiply-add on its own), so the bytes are too.
 fn softmax_rows(scores: &mut [f32], t: usize, scale: f32) {
     #[cfg(target_arch = "x86_64")]
-    if crate::avx512_gemm::available() {
+    if has_avx512f() {
         // SAFETY: the CPU supports AVX-512F (checked just above), the requirement of
         // calling a function compiled with it.
         #[allow(unsafe_code)]

@@ -25,6 +25,7 @@
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
 
+use crate::elementwise::has_avx512f;
 use crate::matrix::{View, ViewMut};
 
 /// Rows of `c` per micro-tile.
@@ -33,18 +34,6 @@ const MR: usize = 8;
 const NR: usize = 32;
 /// Depth per pass: a `KC` × 32 panel of `b` is 32 KB.
 const KC: usize = 256;
-
-/// Whether this CPU can run [`matmul`].
-#[cfg(target_arch = "x86_64")]
-pub fn available() -> bool {
-    std::arch::is_x86_feature_detected!("avx512f")
-}
-
-/// Never on other architectures.
-#[cfg(not(target_arch = "x86_64"))]
-pub fn available() -> bool {
-    false
-}
 
 /// `c (+)= a · b` like [`matmul_strided`](crate::matrix::matmul_strided), on this crate's AVX-512 kernel
 /// (this module) where the CPU has AVX-512F, else on the `gemm` crate's (AVX2).
@@ -97,14 +86,14 @@ pub fn fast_matmul(m: usize, k: usize, n: usize, a: &[f32], b: &[f32], c: &mut [
 /// `EVALHARNESS_GEMM` is not `crate` (read once).
 pub fn avx512_enabled() -> bool {
     static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *ON.get_or_init(|| available() && std::env::var("EVALHARNESS_GEMM").map_or(true, |v| v != "crate"))
+    *ON.get_or_init(|| has_avx512f() && std::env::var("EVALHARNESS_GEMM").map_or(true, |v| v != "crate"))
 }
 
 /// `c (+)= a · b` for `a: [m, k]` (row stride `lda`), `b: [k, n]` (`ldb`), `c: [m, n]`
 /// (`ldc`); `accumulate` adds to `c` instead of overwriting it.
 ///
 /// # Safety
-/// The CPU has AVX-512F ([`available`]); `m, k, n > 0`; `a` holds `(m − 1)·lda + k`
+/// The CPU has AVX-512F ([`has_avx512f`]); `m, k, n > 0`; `a` holds `(m − 1)·lda + k`
 /// elements, `b` `(k − 1)·ldb + n` and `c` `(m − 1)·ldc + n` (every element the shapes and
 /// strides address); `lda ≥ k`, `ldb ≥ n`, `ldc ≥ n`.
 #[cfg(target_arch = "x86_64")]
@@ -283,7 +272,7 @@ mod tests {
 
     #[test]
     fn equals_the_scalar_fma_chain_bit_for_bit() {
-        if !available() {
+        if !has_avx512f() {
             eprintln!("no AVX-512F on this CPU: the kernel is never called here");
             return;
         }
@@ -299,7 +288,7 @@ mod tests {
                 let mut want = test_values(m * ldc, 200 + i as u32);
                 let mut got = want.clone();
                 reference((m, k, n), &a, &b, &mut want, ldc, acc);
-                // SAFETY: checked available() above; the slices hold the shapes exactly.
+                // SAFETY: checked has_avx512f() above; the slices hold the shapes exactly.
                 #[allow(unsafe_code)]
                 unsafe {
                     matmul((m, k, n), &a, k, &b, n, &mut got, ldc, acc)

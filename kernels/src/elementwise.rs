@@ -86,6 +86,19 @@ pub fn has_avx2_fma() -> bool {
     false
 }
 
+/// Whether this CPU has AVX-512F, which every kernel compiled with
+/// `#[target_feature(enable = "avx512f")]` needs before it may be called (cached by std).
+#[cfg(target_arch = "x86_64")]
+pub fn has_avx512f() -> bool {
+    std::arch::is_x86_feature_detected!("avx512f")
+}
+
+/// Never on other architectures (the AVX-512 kernels are not compiled there).
+#[cfg(not(target_arch = "x86_64"))]
+pub fn has_avx512f() -> bool {
+    false
+}
+
 /// `n` deterministic test values in [-1, 1), scrambled by `seed`.
 #[cfg(test)]
 pub(crate) fn test_values(n: usize, seed: u32) -> Vec<f32> {

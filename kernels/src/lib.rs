@@ -8,7 +8,7 @@
 //! burn's weights into these kernels (`nn::weights`) do the copying and
 //! this crate only computes.
 //!
-//! - [`elementwise`]: the vectorisable `exp`, GroupNorm statistics, the AVX2 + FMA check;
+//! - [`elementwise`]: the vectorisable `exp`, GroupNorm statistics, the AVX2 + FMA and AVX-512F checks;
 //! - [`padded`]: bordered feature maps, GroupNorm + SiLU into the border;
 //! - [`direct_conv`]: the direct 3x3 convolution (and the switch to Winograd);
 //! - [`winograd`] (with [`winograd::upsample`]): Winograd F(2x2, 3x3) on one bordered map,
