@@ -8,7 +8,8 @@
 //! checkpoints are read from `checkpoints/pusht/` (override with
 //! `BENCH_POLICY=DIR` and `BENCH_WORLD_MODEL=DIR`). The pixel model runs at batch
 //! 1 only unless `BENCH_PIXEL_BATCHES=1,100` asks for more (batch 100 is minutes per
-//! iteration on a CPU). `world_model_objectives` times one chunk's U-Net passes of the
+//! iteration on a CPU); `BENCH_PIXEL_THREADS=N` also times N such chunks at once, one per
+//! thread, as `rank --jobs N` runs N batches (an iteration is then N chunks). `world_model_objectives` times one chunk's U-Net passes of the
 //! shipped model's architecture as DriftWorld (one pass) and as the K-step diffusion
 //! baseline (`BENCH_DIFFUSION_STEPS`, default 10), random weights, at batch 1 unless
 //! `BENCH_OBJECTIVE_BATCHES=1,100`. The device is `EVALHARNESS_DEVICE` (see
@@ -79,7 +80,7 @@ fn world_model(c: &mut Criterion) {
     let device = nn::device::selected().expect("EVALHARNESS_DEVICE");
     let wm = WorldModel::load(&dir, &device)
         .unwrap_or_else(|e| panic!("benchmark needs a world-model checkpoint: {e}"));
-    chunk(c, "world_model_chunk", &wm, &env_batches("BENCH_WM_BATCHES", &BATCHES));
+    chunk(c, "world_model_chunk", &wm, &env_batches("BENCH_WM_BATCHES", &BATCHES), 1);
 }
 
 /// The paper's pixel-space Push-T model (8,375,201 parameters), drifting, one pass per chunk,
@@ -97,7 +98,12 @@ fn pixel_world_model(c: &mut Criterion) {
             WorldModel::from_parts(cfg, FrameCodec::pixels(96), unet.init(&device), &device)
         }
     };
-    chunk(c, "world_model_pixel_chunk", &wm, &env_batches("BENCH_PIXEL_BATCHES", &[1]));
+    let batches = env_batches("BENCH_PIXEL_BATCHES", &[1]);
+    chunk(c, "world_model_pixel_chunk", &wm, &batches, 1);
+    let threads = std::env::var("BENCH_PIXEL_THREADS").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
+    if threads > 1 {
+        chunk(c, "world_model_pixel_chunk", &wm, &batches, threads);
+    }
 }
 
 fn env_batches(var: &str, default: &[usize]) -> Vec<usize> {
@@ -179,7 +185,9 @@ fn decoder(c: &mut Criterion) {
     g.finish();
 }
 
-fn chunk(c: &mut Criterion, group: &str, wm: &WorldModel, batches: &[usize]) {
+/// One world-model chunk at each batch size, on `threads` threads at once (each its own
+/// chunk of the same size; an iteration ends when all are done).
+fn chunk(c: &mut Criterion, group: &str, wm: &WorldModel, batches: &[usize], threads: usize) {
     let device = wm.device().clone();
     let mut g = c.benchmark_group(group);
     g.sample_size(10).measurement_time(Duration::from_secs(20));
@@ -191,12 +199,28 @@ fn chunk(c: &mut Criterion, group: &str, wm: &WorldModel, batches: &[usize]) {
         let [_, ch, s, _] = z.dims();
         let history = z.clone().reshape([b, 1, ch, s, s]).repeat_dim(1, 4); // [b, 4, C, s, s]
         let actions = Tensor::<3>::from_data(TensorData::new(vec![0f32; b * 4 * 2], [b, 4, 2]), &device);
-        let mut rngs: Vec<Rng> = (0..b as u64).map(Rng::new).collect();
-        g.bench_with_input(BenchmarkId::new("predict_4_decode_2", b), &b, |bench, _| {
+        let one = || {
+            let mut rngs: Vec<Rng> = (0..b as u64).map(Rng::new).collect();
+            let out = wm.predict(history.clone(), z.clone(), actions.clone(), &mut rngs); // [b, 4, C, s, s]
+            let last = out.slice([0..b, 2..4]).reshape([b * 2, ch, s, s]);
+            black_box(wm.decode(last).into_data())
+        };
+        let name = if threads == 1 {
+            "predict_4_decode_2".to_string()
+        } else {
+            format!("predict_4_decode_2_x{threads}_threads")
+        };
+        g.bench_with_input(BenchmarkId::new(name, b), &b, |bench, _| {
             bench.iter(|| {
-                let out = wm.predict(history.clone(), z.clone(), actions.clone(), &mut rngs); // [b, 4, C, s, s]
-                let last = out.slice([0..b, 2..4]).reshape([b * 2, ch, s, s]);
-                black_box(wm.decode(last).into_data())
+                if threads == 1 {
+                    one();
+                } else {
+                    std::thread::scope(|scope| {
+                        for _ in 0..threads {
+                            scope.spawn(one);
+                        }
+                    });
+                }
             })
         });
     }

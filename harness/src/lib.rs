@@ -29,6 +29,7 @@ pub mod judge;
 pub mod metrics;
 pub mod paired_success;
 pub mod policy;
+pub mod provenance;
 pub mod replay;
 pub mod resize;
 pub mod results;

@@ -34,6 +34,24 @@ fn write<C: Serialize>(path: &Path, c: &C) -> Result<(), RunFileError> {
     std::fs::write(path, text).map_err(|e| err(e.to_string()))
 }
 
+/// A run file read as `C`.
+///
+/// # Errors
+/// [`RunFileError`] naming `path` when it is missing or does not parse as `C`.
+pub fn read<C: DeserializeOwned>(path: &Path) -> Result<C, RunFileError> {
+    let err = |m: String| RunFileError { path: path.to_path_buf(), message: m };
+    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    serde_json::from_str(&text).map_err(|e| err(e.to_string()))
+}
+
+/// Writes a run file (`config.json`) as pretty-printed JSON.
+///
+/// # Errors
+/// [`RunFileError`] naming `path` when it cannot be written.
+pub fn write_config<C: Serialize>(path: &Path, c: &C) -> Result<(), RunFileError> {
+    write(path, c)
+}
+
 /// The configuration of a run whose file is `path`: `fresh`, written to `path`, for
 /// a new run; the saved one, after `adjust` (which returns whether it changed
 /// anything), when resuming.
@@ -51,9 +69,7 @@ pub fn resume_or_start<C: Serialize + DeserializeOwned>(
         write(path, &fresh)?;
         return Ok(fresh);
     }
-    let err = |m: String| RunFileError { path: path.to_path_buf(), message: m };
-    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
-    let mut saved: C = serde_json::from_str(&text).map_err(|e| err(e.to_string()))?;
+    let mut saved: C = read(path)?;
     if adjust(&mut saved) {
         write(path, &saved)?;
     }
@@ -121,8 +137,8 @@ pub fn open_log(path: &Path, key: &str, step: u64) -> Result<std::fs::File, RunF
 ///
 /// # Errors
 /// The writer's error.
-pub fn append_line<W: std::io::Write>(w: &mut W, line: &serde_json::Value) -> std::io::Result<()> {
-    let mut text = line.to_string();
+pub fn append_line<W: std::io::Write, T: Serialize + ?Sized>(w: &mut W, line: &T) -> std::io::Result<()> {
+    let mut text = serde_json::to_string(line).map_err(std::io::Error::other)?;
     text.push('\n');
     w.write_all(text.as_bytes())
 }

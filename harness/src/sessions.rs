@@ -66,6 +66,10 @@ pub struct Session {
     /// How it ended, when not normally.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ended: Option<String>,
+    /// A note added by hand to a session recorded before sessions were recorded by the
+    /// trainers (some shipped models' first sessions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
 }
 
 /// The part of a checkpoint's state file read here.
@@ -121,6 +125,7 @@ pub fn open_session(out: &Path, command: &str, commit: &str, from: u64) -> Resul
         to_step: None,
         elapsed_s_total: None,
         ended: None,
+        note: None,
     };
     let path = out.join(OPEN_SESSION);
     let mut text = serde_json::to_string_pretty(&open).map_err(parse(&path))?;
@@ -173,6 +178,7 @@ pub fn record_session(
         to_step: Some(to),
         elapsed_s_total: Some(elapsed_s),
         ended: None,
+        note: None,
     };
     append(out, &line)?;
     let open = out.join(OPEN_SESSION);

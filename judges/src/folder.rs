@@ -32,6 +32,7 @@ use policies::net::{NetConfig, ObsEncoder};
 use crate::error::JudgeError;
 use crate::metrics::JudgeMetrics;
 use crate::pose::{GpcPose, PoseNet};
+use crate::provenance::JudgeProvenance;
 use crate::rule::ColourHeight;
 
 /// The judge's network: frame encoder and a one-logit head.
@@ -110,7 +111,7 @@ pub struct JudgeFile {
     /// Its reading of the held-out episodes' frames.
     pub heldout: JudgeMetrics,
     /// How it was made: command, dataset and its fingerprint, seed, commit.
-    pub provenance: serde_json::Value,
+    pub provenance: JudgeProvenance,
 }
 
 fn one_frame() -> usize {
@@ -292,7 +293,7 @@ mod tests {
             persist_frames: 1,
             steps: 0,
             heldout: JudgeMetrics::default(),
-            provenance: serde_json::Value::Null,
+            provenance: JudgeProvenance::default(),
         }
     }
 

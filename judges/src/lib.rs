@@ -8,12 +8,15 @@
 //! - [`train`]: the learned judge's trainer; [`read`]: a recorded episode read as `rank` reads an
 //!   imagined one; [`metrics`]: which frames `rank` judges and a judge's metrics, shared by the
 //!   three so that none imports another in a circle;
+//! - [`provenance`]: how a judge was made (trained, hand-written or imported) and the
+//!   persistence rule chosen for it, typed;
 //! - [`error`]: [`JudgeError`], naming the folder, file or dataset.
 
 pub mod error;
 pub mod folder;
 pub mod metrics;
 pub mod pose;
+pub mod provenance;
 pub mod read;
 pub mod rule;
 pub mod train;

@@ -28,7 +28,7 @@ use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 use harness::rng::Rng;
 use harness::seed::derive;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use nn::frames::frames_to_tensor;
 use policies::symmetry::augment_frame;
@@ -36,6 +36,7 @@ use policies::symmetry::augment_frame;
 use crate::error::JudgeError;
 use crate::folder::{FrameJudge, JudgeFile, JudgeNet};
 use crate::metrics::{EpisodeReading, JudgeMetrics, Reading, metrics};
+pub use crate::provenance::JudgeTrainConfig;
 use crate::read::{JudgeData, judge_episodes, read_judged};
 
 /// Linear warm-up steps of the learning rate.
@@ -43,24 +44,19 @@ const WARMUP: u64 = 100;
 /// Held-out frames evaluated at most (evenly spaced).
 const EVAL_FRAMES: usize = 2048;
 
-/// Training hyper-parameters (written into `judge.json`'s provenance).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct JudgeTrainConfig {
-    /// Optimiser steps.
-    pub steps: u64,
-    /// Frames per step.
-    pub batch: usize,
-    /// Peak learning rate (AdamW).
-    pub lr: f64,
-    /// Seed of the weights and the frame order.
-    pub seed: u64,
-    /// Draw half of each batch from frames above the threshold.
-    pub balance: bool,
-    /// Augment with the 8 symmetries of the square (Push-T only).
-    pub symmetries: bool,
-    /// Evaluate on the held-out frames every this many steps.
-    pub eval_every: u64,
+/// A line of the judge's training log (`log.jsonl`); fields in alphabetical order, the
+/// order the lines had as sorted JSON maps.
+#[derive(Serialize)]
+struct LogLine {
+    /// The held-out metrics.
+    heldout: JudgeMetrics,
+    /// The step's loss.
+    loss: f64,
+    /// The last line of a run `--max-minutes` stopped early.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    out_of_time: bool,
+    /// Steps done.
+    step: u64,
 }
 
 /// Mean binary cross-entropy of `logits` against soft `targets` in [0, 1]:
@@ -145,8 +141,8 @@ pub fn train_judge(
         });
         m
     };
-    let mut log_line = |line: serde_json::Value| {
-        harness::runfile::append_line(&mut logf, &line)
+    let mut log_line = |line: &LogLine| {
+        harness::runfile::append_line(&mut logf, line)
             .map_err(|source| JudgeError::Io { path: log.into(), source })
     };
     let (mut lv, mut done) = (f64::NAN, 0);
@@ -182,7 +178,7 @@ pub fn train_judge(
         done = step + 1;
         on_step(done, lv);
         if done.is_multiple_of(cfg.eval_every.max(1)) && done < cfg.steps {
-            log_line(serde_json::json!({"step": done, "loss": lv, "heldout": eval(&net)}))?;
+            log_line(&LogLine { heldout: eval(&net), loss: lv, out_of_time: false, step: done })?;
         }
     }
     if done == 0 {
@@ -190,11 +186,7 @@ pub fn train_judge(
     }
     // The last evaluation, where training ended (its last step, or out of time).
     let m = last_eval(&net);
-    let mut line = serde_json::json!({"step": done, "loss": lv, "heldout": m});
-    if done < cfg.steps {
-        line["out_of_time"] = serde_json::json!(true);
-    }
-    log_line(line)?;
+    log_line(&LogLine { heldout: m, loss: lv, out_of_time: done < cfg.steps, step: done })?;
     Ok(Some((net.valid(), m, done)))
 }
 
@@ -240,7 +232,7 @@ mod tests {
             persist_frames: 1,
             steps: 10,
             heldout: JudgeMetrics::default(),
-            provenance: serde_json::Value::Null,
+            provenance: crate::provenance::JudgeProvenance::default(),
         };
         let cfg = JudgeTrainConfig {
             steps: 10,

@@ -16,6 +16,8 @@ use harness::policy::Policy;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use crate::provenance::{Made, PolicyProvenance};
+
 use crate::diffusion::{DiffusionConfig, DiffusionNet, DiffusionPolicy, Normalisation};
 
 /// A problem with a policy checkpoint, naming its folder or file.
@@ -50,7 +52,7 @@ pub struct PolicyFile {
     /// Normalisation statistics.
     pub normalisation: Normalisation,
     /// How it was made (command, data, seed, commit).
-    pub provenance: Value,
+    pub provenance: PolicyProvenance,
     /// Training loss at the checkpoint (absent for an imported one, which does not say).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub train_loss: Option<f64>,
@@ -68,7 +70,7 @@ impl PolicyFile {
         norm: &Normalisation,
         epoch: u64,
         step: u64,
-        provenance: &Value,
+        provenance: &PolicyProvenance,
         train_loss: f64,
         task: Option<&str>,
     ) -> Self {
@@ -270,6 +272,18 @@ pub fn read_policy_file(dir: &Path) -> Result<PolicyFile, PolicyLoadError> {
     serde_json::from_str(&text).map_err(|e| err(format!("policy.json: {e}")))
 }
 
+/// What any policy folder's `policy.json` says of how the policy was made, whatever its
+/// kind.
+///
+/// # Errors
+/// [`PolicyLoadError`] naming the folder for a missing or malformed file.
+pub fn read_made(dir: &Path) -> Result<Made, PolicyLoadError> {
+    let err = |m: String| PolicyLoadError::new(dir, m);
+    let text =
+        std::fs::read_to_string(dir.join("policy.json")).map_err(|e| err(format!("policy.json: {e}")))?;
+    serde_json::from_str(&text).map_err(|e| err(format!("policy.json: {e}")))
+}
+
 /// The diffusion config of a checkpoint's `policy.json`, checked for a usable action horizon.
 ///
 /// # Errors
@@ -393,7 +407,7 @@ mod tests {
             &Normalisation { agent_pos: norm.clone(), action: norm },
             1,
             1,
-            &Value::Null,
+            &PolicyProvenance::default(),
             0.0,
             Some("pusht"),
         );

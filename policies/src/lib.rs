@@ -10,6 +10,7 @@
 //! - [`symmetry`]: the 8 symmetries of Push-T's square world, exact augmentations;
 //! - [`train`]: the trainer, which saves a checkpoint every few epochs;
 //! - [`dir`]: the policy directory format and its validating loader;
+//! - [`provenance`]: how a checkpoint was made and what it scored, typed;
 //! - [`imported_policy`], [`import_gpc`], [`import_lerobot`], [`resnet_gn`]: diffusion policies
 //!   trained elsewhere (DriftWorld/GPC's Push-T policies, LeRobot's), imported once: the
 //!   `gpc-diffusion` and `lerobot-diffusion` kinds, DDPM sampling;
@@ -33,6 +34,7 @@ pub mod imported_sampling;
 mod lerobot_config;
 pub mod net;
 pub mod pretrain;
+pub mod provenance;
 pub mod resnet;
 pub mod resnet_gn;
 mod robomimic_config;

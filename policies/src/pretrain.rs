@@ -40,6 +40,7 @@ use crate::data::{Demos, FrameLabels};
 use crate::diffusion::frames_to_tensor;
 use crate::dir::PolicyLoadError;
 use crate::net::{NetConfig, ObsEncoder};
+pub use crate::provenance::{ColumnError, PoseError};
 use crate::symmetry::{augment_frame, augment_point, augment_pose};
 
 /// Pose targets per frame: agent x, y, then block and goal x, y (world / 256 − 1),
@@ -150,21 +151,6 @@ impl<'a> Targets<'a> {
     }
 }
 
-/// Mean pose errors on held-out frames.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct PoseError {
-    /// Agent position error (world units; the world is 512 wide, a pixel 5.3).
-    pub agent: f64,
-    /// Block position error (world units).
-    pub block: f64,
-    /// Block orientation error (degrees).
-    pub angle_deg: f64,
-    /// Goal position error (world units).
-    pub goal: f64,
-    /// Goal orientation error (degrees).
-    pub goal_angle_deg: f64,
-}
-
 /// Pre-training progress, saved as `encoder_state.json`.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct PretrainState {
@@ -178,16 +164,6 @@ pub struct PretrainState {
     /// (tasks other than Push-T).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub heldout_columns: Option<Vec<ColumnError>>,
-}
-
-/// The held-out mean absolute error of one regressed state column.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ColumnError {
-    /// The column's name.
-    pub name: String,
-    /// Mean |prediction − truth|, in the state's units.
-    pub mean_abs_error: f64,
 }
 
 /// What pre-training is asked to do.

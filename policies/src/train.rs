@@ -29,6 +29,7 @@ use crate::dir::{
     PolicyFile, PolicyLoadError, diffusion_config, diffusion_weights, read_policy_file, write_policy,
 };
 use crate::pretrain::{Pretrain, encode_frames, pretrain_encoder};
+use crate::provenance::{EncoderPretraining, PolicyProvenance, RawWeights, Weights};
 use nn::optim::Ema;
 
 /// Training hyper-parameters.
@@ -134,8 +135,8 @@ pub struct RunConfigs {
     pub train: PolicyTrainConfig,
     /// Data normalisation.
     pub normalisation: Normalisation,
-    /// Free-form provenance (data, command) copied into every checkpoint.
-    pub provenance: serde_json::Value,
+    /// How the run was made (data, command), copied into every checkpoint.
+    pub provenance: PolicyProvenance,
     /// The task of the demonstrations, recorded in every checkpoint's `policy.json`.
     #[serde(default)]
     pub task: Option<String>,
@@ -173,7 +174,7 @@ pub fn train_policy(
     let dir = out.join(".train");
     let cfg_path = dir.join("config.json");
     // This session's command, recorded when resuming (the saved provenance holds the first).
-    let session_command = configs.provenance["command"].clone();
+    let session_command = configs.provenance.command.clone();
     let configs =
         harness::runfile::resume_or_start(&cfg_path, configs.clone(), run.resume, |c: &mut RunConfigs| {
             let extend = run.epochs.filter(|&e| e != c.train.epochs);
@@ -245,7 +246,7 @@ pub fn train_policy(
     let clock = Clock::start(run.max_minutes);
     let mut provenance = configs.provenance.clone();
     if run.resume {
-        provenance["resumed_with"] = session_command;
+        provenance.resumed_with = Some(session_command);
     }
     let features = if tc.encoder_steps > 0 {
         let p = Pretrain { steps: tc.encoder_steps, lr: tc.encoder_lr, seed: tc.seed };
@@ -264,10 +265,11 @@ pub fn train_policy(
                 elapsed_s: state.elapsed_s,
             });
         };
-        provenance["encoder_pretraining"] = json!({"steps": ps.step, "heldout_pose_error": ps.heldout});
-        if let Some(columns) = &ps.heldout_columns {
-            provenance["encoder_pretraining"]["heldout_mean_abs_error"] = json!(columns);
-        }
+        provenance.encoder_pretraining = Some(EncoderPretraining {
+            heldout_mean_abs_error: ps.heldout_columns.clone(),
+            heldout_pose_error: ps.heldout,
+            steps: ps.step,
+        });
         if state.step == 0 {
             net.encoder = probe.encoder;
             ema = Ema::new(&net, tc.ema);
@@ -361,11 +363,11 @@ pub fn train_policy(
             if done.is_multiple_of(tc.save_every) || done == tc.epochs {
                 let ck = out.join(format!("epoch-{done:04}"));
                 let mut prov = provenance.clone();
-                prov["weights"] = if tc.ema > 0.0 {
-                    json!({"ema_decay": tc.ema, "ema_updates": state.ema_updates})
+                prov.weights = Some(if tc.ema > 0.0 {
+                    Weights::Ema { ema_decay: tc.ema, ema_updates: state.ema_updates }
                 } else {
-                    json!("raw")
-                };
+                    Weights::Raw(RawWeights::Raw)
+                });
                 let file = PolicyFile::diffusion(
                     pc,
                     &configs.normalisation,

@@ -23,7 +23,7 @@ fn provenance(dir: &Path) -> String {
     struct Shown<'a> {
         epoch: u64,
         step: u64,
-        training: &'a serde_json::Value,
+        training: &'a policies::provenance::PolicyProvenance,
     }
     if let Ok(text) = std::fs::read_to_string(dir.join("provenance.json"))
         && let Ok(v) = serde_json::from_str::<serde_json::Value>(&text)

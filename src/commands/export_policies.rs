@@ -11,24 +11,26 @@
 //! (its measured MuJoCo score) is carried over only when no inference setting
 //! changed: a score measured with other settings would be wrong for the copy.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
+use harness::provenance::Exported;
 use policies::diffusion::DiffusionConfig;
 use policies::dir::{PolicyFile, checkpoint_dirs};
-use serde_json::{Map, Value, json};
+use policies::provenance::PolicyScores;
 
 use super::git_commit;
 use crate::cli::ExportPoliciesArgs;
-use crate::output::{Staged, read_json, write_json};
+use crate::output::{Staged, write_json};
 
 /// A checkpoint to export: its folder, file and the settings changed.
 struct Export {
     dir: PathBuf,
     name: String,
     file: PolicyFile,
-    changes: Map<String, Value>,
+    changes: BTreeMap<String, [usize; 2]>,
 }
 
 /// `evalharness export-policies`.
@@ -76,18 +78,20 @@ pub fn run(a: &ExportPoliciesArgs) -> Result<ExitCode> {
         let (from, to) = (p.dir.join("model.bpk"), dst.join("model.bpk"));
         std::fs::copy(&from, &to)
             .with_context(|| format!("copying {} to {}", from.display(), to.display()))?;
-        let exported = json!({
-            "command": command,
-            "commit": commit,
-            "from": p.dir.display().to_string(),
-            "changed": p.changes,
-        });
-        append(&mut p.file.provenance["exported"], exported.clone());
-        write_json(&dst.join("policy.json"), &serde_json::to_value(&p.file)?)?;
+        let exported = Exported {
+            alpha: None,
+            changed: Some(p.changes.clone()),
+            command: command.clone(),
+            commit: commit.clone(),
+            from: p.dir.display().to_string(),
+            other: BTreeMap::new(),
+        };
+        p.file.provenance.exported.push(exported.clone());
+        write_json(&dst.join("policy.json"), &p.file)?;
         let scores = p.dir.join("provenance.json");
         if p.changes.is_empty() && scores.is_file() {
-            let mut v = read_json(&scores)?;
-            append(&mut v["training"]["exported"], exported);
+            let mut v: PolicyScores = harness::provenance::read(&scores)?;
+            v.training.exported.push(exported);
             write_json(&dst.join("provenance.json"), &v)?;
         }
     }
@@ -103,13 +107,13 @@ fn prepare(dir: &Path, mut file: PolicyFile, a: &ExportPoliciesArgs) -> Result<E
     let path = dir.join("policy.json");
     let mut cfg: DiffusionConfig = serde_json::from_value(file.config.clone())
         .with_context(|| format!("{}: \"config\"", path.display()))?;
-    let mut changes = Map::new();
+    let mut changes = BTreeMap::new();
     if let Some(k) = a.action_horizon.filter(|&k| k != cfg.action_horizon) {
-        changes.insert("action_horizon".into(), json!([cfg.action_horizon, k]));
+        changes.insert("action_horizon".into(), [cfg.action_horizon, k]);
         cfg.action_horizon = k;
     }
     if let Some(s) = a.inference_steps.filter(|&s| s != cfg.inference_steps) {
-        changes.insert("inference_steps".into(), json!([cfg.inference_steps, s]));
+        changes.insert("inference_steps".into(), [cfg.inference_steps, s]);
         cfg.inference_steps = s;
     }
     let room = cfg.max_action_horizon();
@@ -136,15 +140,6 @@ fn prepare(dir: &Path, mut file: PolicyFile, a: &ExportPoliciesArgs) -> Result<E
         .map_or_else(|| format!("epoch-{:04}", file.epoch), |n| n.to_string_lossy().into_owned());
     let name = format!("{}{name}", a.prefix);
     Ok(Export { dir: dir.to_path_buf(), name, file, changes })
-}
-
-/// Appends an export record to the list at `slot` (created if absent).
-pub(super) fn append(slot: &mut Value, record: Value) {
-    match slot {
-        Value::Array(list) => list.push(record),
-        Value::Null => *slot = Value::Array(vec![record]),
-        other => *other = Value::Array(vec![other.take(), record]),
-    }
 }
 
 /// A diffusion checkpoint's `policy.json` (other kinds are named and refused).

@@ -10,6 +10,7 @@ use anyhow::{Context, Result};
 use judges::folder::{FrameJudge, JudgeFile, Label};
 use judges::metrics::JudgeMetrics;
 use judges::pose::{import_gpc, write_pose_weights};
+use judges::provenance::JudgeProvenance;
 use policies::net::NetConfig;
 use serde_json::json;
 
@@ -37,16 +38,17 @@ pub fn run(a: &ImportJudgeArgs) -> Result<ExitCode> {
         persist_frames: 1,
         steps: 0,
         heldout: JudgeMetrics::default(),
-        provenance: json!({
-            "import": {
+        provenance: JudgeProvenance {
+            command: Some(crate::stdout::command_line().join(" ")),
+            commit: git_commit(),
+            import: Some(json!({
                 "format": "gpc-reward-predictor",
                 "xy": {"source": a.xy.display().to_string(), "sha256": xy_sha},
                 "angle": {"source": a.angle.display().to_string(), "sha256": angle_sha},
                 "batchnorm": "folded into the convolutions (eps 1e-5)",
-            },
-            "command": crate::stdout::command_line().join(" "),
-            "commit": git_commit(),
-        }),
+            })),
+            ..JudgeProvenance::default()
+        },
     };
     write_pose_weights(staged.dir(), &pose).map_err(anyhow::Error::msg)?;
     judges::folder::write_judge(staged.dir(), None, &file)?;

@@ -12,6 +12,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use policies::dir::{Expectations, PolicyFile, load_policy, write_policy_f32};
 use policies::import_gpc::{GpcWeights, import};
+use policies::provenance::PolicyProvenance;
 use serde_json::json;
 
 use super::git_commit;
@@ -65,8 +66,8 @@ fn lerobot(a: &ImportPolicyArgs) -> Result<ExitCode> {
         step: 0,
         config: serde_json::to_value(&p.cfg)?,
         normalisation: p.norm.clone(),
-        provenance: json!({
-            "import": {
+        provenance: PolicyProvenance {
+            import: Some(json!({
                 "format": "lerobot",
                 "source": a.file.display().to_string(),
                 "config_sha256": cfg_sha,
@@ -74,10 +75,9 @@ fn lerobot(a: &ImportPolicyArgs) -> Result<ExitCode> {
                 "statistics": {"source": p.stats_from.display().to_string(), "sha256": stats_sha},
                 "tensors": p.tensors,
                 "epoch_and_step": "not in a LeRobot folder: 0",
-            },
-            "command": crate::stdout::command_line().join(" "),
-            "commit": git_commit(),
-        }),
+            })),
+            ..PolicyProvenance::new(crate::stdout::command_line().join(" "), git_commit())
+        },
         train_loss: None,
         task: None,
     };
@@ -145,8 +145,8 @@ fn gpc(a: &ImportPolicyArgs) -> Result<ExitCode> {
         step: p.step.and_then(|s| u64::try_from(s).ok()).unwrap_or(0),
         config: serde_json::to_value(&p.cfg)?,
         normalisation,
-        provenance: json!({
-            "import": {
+        provenance: PolicyProvenance {
+            import: Some(json!({
                 "format": "gpc",
                 "source": a.file.display().to_string(),
                 "sha256": sha,
@@ -157,10 +157,9 @@ fn gpc(a: &ImportPolicyArgs) -> Result<ExitCode> {
                 "tensors": p.tensors,
                 "normalisation": stats,
                 "sampling": "DDPM, every one of the 100 training steps, squared-cosine betas, x0 clipped",
-            },
-            "command": crate::stdout::command_line().join(" "),
-            "commit": git_commit(),
-        }),
+            })),
+            ..PolicyProvenance::new(crate::stdout::command_line().join(" "), git_commit())
+        },
         train_loss: None,
         task: Some("pusht".into()),
     };

@@ -9,6 +9,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use policies::dir::{PolicyFile, load_policy, write_policy_f32};
 use policies::import_robomimic::{RobomimicWeights, declared, import};
+use policies::provenance::PolicyProvenance;
 use serde_json::json;
 
 use super::git_commit;
@@ -67,8 +68,8 @@ pub fn run(a: &ImportPolicyArgs) -> Result<ExitCode> {
         step: 0,
         config: serde_json::to_value(&p.cfg)?,
         normalisation: p.norm.clone(),
-        provenance: json!({
-            "import": {
+        provenance: PolicyProvenance {
+            import: Some(json!({
                 "format": "robomimic",
                 "source": a.file.display().to_string(),
                 "sha256": sha,
@@ -82,10 +83,9 @@ pub fn run(a: &ImportPolicyArgs) -> Result<ExitCode> {
                     "robot_state_in_imagination": "estimated from the reset state and the commands since (the world model imagines frames only)",
                 },
                 "normalisation": "the checkpoint's action_normalization_stats and obs_normalization_stats (none stored: the identity)",
-            },
-            "command": crate::stdout::command_line().join(" "),
-            "commit": git_commit(),
-        }),
+            })),
+            ..PolicyProvenance::new(crate::stdout::command_line().join(" "), git_commit())
+        },
         train_loss: None,
         task: Some(task.name().to_string()),
     };

@@ -10,25 +10,13 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use judges::folder::{FrameJudge, JudgeFile, Label, write_judge};
 use judges::metrics::{EpisodeReading, JudgeMetrics, Reading};
+use judges::provenance::{JudgeProvenance, Persistence, PersistenceReport};
 use judges::read::{JudgeData, judge_episodes, judged_frame_metrics, read_judged};
 use judges::rule::ColourHeight;
 use policies::net::NetConfig;
-use serde::Serialize;
-use serde_json::json;
 
 use super::git_commit;
 use crate::cli::{JudgeRule, ReadJudgeArgs};
-
-/// What `read-judge` reports.
-#[derive(Debug, Serialize)]
-struct Report {
-    /// The judge's frame metrics over every judged frame.
-    frames: JudgeMetrics,
-    /// One reading per persistence value, in the order given.
-    readings: Vec<EpisodeReading>,
-    /// The persistence value that reads most episodes right (smallest on a tie).
-    best: usize,
-}
 
 /// The persistence value whose reading gets most episodes right; the smallest on a tie.
 fn best_persist(readings: &[EpisodeReading]) -> Option<usize> {
@@ -51,7 +39,11 @@ fn rule_file(rule: ColourHeight) -> JudgeFile {
         persist_frames: 1,
         steps: 0,
         heldout: JudgeMetrics::default(),
-        provenance: json!({"hand_written": "judges::rule::ColourHeight", "commit": git_commit()}),
+        provenance: JudgeProvenance {
+            commit: git_commit(),
+            hand_written: Some("judges::rule::ColourHeight".into()),
+            ..JudgeProvenance::default()
+        },
     }
 }
 
@@ -106,18 +98,18 @@ pub fn run(a: &ReadJudgeArgs) -> Result<ExitCode> {
         })
         .collect();
     let best = best_persist(&readings).context("no reading")?;
-    let report = Report { frames: judged_frame_metrics(&judged, threshold), readings, best };
+    let report = PersistenceReport { best, frames: judged_frame_metrics(&judged, threshold), readings };
     if let Some(staged) = staged {
         let mut file = judge.file.clone();
         file.persist_frames = best;
-        file.provenance["persistence"] = json!({
-            "command": crate::stdout::command_line().join(" "),
-            "commit": git_commit(),
-            "from": from,
-            "data": a.data.display().to_string(),
-            "fingerprint": harness::fingerprint::folder(&a.data).ok(),
-            "episodes": data.episodes.len(),
-            "report": &report,
+        file.provenance.persistence = Some(Persistence {
+            command: crate::stdout::command_line().join(" "),
+            commit: git_commit(),
+            data: a.data.display().to_string(),
+            episodes: data.episodes.len(),
+            fingerprint: harness::fingerprint::folder(&a.data).ok(),
+            from,
+            report: report.clone(),
         });
         write_judge(staged.dir(), judge.net(), &file)?;
         let out = staged.commit()?;

@@ -11,12 +11,13 @@ use anyhow::{Context, Result, bail};
 use engine::{Observe, Setup, Start, Timing, sim_branch};
 use nn::frames::{frames_to_tensor, tensor_to_frames};
 use policies::dir::checkpoint_dirs;
+use policies::provenance::{MujocoScore, PolicyScores};
 use serde_json::{Value, json};
 use world_model::model::WorldModel;
 
 use super::git_commit;
 use crate::cli::SimulateArgs;
-use crate::output::{Staged, read_json, write_json};
+use crate::output::{Staged, write_json};
 use crate::policy_kinds::{expectations, load_any};
 use crate::progress;
 use crate::scenario::load_task;
@@ -135,20 +136,24 @@ fn record(
     episodes: u64,
     max_steps: usize,
 ) -> Result<()> {
-    let pj = dir.join("policy.json");
-    let file = read_json(&pj)?;
+    let made = policies::dir::read_made(dir)?;
     let args: Vec<String> = crate::stdout::command_line();
-    write_json(
-        &dir.join("provenance.json"),
-        &json!({
-            "training": file["provenance"],
-            "epoch": file["epoch"], "step": file["step"], "train_loss": file["train_loss"],
-            "mujoco_score": {
-                "seeds": [seed_start, seed_start + episodes - 1], "max_steps": max_steps,
-                "mean": stats.mean, "ci95": stats.ci95,
-                "success_rate": stats.success_rate, "success_ci95": stats.success_ci95,
-                "measured_with": args.join(" "), "commit": git_commit(),
-            },
-        }),
-    )
+    let scores = PolicyScores {
+        epoch: made.epoch,
+        mujoco_score: MujocoScore {
+            ci95: stats.ci95,
+            commit: git_commit(),
+            max_steps,
+            mean: stats.mean,
+            measured_with: args.join(" "),
+            seeds: [seed_start, seed_start + episodes - 1],
+            success_ci95: stats.success_ci95,
+            success_rate: stats.success_rate,
+        },
+        step: made.step,
+        train_loss: made.train_loss,
+        training: made.provenance,
+        other: Default::default(),
+    };
+    write_json(&dir.join("provenance.json"), &scores)
 }

@@ -7,14 +7,13 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
+use harness::provenance::{AutoencoderMetrics, AutoencoderProvenance, FramesUsed, Source};
 use harness::replay::attrs::{DatasetAttrs, Recipe};
-use serde_json::json;
 use world_model::autoencoder::AutoencoderConfig;
 use world_model::data::EpisodeData;
-use world_model::train_ae::{AeTrainConfig, RunOptions, train_autoencoder};
+use world_model::train_ae::{AeConfigs, AeTrainConfig, RunOptions, read_configs, train_autoencoder};
 
 use crate::cli::TrainAutoencoderArgs;
-use crate::output::write_json;
 use crate::progress;
 use harness::sessions::{open_session, read_step, record_session};
 
@@ -61,13 +60,11 @@ pub(super) fn stop_on_signals() {
 /// line gives it and the run's saved value.
 pub(super) type FixedFlag = (&'static str, serde_json::Value, serde_json::Value);
 
-/// `(id, fresh[key], saved[key])` for each `(id, key)`: fields of two serialised configs.
-pub(super) fn fixed_fields(
-    fresh: &serde_json::Value,
-    saved: &serde_json::Value,
-    ids_keys: &[(&'static str, &str)],
-) -> Vec<FixedFlag> {
-    ids_keys.iter().map(|&(id, key)| (id, fresh[key].clone(), saved[key].clone())).collect()
+/// The flag `id`'s value on this command line and in the saved run, as JSON (how the
+/// refusal shows the saved one).
+pub(super) fn fixed<T: serde::Serialize>(id: &'static str, fresh: &T, saved: &T) -> FixedFlag {
+    let json = |v: &T| serde_json::to_value(v).unwrap_or_default();
+    (id, json(fresh), json(saved))
 }
 
 /// `--resume` continues a run with the settings saved in `saved` (its config file).
@@ -123,14 +120,11 @@ pub(super) fn prepare_out(
 }
 
 /// The `data` entry of a world-model or autoencoder provenance file.
-pub fn data_provenance(path: &std::path::Path, episodes: usize, frames: usize) -> Result<serde_json::Value> {
-    Ok(json!({
-        "path": path.display().to_string(),
-        "episodes": episodes,
-        "frames": frames,
-        "held_out": "episodes with index % 10 == 9",
-        "collected_with": dataset_origin(path)?,
-    }))
+///
+/// # Errors
+/// A dataset whose attributes cannot be read.
+pub fn data_provenance(path: &std::path::Path, episodes: usize, frames: usize) -> Result<FramesUsed> {
+    Ok(FramesUsed::new(path, episodes, frames, dataset_origin(path)?))
 }
 
 /// The autoencoder and training settings the flags ask for; on `--resume`, checked against the
@@ -162,11 +156,17 @@ fn autoencoder_configs(a: &TrainAutoencoderArgs) -> Result<(AutoencoderConfig, A
     };
     if a.session.resume {
         let path = a.out.join("config.json");
-        let saved = crate::output::read_json(&path)?;
-        let keys = ["batch", "lr", "seed", "eval_every", "checkpoint_every", "encoder_from"].map(|k| (k, k));
-        let mut fixed = fixed_fields(&serde_json::to_value(&cfg)?, &saved["train"], &keys);
-        let model_keys = [("decoder_channels", "decoder_channels")];
-        fixed.extend(fixed_fields(&serde_json::to_value(&model_cfg)?, &saved["model"], &model_keys));
+        let saved: AeConfigs = read_configs(&path)?;
+        let theirs = &saved.train;
+        let fixed = [
+            fixed("batch", &cfg.batch, &theirs.batch),
+            fixed("lr", &cfg.lr, &theirs.lr),
+            fixed("seed", &cfg.seed, &theirs.seed),
+            fixed("eval_every", &cfg.eval_every, &theirs.eval_every),
+            fixed("checkpoint_every", &cfg.checkpoint_every, &theirs.checkpoint_every),
+            fixed("encoder_from", &cfg.encoder_from, &theirs.encoder_from),
+            fixed("decoder_channels", &model_cfg.decoder_channels, &saved.model.decoder_channels),
+        ];
         refuse_contradicting_flags(&path, "autoencoder", &fixed)?;
     }
     Ok((model_cfg, cfg))
@@ -215,32 +215,31 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
         outcome.elapsed_s,
     )?;
     // The saved config is the run's (a resumed run keeps it).
-    let saved = crate::output::read_json(&a.out.join("config.json"))?;
-    let encoder_from = saved["train"].get("encoder_from").map(|dir| {
-        let dir = std::path::PathBuf::from(dir.as_str().unwrap_or_default());
-        json!({"path": dir.display().to_string(), "provenance": crate::output::read_json(&dir.join("provenance.json")).ok()})
+    let saved: AeConfigs = read_configs(&a.out.join("config.json"))?;
+    let encoder_from = saved.train.encoder_from.as_ref().map(|dir| Source {
+        path: dir.display().to_string(),
+        provenance: harness::provenance::snapshot(dir),
     });
-    let saved_decoder_channels = saved["model"]["decoder_channels"].clone();
-    write_json(
-        &a.out.join("provenance.json"),
-        &json!({
-            "what": match &encoder_from {
-                Some(_) => "frame decoder (12x12x8 -> 96x96x3) trained on a fixed encoder's latents",
-                None => "frame autoencoder (96x96x3 <-> 12x12x8)",
-            },
-            "encoder_from": encoder_from,
-            "decoder_channels": saved_decoder_channels,
-            "command": args.join(" "),
-            "sessions": sessions,
-            "seed": a.seed,
-            "commit": super::git_commit(),
-            "data": data_prov,
-            "steps": outcome.step,
-            "finished": outcome.finished,
-            "elapsed_s": outcome.elapsed_s,
-            "metrics": {"held_out_psnr_db": outcome.psnr, "held_out_mse": outcome.mse},
-        }),
-    )?;
+    let provenance = AutoencoderProvenance {
+        command: args.join(" "),
+        commit: super::git_commit(),
+        data: data_prov,
+        decoder_channels: saved.model.decoder_channels,
+        elapsed_s: outcome.elapsed_s,
+        finished: outcome.finished,
+        metrics: AutoencoderMetrics { held_out_mse: Some(outcome.mse), held_out_psnr_db: Some(outcome.psnr) },
+        seed: a.seed,
+        sessions,
+        steps: outcome.step,
+        what: match &encoder_from {
+            Some(_) => "frame decoder (12x12x8 -> 96x96x3) trained on a fixed encoder's latents",
+            None => "frame autoencoder (96x96x3 <-> 12x12x8)",
+        }
+        .to_string(),
+        encoder_from,
+        other: Default::default(),
+    };
+    harness::provenance::write(&a.out.join("provenance.json"), &provenance)?;
     outln!(
         "autoencoder: step {}/{}{}, held-out PSNR {:.2} dB, MSE {:.6} -> {}",
         outcome.step,

@@ -8,10 +8,10 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use judges::folder::{JudgeFile, Label, write_judge};
 use judges::metrics::JudgeMetrics;
+use judges::provenance::{JudgeProvenance, LabelledData};
 use judges::read::JudgeData;
 use judges::train::{JudgeTrainConfig, train_judge};
 use policies::net::NetConfig;
-use serde_json::json;
 
 use super::git_commit;
 use super::train::dataset_origin;
@@ -58,20 +58,22 @@ fn judge_file(
         persist_frames: a.persist,
         steps: a.steps,
         heldout: JudgeMetrics::default(),
-        provenance: json!({
-            "command": args.join(" "),
-            "commit": git_commit(),
-            "seed": a.seed,
-            "train": cfg,
-            "data": {
-                "path": a.data.display().to_string(),
-                "fingerprint": harness::fingerprint::folder(&a.data).ok(),
-                "episodes": data.episodes.len(),
-                "frames": frames,
-                "held_out": "episodes with index % 10 == 9",
-                "collected_with": dataset_origin(&a.data)?,
-            },
-        }),
+        provenance: JudgeProvenance {
+            command: Some(args.join(" ")),
+            commit: git_commit(),
+            data: Some(LabelledData {
+                collected_with: dataset_origin(&a.data)?,
+                episodes: data.episodes.len(),
+                fingerprint: harness::fingerprint::folder(&a.data).ok(),
+                frames,
+                held_out: harness::provenance::HELD_OUT.to_string(),
+                path: a.data.display().to_string(),
+                other: Default::default(),
+            }),
+            seed: Some(a.seed),
+            train: Some(cfg.clone()),
+            ..JudgeProvenance::default()
+        },
     })
 }
 
@@ -160,7 +162,7 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     file.heldout = heldout;
     file.steps = steps;
     if steps < a.steps {
-        file.provenance["out_of_time"] = json!(format!(
+        file.provenance.out_of_time = Some(format!(
             "--max-minutes {} ended training at step {steps} of {}",
             a.max_minutes.unwrap_or(0.0),
             a.steps

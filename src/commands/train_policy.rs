@@ -8,11 +8,11 @@ use policies::data::Demos;
 use policies::diffusion::{DiffusionConfig, Normalisation};
 use policies::dir::{diffusion_config, read_policy_file};
 use policies::net::NetConfig;
+use policies::provenance::{DemosUsed, PolicyProvenance, PolicyStart};
 use policies::train::{Phase, PolicyRun, PolicyTrainConfig, RunConfigs, train_policy};
-use serde_json::json;
 
 use super::git_commit;
-use super::train::{dataset_origin, dataset_task, fixed_fields, prepare_out, refuse_contradicting_flags};
+use super::train::{dataset_origin, dataset_task, fixed, prepare_out, refuse_contradicting_flags};
 use crate::cli::TrainPolicyArgs;
 use crate::progress;
 use harness::sessions::{open_session, read_step, record_session};
@@ -74,25 +74,25 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
             init_from: a.init_from.clone(),
         },
         normalisation,
-        provenance: json!({
-            "command": args.join(" "),
-            "commit": git_commit(),
-            "seed": a.seed,
-            "data": {
-                "path": a.data.display().to_string(),
-                "behaviour": a.behaviour,
-                "episodes": demos.episodes.len(),
-                "samples": demos.len(),
-                "collected_with": dataset_origin(&a.data)?,
-            },
-            "encoder_from": a.encoder_from.as_ref().map(|p| p.display().to_string()),
-            "init_from": start.as_ref().map(|s| json!({
-                "path": s.dir.display().to_string(),
-                "epoch": s.epoch,
-                "step": s.step,
-                "provenance": s.provenance,
-            })),
-        }),
+        provenance: PolicyProvenance {
+            data: Some(DemosUsed {
+                behaviour: a.behaviour.clone(),
+                collected_with: dataset_origin(&a.data)?,
+                episodes: demos.episodes.len(),
+                path: a.data.display().to_string(),
+                samples: demos.len(),
+                other: Default::default(),
+            }),
+            encoder_from: a.encoder_from.as_ref().map(|p| p.display().to_string()),
+            init_from: start.as_ref().map(|s| PolicyStart {
+                epoch: s.epoch,
+                path: s.dir.display().to_string(),
+                provenance: serde_json::to_value(&s.provenance).unwrap_or_default(),
+                step: s.step,
+            }),
+            seed: Some(a.seed),
+            ..PolicyProvenance::new(args.join(" "), git_commit())
+        },
         policy,
         task: Some(task.name().to_string()),
     };
@@ -149,21 +149,25 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
 /// optimiser flags typed on this command line must agree with it (`--epochs`, `--ema`
 /// and the session flags may change; see [`refuse_contradicting_flags`]).
 fn check_resume_flags(path: &std::path::Path, fresh: &RunConfigs) -> Result<()> {
-    let saved = crate::output::read_json(path)?;
-    let ours = serde_json::to_value(fresh)?;
-    let keys =
-        ["save_every", "batch", "lr", "seed", "encoder_steps", "encoder_lr", "init_from"].map(|k| (k, k));
-    let mut fixed = fixed_fields(&ours["train"], &saved["train"], &keys);
-    let net = [("encoder_width", "encoder_width"), ("down_dims", "down_dims")];
-    fixed.extend(fixed_fields(&ours["policy"]["net"], &saved["policy"]["net"], &net));
-    fixed.extend(fixed_fields(&ours["policy"], &saved["policy"], &[("inference_steps", "inference_steps")]));
-    fixed.extend(fixed_fields(
-        &ours["provenance"],
-        &saved["provenance"],
-        &[("encoder_from", "encoder_from")],
-    ));
-    let data = [("behaviour", "behaviour"), ("episodes", "episodes")];
-    fixed.extend(fixed_fields(&ours["provenance"]["data"], &saved["provenance"]["data"], &data));
+    let saved: RunConfigs = harness::runfile::read(path)?;
+    let (ours, theirs) = (&fresh.train, &saved.train);
+    let data = |c: &RunConfigs| c.provenance.data.as_ref().map(|d| (d.behaviour.clone(), d.episodes)).unzip();
+    let ((our_behaviour, our_episodes), (their_behaviour, their_episodes)) = (data(fresh), data(&saved));
+    let fixed = vec![
+        fixed("save_every", &ours.save_every, &theirs.save_every),
+        fixed("batch", &ours.batch, &theirs.batch),
+        fixed("lr", &ours.lr, &theirs.lr),
+        fixed("seed", &ours.seed, &theirs.seed),
+        fixed("encoder_steps", &ours.encoder_steps, &theirs.encoder_steps),
+        fixed("encoder_lr", &ours.encoder_lr, &theirs.encoder_lr),
+        fixed("init_from", &ours.init_from, &theirs.init_from),
+        fixed("encoder_width", &fresh.policy.net.encoder_width, &saved.policy.net.encoder_width),
+        fixed("down_dims", &fresh.policy.net.down_dims, &saved.policy.net.down_dims),
+        fixed("inference_steps", &fresh.policy.inference_steps, &saved.policy.inference_steps),
+        fixed("encoder_from", &fresh.provenance.encoder_from, &saved.provenance.encoder_from),
+        fixed("behaviour", &our_behaviour, &their_behaviour),
+        fixed("episodes", &our_episodes, &their_episodes),
+    ];
     refuse_contradicting_flags(path, "policy", &fixed)
 }
 
@@ -175,7 +179,7 @@ struct Start {
     normalisation: Normalisation,
     epoch: u64,
     step: u64,
-    provenance: serde_json::Value,
+    provenance: PolicyProvenance,
 }
 
 fn starting_checkpoint(dir: &std::path::Path, typed: &DiffusionConfig) -> Result<Start> {

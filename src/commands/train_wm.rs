@@ -8,8 +8,8 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use burn::tensor::Device;
+use harness::provenance::{Source, WorldModelMetrics, WorldModelProvenance};
 use scenarios::pusht::goal_free::{self, DatasetScene};
-use serde_json::json;
 use world_model::codec::FrameCodec;
 use world_model::data::EpisodeData;
 use world_model::drift_step::FieldKind;
@@ -17,11 +17,12 @@ use world_model::latents::{LatentStats, Latents};
 use world_model::model::{Objective, Prediction, WorldModelConfig};
 use world_model::motion::MotionWeighting;
 use world_model::train_ae::RunOptions;
-use world_model::train_wm::{TrainingFrames, WmTrainConfig, train_world_model};
+use world_model::train_ae::read_configs;
+use world_model::train_wm::{TrainingFrames, WmConfigs, WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
 use super::git_commit;
-use super::train::{data_provenance, fixed_fields, prepare_out, refuse_contradicting_flags};
+use super::train::{data_provenance, fixed, prepare_out, refuse_contradicting_flags};
 use crate::cli::{FieldArg, ObjectiveArg, PredictionArg, TrainWorldModelArgs, WmConfigArg};
 use crate::output::{read_json, write_json};
 use crate::progress;
@@ -219,7 +220,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     }
     let inner = nn::device::selected()?;
     // A resumed run keeps its saved config (and so its codec); a fresh one builds it.
-    let saved = if a.session.resume { Some(saved_model_config(&a.out)?) } else { None };
+    let saved = if a.session.resume { Some(WorldModelConfig::read(&a.out)?) } else { None };
     let codec = match &saved {
         Some(saved) => resumed_codec(a, saved, &inner)?,
         None => fresh_codec(a, &inner)?,
@@ -267,29 +268,38 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     pb.finish_and_clear();
     let sessions =
         record_session(&a.out, &args.join(" "), &git_commit(), (from_step, outcome.step), outcome.elapsed_s)?;
-    let saved = saved_model_config(&a.out)?;
-    write_json(
-        &a.out.join("provenance.json"),
-        &json!({
-            "what": format!(
-                "world model U-Net, objective {}, on {}",
-                saved.objective.name(),
-                saved.autoencoder.as_ref().map_or("pixels".into(), |ae| format!("the latents of {}", ae.display()))
-            ),
-            "command": args.join(" "),
-            "sessions": sessions,
-            "seed": a.seed,
-            "commit": git_commit(),
-            "autoencoder": saved.autoencoder,
-            "data": data_prov,
-            "frames": if goal_free { "re-rendered without the goal from data/state (--goal-free)" } else { "data/img as stored" },
-            "steps": outcome.step,
-            "finished": outcome.finished,
-            "elapsed_s": outcome.elapsed_s,
-            "metrics": {"held_out_one_chunk_latent_mse": outcome.eval_mse},
-            "init_from": warm_start_record(&a.out)?,
-        }),
-    )?;
+    let saved = WorldModelConfig::read(&a.out)?;
+    let frames = if goal_free {
+        "re-rendered without the goal from data/state (--goal-free)"
+    } else {
+        "data/img as stored"
+    };
+    let provenance = WorldModelProvenance {
+        autoencoder: saved.autoencoder.as_ref().map(|ae| ae.display().to_string()),
+        autoencoder_replaced: None,
+        command: args.join(" "),
+        commit: git_commit(),
+        data: data_prov,
+        elapsed_s: outcome.elapsed_s,
+        exported: Vec::new(),
+        finished: outcome.finished,
+        frames: Some(frames.to_string()),
+        init_from: warm_start_record(&a.out)?,
+        metrics: WorldModelMetrics { held_out_one_chunk_latent_mse: Some(outcome.eval_mse) },
+        seed: a.seed,
+        sessions,
+        steps: outcome.step,
+        what: format!(
+            "world model U-Net, objective {}, on {}",
+            saved.objective.name(),
+            saved
+                .autoencoder
+                .as_ref()
+                .map_or("pixels".into(), |ae| format!("the latents of {}", ae.display()))
+        ),
+        other: Default::default(),
+    };
+    harness::provenance::write(&a.out.join("provenance.json"), &provenance)?;
     outln!(
         "world model ({}): step {}/{}{}, held-out one-chunk latent MSE {:.5} -> {}",
         saved.objective.name(),
@@ -367,7 +377,7 @@ fn same_folder(x: &Path, y: &Path) -> bool {
 /// The latent statistics of the run `dir` that `--init-from` starts from, after
 /// checking that its U-Net and autoencoder are the ones this run uses.
 fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: Option<&Path>) -> Result<LatentStats> {
-    let from = saved_model_config(dir).context("--init-from")?;
+    let from = WorldModelConfig::read(dir).context("--init-from")?;
     // The differences a warm start bridges: adding action maps or a timestep embedding.
     if !unet.can_start_from(&from.unet) {
         bail!(
@@ -396,38 +406,39 @@ fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: Option<&Path>) -
     Ok(from.latents)
 }
 
-/// Where a warm-started run came from: `{"path", "provenance"}` with the source
-/// run's provenance as it was when this run first recorded it (snapshotted into
-/// `OUT/init_from_provenance.json`, since the source may go on training), so a
-/// shipped model's lineage nests all the way back; `null` for a cold start.
-fn warm_start_record(out: &Path) -> Result<serde_json::Value> {
-    let cfg = read_json(&out.join("config.json"))?;
-    let Some(src) = cfg["train"]["init_from"].as_str() else {
-        return Ok(serde_json::Value::Null);
+/// Where a warm-started run came from: its folder, with the source run's provenance as
+/// it was when this run first recorded it (snapshotted into
+/// `OUT/init_from_provenance.json`, since the source may go on training), so a shipped
+/// model's lineage nests all the way back; `None` for a cold start.
+fn warm_start_record(out: &Path) -> Result<Option<Source>> {
+    let saved: WmConfigs = read_configs(&out.join("config.json"))?;
+    let Some(src) = saved.train.init_from else {
+        return Ok(None);
     };
+    let path = src.display().to_string();
     let snapshot = out.join("init_from_provenance.json");
     if !snapshot.exists() {
-        match read_json(&Path::new(src).join("provenance.json")) {
+        match read_json(&src.join("provenance.json")) {
             Ok(v) => write_json(&snapshot, &v)?,
             Err(e) => {
-                tracing::warn!("--init-from {src}: no provenance to record ({e:#})");
-                return Ok(json!({"path": src, "provenance": null}));
+                tracing::warn!("--init-from {path}: no provenance to record ({e:#})");
+                return Ok(Some(Source { path, provenance: None }));
             }
         }
     }
-    Ok(json!({"path": src, "provenance": read_json(&snapshot)?}))
+    Ok(Some(Source { path, provenance: Some(read_json(&snapshot)?) }))
 }
 
 /// `--resume --ema-decay D`: the run goes on with decay D (its EMA weights as
 /// they are), written into its `config.json` so the change is on record.
 fn set_saved_ema_decay(out: &Path, decay: f64) -> Result<()> {
     let path = out.join("config.json");
-    let mut v = read_json(&path)?;
-    let before = v["train"]["ema_decay"].as_f64();
-    if before != Some(decay) {
-        tracing::info!(?before, after = decay, "changing the EMA decay");
-        v["train"]["ema_decay"] = json!(decay);
-        write_json(&path, &v)?;
+    let mut saved: WmConfigs = read_configs(&path)?;
+    let before = saved.train.ema_decay;
+    if before != decay {
+        tracing::info!(before, after = decay, "changing the EMA decay");
+        saved.train.ema_decay = decay;
+        harness::runfile::write_config(&path, &saved)?;
     }
     Ok(())
 }
@@ -437,43 +448,40 @@ fn set_saved_ema_decay(out: &Path, decay: f64) -> Result<()> {
 /// session flags may change; see [`refuse_contradicting_flags`]).
 fn check_resume_flags(a: &TrainWorldModelArgs, fresh: &WmTrainConfig) -> Result<()> {
     let path = a.out.join("config.json");
-    let model = saved_model_config(&a.out)?;
-    let train: WmTrainConfig = serde_json::from_value(read_json(&path)?["train"].clone())
-        .with_context(|| format!("{}: \"train\"", path.display()))?;
-    let (ours, theirs) = (serde_json::to_value(fresh)?, serde_json::to_value(&train)?);
-    let keys = ["contexts", "samples", "field", "warmup", "lr", "seed", "eval_every", "eval_windows"];
-    let keys = keys.map(|k| (k, k));
-    let more = [
-        ("checkpoint_every", "checkpoint_every"),
-        ("self_forcing", "chunks"),
-        ("context_noise", "context_noise"),
-    ];
-    let mut fixed = fixed_fields(&ours, &theirs, &[&keys[..], &more[..]].concat());
+    let WmConfigs { model, train } = read_configs(&path)?;
+    // The same starting folder, however it is spelt, is no contradiction.
     let init_from = match (&fresh.init_from, &train.init_from) {
-        (Some(x), Some(y)) if x == y || same_folder(x, y) => theirs["init_from"].clone(),
-        _ => ours["init_from"].clone(),
+        (Some(x), Some(y)) if x == y || same_folder(x, y) => &train.init_from,
+        _ => &fresh.init_from,
     };
-    let name = |o: Objective| json!(o.name());
-    let family = |pixels: bool| json!(if pixels { "pusht-pixel" } else { "pusht-latent" });
-    fixed.extend([
-        ("motion_weighting", json!(a.motion_weighting), json!(train.motion.is_some())),
-        ("init_from", init_from, theirs["init_from"].clone()),
-        ("objective", name(fresh_objective(a.objective)), name(model.objective)),
-        ("config", family(matches!(a.config, WmConfigArg::PushtPixel)), family(model.autoencoder.is_none())),
-        ("base_channels", json!(a.base_channels), json!(model.unet.model_channels)),
-        ("action_maps", json!(a.action_maps), json!(model.unet.uses_action_maps())),
-        ("anchor", json!(a.anchor), json!(model.unet.uses_anchor())),
-        ("goal_free", json!(a.goal_free), json!(model.is_goal_free())),
-        ("accentuation", json!(a.accentuation), json!(model.unet.uses_accentuation())),
-        ("sample_steps", json!(a.sample_steps), json!(model.sample_steps)),
-        ("prediction", json!(prediction(a)), json!(model.prediction.unwrap_or_default())),
-    ]);
+    let family = |pixels: bool| if pixels { "pusht-pixel" } else { "pusht-latent" };
+    let fixed = [
+        fixed("contexts", &fresh.contexts, &train.contexts),
+        fixed("samples", &fresh.samples, &train.samples),
+        fixed("field", &fresh.field, &train.field),
+        fixed("warmup", &fresh.warmup, &train.warmup),
+        fixed("lr", &fresh.lr, &train.lr),
+        fixed("seed", &fresh.seed, &train.seed),
+        fixed("eval_every", &fresh.eval_every, &train.eval_every),
+        fixed("eval_windows", &fresh.eval_windows, &train.eval_windows),
+        fixed("checkpoint_every", &fresh.checkpoint_every, &train.checkpoint_every),
+        fixed("self_forcing", &fresh.chunks, &train.chunks),
+        fixed("context_noise", &fresh.context_noise, &train.context_noise),
+        fixed("motion_weighting", &a.motion_weighting, &train.motion.is_some()),
+        fixed("init_from", init_from, &train.init_from),
+        fixed("objective", &fresh_objective(a.objective).name(), &model.objective.name()),
+        fixed(
+            "config",
+            &family(matches!(a.config, WmConfigArg::PushtPixel)),
+            &family(model.autoencoder.is_none()),
+        ),
+        fixed("base_channels", &a.base_channels, &Some(model.unet.model_channels)),
+        fixed("action_maps", &a.action_maps, &model.unet.uses_action_maps()),
+        fixed("anchor", &a.anchor, &model.unet.uses_anchor()),
+        fixed("goal_free", &a.goal_free, &model.is_goal_free()),
+        fixed("accentuation", &a.accentuation, &model.unet.uses_accentuation()),
+        fixed("sample_steps", &a.sample_steps, &model.sample_steps),
+        fixed("prediction", &prediction(a), &model.prediction.unwrap_or_default()),
+    ];
     refuse_contradicting_flags(&path, "world-model", &fixed)
-}
-
-/// The "model" entry of a run's `config.json`.
-fn saved_model_config(out: &Path) -> Result<WorldModelConfig> {
-    let path = out.join("config.json");
-    let v = read_json(&path)?;
-    serde_json::from_value(v["model"].clone()).with_context(|| format!("{}: \"model\"", path.display()))
 }

@@ -17,15 +17,14 @@ use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use serde_json::json;
-use world_model::model::WorldModel;
+use harness::provenance::{AutoencoderReplaced, Exported, WorldModelOrigin};
+use world_model::model::{FolderConfig, WorldModel};
 use world_model::train_ae::load_autoencoder;
 
-use super::export_policies::append;
 use super::git_commit;
 use super::train_wm::relative_to;
 use crate::cli::WmExportArgs;
-use crate::output::{Staged, read_json, write_json};
+use crate::output::{Staged, write_json};
 use harness::sessions::stale_provenance;
 
 /// Copied when present; `ema.bpk` is required.
@@ -70,24 +69,23 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
             a.from.display()
         );
     }
-    let mut provenance = read_json(&prov_path)?;
-    if let Some(why) = stale_provenance(&a.from, provenance.get("steps").and_then(serde_json::Value::as_u64))?
-    {
+    let mut provenance: WorldModelOrigin = harness::provenance::read(&prov_path)?;
+    if let Some(why) = stale_provenance(&a.from, provenance.steps())? {
         bail!(
             "--from {why}; `train world-model --out {} --resume --max-minutes 0` records that session \
              and rewrites provenance.json without training",
             a.from.display()
         );
     }
-    let mut config = read_json(&a.from.join("config.json"))?;
+    let mut config = FolderConfig::read(&a.from)?;
     if let Some(alpha) = a.alpha {
-        config["model"]["alpha"] = json!(alpha);
+        config.model.alpha = Some(alpha);
     }
     let inputs = crate::output::Inputs::new()
         .world_model("--from", &a.from)
         .maybe("--autoencoder", a.autoencoder.as_deref());
     let staged = Staged::new(&a.out, a.force, &inputs)?;
-    if let Some(ae) = config["model"]["autoencoder"].as_str() {
+    if let Some(ae) = config.model.autoencoder.clone() {
         let trained_on = a.from.join(ae);
         let target = match &a.autoencoder {
             Some(other) => {
@@ -97,20 +95,20 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
             None => trained_on.clone(),
         };
         // The staging folder is the output's sibling, so paths relative to it hold.
-        let moved = relative_to(&staged.file(""), &target)?.display().to_string();
-        if let Some(other) = &a.autoencoder {
-            // Relative to the exported folder, as the config's path: the path as given
-            // depends on the directory the command ran in (it is in "exported"'s command).
-            provenance["autoencoder_replaced"] = json!({
-                "trained_on": trained_on.display().to_string(),
-                "now": moved,
-                "now_provenance": read_json(&other.join("provenance.json")).ok(),
-            });
+        let moved = relative_to(&staged.file(""), &target)?;
+        if let WorldModelOrigin::Trained(p) = &mut provenance {
+            if let Some(other) = &a.autoencoder {
+                // Relative to the exported folder, as the config's path: the path as given
+                // depends on the directory the command ran in (it is in "exported"'s command).
+                p.autoencoder_replaced = Some(AutoencoderReplaced {
+                    now: moved.display().to_string(),
+                    now_provenance: harness::provenance::snapshot(other),
+                    trained_on: trained_on.display().to_string(),
+                });
+            }
+            p.autoencoder = Some(moved.display().to_string());
         }
-        config["model"]["autoencoder"] = json!(moved);
-        if provenance.get("autoencoder").is_some() {
-            provenance["autoencoder"] = json!(moved);
-        }
+        config.model.autoencoder = Some(moved);
     } else if let Some(other) = &a.autoencoder {
         bail!(
             "--autoencoder {}: {} is a pixel-space model (no autoencoder)",
@@ -126,12 +124,14 @@ pub fn run(a: &WmExportArgs) -> Result<ExitCode> {
         }
     }
     let command: Vec<String> = crate::stdout::command_line();
-    let mut entry =
-        json!({"command": command.join(" "), "commit": git_commit(), "from": a.from.display().to_string()});
-    if let Some(alpha) = a.alpha {
-        entry["alpha"] = json!(alpha);
-    }
-    append(&mut provenance["exported"], entry);
+    provenance.exported_mut().push(Exported {
+        alpha: a.alpha,
+        changed: None,
+        command: command.join(" "),
+        commit: git_commit(),
+        from: a.from.display().to_string(),
+        other: Default::default(),
+    });
     write_json(&staged.file("provenance.json"), &provenance)?;
     let out = staged.commit()?;
     WorldModel::load(&out, &device)

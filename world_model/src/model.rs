@@ -60,6 +60,29 @@ pub enum Prediction {
     X0,
 }
 
+/// A world-model folder's `config.json`: the model's configuration, and what else the
+/// folder's maker wrote beside it (a trainer's `train`, an import's `import`), kept as
+/// written so that `wm export` can rewrite the model's entry without losing the rest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FolderConfig {
+    /// The model's configuration.
+    pub model: WorldModelConfig,
+    /// The other entries, as written.
+    #[serde(flatten)]
+    pub rest: std::collections::BTreeMap<String, serde_json::Value>,
+}
+
+impl FolderConfig {
+    /// `dir/config.json`.
+    ///
+    /// # Errors
+    /// [`WorldModelError::Checkpoint`] naming the file when it is missing or malformed.
+    pub fn read(dir: &Path) -> Result<Self, WorldModelError> {
+        let path = dir.join("config.json");
+        harness::runfile::read(&path).map_err(|e| ckpt(&e.path, e.message))
+    }
+}
+
 /// Everything needed to rebuild a world model (its `config.json` "model" entry).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -134,11 +157,13 @@ impl WorldModelConfig {
     /// # Errors
     /// [`WorldModelError::Checkpoint`] naming the file when it is missing or malformed.
     pub fn read(dir: &Path) -> Result<Self, WorldModelError> {
+        /// The entry read; a trained model's file also has `train`, an imported one's `import`.
+        #[derive(Deserialize)]
+        struct Entry {
+            model: WorldModelConfig,
+        }
         let path = dir.join("config.json");
-        let text = std::fs::read_to_string(&path).map_err(|e| ckpt(&path, e))?;
-        let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| ckpt(&path, e))?;
-        let cfg: Self =
-            serde_json::from_value(v["model"].clone()).map_err(|e| ckpt(&path, format!("\"model\": {e}")))?;
+        let Entry { model: cfg } = harness::runfile::read(&path).map_err(|e| ckpt(&e.path, e.message))?;
         cfg.unet.check().map_err(|e| ckpt(&path, format!("\"model.unet\": {e}")))?;
         Ok(cfg)
     }

@@ -119,11 +119,16 @@ pub(crate) struct State {
 }
 
 /// What a trainer's `config.json` holds: the model's and the training's configs.
-#[derive(Clone, Serialize, Deserialize)]
-pub(crate) struct Configs<M, T> {
-    pub(crate) model: M,
-    pub(crate) train: T,
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Configs<M, T> {
+    /// The model's.
+    pub model: M,
+    /// The training's.
+    pub train: T,
 }
+
+/// An autoencoder run's `config.json`.
+pub type AeConfigs = Configs<AutoencoderConfig, AeTrainConfig>;
 
 /// The configs of a run in `out`: written fresh, or read back when resuming (the
 /// saved ones win), with the step total (`steps` picks it) replaced when extending.
@@ -153,10 +158,12 @@ pub(crate) fn ckpt(path: &Path, e: impl std::fmt::Display) -> WorldModelError {
     WorldModelError::Checkpoint { path: path.to_path_buf(), message: e.to_string() }
 }
 
-/// Reads a run's `config.json`.
-fn read_configs(path: &Path) -> Result<Configs<AutoencoderConfig, AeTrainConfig>, WorldModelError> {
-    let text = std::fs::read_to_string(path).map_err(|e| ckpt(path, e))?;
-    serde_json::from_str(&text).map_err(|e| ckpt(path, e))
+/// Reads a run's `config.json` as `C` ([`AeConfigs`], [`crate::train_wm::WmConfigs`]).
+///
+/// # Errors
+/// [`WorldModelError::Checkpoint`] naming the file when it is missing or malformed.
+pub fn read_configs<C: serde::de::DeserializeOwned>(path: &Path) -> Result<C, WorldModelError> {
+    harness::runfile::read(path).map_err(|e| ckpt(&e.path, e.message))
 }
 
 /// Loads a trained autoencoder from its folder (`config.json` + `model.bpk`).
@@ -169,7 +176,7 @@ pub fn load_autoencoder(
     device: &Device,
 ) -> Result<(Autoencoder, AutoencoderConfig), WorldModelError> {
     let cfg_path = dir.join("config.json");
-    let cfgs = read_configs(&cfg_path)?;
+    let cfgs: AeConfigs = read_configs(&cfg_path)?;
     let weights = dir.join("model.bpk");
     let model = cfgs.model.init(device).try_load_file(&weights).map_err(|e| ckpt(&weights, e))?;
     Ok((model, cfgs.model))

@@ -113,6 +113,9 @@ impl WmTrainConfig {
     }
 }
 
+/// A world-model run's `config.json`: the model's configuration and the training's.
+pub type WmConfigs = Configs<crate::model::WorldModelConfig, WmTrainConfig>;
+
 /// A training progress report.
 #[derive(Clone, Debug)]
 pub struct WmProgress {

@@ -6,10 +6,12 @@
 //!
 //! - [`state`]: the shared context, each episode's live state and the rows;
 //! - [`episodes`]: the lockstep loop over a batch, the picking and spreading rules;
-//! - `imagine`: a decision's proposals imagined in the world model or the simulator.
+//! - `imagine`: a decision's proposals imagined in the world model or the simulator;
+//! - [`results`]: the run's statistics per planner, its `results.json`.
 
 pub mod episodes;
 mod imagine;
+pub mod results;
 pub mod state;
 
 pub use episodes::{pick, pick_with_margin, run_batch, spread};

@@ -204,17 +204,18 @@ pub fn total_steps(episodes: &[EpisodeEntry]) -> u64 {
 
 /// How to make a dataset again (`collect` is deterministic: the same arguments give the
 /// same bytes), for a trainer's provenance; a merged dataset lists each input's.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Recipe {
     /// The command that makes it (`DATASET` standing for a merge's output).
     pub command: String,
     /// A merge's inputs' recipes, in order (none for an input that was not made by evalharness).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub inputs: Option<Vec<Option<Recipe>>>,
     /// `collect --policy`'s checkpoints.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub checkpoints: Option<Vec<CheckpointEntry>>,
     /// The version that wrote the dataset.
+    #[serde(default)]
     pub evalharness_version: Option<String>,
 }
 

@@ -20,10 +20,10 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use engine::plan::results::{PlanSettings, PlanTiming, summarise};
 use harness::policy::Policy;
 use policies::diffusion::DiffusionPolicy;
 use policies::dir::{checkpoint_name, diffusion_config, diffusion_weights, read_policy_file};
-use serde_json::json;
 
 use crate::cli::PlanArgs;
 use crate::output::write_json;
@@ -43,11 +43,11 @@ fn load_proposer(
     let image_size = task.observation_spec().image_size;
     let dir = &a.policy;
     // The kind first: other kinds' policy.json has other fields.
-    let kind = crate::output::read_json(&dir.join("policy.json"))
-        .with_context(|| format!("policy {}", dir.display()))?["kind"]
-        .as_str()
-        .unwrap_or("?")
-        .to_string();
+    let Some(kind) = policies::dir::policy_kind(dir) else {
+        // Unreadable, not JSON, or without a kind: the reader names what is wrong.
+        read_policy_file(dir)?;
+        bail!("{}: policy.json names no kind", dir.display());
+    };
     let file = match kind.as_str() {
         "diffusion" | "gpc-diffusion" | "lerobot-diffusion" | "robomimic-diffusion" => read_policy_file(dir)?,
         _ => bail!(
@@ -240,20 +240,16 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         tracing::info!(planner = planner.name(), "done");
     }
     pb.finish_and_clear();
-    let mut res = results::summarise(&rows, &planners, a.bootstrap, a.seed);
-    res["policy"] = json!(policy.name());
-    res["proposals"] = json!(a.proposals);
-    res["imagine"] = json!(imagine);
-    res["execute"] = json!(execute);
-    res["episodes"] = json!(a.episodes);
-    res["seed_start"] = json!(a.seed_start);
-    res["timing"] = json!({
-        "wall_seconds": started.elapsed().as_secs_f64(),
-        "policy_seconds": timing.policy_s,
-        "world_model_seconds": timing.world_model_s,
-        "world_model_ms_per_frame": 1e3 * timing.world_model_s / timing.frames.max(1) as f64,
-        "sim_seconds": timing.sim_s,
-    });
+    let settings = PlanSettings {
+        policy: policy.name().to_string(),
+        proposals: a.proposals,
+        imagine,
+        execute,
+        episodes: a.episodes,
+        seed_start: a.seed_start,
+    };
+    let timing = PlanTiming::new(started.elapsed().as_secs_f64(), &timing);
+    let res = summarise(&rows, &planners, a.bootstrap, a.seed, settings, timing);
     write_json(&a.out.join("results.json"), &res)?;
     results::write_csv(&a.out.join("episodes.csv"), &rows)?;
     out_dir.finish(true)?;
