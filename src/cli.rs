@@ -354,6 +354,26 @@ pub struct SimulateArgs {
     pub record: Option<PathBuf>,
 }
 
+impl SimulateArgs {
+    /// The paths this command reads, with their flags, checked against `--out` before it is
+    /// touched: the scenario file, the policy folder, the judge and the world models.
+    pub fn inputs(&self) -> crate::output::Inputs {
+        let policy = std::path::Path::new(&self.policy);
+        let mut inputs = crate::output::Inputs::new()
+            .scenario(&self.common.scenario)
+            .maybe("--policy", policy.exists().then_some(policy))
+            .maybe("--judge", self.judge.as_deref());
+        for (flag, wm) in
+            [("--observe-through", &self.observe_through), ("--replay-imagined", &self.replay_imagined)]
+        {
+            if let Some(wm) = wm {
+                inputs = inputs.world_model(flag, wm);
+            }
+        }
+        inputs
+    }
+}
+
 /// `evalharness collect`.
 #[derive(Debug, Args)]
 pub struct CollectArgs {

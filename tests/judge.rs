@@ -36,18 +36,14 @@ pub fn check(dir: &Path, data: &Path, wm: &Path, set: &Path) {
     let (_, err) = expect_code(&run(&[&train[..], &tiny[..]].concat()), 2);
     assert!(err.contains("already exists"), "{err}");
     expect_code(&run(&[&train[..], &tiny[..], &["--force"]].concat()), 0);
-    assert!(!dir.join("judge.partial").exists());
+    assert!(!dir.join("judge.replaced").exists());
+    let heldout = read_json(&judge.join("judge.json"))["heldout"].clone();
     // A label the dataset lacks is named.
     let (_, err) =
         expect_code(&run(&[&train[..], &tiny[..], &["--force", "--label", "success"]].concat()), 2);
     assert!(err.contains("data/success"), "{err}");
     assert!(judge.join("judge.json").is_file(), "the old judge stays when the new one fails");
-    // Out of time before the first step: an error, and no folder.
-    let none = dir.join("judge_no_time");
-    let args = ["train", "judge", "--data", s(data), "--out", s(&none), "--max-minutes", "0"];
-    let (_, err) = expect_code(&run(&[&args[..], &tiny[..]].concat()), 2);
-    assert!(err.contains("first step"), "{err}");
-    assert!(!none.exists() && !dir.join("judge_no_time.partial").exists());
+    resumes(dir, data, &tiny, &heldout);
 
     // rank --judge: the learned judge scores the imagined frames; its error on the
     // simulator branch's real frames is reported as for any judge.
@@ -78,4 +74,51 @@ pub fn check(dir: &Path, data: &Path, wm: &Path, set: &Path) {
     let args = [&rank[..], &["--judge", s(set), "--out", s(&out2)]].concat();
     let (_, err) = expect_code(&run(&args), 2);
     assert!(err.contains("judge.json"), "{err}");
+}
+
+/// A judge run resumes as the other trainers' do, to the judge an uninterrupted run ends
+/// with (`heldout`, the held-out reading of the 3-step judge of `tiny`, every figure to the
+/// last bit; the unit test `a_stopped_session_resumes_to_the_weights_of_an_uninterrupted_run`
+/// compares the weights): from a session out of time before its first step, and from a
+/// finished 2-step run extended by `--steps 3`, whose optimiser state the checkpoint carries.
+fn resumes(dir: &Path, data: &Path, tiny: &[&str], heldout: &serde_json::Value) {
+    let none = dir.join("judge_no_time");
+    let args = [&["train", "judge", "--data", s(data), "--out", s(&none)][..], tiny].concat();
+    let (stdout, _) = expect_code(&run(&[&args[..], &["--max-minutes", "0"]].concat()), 0);
+    assert!(stdout.contains("stopped before its first step; --resume continues"), "{stdout}");
+    assert!(!none.join("judge.json").exists() && none.join(".train/state.json").is_file());
+    // Without --resume the run is refused; a flag that contradicts the saved run is named.
+    let (_, err) = expect_code(&run(&args), 2);
+    assert!(err.contains("--resume"), "{err}");
+    let (_, err) = expect_code(&run(&[&args[..], &["--resume", "--lr", "0.5"]].concat()), 2);
+    assert!(err.contains("--lr (saved: 0.001)"), "{err}");
+    let (stdout, _) = expect_code(&run(&[&args[..], &["--resume"]].concat()), 0);
+    assert!(stdout.contains("judge of coverage"), "{stdout}");
+    let file = read_json(&none.join("judge.json"));
+    assert_eq!(&file["heldout"], heldout, "resumed from step 0");
+    assert_eq!(
+        (file["steps"].as_u64(), file["provenance"]["sessions"].as_array().map(Vec::len)),
+        (Some(3), Some(2))
+    );
+    assert!(file["provenance"].get("out_of_time").is_none(), "{file}");
+
+    // Two steps, then one more: the same weights as three in one go.
+    let ext = dir.join("judge_extended");
+    // `tiny` opens with `--steps 3`.
+    let rest = &tiny[2..];
+    let two =
+        [&["train", "judge", "--data", s(data), "--out", s(&ext)][..], rest, &["--steps", "2"]].concat();
+    expect_code(&run(&two), 0);
+    assert_eq!(read_json(&ext.join("judge.json"))["steps"], 2);
+    let three = [&two[..two.len() - 2], &["--steps", "3", "--resume"]].concat();
+    let (stdout, _) = expect_code(&run(&three), 0);
+    assert!(!stdout.contains("stopped early"), "{stdout}");
+    assert_eq!(&read_json(&ext.join("judge.json"))["heldout"], heldout, "resumed from step 2");
+    // The log keeps one history: the evaluation at step 2 (the first run's last), then step 3.
+    let log = std::fs::read_to_string(ext.join("log.jsonl")).unwrap();
+    let steps: Vec<u64> = log
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["step"].as_u64().unwrap())
+        .collect();
+    assert_eq!(steps, [2, 3], "{log}");
 }

@@ -1,5 +1,5 @@
 //! The loop skeleton every resumable trainer shares (autoencoder, world model,
-//! policy encoder pre-training, policy): when to stop, how long the run has
+//! policy encoder pre-training, policy, judge): when to stop, how long the run has
 //! trained over all its sessions, its JSON-lines log, and its small state file.
 //!
 //! A trainer keeps its model, optimiser and step counter, and asks the [`Driver`]
@@ -96,7 +96,7 @@ impl Driver {
     ///
     /// # Errors
     /// [`RunFileError`] naming the log when it cannot be written.
-    pub fn log(&mut self, line: &serde_json::Value) -> Result<(), RunFileError> {
+    pub fn log<T: Serialize + ?Sized>(&mut self, line: &T) -> Result<(), RunFileError> {
         crate::runfile::append_line(&mut self.log, line)
             .map_err(|e| RunFileError { path: self.log_path.clone(), message: e.to_string() })
     }

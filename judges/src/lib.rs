@@ -5,7 +5,7 @@
 //!   which implements [`harness::judge::Judge`]: a learned network ([`folder::JudgeNet`], the
 //!   policies' frame encoder and a one-logit head), a hand-written [`rule`], or GPC's reward
 //!   predictors imported by [`pose`];
-//! - [`train`]: the learned judge's trainer; [`read`]: a recorded episode read as `rank` reads an
+//! - [`train`]: the learned judge's trainer, resumable ([`run`]: its `.train` folder); [`read`]: a recorded episode read as `rank` reads an
 //!   imagined one; [`metrics`]: which frames `rank` judges and a judge's metrics, shared by the
 //!   three so that none imports another in a circle;
 //! - [`provenance`]: how a judge was made (trained, hand-written or imported) and the
@@ -19,6 +19,7 @@ pub mod pose;
 pub mod provenance;
 pub mod read;
 pub mod rule;
+pub mod run;
 pub mod train;
 
 pub use error::JudgeError;

@@ -102,7 +102,7 @@ pub struct JudgeProvenance {
     /// What an import read and how, whole.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub import: Option<Value>,
-    /// Why training stopped before its step total (`--max-minutes`).
+    /// Why training stopped before its step total (`--max-minutes`, Ctrl-C).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub out_of_time: Option<String>,
     /// The persistence rule `read-judge --out` chose.
@@ -111,6 +111,9 @@ pub struct JudgeProvenance {
     /// The training seed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seed: Option<u64>,
+    /// The training run's sessions, oldest first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sessions: Vec<harness::sessions::Session>,
     /// The training settings.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub train: Option<JudgeTrainConfig>,

@@ -15,10 +15,10 @@
 //! symmetries of the square world ([`augment_frame`]): coverage is invariant under
 //! them, since block and goal move together.
 //!
-//! Training takes minutes to an hour, so a run does not resume. A run that reaches
-//! its time limit (`--max-minutes`) ends there: the judge trained so far is
-//! evaluated and written, with the steps it took. Ctrl-C abandons the run, and
-//! the folder is written, atomically, only when the run ends.
+//! A run resumes as the other trainers' do ([`crate::run`]: its `.train` folder): a
+//! session that reaches its time limit (`--max-minutes`) or is stopped (Ctrl-C) saves its
+//! checkpoint, and the judge trained so far is evaluated and written with the steps it
+//! took; `--resume` goes on from there to the same weights an uninterrupted run ends with.
 
 use std::path::Path;
 
@@ -26,6 +26,7 @@ use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
+use harness::driver::{Clock, Driver};
 use harness::rng::Rng;
 use harness::seed::derive;
 use serde::Serialize;
@@ -38,6 +39,7 @@ use crate::folder::{FrameJudge, JudgeFile, JudgeNet};
 use crate::metrics::{EpisodeReading, JudgeMetrics, Reading, metrics};
 pub use crate::provenance::JudgeTrainConfig;
 use crate::read::{JudgeData, judge_episodes, read_judged};
+use crate::run::{self, State};
 
 /// Linear warm-up steps of the learning rate.
 const WARMUP: u64 = 100;
@@ -84,15 +86,37 @@ pub fn evaluate(judge: &FrameJudge, data: &JudgeData, steps: &[usize], threshold
     metrics(&est, &pick.iter().map(|&i| f64::from(data.labels[i])).collect::<Vec<_>>(), threshold)
 }
 
-/// Trains a judge of `data`'s label with the network and threshold of `judge`
-/// (the folder's `judge.json` as it will be written). `out_of_time` is asked
-/// before each step: once it says yes, training ends there. Returns the judge
-/// (inference device), its held-out metrics and the steps it took; `None` when
-/// stopped (Ctrl-C) or out of time before the first step.
+/// One session of a judge run: its `.train` folder ([`crate::run`]), whether it continues
+/// the run saved there, and its clock (`--max-minutes`).
+pub struct JudgeSession<'a> {
+    /// The run's `.train` folder.
+    pub dir: &'a Path,
+    /// Continue the run saved in `dir`.
+    pub resume: bool,
+    /// The session's start and deadline.
+    pub clock: Clock,
+}
+
+/// What a session ended with.
+pub struct JudgeOutcome {
+    /// The judge (inference device) and its held-out metrics; `None` before the run's
+    /// first step.
+    pub judge: Option<(JudgeNet, JudgeMetrics)>,
+    /// Steps done.
+    pub step: u64,
+    /// Training seconds over all sessions.
+    pub elapsed_s: f64,
+}
+
+/// Trains, or goes on training, a judge of `data`'s label with the network and threshold
+/// of `judge` (the folder's `judge.json` as it will be written), logging to `log`, until
+/// `cfg.steps` or until the session stops ([`Driver::should_stop`]: out of time, or
+/// Ctrl-C). The checkpoint is saved at every evaluation and when the session ends, so
+/// `--resume` continues from where it stopped.
 ///
 /// # Errors
-/// [`JudgeError`] naming `log` for an unwritable log, or the dataset for a
-/// non-finite loss (naming the step) or too few episodes to hold any out.
+/// [`JudgeError`] naming the log or checkpoint file that cannot be read or written, or the
+/// dataset for a non-finite loss (naming the step) or too few episodes to hold any out.
 #[allow(clippy::too_many_arguments)]
 pub fn train_judge(
     data: &JudgeData,
@@ -100,10 +124,10 @@ pub fn train_judge(
     judge: &JudgeFile,
     cfg: &JudgeTrainConfig,
     log: &Path,
-    out_of_time: &mut dyn FnMut() -> bool,
+    session: JudgeSession,
     inner: &Device,
     on_step: &mut dyn FnMut(u64, f64),
-) -> Result<Option<(JudgeNet, JudgeMetrics, u64)>, JudgeError> {
+) -> Result<JudgeOutcome, JudgeError> {
     let err = |what: String| JudgeError::Dataset { path: dataset.into(), what };
     let threshold = judge.threshold;
     let (train, held) = data.split();
@@ -122,8 +146,11 @@ pub fn train_judge(
     device.seed(derive(cfg.seed, &[0x6a75_6467]));
     let mut net = JudgeNet::new(&judge.net, &device);
     let mut optim = AdamWConfig::new().with_weight_decay(1e-6).init();
-    let mut logf =
-        std::fs::File::create(log).map_err(|source| JudgeError::Io { path: log.into(), source })?;
+    let mut state = State::default();
+    if session.resume {
+        (net, optim, state) = run::load(session.dir, net, optim)?;
+    }
+    let mut driver = Driver::start(log, "step", state.step, state.elapsed_s, session.clock)?;
     let s = data.size;
     let eval = |net: &JudgeNet| {
         evaluate(&FrameJudge::new(judge.clone(), net.valid(), inner), data, &held, threshold)
@@ -141,17 +168,14 @@ pub fn train_judge(
         });
         m
     };
-    let mut log_line = |line: &LogLine| {
-        harness::runfile::append_line(&mut logf, line)
-            .map_err(|source| JudgeError::Io { path: log.into(), source })
-    };
-    let (mut lv, mut done) = (f64::NAN, 0);
-    for step in 0..cfg.steps {
-        if harness::stop::requested() {
-            return Ok(None);
-        }
-        if out_of_time() {
-            tracing::warn!(step, of = cfg.steps, "out of time: the judge ends at this step");
+    let (first, mut lv) = (state.step, f64::NAN);
+    for step in first..cfg.steps {
+        if driver.should_stop() {
+            tracing::warn!(
+                step,
+                of = cfg.steps,
+                "stopped: the session ends at this step (--resume continues)"
+            );
             break;
         }
         let mut rng = Rng::new(derive(cfg.seed, &[step]));
@@ -175,19 +199,25 @@ pub fn train_judge(
         let grads = GradientsParams::from_grads(loss.backward(), &net);
         let lr = cfg.lr * ((step + 1) as f64 / WARMUP as f64).min(1.0);
         net = optim.step(lr, net, grads);
-        done = step + 1;
-        on_step(done, lv);
-        if done.is_multiple_of(cfg.eval_every.max(1)) && done < cfg.steps {
-            log_line(&LogLine { heldout: eval(&net), loss: lv, out_of_time: false, step: done })?;
+        state = State { step: step + 1, elapsed_s: driver.elapsed_s() };
+        on_step(state.step, lv);
+        if state.step.is_multiple_of(cfg.eval_every.max(1)) && state.step < cfg.steps {
+            driver.log(&LogLine { heldout: eval(&net), loss: lv, out_of_time: false, step: state.step })?;
+            run::save(session.dir, &net, &optim, state)?;
         }
     }
-    if done == 0 {
-        return Ok(None);
+    state.elapsed_s = driver.elapsed_s();
+    run::save(session.dir, &net, &optim, state)?;
+    if state.step == 0 {
+        return Ok(JudgeOutcome { judge: None, step: 0, elapsed_s: state.elapsed_s });
     }
-    // The last evaluation, where training ended (its last step, or out of time).
+    // The last evaluation, where the session ended (the run's last step, or where it stopped).
     let m = last_eval(&net);
-    log_line(&LogLine { heldout: m, loss: lv, out_of_time: done < cfg.steps, step: done })?;
-    Ok(Some((net.valid(), m, done)))
+    if state.step > first {
+        let out_of_time = state.step < cfg.steps;
+        driver.log(&LogLine { heldout: m, loss: lv, out_of_time, step: state.step })?;
+    }
+    Ok(JudgeOutcome { judge: Some((net.valid(), m)), step: state.step, elapsed_s: state.elapsed_s })
 }
 
 #[cfg(test)]
@@ -210,9 +240,9 @@ mod tests {
     }
 
     #[test]
-    fn out_of_time_ends_training_with_the_judge_so_far() {
+    fn a_stopped_session_resumes_to_the_weights_of_an_uninterrupted_run() {
         // 10 episodes of 2 frames (16 x 16), labels alternating 0 / 1; episode 9 is
-        // held out (2 frames). The clock runs out before the 4th of 10 steps.
+        // held out (2 frames).
         let size = 16;
         let n = 20;
         let data = JudgeData {
@@ -230,41 +260,62 @@ mod tests {
             rule: None,
             threshold: 0.5,
             persist_frames: 1,
-            steps: 10,
+            steps: 5,
             heldout: JudgeMetrics::default(),
             provenance: crate::provenance::JudgeProvenance::default(),
         };
-        let cfg = JudgeTrainConfig {
-            steps: 10,
+        let cfg = |steps| JudgeTrainConfig {
+            steps,
             batch: 2,
             lr: 1e-3,
             seed: 0,
             balance: true,
             symmetries: false,
-            eval_every: 100,
+            eval_every: 2,
         };
-        let dir = tempfile::tempdir().unwrap();
-        let log = dir.path().join("log.jsonl");
+        let root = tempfile::tempdir().unwrap();
         let device = Device::flex();
-        let mut asked = 0;
-        let mut clock = || {
-            asked += 1;
-            asked > 3
+        let session = |name: &str, steps: u64, resume: bool, minutes: Option<f64>| {
+            let (out, train) = (root.path().join(name), root.path().join(name).join(".train"));
+            std::fs::create_dir_all(&out).unwrap();
+            let s = JudgeSession { dir: &train, resume, clock: Clock::start(minutes) };
+            let log = out.join("log.jsonl");
+            train_judge(&data, root.path(), &judge, &cfg(steps), &log, s, &device, &mut |_, _| {}).unwrap()
         };
-        let out = train_judge(&data, dir.path(), &judge, &cfg, &log, &mut clock, &device, &mut |_, _| {});
-        let (_, m, steps) = out.unwrap().expect("the judge trained so far");
-        assert_eq!((steps, m.frames), (3, 2));
+        let logged = |name: &str| -> Vec<u64> {
+            let text = std::fs::read_to_string(root.path().join(name).join("log.jsonl")).unwrap();
+            text.lines()
+                .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["step"].as_u64().unwrap())
+                .collect()
+        };
+        // Out of time before the first step: no judge yet, but a checkpoint to resume.
+        let none = session("none", 5, false, Some(0.0));
+        assert!(none.judge.is_none() && none.step == 0);
+        assert!(root.path().join("none/.train/state.json").is_file());
+        // Five steps in one session; three, then two more on --resume.
+        let straight = session("straight", 5, false, None);
+        assert_eq!(session("split", 3, false, None).step, 3);
+        let split = session("split", 5, true, None);
+        assert_eq!((straight.step, split.step), (5, 5));
+        // The same weights: the same logits, bit for bit, on every frame (the files differ
+        // in burn's parameter ids, which each process draws anew).
+        let frames: Vec<&[u8]> = (0..n).map(|i| data.frame(i)).collect();
+        let logits = |net: &JudgeNet| {
+            net.forward(frames_to_tensor(&frames, size, &device)).into_data().to_vec::<f32>().unwrap()
+        };
+        let ((split_net, m), (straight_net, m_straight)) =
+            (split.judge.expect("a judge"), straight.judge.expect("a judge"));
+        assert_eq!(logits(&split_net), logits(&straight_net), "the resumed run's weights differ");
+        assert_eq!(m, m_straight);
+        assert_eq!(m.frames, 2);
         // The held-out episode (labels 0, 1) is read whole: it succeeds.
         let e = m.episodes.expect("the last evaluation reads whole episodes");
         assert_eq!((e.episodes, e.successes), (1, 1));
-        assert_eq!(e.agree + e.missed_successes, 1);
-        // One log line, the evaluation where training ended (step 3).
-        let text = std::fs::read_to_string(&log).unwrap();
-        let line: serde_json::Value = serde_json::from_str(text.trim()).unwrap();
-        assert_eq!((line["step"].as_u64(), line["out_of_time"].as_bool()), (Some(3), Some(true)));
-        // Out of time before the first step: nothing trained, nothing returned.
-        let out = train_judge(&data, dir.path(), &judge, &cfg, &log, &mut || true, &device, &mut |_, _| {});
-        assert!(out.unwrap().is_none());
+        // Evaluations every 2 steps and at each session's end, once per step.
+        assert_eq!((logged("straight"), logged("split")), (vec![2, 4, 5], vec![2, 3, 4, 5]));
+        // The run stopped at once resumes from its step-0 checkpoint to the same weights.
+        let resumed = session("none", 5, true, None).judge.expect("a judge").0;
+        assert_eq!(logits(&resumed), logits(&straight_net), "resumed from step 0");
     }
 
     #[test]

@@ -40,12 +40,12 @@ pub fn attend(qkv: &[f32], s: Heads) -> Vec<f32> {
     assert!(qkv.len() >= 3 * c * cols, "attention: qkv holds {} values, not 3·{c}·{cols}", qkv.len());
     let d = c / s.heads;
     let scale = 1.0 / (d as f32).sqrt();
-    let mut o = vec![0.0; c * cols];
+    let mut o = crate::elementwise::zeros(c * cols);
     if t == 0 || d == 0 {
         return o;
     }
     // scores[t1, t2] = Σ_dd q[dd, t1] k[dd, t2]; then each row's softmax of scale · scores.
-    let mut scores = vec![0.0f32; t * t];
+    let mut scores = crate::elementwise::zeros(t * t);
     for img in 0..s.images {
         for hd in 0..s.heads {
             let at = |part: usize| (part * c + hd * d) * cols + img * t;

@@ -5,6 +5,23 @@
 //! Why: libm's `expf` is a call per element, which keeps loops over SiLU, mish
 //! and softmax scalar; a float sum in one accumulator cannot vectorise either.
 
+/// `n` zeros, written now rather than left to the allocator. A large `vec![0.0; n]` is
+/// `calloc`'d memory whose pages the kernel maps to its one shared zero page until they are
+/// written; a buffer that is read before it is written (`out[i] += ...` into fresh zeros) then
+/// faults twice per page, and the second fault copies the page and flushes it from the TLB of
+/// every CPU that runs the process. With two threads in one process each flush interrupts
+/// the other core: the full-size pixel U-Net ran no faster on two threads than on one
+/// (BENCHMARKS.md, 2026-12-02, "two threads in one process"). Writing the zeros first maps
+/// each page once, with nothing to flush.
+pub fn zeros(n: usize) -> Vec<f32> {
+    let mut v = Vec::with_capacity(n);
+    // Keeps the allocation and the zeroing apart, so the compiler cannot fold them back
+    // into one zeroed allocation.
+    std::hint::black_box(v.as_mut_ptr());
+    v.resize(n, 0.0);
+    v
+}
+
 /// The sum of `f(v)` over `xs`: runs of 512 values summed in 8 f32 lanes (which
 /// vectorises), the runs' totals in f64.
 #[inline(always)]

@@ -25,7 +25,7 @@ impl Padded {
     #[inline]
     pub fn zeros(c: usize, h: usize, w: usize) -> Self {
         let stride = w.div_ceil(LANES) * LANES + 2;
-        Self { c, h, w, stride, data: vec![0.0; c * (h + 2) * stride] }
+        Self { c, h, w, stride, data: crate::elementwise::zeros(c * (h + 2) * stride) }
     }
 
     /// Floats per stored row (the interior rounded up to whole tiles, plus the border).

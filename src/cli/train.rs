@@ -34,7 +34,8 @@ pub struct TrainJudgeArgs {
     /// Dataset of simulator frames with a per-step label array (zarr replay buffer).
     #[arg(long)]
     pub data: PathBuf,
-    /// Output folder: `judge.json`, `model.bpk`, `log.jsonl`.
+    /// Output folder: `judge.json`, `model.bpk`, `log.jsonl`, and the run's resumable state
+    /// in `.train/`.
     #[arg(long)]
     pub out: PathBuf,
     /// The label to learn (default: coverage if the dataset has it, else success).
@@ -75,13 +76,10 @@ pub struct TrainJudgeArgs {
     /// Seed of the weights and the frame order.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// End training after this many minutes: the judge trained so far is evaluated and
-    /// written, with the steps it took (`judge.json`'s `steps`).
-    #[arg(long)]
-    pub max_minutes: Option<f64>,
-    /// Replace an existing `--out` once the new judge is complete.
-    #[arg(long)]
-    pub force: bool,
+    /// Session control: `--max-minutes` ends a session with a checkpoint, the judge trained
+    /// so far evaluated and written (`judge.json`'s `steps`); `--resume` continues it.
+    #[command(flatten)]
+    pub session: SessionArgs,
 }
 
 /// `evalharness train policy`.

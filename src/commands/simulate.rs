@@ -143,7 +143,7 @@ fn run_pusht(args: &SimulateArgs, cfg: scenarios::pusht::PushTConfig, quiet: boo
         super::collect::pusht_runner(cfg, c.jobs, c.max_steps, Perturbation { noise: c.noise, lag: c.lag })?;
     let work: Vec<(u64, BehaviourKind)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, kind)).collect();
-    let out = Staged::new(&args.out, c.force, &inputs(args))?;
+    let out = Staged::new(&args.out, c.force, &args.inputs())?;
     write_json(
         &out.file("config.json"),
         &json!({
@@ -219,23 +219,4 @@ fn run_pusht(args: &SimulateArgs, cfg: scenarios::pusht::PushTConfig, quiet: boo
         dir.display()
     );
     Ok(ExitCode::SUCCESS)
-}
-
-/// What `simulate` reads, for [`crate::output::Staged`]: the scenario file, the policy
-/// folder (a behaviour's name is not a path), the world model of `--observe-through` or
-/// `--replay-imagined` with its autoencoder, and the judge.
-pub(super) fn inputs(args: &SimulateArgs) -> crate::output::Inputs {
-    let policy = std::path::Path::new(&args.policy);
-    let mut inputs = crate::output::Inputs::new()
-        .scenario(&args.common.scenario)
-        .maybe("--policy", policy.exists().then_some(policy))
-        .maybe("--judge", args.judge.as_deref());
-    for (flag, wm) in
-        [("--observe-through", &args.observe_through), ("--replay-imagined", &args.replay_imagined)]
-    {
-        if let Some(wm) = wm {
-            inputs = inputs.world_model(flag, wm);
-        }
-    }
-    inputs
 }

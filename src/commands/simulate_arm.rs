@@ -89,7 +89,7 @@ pub fn run<T: ArmTask>(args: &SimulateArgs, task: &T, quiet: bool) -> Result<Exi
     let perturbation = Perturbation { noise: c.noise, lag: c.lag };
     let work: Vec<(u64, T::Behaviour)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, kind)).collect();
-    let out = Staged::new(&args.out, c.force, &super::simulate::inputs(args))?;
+    let out = Staged::new(&args.out, c.force, &args.inputs())?;
     write_config(&out, args, task, max_steps)?;
     let open = |name: &str| -> Result<(std::path::PathBuf, BufWriter<std::fs::File>)> {
         let p = out.file(name);

@@ -43,7 +43,7 @@ pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
             "--record-scores records MuJoCo scores on real frames; it cannot be given with --observe-through"
         );
     }
-    let out = Staged::new(&args.out, c.force, &super::simulate::inputs(args))?;
+    let out = Staged::new(&args.out, c.force, &args.inputs())?;
     let expect = expectations(task.as_ref());
     let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();
     let pool =

@@ -69,7 +69,7 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     };
     let setup = Setup::new(task.as_ref(), args.seed.unwrap_or(0), max_steps, judge.as_ref());
     let dirs = checkpoint_dirs(Path::new(&args.policy))?;
-    let inputs = super::simulate::inputs(args).maybe("--judge", judge_dir.as_deref());
+    let inputs = args.inputs().maybe("--judge", judge_dir.as_deref());
     let out = Staged::new(&args.out, c.force, &inputs)?;
     let expect = expectations(task.as_ref());
     let seeds: Vec<u64> = harness::seed::range(c.seed_start, c.episodes)?.collect();

@@ -1,7 +1,9 @@
 //! `evalharness train judge`: trains a learned judge of imagined frames on a
 //! dataset's frames and its exact per-step label, and writes the judge folder
-//! (`judge.json` with its held-out metrics and provenance, `model.bpk`,
-//! `log.jsonl`) only once training is complete.
+//! (`judge.json` with its held-out metrics and provenance, `model.bpk`, `log.jsonl`)
+//! when each session ends, with the run's resumable state in `.train/`
+//! ([`judges::run`]): `--resume` goes on from a session that ran out of time or was
+//! stopped, as the other trainers do.
 
 use std::process::ExitCode;
 
@@ -10,13 +12,16 @@ use judges::folder::{JudgeFile, Label, write_judge};
 use judges::metrics::JudgeMetrics;
 use judges::provenance::{JudgeProvenance, LabelledData};
 use judges::read::JudgeData;
-use judges::train::{JudgeTrainConfig, train_judge};
+use judges::run::JudgeRunConfig;
+use judges::train::{JudgeSession, JudgeTrainConfig, train_judge};
 use policies::net::NetConfig;
 
 use super::git_commit;
-use super::train::dataset_origin;
+use super::train::{dataset_origin, fixed, prepare_out, refuse_contradicting_flags};
 use crate::cli::{JudgeLabelArg, TrainJudgeArgs};
 use crate::progress;
+use harness::driver::Clock;
+use harness::sessions::{open_session, read_step, record_session};
 
 /// The label `--label` names, or the one the dataset has (coverage first).
 fn label_of(a: &TrainJudgeArgs) -> Result<Label> {
@@ -110,9 +115,7 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     if !a.data.exists() {
         bail!("--data {}: no such file or folder", a.data.display());
     }
-    // Written into OUT.partial; an old OUT is replaced only once the judge is complete.
-    let staged =
-        crate::output::Staged::new(&a.out, a.force, &crate::output::Inputs::new().add("--data", &a.data))?;
+    // The dataset is read before `--out` is touched, so a refused run leaves it as it was.
     let label = label_of(a)?;
     let threshold = match label {
         Label::Coverage => 0.95,
@@ -120,8 +123,7 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     };
     tracing::info!(data = %a.data.display(), ?label, "loading frames");
     let data = JudgeData::load(&a.data, label, a.episodes)?;
-    let frames = data.labels.len();
-    tracing::info!(episodes = data.episodes.len(), frames, "loaded");
+    tracing::info!(episodes = data.episodes.len(), frames = data.labels.len(), "loaded");
     let net = NetConfig::new()
         .with_image_size(data.size)
         .with_encoder_width(a.encoder_width)
@@ -135,41 +137,84 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
         symmetries: a.symmetries,
         eval_every: a.eval_every,
     };
-    let mut file = judge_file(a, (label, threshold), &data, net, &cfg)?;
-    let clock = harness::driver::Clock::start(a.max_minutes);
-    let mut out_of_time = || clock.out_of_time();
-    let pb = progress::bar(a.steps, "judge", quiet);
-    let device = nn::device::selected()?;
+    let fresh = JudgeRunConfig { judge: judge_file(a, (label, threshold), &data, net, &cfg)?, train: cfg };
+    let (resume, force) = (a.session.resume, a.session.force);
+    let out_dir = prepare_out(&a.out, resume, force, ".train/state.json", &[("--data", &a.data)])?;
+    let train_dir = a.out.join(".train");
+    if resume {
+        check_resume_flags(&train_dir.join("config.json"), &fresh)?;
+    }
+    let given = crate::cli::given_on_command_line(&["train", "judge"]);
+    let steps = given.iter().any(|g| g == "steps").then_some(a.steps);
+    let run = judges::run::resume_or_start(&train_dir, fresh, resume, steps)?;
+    let args = crate::stdout::command_line().join(" ");
+    let from_step = if resume { read_step(&train_dir)? } else { 0 };
+    open_session(&train_dir, &args, &git_commit(), from_step)?;
+    let pb = progress::bar(run.train.steps, "judge", quiet);
+    pb.set_position(from_step);
+    let session = JudgeSession { dir: &train_dir, resume, clock: Clock::start(a.session.max_minutes) };
     let outcome = train_judge(
         &data,
         &a.data,
-        &file,
-        &cfg,
-        &staged.file("log.jsonl"),
-        &mut out_of_time,
-        &device,
+        &run.judge,
+        &run.train,
+        &a.out.join("log.jsonl"),
+        session,
+        &nn::device::selected()?,
         &mut |s, l| {
             pb.set_position(s);
             pb.set_message(format!("loss {l:.4}"));
         },
-    );
+    )?;
     pb.finish_and_clear();
-    let Some((net, heldout, steps)) = outcome? else {
-        bail!(
-            "stopped before the judge's first step, or by Ctrl-C; nothing was written (a judge does not resume)"
-        );
+    let sessions =
+        record_session(&train_dir, &args, &git_commit(), (from_step, outcome.step), outcome.elapsed_s)?;
+    let total = run.train.steps;
+    let finished = outcome.step >= total;
+    let Some((net, heldout)) = outcome.judge else {
+        outln!("judge: stopped before its first step; --resume continues -> {}", a.out.display());
+        out_dir.finish(false)?;
+        return Ok(ExitCode::SUCCESS);
     };
+    let mut file = run.judge;
     file.heldout = heldout;
-    file.steps = steps;
-    if steps < a.steps {
-        file.provenance.out_of_time = Some(format!(
-            "--max-minutes {} ended training at step {steps} of {}",
-            a.max_minutes.unwrap_or(0.0),
-            a.steps
-        ));
-    }
-    write_judge(staged.dir(), Some(&net), &file)?;
-    staged.commit()?;
+    file.steps = outcome.step;
+    file.provenance.sessions = sessions;
+    file.provenance.out_of_time = (!finished).then(|| {
+        format!(
+            "the last session stopped at step {} of {total} (--max-minutes or Ctrl-C); --resume continues",
+            outcome.step
+        )
+    });
+    write_judge(&a.out, Some(&net), &file)?;
     say_result(a, (label, threshold), &heldout);
+    if !finished {
+        outln!("judge: step {} of {total} (stopped early; --resume continues)", outcome.step);
+    }
+    out_dir.finish(finished)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// `--resume` continues a run with its saved `.train/config.json`: the flags typed on this
+/// command line must agree with it (`--steps` and the session flags may change; see
+/// [`refuse_contradicting_flags`]).
+fn check_resume_flags(path: &std::path::Path, fresh: &JudgeRunConfig) -> Result<()> {
+    let saved: JudgeRunConfig = harness::runfile::read(path)?;
+    let (ours, theirs) = (&fresh.train, &saved.train);
+    let (our_net, their_net) = (&fresh.judge.net, &saved.judge.net);
+    let episodes = |c: &JudgeRunConfig| c.judge.provenance.data.as_ref().map(|d| d.episodes);
+    let fixed = [
+        fixed("label", &fresh.judge.label, &saved.judge.label),
+        fixed("batch", &ours.batch, &theirs.batch),
+        fixed("lr", &ours.lr, &theirs.lr),
+        fixed("seed", &ours.seed, &theirs.seed),
+        fixed("no_balance", &!ours.balance, &!theirs.balance),
+        fixed("symmetries", &ours.symmetries, &theirs.symmetries),
+        fixed("eval_every", &ours.eval_every, &theirs.eval_every),
+        fixed("encoder_width", &our_net.encoder_width, &their_net.encoder_width),
+        fixed("feature_dim", &our_net.feature_dim, &their_net.feature_dim),
+        fixed("persist", &fresh.judge.persist_frames, &saved.judge.persist_frames),
+        fixed("episodes", &episodes(fresh), &episodes(&saved)),
+    ];
+    refuse_contradicting_flags(path, "judge", &fixed)
 }

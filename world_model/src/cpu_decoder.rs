@@ -35,7 +35,7 @@ struct UpConv {
 impl UpConv {
     /// `src` `[cin, h, w]` upsampled and convolved: `[cout, 2h, 2w]`.
     fn forward(&self, src: &[f32], h: usize, w: usize) -> Vec<f32> {
-        let mut out = vec![0.0; self.conv.cout() * 4 * h * w];
+        let mut out = kernels::elementwise::zeros(self.conv.cout() * 4 * h * w);
         if Upsample3x3::supports(h, w) && winograd_enabled() {
             let mut pad = Padded::zeros(self.conv.cin(), h, w);
             pad.fill(src, false);
@@ -120,7 +120,7 @@ impl CpuDecoder {
         let (c, mut side) = (self.latent_channels, self.latent_size);
         let mut pad = Padded::zeros(c, side, side);
         pad.fill(z, false);
-        let mut h = vec![0.0; self.dec_in.cout() * side * side]; // [c3, s, s]
+        let mut h = kernels::elementwise::zeros(self.dec_in.cout() * side * side); // [c3, s, s]
         self.dec_in.forward(&pad, None, &mut h);
         h = self.block(&self.blocks[0], h, side);
         for (up, block) in self.ups.iter().zip(&self.blocks[1..]) {
@@ -130,7 +130,7 @@ impl CpuDecoder {
         }
         let mut pad = Padded::zeros(self.out.cin(), side, side);
         pad.fill_norm_silu(&h, &self.norm);
-        let mut frame = vec![0.0; self.out.cout() * side * side]; // [3, 8s, 8s]
+        let mut frame = kernels::elementwise::zeros(self.out.cout() * side * side); // [3, 8s, 8s]
         self.out.forward(&pad, None, &mut frame);
         frame
     }
@@ -140,7 +140,7 @@ impl CpuDecoder {
         let c = b.conv1.cin();
         let mut pad = Padded::zeros(c, side, side);
         pad.fill_norm_silu(&x, &b.norm1);
-        let mut t = vec![0.0; c * side * side];
+        let mut t = kernels::elementwise::zeros(c * side * side);
         b.conv1.forward(&pad, None, &mut t);
         pad.fill_norm_silu(&t, &b.norm2);
         b.conv2.forward(&pad, Some(&x), &mut t);

@@ -143,7 +143,13 @@ impl Conv {
     /// `x` `[c_in, n, f, h, w]` → `[c_out, n, f, h', w']`.
     fn forward(&self, x: &Video) -> Video {
         let (h, w) = (self.shape.out(x.h), self.shape.out(x.w));
-        let mut out = Video { data: vec![0.0; self.cout * x.n * x.f * h * w], c: self.cout, h, w, ..*x };
+        let mut out = Video {
+            data: kernels::elementwise::zeros(self.cout * x.n * x.f * h * w),
+            c: self.cout,
+            h,
+            w,
+            ..*x
+        };
         self.forward_add(x, &mut out.data);
         out
     }
@@ -155,7 +161,7 @@ impl Conv {
             None => self.spatial_add(x, out),
             Some(t) => {
                 let (h, w) = (self.shape.out(x.h), self.shape.out(x.w));
-                let mut y = vec![0.0; self.cout * x.n * x.f * h * w];
+                let mut y = kernels::elementwise::zeros(self.cout * x.n * x.f * h * w);
                 self.spatial_add(x, &mut y);
                 temporal_add(t, self.cout, &y, x.n, x.f, h * w, out);
             }
@@ -184,7 +190,7 @@ impl Conv {
         }
         let kk = self.cin * k * k;
         let per = (IM2COL_CHUNK / (kk * plane)).clamp(1, imgs);
-        let mut col = vec![0.0; kk * per * plane];
+        let mut col = kernels::elementwise::zeros(kk * per * plane);
         for i0 in (0..imgs).step_by(per) {
             let i1 = (i0 + per).min(imgs);
             let n = (i1 - i0) * plane;
@@ -403,7 +409,7 @@ impl CpuUNet {
     /// - returns `[b, c_frame, F, h, w]`
     pub fn forward(&self, x: &[f32], emb: &[f32], [b, cin, f, h, w]: [usize; 5]) -> Vec<f32> {
         let l = f * h * w;
-        let mut data = vec![0.0; x.len()];
+        let mut data = kernels::elementwise::zeros(x.len());
         for (i, chunk) in x.chunks(l).enumerate() {
             let (bi, ci) = (i / cin, i % cin);
             data[(ci * b + bi) * l..][..l].copy_from_slice(chunk); // [c_in, b, F, h, w]
@@ -437,7 +443,7 @@ impl CpuUNet {
         }
         group_norm_cols(&mut hcur.data, &self.norm_out, b, f, h * w, None, silu);
         let y = self.conv_out.forward(&hcur); // [c_frame, b, F, h, w]
-        let mut out = vec![0.0; y.data.len()];
+        let mut out = kernels::elementwise::zeros(y.data.len());
         for (i, chunk) in y.data.chunks(l).enumerate() {
             let (ci, bi) = (i / b, i % b);
             out[(bi * y.c + ci) * l..][..l].copy_from_slice(chunk);
