@@ -298,6 +298,16 @@ fn damaged_datasets_scenarios_and_results_are_refused_by_name() {
     std::fs::write(&path, r.to_string()).unwrap();
     let (_, err) = expect_code(&run(&["report", s(&out)]), 2);
     assert!(err.contains("missing field `agreement`"), "{err}");
+    // The previous layout (no schema_version) is reported; a later one is refused by name.
+    r = serde_json::from_str(&good).unwrap();
+    assert_eq!(r["schema_version"], 2);
+    r.as_object_mut().unwrap().remove("schema_version");
+    std::fs::write(&path, r.to_string()).unwrap();
+    expect_code(&run(&["report", s(&out)]), 0);
+    r["schema_version"] = serde_json::json!(3);
+    std::fs::write(&path, r.to_string()).unwrap();
+    let (_, err) = expect_code(&run(&["report", s(&out)]), 2);
+    assert!(err.contains("results schema version 3, written by a later evalharness"), "{err}");
     // A damaged filmstrip index, or a missing PNG, is reported and marked in the page.
     std::fs::write(&path, &good).unwrap();
     let index = out.join("filmstrips/index.json");

@@ -231,7 +231,7 @@ pub struct ImportedProvenance {
 #[serde(untagged)]
 pub enum WorldModelOrigin {
     /// `train world-model`'s.
-    Trained(WorldModelProvenance),
+    Trained(Box<WorldModelProvenance>),
     /// `import world-model`'s.
     Imported(ImportedProvenance),
 }

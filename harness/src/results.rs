@@ -250,9 +250,22 @@ pub struct RunTiming {
     pub note: String,
 }
 
+/// The layout of `results.json` this build writes. Version 1 is the files written before
+/// 2026-12-02, which have no `schema_version` and the same fields; a file of a later version
+/// than this is refused by name rather than read as one of this version.
+pub const RESULTS_SCHEMA: u32 = 2;
+
+/// The version a `results.json` without `schema_version` was written in.
+fn first_schema() -> u32 {
+    1
+}
+
 /// `results.json` of `rank` and `merge`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RankResults {
+    /// The file's layout ([`RESULTS_SCHEMA`] when written by this build; 1 when absent).
+    #[serde(default = "first_schema")]
+    pub schema_version: u32,
     /// Scenario name or file.
     pub scenario: String,
     /// World-model folder.
@@ -293,6 +306,16 @@ pub enum ResultsError {
         /// The field's path and what is wrong with it.
         message: String,
     },
+    /// Written by a later evalharness, in a layout this build does not know.
+    #[error(
+        "{path}: results schema version {found}, written by a later evalharness; this one reads versions 1 to {RESULTS_SCHEMA}"
+    )]
+    Newer {
+        /// The file.
+        path: PathBuf,
+        /// Its `schema_version`.
+        found: u32,
+    },
 }
 
 impl RankResults {
@@ -303,6 +326,17 @@ impl RankResults {
     pub fn read(path: &Path) -> Result<Self, ResultsError> {
         let text =
             std::fs::read_to_string(path).map_err(|source| ResultsError::Io { path: path.into(), source })?;
+        /// The version alone, read first: a later layout may not parse as this one.
+        #[derive(Deserialize)]
+        struct Version {
+            #[serde(default = "first_schema")]
+            schema_version: u32,
+        }
+        if let Ok(Version { schema_version: found }) = serde_json::from_str(&text)
+            && found > RESULTS_SCHEMA
+        {
+            return Err(ResultsError::Newer { path: path.into(), found });
+        }
         let de = &mut serde_json::Deserializer::from_str(&text);
         serde_path_to_error::deserialize(de).map_err(|e| {
             let field = e.path().to_string();
@@ -366,7 +400,7 @@ mod tests {
             "success_ci95": [0.1, 0.9], "steps_to_success": 12.5, "episodes": 2, "block_area": null,
             "goal_kept": null, "agent_kept": 1.0});
         serde_json::json!({
-            "scenario": "pusht", "world_model": "wm", "episodes": 2, "seed_start": 5, "max_steps": 300,
+            "schema_version": 2, "scenario": "pusht", "world_model": "wm", "episodes": 2, "seed_start": 5, "max_steps": 300,
             "policies": [{"name": "a", "sim": branch, "world_model": branch, "frame_scorer_mean_abs_error": 0.01}],
             "agreement": {"pearson": null, "spearman": null, "kendall_tau_b": null, "rank_inversions": null,
                 "rank_inversion_fraction": null, "ties": [], "mmrv": null, "regret_at_1": null, "ci95": null},
@@ -374,6 +408,23 @@ mod tests {
             "timing": {"wall_seconds": 1.0, "sim_seconds": 0.5, "world_model_seconds": 0.25,
                 "world_model_ms_per_frame": 4.0, "policy_seconds": 0.1, "note": "n"},
         })
+    }
+
+    #[test]
+    fn reads_the_previous_version_and_refuses_a_later_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("results.json");
+        // Version 1: no schema_version, the same fields.
+        let mut v1 = sample();
+        v1.as_object_mut().unwrap().remove("schema_version");
+        std::fs::write(&path, v1.to_string()).unwrap();
+        assert_eq!(RankResults::read(&path).unwrap().schema_version, 1);
+        // A later version is named, whatever else it holds.
+        let later = serde_json::json!({"schema_version": RESULTS_SCHEMA + 1, "rows": "elsewhere"});
+        std::fs::write(&path, later.to_string()).unwrap();
+        let err = RankResults::read(&path).unwrap_err().to_string();
+        assert!(err.contains("results schema version 3, written by a later evalharness"), "{err}");
+        assert!(err.contains("reads versions 1 to 2") && err.contains("results.json"), "{err}");
     }
 
     #[test]

@@ -301,7 +301,7 @@ mod tests {
         // in burn's parameter ids, which each process draws anew).
         let frames: Vec<&[u8]> = (0..n).map(|i| data.frame(i)).collect();
         let logits = |net: &JudgeNet| {
-            net.forward(frames_to_tensor(&frames, size, &device)).into_data().to_vec::<f32>().unwrap()
+            net.forward(frames_to_tensor(&frames, size, &device)).into_data().try_to_vec::<f32>().unwrap()
         };
         let ((split_net, m), (straight_net, m_straight)) =
             (split.judge.expect("a judge"), straight.judge.expect("a judge"));

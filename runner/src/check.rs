@@ -94,6 +94,7 @@ mod tests {
             note: String::new(),
         };
         let ok = RankResults {
+            schema_version: harness::results::RESULTS_SCHEMA,
             scenario: "pusht".into(),
             world_model: "wm".into(),
             episodes: 4,

@@ -104,7 +104,10 @@ pub fn join(
     let failed_names: Vec<&str> = failed.iter().map(|f| f.policy.as_str()).collect();
     let ok: Vec<String> = names.iter().filter(|n| !failed_names.contains(&n.as_str())).cloned().collect();
     let (policies, agreement) = summarise(&rows, &ok, first.bootstrap, first.seed);
-    let res = RankResults { policies, agreement, failed_policies: failed, timing, ..first_res };
+    // Written in this build's layout, whichever version the shards were written in.
+    let schema_version = harness::results::RESULTS_SCHEMA;
+    let res =
+        RankResults { schema_version, policies, agreement, failed_policies: failed, timing, ..first_res };
     // As `rank` writes it: the struct as a JSON value (its keys sorted).
     let results = tmp.join("results.json");
     let value = res.to_json().map_err(|e| RunError::File {

@@ -214,6 +214,7 @@ fn run_with(
         names.iter().filter(|n| !failed_names.contains(&n.as_str())).cloned().collect();
     let (policies, agreement) = summarise(&rows, &ok_names, a.bootstrap, a.seed);
     let res = RankResults {
+        schema_version: harness::results::RESULTS_SCHEMA,
         scenario: a.scenario.clone(),
         world_model: r.world_model.clone(),
         episodes: r.episodes,
