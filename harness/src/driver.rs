@@ -18,8 +18,8 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use serde::Serialize;
 use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 
 use crate::runfile::{RunFileError, open_log, write_atomic};
 
@@ -102,14 +102,22 @@ impl Driver {
     }
 }
 
+/// The progress a checkpoint saves in its state file (`state.json`), for a trainer that
+/// saves nothing else there (the autoencoder's, the world model's and the judge's).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct State {
+    /// Steps done.
+    pub step: u64,
+    /// Training seconds over all sessions.
+    pub elapsed_s: f64,
+}
+
 /// Reads a run's state file.
 ///
 /// # Errors
 /// [`RunFileError`] naming `path` when it cannot be read or does not parse as `S`.
 pub fn read_state<S: DeserializeOwned>(path: &Path) -> Result<S, RunFileError> {
-    let err = |m: String| RunFileError { path: path.to_path_buf(), message: m };
-    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
-    serde_json::from_str(&text).map_err(|e| err(e.to_string()))
+    crate::runfile::read(path)
 }
 
 /// Writes a run's state file atomically.
@@ -125,13 +133,6 @@ pub fn write_state<S: Serialize>(path: &Path, state: &S) -> Result<(), RunFileEr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use serde::Deserialize;
-
-    #[derive(Debug, PartialEq, Serialize, Deserialize)]
-    struct State {
-        step: u64,
-        elapsed_s: f64,
-    }
 
     #[test]
     fn a_clock_without_time_is_out_of_it_and_one_without_a_limit_never_is() {

@@ -270,17 +270,6 @@ pub fn snapshot(dir: &Path) -> Option<Value> {
     read(&dir.join("provenance.json")).ok()
 }
 
-/// Writes `value` to `path` as pretty-printed JSON and a newline.
-///
-/// # Errors
-/// [`ProvenanceError::Io`] naming `path`.
-pub fn write<T: Serialize>(path: &Path, value: &T) -> Result<(), ProvenanceError> {
-    let mut text = serde_json::to_string_pretty(value)
-        .map_err(|source| ProvenanceError::Parse { path: path.into(), source })?;
-    text.push('\n');
-    std::fs::write(path, text).map_err(|source| ProvenanceError::Io { path: path.into(), source })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -25,7 +25,11 @@ pub struct RunFileError {
     pub message: String,
 }
 
-fn write<C: Serialize>(path: &Path, c: &C) -> Result<(), RunFileError> {
+/// Writes a run file (`config.json`) as pretty-printed JSON.
+///
+/// # Errors
+/// [`RunFileError`] naming `path` when it cannot be written.
+pub fn write_config<C: Serialize>(path: &Path, c: &C) -> Result<(), RunFileError> {
     let err = |m: String| RunFileError { path: path.to_path_buf(), message: m };
     let text = serde_json::to_string_pretty(c).map_err(|e| err(e.to_string()))?;
     if let Some(dir) = path.parent() {
@@ -44,14 +48,6 @@ pub fn read<C: DeserializeOwned>(path: &Path) -> Result<C, RunFileError> {
     serde_json::from_str(&text).map_err(|e| err(e.to_string()))
 }
 
-/// Writes a run file (`config.json`) as pretty-printed JSON.
-///
-/// # Errors
-/// [`RunFileError`] naming `path` when it cannot be written.
-pub fn write_config<C: Serialize>(path: &Path, c: &C) -> Result<(), RunFileError> {
-    write(path, c)
-}
-
 /// The configuration of a run whose file is `path`: `fresh`, written to `path`, for
 /// a new run; the saved one, after `adjust` (which returns whether it changed
 /// anything), when resuming.
@@ -66,12 +62,12 @@ pub fn resume_or_start<C: Serialize + DeserializeOwned>(
     adjust: impl FnOnce(&mut C) -> bool,
 ) -> Result<C, RunFileError> {
     if !resume {
-        write(path, &fresh)?;
+        write_config(path, &fresh)?;
         return Ok(fresh);
     }
     let mut saved: C = read(path)?;
     if adjust(&mut saved) {
-        write(path, &saved)?;
+        write_config(path, &saved)?;
     }
     Ok(saved)
 }

@@ -33,14 +33,7 @@ pub struct JudgeRunConfig {
     pub train: JudgeTrainConfig,
 }
 
-/// The progress saved with a checkpoint (`state.json`).
-#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
-pub(crate) struct State {
-    /// Steps done.
-    pub(crate) step: u64,
-    /// Training seconds over all sessions.
-    pub(crate) elapsed_s: f64,
-}
+pub(crate) use harness::driver::State;
 
 /// The configuration of the run whose `.train` folder is `dir`: `fresh`, written there, for
 /// a new run; the saved one when resuming, with `steps` (when given) as its step total.

@@ -266,9 +266,14 @@ pub fn policy_kind(dir: &Path) -> Option<String> {
 /// # Errors
 /// [`PolicyLoadError`] naming the folder for a missing or malformed file.
 pub fn read_policy_file(dir: &Path) -> Result<PolicyFile, PolicyLoadError> {
+    read_policy_json(dir)
+}
+
+/// `dir/policy.json` read as `T`, naming the folder and file in any error.
+fn read_policy_json<T: serde::de::DeserializeOwned>(dir: &Path) -> Result<T, PolicyLoadError> {
     let err = |m: String| PolicyLoadError::new(dir, m);
-    let json = dir.join("policy.json");
-    let text = std::fs::read_to_string(&json).map_err(|e| err(format!("policy.json: {e}")))?;
+    let text =
+        std::fs::read_to_string(dir.join("policy.json")).map_err(|e| err(format!("policy.json: {e}")))?;
     serde_json::from_str(&text).map_err(|e| err(format!("policy.json: {e}")))
 }
 
@@ -278,10 +283,7 @@ pub fn read_policy_file(dir: &Path) -> Result<PolicyFile, PolicyLoadError> {
 /// # Errors
 /// [`PolicyLoadError`] naming the folder for a missing or malformed file.
 pub fn read_made(dir: &Path) -> Result<Made, PolicyLoadError> {
-    let err = |m: String| PolicyLoadError::new(dir, m);
-    let text =
-        std::fs::read_to_string(dir.join("policy.json")).map_err(|e| err(format!("policy.json: {e}")))?;
-    serde_json::from_str(&text).map_err(|e| err(format!("policy.json: {e}")))
+    read_policy_json(dir)
 }
 
 /// The diffusion config of a checkpoint's `policy.json`, checked for a usable action horizon.

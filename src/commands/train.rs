@@ -239,7 +239,7 @@ pub fn autoencoder(a: &TrainAutoencoderArgs, quiet: bool) -> Result<ExitCode> {
         encoder_from,
         other: Default::default(),
     };
-    harness::provenance::write(&a.out.join("provenance.json"), &provenance)?;
+    crate::output::write_json(&a.out.join("provenance.json"), &provenance)?;
     outln!(
         "autoencoder: step {}/{}{}, held-out PSNR {:.2} dB, MSE {:.6} -> {}",
         outcome.step,

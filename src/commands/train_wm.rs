@@ -299,7 +299,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         ),
         other: Default::default(),
     };
-    harness::provenance::write(&a.out.join("provenance.json"), &provenance)?;
+    write_json(&a.out.join("provenance.json"), &provenance)?;
     outln!(
         "world model ({}): step {}/{}{}, held-out one-chunk latent MSE {:.5} -> {}",
         saved.objective.name(),

@@ -157,14 +157,8 @@ impl WorldModelConfig {
     /// # Errors
     /// [`WorldModelError::Checkpoint`] naming the file when it is missing or malformed.
     pub fn read(dir: &Path) -> Result<Self, WorldModelError> {
-        /// The entry read; a trained model's file also has `train`, an imported one's `import`.
-        #[derive(Deserialize)]
-        struct Entry {
-            model: WorldModelConfig,
-        }
-        let path = dir.join("config.json");
-        let Entry { model: cfg } = harness::runfile::read(&path).map_err(|e| ckpt(&e.path, e.message))?;
-        cfg.unet.check().map_err(|e| ckpt(&path, format!("\"model.unet\": {e}")))?;
+        let cfg = FolderConfig::read(dir)?.model;
+        cfg.unet.check().map_err(|e| ckpt(&dir.join("config.json"), format!("\"model.unet\": {e}")))?;
         Ok(cfg)
     }
 

@@ -111,12 +111,7 @@ pub struct AeOutcome {
 /// A held-out frame and its reconstruction (HWC bytes).
 pub type SamplePair = (Vec<u8>, Vec<u8>);
 
-/// The progress saved with a checkpoint (`state.json`).
-#[derive(Serialize, Deserialize)]
-pub(crate) struct State {
-    pub(crate) step: u64,
-    pub(crate) elapsed_s: f64,
-}
+pub(crate) use harness::driver::State;
 
 /// What a trainer's `config.json` holds: the model's and the training's configs.
 #[derive(Clone, Debug, Serialize, Deserialize)]
