@@ -140,6 +140,14 @@ pub enum ScenarioError {
     /// The worker threads could not be started.
     #[error("starting worker threads: {0}")]
     Threads(#[source] rayon::ThreadPoolBuildError),
+    /// A recorded episode whose arrays do not fit the task's dataset layout.
+    #[error("recorded episode seed {seed}: {message}")]
+    Recorded {
+        /// The episode's seed.
+        seed: u64,
+        /// What does not fit, naming the step.
+        message: String,
+    },
     /// One episode of a batch failed.
     #[error("{scenario}episode seed {seed} ({behaviour})")]
     Episode {
@@ -153,4 +161,10 @@ pub enum ScenarioError {
         #[source]
         source: Box<ScenarioError>,
     },
+}
+
+impl From<ScenarioError> for harness::task::TaskError {
+    fn from(e: ScenarioError) -> Self {
+        Self::new(e)
+    }
 }

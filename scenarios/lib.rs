@@ -3,9 +3,9 @@
 //! Each scenario owns its MuJoCo model, its seeded reset (a pure function of the
 //! seed), its renderer, its exact scoring and its scripted behaviours (expert and
 //! exploration) used to collect datasets, and implements the task interface
-//! ([`harness::task::Task`]) the paired engine drives; [`load_task`] resolves
-//! `--scenario`. Push-T implements the task interface; robomimic Lift so far has
-//! its reference simulator, scripted behaviours and data commands.
+//! ([`harness::task::Task`]) the paired engine drives, with its scripted behaviours and
+//! dataset layout ([`harness::scripted::Scripted`]) the data commands run; [`load_task`]
+//! resolves `--scenario` through one table of the tasks (`TASKS`).
 
 pub mod can;
 pub mod error;
@@ -15,93 +15,77 @@ pub mod robosuite;
 
 pub use error::ScenarioError;
 
+use std::path::Path;
+
 use harness::task::Task;
+use mujoco_rs::prelude::MjModel;
+use robosuite::render_pool::ModelKey;
+use robosuite::task::RobosuiteTask;
+
+/// Loads a task: `None` for its shipped parameters, or a scenario file.
+type Load = fn(Option<&Path>) -> Result<Box<dyn Task>, ScenarioError>;
+
+/// Builds a render worker's model from an episode's recipe.
+type RenderModel = fn(&ModelKey) -> Result<MjModel, ScenarioError>;
+
+/// A task of this build: its name, how it loads (its shipped parameters, or a scenario
+/// file whose `name` key names it) and, for tasks whose frames render workers draw, how a
+/// worker builds the model an episode asks for.
+struct Registered {
+    /// The name `--scenario` and a scenario file's `name` give.
+    name: &'static str,
+    /// Loads the task: `None` for its shipped parameters, or a scenario file.
+    load: Load,
+    /// Builds a render worker's model from an episode's recipe.
+    render_model: Option<RenderModel>,
+}
+
+/// The tasks this build runs. Adding a task adds its line here (and its folder).
+const TASKS: &[Registered] = &[
+    Registered { name: "pusht", load: pusht::registered, render_model: None },
+    Registered { name: "pusht-gpc", load: pusht::registered_gpc, render_model: None },
+    Registered { name: "lift", load: lift::registered, render_model: Some(lift::render_model) },
+    Registered { name: "can", load: can::registered, render_model: Some(can::render_model) },
+];
+
+/// Names of the scenarios this build can simulate.
+pub fn scenarios() -> Vec<&'static str> {
+    TASKS.iter().map(|t| t.name).collect()
+}
 
 /// The task `--scenario` names: a scenario name (`pusht`, `pusht-gpc`, `lift`, `can`: the
-/// shipped parameters) or a scenario .toml file. The only place that maps a scenario to its
-/// implementation: adding a task adds its line here.
+/// shipped parameters) or a scenario .toml file, whose `name` key says which task it
+/// describes (a file whose name no other task has is read as Push-T's, whose checks then
+/// name what is wrong). The only place that maps a scenario to its implementation
+/// ([`TASKS`]).
 ///
 /// # Errors
 /// An unknown name, an unreadable or invalid file, or a scene MuJoCo refuses.
 pub fn load_task(spec: &str) -> Result<Box<dyn Task>, ScenarioError> {
-    use robosuite::task::RobosuiteTask;
-    match scenario(spec)? {
-        Scenario::PushT(cfg) => Ok(Box::new(pusht::PushTTask::new(*cfg)?)),
-        Scenario::Lift(cfg) => Ok(Box::new(RobosuiteTask::new(lift::LiftSim::new(cfg)?))),
-        Scenario::Can(cfg) => Ok(Box::new(RobosuiteTask::new(can::CanSim::new(cfg)?))),
+    if let Some(task) = TASKS.iter().find(|t| t.name == spec) {
+        return (task.load)(None);
     }
-}
-
-/// The Push-T config `--scenario` names: `pusht` gives the shipped parameters, a
-/// path loads that file (which must describe Push-T).
-///
-/// # Errors
-/// An unknown name, or an unreadable or invalid file.
-pub fn pusht_config(spec: &str) -> Result<pusht::PushTConfig, ScenarioError> {
-    if spec == "pusht" {
-        return Ok(pusht::PushTConfig::default());
+    let path = Path::new(spec);
+    if !(spec.ends_with(".toml") || path.exists()) {
+        return Err(ScenarioError::UnknownScenario { name: spec.into(), available: scenarios().join(", ") });
     }
-    if spec == "pusht-gpc" {
-        return pusht::PushTConfig::gpc();
-    }
-    let path = std::path::Path::new(spec);
-    let file = spec.ends_with(".toml") || path.exists();
-    let named = if file { file_names(path)? } else { Some(spec.to_string()) };
-    if let Some(name @ ("lift" | "can")) = named.as_deref() {
-        return Err(ScenarioError::Unsupported {
-            scenario: name.into(),
-            what: "this command (it runs with `simulate` and `collect` and its scripted behaviours)".into(),
-        });
-    }
-    if file {
-        return pusht::PushTConfig::from_file(path);
-    }
-    Err(ScenarioError::UnknownScenario { name: spec.into(), available: SCENARIOS.join(", ") })
-}
-
-/// Names of the scenarios this build can simulate.
-pub const SCENARIOS: &[&str] = &["pusht", "pusht-gpc", "lift", "can"];
-
-/// A resolved `--scenario`: which simulator, with its parameters.
-#[derive(Clone, Debug)]
-pub enum Scenario {
-    /// Push-T.
-    PushT(Box<pusht::PushTConfig>),
-    /// robomimic Lift.
-    Lift(lift::LiftConfig),
-    /// robomimic Can (robosuite's PickPlaceCan).
-    Can(can::CanConfig),
-}
-
-/// Resolves `--scenario`: a name (`pusht`, `lift`: the shipped parameters) or a
-/// scenario .toml file, whose `name` key says which simulator it describes.
-///
-/// # Errors
-/// An unknown name, or an unreadable or invalid file.
-pub fn scenario(spec: &str) -> Result<Scenario, ScenarioError> {
-    match spec {
-        "lift" => return Ok(Scenario::Lift(lift::LiftConfig::default())),
-        "can" => return Ok(Scenario::Can(can::CanConfig::default())),
-        _ => {}
-    }
-    let path = std::path::Path::new(spec);
-    if !matches!(spec, "pusht" | "pusht-gpc") && (spec.ends_with(".toml") || path.exists()) {
-        match file_names(path)?.as_deref() {
-            Some("lift") => return Ok(Scenario::Lift(lift::LiftConfig::from_file(path)?)),
-            Some("can") => return Ok(Scenario::Can(can::CanConfig::from_file(path)?)),
-            _ => {}
-        }
-    }
-    Ok(Scenario::PushT(Box::new(pusht_config(spec)?)))
+    let named = file_names(path)?;
+    let task = TASKS.iter().find(|t| Some(t.name) == named.as_deref()).unwrap_or(&TASKS[0]);
+    (task.load)(Some(path))
 }
 
 /// The `name` a scenario file gives itself, if it parses and has one.
-fn file_names(path: &std::path::Path) -> Result<Option<String>, ScenarioError> {
+fn file_names(path: &Path) -> Result<Option<String>, ScenarioError> {
     let text =
         std::fs::read_to_string(path).map_err(|source| ScenarioError::Io { path: path.into(), source })?;
     Ok(toml::from_str::<toml::Table>(&text)
         .ok()
         .and_then(|t| t.get("name").and_then(|n| n.as_str().map(str::to_string))))
+}
+
+/// A robosuite task of its shipped parameters or of a scenario file, as a [`Task`].
+fn arm_task<T: robosuite::task::ArmEngine + 'static>(sim: T) -> Box<dyn Task> {
+    Box::new(RobosuiteTask::new(sim))
 }
 
 /// Prepares the process for MuJoCo; call it once at the start of `main`, before
@@ -143,22 +127,12 @@ pub fn init_mujoco() {
 /// assets as the episode that asked, so the same compiled model.
 ///
 /// # Errors
-/// An unknown task, a config that does not parse, or the build's own errors.
-pub fn build_arm_model(
-    key: &robosuite::render_pool::ModelKey,
-) -> Result<mujoco_rs::prelude::MjModel, ScenarioError> {
-    let bad = |e: serde_json::Error| ScenarioError::Render { message: format!("{} config: {e}", key.task) };
-    match (key.task.as_str(), key.object_half) {
-        ("lift", Some(half)) => {
-            let cfg: lift::LiftConfig = serde_json::from_str(&key.config).map_err(bad)?;
-            lift::sim::lift_model(&cfg, &key.assets, half)
-        }
-        ("can", None) => {
-            let cfg: can::CanConfig = serde_json::from_str(&key.config).map_err(bad)?;
-            can::sim::can_model(&cfg, &key.assets)
-        }
-        (task, _) => Err(ScenarioError::Render { message: format!("no arm model for task {task}") }),
-    }
+/// A task without render workers, a config that does not parse, or the build's own errors.
+pub fn build_arm_model(key: &ModelKey) -> Result<MjModel, ScenarioError> {
+    let build = TASKS.iter().find(|t| t.name == key.task).and_then(|t| t.render_model);
+    let build = build
+        .ok_or_else(|| ScenarioError::Render { message: format!("no arm model for task {}", key.task) })?;
+    build(key)
 }
 
 /// A render worker's loop on `input` and `output` (`evalharness render-worker`).
@@ -171,6 +145,31 @@ pub fn serve_render_worker(input: impl std::io::Read, output: impl std::io::Writ
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_task_table_loads_every_task_by_name_and_by_file() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in super::scenarios() {
+            let task = super::load_task(name).expect("robosuite assets (scripts/setup.sh)");
+            // `pusht-gpc` is Push-T with GPC's parameters: its task is called `pusht`.
+            assert_eq!(task.name(), name.trim_end_matches("-gpc"), "{name}");
+            let scripted = task.scripted().expect("every shipped task has scripted behaviours");
+            assert!(!scripted.behaviours().is_empty(), "{name}");
+        }
+        // A file names its task; a file whose name no other task has is read as Push-T's,
+        // whose errors then name what is missing.
+        let lift = dir.path().join("l.toml");
+        std::fs::write(&lift, "name = \"lift\"\n").unwrap();
+        assert_eq!(super::load_task(lift.to_str().unwrap()).unwrap().name(), "lift");
+        let pusht = concat!(env!("CARGO_MANIFEST_DIR"), "/pusht.toml");
+        assert_eq!(super::load_task(pusht).unwrap().name(), "pusht");
+        let unnamed = dir.path().join("p.toml");
+        std::fs::write(&unnamed, "").unwrap();
+        let err = super::load_task(unnamed.to_str().unwrap()).err().unwrap().to_string();
+        assert!(err.contains("p.toml") && err.contains("missing field `name`"), "{err}");
+        let err = super::load_task("pushq").err().unwrap().to_string();
+        assert_eq!(err, "unknown scenario 'pushq' (available: pusht, pusht-gpc, lift, can)");
+    }
+
     #[test]
     fn every_task_says_without_a_reset_whether_its_episodes_judge_their_frames() {
         // `rank` asks `judges_own_frames` to pick a learned judge; the episodes' own

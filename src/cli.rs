@@ -4,19 +4,18 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
-pub mod bounds;
+pub use runner::bounds;
 mod choices;
 mod import;
 mod judge;
 mod plan;
 mod rank;
-mod train;
 pub use choices::*;
 pub use import::*;
 pub use judge::*;
 pub use plan::*;
 pub use rank::*;
-pub use train::*;
+pub use trainers::args::*;
 
 /// Rank robot-policy checkpoints offline in a learned world model (DriftWorld),
 /// checked against a MuJoCo reference simulator.
@@ -309,7 +308,7 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Side in pixels of the GIF frames.
-    #[arg(long, default_value_t = 256, value_parser = bounds::count(16, 2048))]
+    #[arg(long, default_value_t = 256, value_parser = bounds::count(16, 1024))]
     pub gif_size: usize,
     /// Renderer of the GIF: `raster` (the observations' 2-D rasteriser) or `mujoco`
     /// (MuJoCo's OpenGL renderer beside the rasteriser, a visual cross-check; also
@@ -430,4 +429,31 @@ pub enum DatasetCommand {
         #[arg(long)]
         force: bool,
     },
+}
+
+#[cfg(test)]
+mod bounds_tests {
+    use clap::Parser;
+
+    /// The ranges of `runner::bounds` on the command line.
+    #[test]
+    fn counts_out_of_range_are_refused_by_flag() {
+        // Each of these was accepted at 92f9f2b (and panicked inside burn, or could
+        // abort on memory or spawn without end).
+        for argv in [
+            "evalharness rank --jobs 0",
+            "evalharness rank --jobs 100000",
+            "evalharness rank --processes 1000",
+            "evalharness rank --batch 0",
+            "evalharness plan --proposals 1000000000",
+            "evalharness train judge --data d --out o --feature-dim 0",
+            "evalharness train judge --data d --out o --encoder-width 0",
+            "evalharness train judge --data d --out o --batch 100000000",
+        ] {
+            let flag = argv.split_whitespace().rev().nth(1).unwrap();
+            let e = super::Cli::try_parse_from(argv.split_whitespace()).unwrap_err().to_string();
+            assert!(e.contains(flag), "{argv}: {e}");
+        }
+        super::Cli::try_parse_from("evalharness rank --jobs 2 --processes 3".split_whitespace()).unwrap();
+    }
 }

@@ -12,7 +12,7 @@ mod commands;
 mod fuzz;
 mod output;
 mod policy_kinds;
-mod progress;
+use runner::progress;
 mod render_workers;
 mod scenario;
 

@@ -60,6 +60,19 @@ fn the_expert_lifts_and_any_jobs_gives_the_same_bytes() {
     assert_eq!(std::fs::read_to_string(one.join("initial_states.jsonl")).unwrap().lines().count(), 3);
 }
 
+/// `--renderer mujoco` draws MuJoCo's frames beside a task's own renderer; Lift's frames are
+/// MuJoCo's, and the flag was once silently ignored there.
+#[test]
+fn a_second_renderer_is_refused_where_the_task_has_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("r");
+    let args =
+        ["simulate", "--scenario", "lift", "--renderer", "mujoco", "--episodes", "1", "--out", s(&out)];
+    let (_, stderr) = expect_code(&run(&args), 2);
+    assert!(stderr.contains("--renderer mujoco: the lift task's frames are MuJoCo's already"), "{stderr}");
+    assert!(!out.exists());
+}
+
 #[test]
 fn a_missed_grasp_never_lifts() {
     let dir = tempfile::tempdir().unwrap();
@@ -133,7 +146,7 @@ fn collect_no_early_stop_keeps_the_episode_going_after_success() {
     // Push-T episodes have no such switch.
     let res = run(&["collect", "--no-early-stop", "--episodes", "1", "--out", s(&dir.path().join("p"))]);
     let (_, stderr) = expect_code(&res, 2);
-    assert!(stderr.contains("--no-early-stop applies to Lift and Can"), "{stderr}");
+    assert!(stderr.contains("--no-early-stop: pusht episodes end at success"), "{stderr}");
 }
 
 #[test]
@@ -164,7 +177,7 @@ fn collect_policy_no_early_stop_keeps_a_policys_episode_going_after_success() {
     let pusht = Path::new(env!("CARGO_MANIFEST_DIR")).join("checkpoints/pusht/policies/epoch-0001");
     let args = ["collect", "--policy", s(&pusht), "--no-early-stop", "--episodes", "1"];
     let (_, stderr) = expect_code(&run(&[&args[..], &["--out", s(&dir.path().join("p"))]].concat()), 2);
-    assert!(stderr.contains("--no-early-stop applies to Lift and Can"), "{stderr}");
+    assert!(stderr.contains("--no-early-stop: pusht episodes end at success"), "{stderr}");
 }
 
 #[test]

@@ -42,7 +42,9 @@ fn expert_episodes_write_summary_steps_and_gif() {
     assert_eq!(first["block"].as_array().unwrap().len(), 3);
     let gif = std::fs::read(out.join("episode_3.gif")).unwrap();
     assert_eq!(&gif[..6], b"GIF89a");
-    assert_eq!(read_json(&out.join("config.json"))["scenario"]["name"], "pusht");
+    let config = read_json(&out.join("config.json"));
+    assert_eq!(config["scenario"], "pusht");
+    assert_eq!(config["scenario_config"]["name"], "pusht");
     assert!(!dir.path().join("sim.partial").exists());
 }
 
@@ -68,7 +70,12 @@ fn unknown_scenario_and_policy_are_named() {
     let (_, err) = expect_code(&run(&["simulate", "--scenario", "pushq", "--out", o]), 2);
     assert!(err.contains("unknown scenario 'pushq'") && err.contains("pusht"), "{err}");
     let (_, err) = expect_code(&run(&["simulate", "--policy", "oracle", "--out", o]), 2);
-    assert!(err.contains("unknown policy 'oracle'"), "{err}");
+    assert!(
+        err.contains(
+            "unknown pusht behaviour 'oracle' (built-in: expert, explore, decoy; or a checkpoint folder)"
+        ),
+        "{err}"
+    );
 }
 
 #[test]

@@ -2,6 +2,8 @@
 //!
 //! - [`task`] and [`judge`]: the task interface (seeded episodes, action and observation
 //!   specs, exact scores) and the judge of imagined frames, which the paired engine drives;
+//!   [`scripted`]: a task's scripted behaviours and dataset layout, which the data
+//!   commands run for any task;
 //! - [`policy`] + [`rng`]: the batched policy interface and the caller-owned noise streams;
 //! - [`image`]: PSNR and SSIM as scikit-image computes them on 8-bit frames; [`resize`]:
 //!   OpenCV's INTER_LINEAR resize of 8-bit images (bit for bit on reductions);
@@ -36,6 +38,7 @@ pub mod results;
 pub mod rng;
 pub mod rows;
 pub mod runfile;
+pub mod scripted;
 pub mod seed;
 pub mod sessions;
 pub mod stop;

@@ -372,6 +372,12 @@ pub trait Task: Send + Sync {
     fn scripted_policy(&self, dir: &Path) -> Result<Box<dyn Policy>, TaskError> {
         Err(TaskError::new(NoScriptedPolicies { dir: dir.to_path_buf(), task: self.name().to_string() }))
     }
+    /// The task's scripted behaviours and dataset layout (what `simulate` and `collect`
+    /// run, and what every dataset of its episodes is written in); `None` for a task
+    /// without them, which those commands then refuse.
+    fn scripted(&self) -> Option<&dyn crate::scripted::Scripted> {
+        None
+    }
 }
 
 #[cfg(test)]

@@ -11,7 +11,9 @@
 //! from the frames a run keeps or replays ([`media`]), and its report ([`report`]); and
 //! the batches one process of a run runs, appended as they finish ([`batches`]), and the
 //! models a run reads, loaded, checked and fingerprinted ([`inputs`]); and what a bare
-//! `rank --scenario NAME` runs, from the task's shipped folder and `rank.toml` ([`defaults`]).
+//! `rank --scenario NAME` runs, from the task's shipped folder and `rank.toml` ([`defaults`]);
+//! and what every command shares around a run: the ranges of the counts its flags take
+//! ([`bounds`]) and its progress bars on stderr ([`progress`]).
 //!
 //! Why a crate of its own: the configuration is the contract between the processes of
 //! one run (the shards of `rank --processes`, `merge`, `report`, a later `--resume`),
@@ -19,6 +21,7 @@
 //! label and metrics), so it sits above them and below the binary.
 
 pub mod batches;
+pub mod bounds;
 pub mod check;
 pub mod claims;
 pub mod config;
@@ -29,6 +32,7 @@ pub mod inputs;
 pub mod media;
 pub mod merge;
 pub mod output;
+pub mod progress;
 pub mod report;
 pub mod resume;
 pub mod shards;

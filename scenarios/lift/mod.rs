@@ -13,5 +13,25 @@ pub use expert::{LiftExpert, LiftFlaws};
 pub use rollout::{LiftBehaviour, LiftEpisodeRecord};
 pub use sim::{LiftEpisode, LiftInit, LiftSim, STATE_COLUMNS};
 
+/// Lift for the task table (`crate::load_task`): the shipped parameters, or a scenario file's.
+pub(crate) fn registered(
+    file: Option<&std::path::Path>,
+) -> Result<Box<dyn harness::task::Task>, crate::ScenarioError> {
+    let cfg = file.map_or_else(|| Ok(LiftConfig::default()), LiftConfig::from_file)?;
+    Ok(crate::arm_task(LiftSim::new(cfg)?))
+}
+
+/// The model a render worker builds for a Lift episode's recipe.
+pub(crate) fn render_model(
+    key: &crate::robosuite::render_pool::ModelKey,
+) -> Result<mujoco_rs::prelude::MjModel, crate::ScenarioError> {
+    let cfg: LiftConfig = serde_json::from_str(&key.config)
+        .map_err(|e| crate::ScenarioError::Render { message: format!("lift config: {e}") })?;
+    let half = key.object_half.ok_or_else(|| crate::ScenarioError::Render {
+        message: "a lift model needs the cube's half-sizes".into(),
+    })?;
+    sim::lift_model(&cfg, &key.assets, half)
+}
+
 #[cfg(test)]
 mod tests;

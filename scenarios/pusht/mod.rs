@@ -8,6 +8,7 @@
 
 pub mod colors;
 pub mod config;
+pub mod datasets;
 pub mod decoy;
 pub mod expert;
 pub mod explore;
@@ -40,6 +41,22 @@ pub use config::PushTConfig;
 pub use geometry::{Pose2, TShape};
 pub use physics::{PushTPhysics, PushTState};
 pub use task::PushTTask;
+
+/// Push-T for the task table (`crate::load_task`): the shipped scene, or a scenario file's.
+pub(crate) fn registered(
+    file: Option<&std::path::Path>,
+) -> Result<Box<dyn harness::task::Task>, crate::ScenarioError> {
+    let cfg = file.map_or_else(|| Ok(PushTConfig::default()), PushTConfig::from_file)?;
+    Ok(Box::new(PushTTask::new(cfg)?))
+}
+
+/// The GPC-faithful Push-T for the task table: the shipped `pusht_gpc.toml`, or a file's.
+pub(crate) fn registered_gpc(
+    file: Option<&std::path::Path>,
+) -> Result<Box<dyn harness::task::Task>, crate::ScenarioError> {
+    let cfg = file.map_or_else(PushTConfig::gpc, PushTConfig::from_file)?;
+    Ok(Box::new(PushTTask::new(cfg)?))
+}
 
 use crate::error::ScenarioError;
 use geometry::wrap_angle;

@@ -18,7 +18,7 @@ use super::explore::Explorer;
 use super::mj_render::{MujocoRenderer, SideBySide};
 use super::render::Rasterizer;
 use super::rollout::{Behaviour, Episode, FrameSource, Noisy, Record, run_episode};
-use super::{PushTConfig, PushTEnv, PushTPhysics};
+use super::{PushTConfig, PushTEnv};
 use crate::error::ScenarioError;
 
 /// The scripted behaviours.
@@ -140,19 +140,19 @@ pub struct Runner {
 }
 
 impl Runner {
-    /// Compiles the model and builds a pool of `jobs` threads; episodes end at
-    /// `max_steps` (the task's limit if `None`). The caller checks the settings (a finite
-    /// noise of at least 0, a positive step limit) and names the flags that set them.
+    /// Builds a pool of `jobs` threads for episodes on `model` (compiled from `cfg`); episodes
+    /// end at `max_steps` (the task's limit if `None`). The caller checks the settings (a
+    /// finite noise of at least 0, a positive step limit) and names the flags that set them.
     ///
     /// # Errors
-    /// A model that does not compile, or threads that cannot be started.
-    pub fn new(
+    /// Threads that cannot be started.
+    pub fn on_model(
         cfg: PushTConfig,
+        model: Arc<MjModel>,
         jobs: usize,
         max_steps: Option<u32>,
         perturbation: Perturbation,
     ) -> Result<Self, ScenarioError> {
-        let model = PushTPhysics::compile(&cfg)?;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(jobs.max(1))
             .build()

@@ -114,6 +114,10 @@ impl Task for PushTTask {
             .map_err(TaskError::new)?;
         Ok(Box::new(p))
     }
+
+    fn scripted(&self) -> Option<&dyn harness::scripted::Scripted> {
+        Some(self)
+    }
 }
 
 /// One Push-T episode behind the task interface.

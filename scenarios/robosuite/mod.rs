@@ -8,6 +8,7 @@
 //! the scenes, actions and success checks.
 
 pub mod assets;
+pub mod datasets;
 pub mod episode;
 pub mod linalg;
 pub mod osc;

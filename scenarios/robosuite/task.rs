@@ -122,6 +122,10 @@ impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
         crate::robosuite::episode::release_renderer();
     }
 
+    fn scripted(&self) -> Option<&dyn harness::scripted::Scripted> {
+        Some(self)
+    }
+
     fn score_kind(&self) -> ScoreKind {
         ScoreKind::Success
     }

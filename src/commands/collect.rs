@@ -1,172 +1,193 @@
-//! `evalharness collect`: a Push-T dataset in the replay-buffer zarr layout.
+//! `evalharness collect`: a dataset of a task's scripted behaviours in the replay-buffer
+//! zarr layout the task declares ([`harness::scripted::Scripted::layout`]).
 //!
-//! Each episode's behaviour is drawn from `--mix` with a random number derived
-//! from its seed, so the dataset is a pure function of the arguments, whatever
-//! `--jobs` is. Images are the 96x96 observations before each action; state rows
-//! are `[agent x, agent y, block x, block y, block θ, goal x, goal y, goal θ]`;
-//! `data/coverage` holds the coverage after each action.
+//! Each episode's behaviour is drawn from `--mix` with a random number derived from its
+//! seed, so the dataset is a pure function of the arguments, whatever `--jobs` is.
 
 use std::process::ExitCode;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, anyhow, bail};
 use harness::replay::attrs::{DatasetAttrs, EpisodeEntry, Source};
-use harness::replay::{EpisodeArrays, ReplaySpec};
+use harness::scripted::{FrameRequest, Scripted, Settings};
+use harness::seed::{derive, fnv1a};
+use harness::task::{ScoreKind, Task, TaskError};
 
-use crate::output::dataset::StagedDataset;
-
-use scenarios::pusht::PushTConfig;
-use scenarios::pusht::rollout::Episode;
-
-use super::collect_mix::{draw, parse_mix_with, with_source};
 use crate::cli::CollectArgs;
+use crate::output::dataset::StagedDataset;
 use crate::progress;
-use scenarios::pusht::runs::{BehaviourKind, FrameSpec, Perturbation, Runner, behaviour_label};
 
-/// Names of the state columns, stored in the dataset's attributes.
-pub const STATE_COLUMNS: [&str; 8] =
-    ["agent_x", "agent_y", "block_x", "block_y", "block_theta", "goal_x", "goal_y", "goal_theta"];
-
-/// Push-T's default `--mix`.
-pub const PUSHT_MIX: &str = "expert=0.8,explore=0.2";
-
-/// Parses `expert=0.8,explore=0.2` into normalised weights.
-fn parse_mix(text: &str) -> Result<Vec<(BehaviourKind, f64)>> {
-    parse_mix_with(text, |name| Ok(BehaviourKind::parse(name)?))
+/// A task's error (a scripted run's, or the command's own that its sink returned) as the
+/// command's.
+pub(super) fn from_task(e: TaskError) -> anyhow::Error {
+    anyhow::Error::from_boxed(e.0)
 }
 
-/// Push-T's scripted runner for `collect` and `simulate` (clap has checked `--noise` and
-/// `--max-steps`: `cli::bounds`).
+/// The command's error returned through a task's episode sink.
+pub(super) fn to_task(e: anyhow::Error) -> TaskError {
+    TaskError(e.into())
+}
+
+/// The task `--scenario` names.
 ///
 /// # Errors
-/// A runner that cannot be built.
-pub(super) fn pusht_runner(
-    cfg: PushTConfig,
-    jobs: usize,
-    max_steps: Option<u32>,
-    perturbation: Perturbation,
-) -> Result<Runner> {
-    Ok(Runner::new(cfg, jobs, max_steps, perturbation)?)
+/// A scenario that does not load, naming it.
+pub(super) fn load_task(spec: &str) -> Result<Box<dyn Task>> {
+    scenarios::load_task(spec).with_context(|| format!("loading scenario {spec}"))
 }
 
-/// The dataset layout: `size`² RGB images, 2-D actions, 8 state columns, coverage.
-pub(super) fn replay_spec(size: usize) -> ReplaySpec {
-    ReplaySpec { image_hw: [size, size], action_dim: 2, state_dim: 8, extras: vec!["coverage".into()] }
+/// A task's scripted behaviours and dataset layout.
+///
+/// # Errors
+/// A task without them, naming it.
+pub(super) fn scripted_of(task: &dyn Task) -> Result<&dyn Scripted> {
+    task.scripted()
+        .with_context(|| format!("the {} task has no scripted behaviours or dataset layout", task.name()))
 }
 
-/// One episode's arrays: the observation before each action, its state row
-/// ([`STATE_COLUMNS`]), the action and the coverage after it.
-pub(super) fn episode_arrays(ep: &Episode) -> EpisodeArrays {
-    let steps = ep.rows.len();
-    let mut arrays = EpisodeArrays::default();
-    for f in &ep.frames[..steps] {
-        arrays.img.extend_from_slice(f);
+/// `--no-early-stop` on a task whose episodes end at success (Push-T's, as gym-pusht's):
+/// refused, naming the task.
+///
+/// # Errors
+/// When the flag is set for such a task.
+pub(super) fn refuse_no_early_stop(task: &dyn Task, no_early_stop: bool) -> Result<()> {
+    if no_early_stop && !scripted_of(task)?.early_stop_optional() {
+        bail!(
+            "--no-early-stop: {} episodes end at success or their step limit; the flag applies to tasks \
+             whose episodes may run on past their first success",
+            task.name()
+        );
     }
-    let g = ep.goal;
-    let mut coverage = Vec::with_capacity(steps);
-    for r in &ep.rows {
-        arrays.action.extend(r.action.map(|v| v as f32));
-        let s = [r.agent[0], r.agent[1], r.block.x, r.block.y, r.block.theta, g.x, g.y, g.theta];
-        arrays.state.extend(s.map(|v| v as f32));
-        coverage.push(r.coverage as f32);
-    }
-    arrays.extras.push(coverage);
-    arrays
+    Ok(())
 }
 
-/// An episode's entry in the dataset attributes.
-pub(super) fn episode_attr(ep: &Episode, behaviour: &str) -> EpisodeEntry {
-    EpisodeEntry {
-        seed: Some(ep.seed),
-        behaviour: Some(behaviour.to_string()),
-        steps: Some(ep.rows.len() as u64),
-        score: Some(ep.score),
-        success: Some(ep.success),
-        ..EpisodeEntry::default()
-    }
+/// The index of the behaviour `name` of `task`.
+///
+/// # Errors
+/// An unknown name, listing the task's behaviours (and `more`, what else the flag takes).
+pub(super) fn behaviour_index(task: &dyn Task, name: &str, more: &str) -> Result<usize> {
+    let all = scripted_of(task)?.behaviours();
+    all.iter().position(|b| *b == name).ok_or_else(|| {
+        anyhow!("unknown {} behaviour '{name}' (built-in: {}{more})", task.name(), all.join(", "))
+    })
 }
 
-/// The dataset attributes: the layout and scenario, the seeds, how the episodes were
-/// made (`source`: `collect`'s mix and perturbation, or `--policy`'s checkpoints) and
-/// the episodes.
-pub(super) fn dataset_attrs(
-    cfg: &PushTConfig,
+/// Parses `name=weight` pairs, naming behaviours with `parse`, into normalised weights.
+fn parse_mix<K>(text: &str, parse: impl Fn(&str) -> Result<K>) -> Result<Vec<(K, f64)>> {
+    let mut mix = Vec::new();
+    for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let Some((name, w)) = part.split_once('=') else {
+            bail!("--mix: '{part}' is not name=weight");
+        };
+        let kind = parse(name.trim()).map_err(|e| anyhow!("--mix: {e}"))?;
+        let w: f64 =
+            w.trim().parse().map_err(|_| anyhow!("--mix: weight '{w}' of {name} is not a number"))?;
+        if !(w.is_finite() && w >= 0.0) {
+            bail!("--mix: weight of {name} must be >= 0, got {w}");
+        }
+        mix.push((kind, w));
+    }
+    let total: f64 = mix.iter().map(|(_, w)| w).sum();
+    if total <= 0.0 {
+        bail!("--mix: needs at least one positive weight, got '{text}'");
+    }
+    Ok(mix.into_iter().map(|(k, w)| (k, w / total)).collect())
+}
+
+/// The behaviour of episode `seed`: a pure function of the seed and the mix.
+fn draw<K: Copy>(mix: &[(K, f64)], seed: u64) -> K {
+    let u = (derive(seed, &[fnv1a("collect/mix")]) >> 11) as f64 / (1u64 << 53) as f64;
+    let mut acc = 0.0;
+    for &(k, w) in mix {
+        acc += w;
+        if u < acc {
+            return k;
+        }
+    }
+    mix.last().map(|m| m.0).expect("a parsed mix has an entry")
+}
+
+/// A dataset's attributes from its task's own (`header`): the first seed, how the episodes
+/// were made (`source`), the step limit and one entry per episode.
+pub(super) fn with_source(
+    header: DatasetAttrs,
     seed_start: u64,
     source: Source,
     max_steps: usize,
     episodes: Vec<EpisodeEntry>,
 ) -> DatasetAttrs {
-    let header = DatasetAttrs {
-        scenario: Some("pusht".into()),
-        scenario_config: serde_json::to_value(cfg).ok(),
-        state_columns: Some(STATE_COLUMNS.iter().map(|c| (*c).to_string()).collect()),
-        action: Some("absolute agent target position, world units".into()),
-        coverage: Some("data/coverage: coverage after each action".into()),
-        ..DatasetAttrs::new()
-    };
-    with_source(header, seed_start, source, max_steps, episodes)
+    DatasetAttrs {
+        seed_start: Some(seed_start),
+        source,
+        max_steps: Some(max_steps as u64),
+        episodes,
+        ..header
+    }
 }
 
-/// `--no-early-stop` on Push-T (`collect`, `collect --policy`, `simulate`): refused, since
-/// its episodes end at success or the step limit as gym-pusht's do.
-///
-/// # Errors
-/// When the flag is set.
-pub(super) fn refuse_run_on_for_pusht(no_early_stop: bool) -> Result<()> {
-    if no_early_stop {
-        bail!("--no-early-stop applies to Lift and Can; Push-T episodes run to their step limit or success");
+/// An episode's entry in a dataset's attributes: its seed, behaviour, steps, success, and
+/// for tasks scored by more than success (Push-T's coverage) its score.
+pub(super) fn episode_entry(
+    task: &dyn Task,
+    seed: u64,
+    behaviour: &str,
+    steps: usize,
+    (score, success): (f64, bool),
+) -> EpisodeEntry {
+    EpisodeEntry {
+        seed: Some(seed),
+        behaviour: Some(behaviour.to_string()),
+        steps: Some(steps as u64),
+        score: (task.score_kind() != ScoreKind::Success).then_some(score),
+        success: Some(success),
+        ..EpisodeEntry::default()
     }
-    Ok(())
 }
 
 /// Runs the command for the scripted behaviours (`--policy` runs [`super::collect_policy`]).
 pub fn run(args: &CollectArgs, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
-    let cfg =
-        match scenarios::scenario(&c.scenario).with_context(|| format!("loading scenario {}", c.scenario))? {
-            scenarios::Scenario::Lift(cfg) => {
-                let task = scenarios::lift::LiftSim::new(cfg).context("setting up Lift")?;
-                return super::collect_arm::run(args, &task, quiet);
-            }
-            scenarios::Scenario::Can(cfg) => {
-                let task = scenarios::can::CanSim::new(cfg).context("setting up Can")?;
-                return super::collect_arm::run(args, &task, quiet);
-            }
-            scenarios::Scenario::PushT(cfg) => *cfg,
-        };
-    refuse_run_on_for_pusht(args.no_early_stop)?;
-    let mix_text = args.mix.as_deref().unwrap_or(PUSHT_MIX);
-    let mix = parse_mix(mix_text)?;
-    let perturbation = Perturbation { noise: c.noise, lag: c.lag };
-    let runner = pusht_runner(cfg, c.jobs, c.max_steps, perturbation)?;
-    let size = runner.cfg.render.size as usize;
-    let work: Vec<(u64, BehaviourKind)> =
+    let task = load_task(&c.scenario)?;
+    let (task, scripted) = (task.as_ref(), scripted_of(task.as_ref())?);
+    refuse_no_early_stop(task, args.no_early_stop)?;
+    let mix_text = args.mix.clone().unwrap_or_else(|| scripted.default_mix());
+    let mix = parse_mix(&mix_text, |name| behaviour_index(task, name, ""))?;
+    let settings = Settings {
+        noise: c.noise,
+        lag: c.lag,
+        max_steps: c.max_steps.map_or(task.max_steps(), |m| m as usize),
+        stop_at_success: !args.no_early_stop,
+        jobs: c.jobs,
+    };
+    let work: Vec<(u64, usize)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, draw(&mix, seed))).collect();
+    let layout = scripted.layout();
+    let size = layout.spec.image_hw[0];
     let inputs = crate::output::Inputs::new().scenario(&c.scenario);
-    let mut writer = StagedDataset::create(&args.out, c.force, &inputs, replay_spec(size))?;
-    let pb = progress::bar(c.episodes, "collect", quiet);
+    let mut writer = StagedDataset::create(&args.out, c.force, &inputs, layout.spec)?;
+    let pb = progress::bar(c.episodes, &format!("collect {}", task.name()), quiet);
     let mut episodes = Vec::new();
-    runner.run(
-        &work,
-        |_| Some(FrameSpec { size, beside_mujoco: false }),
-        |i, ep| {
-            writer.append(&episode_arrays(&ep))?;
-            episodes.push(episode_attr(&ep, &behaviour_label(work[i].1, perturbation)));
+    let frames = |_| Some(FrameRequest { size, beside_reference: false });
+    scripted
+        .run(&work, &settings, &frames, &mut |_, ep| {
+            writer.append(&ep.arrays).map_err(TaskError::new)?;
+            episodes.push(episode_entry(task, ep.seed, &ep.behaviour, ep.steps, (ep.score, ep.success)));
             pb.inc(1);
-            anyhow::Ok(())
-        },
-    )?;
+            Ok(())
+        })
+        .map_err(from_task)?;
     pb.finish_and_clear();
     let n = episodes.len();
     let source = Source {
-        mix: Some(mix_text.to_string()),
+        mix: Some(mix_text),
         noise: Some(c.noise),
         lag: Some(c.lag as u64),
+        no_early_stop: scripted.early_stop_optional().then_some(args.no_early_stop),
         ..Source::default()
     };
-    let attrs = dataset_attrs(&runner.cfg, c.seed_start, source, runner.max_steps as usize, episodes);
+    let attrs = with_source(layout.header, c.seed_start, source, settings.max_steps, episodes);
     let steps = attrs.total_steps();
     let path = writer.finish(&attrs)?;
-    outln!("pusht dataset: {n} episodes, {steps} steps -> {}", path.display());
+    outln!("{} dataset: {n} episodes, {steps} steps -> {}", task.name(), path.display());
     Ok(ExitCode::SUCCESS)
 }
 
@@ -176,21 +197,36 @@ mod tests {
 
     #[test]
     fn mix_parses_and_normalises() {
-        let m = parse_mix("expert=3, explore=1").unwrap();
-        assert_eq!(m, vec![(BehaviourKind::Expert, 0.75), (BehaviourKind::Explore, 0.25)]);
-        assert!(parse_mix("expert").is_err());
-        assert!(parse_mix("robot=1").is_err());
-        assert!(parse_mix("expert=0").is_err());
-        assert!(parse_mix("expert=x").is_err());
+        let task = load_task("pusht").unwrap();
+        let parse = |t: &str| parse_mix(t, |n| behaviour_index(task.as_ref(), n, ""));
+        // Push-T's behaviours: expert 0, explore 1, decoy 2.
+        assert_eq!(parse("expert=3, explore=1").unwrap(), vec![(0, 0.75), (1, 0.25)]);
+        assert!(parse("expert").is_err());
+        let err = parse("robot=1").unwrap_err().to_string();
+        assert!(err.contains("unknown pusht behaviour 'robot' (built-in: expert, explore, decoy)"), "{err}");
+        assert!(parse("expert=0").is_err());
+        assert!(parse("expert=x").is_err());
     }
 
     #[test]
     fn draws_follow_the_weights() {
-        let m = parse_mix("expert=0.8,explore=0.2").unwrap();
-        let experts = (0..10_000).filter(|&s| draw(&m, s) == BehaviourKind::Expert).count();
+        let m = vec![(0usize, 0.8), (1, 0.2)];
+        let experts = (0..10_000).filter(|&s| draw(&m, s) == 0).count();
         // Binomial(10000, 0.8): std 40, so 7800..8200 is a 5-sigma band.
         assert!((7800..8200).contains(&experts), "{experts}");
         assert_eq!(draw(&m, 17), draw(&m, 17));
+    }
+
+    #[test]
+    fn the_default_mixes_are_what_the_shipped_datasets_were_collected_with() {
+        // Push-T's and Lift's default mixes, as the shipped models' provenance records them.
+        for (name, mix) in [
+            ("pusht", "expert=0.8,explore=0.2"),
+            ("lift", "expert=0.5,miss=0.1,drop=0.1,push=0.1,hesitate=0.1,random=0.1"),
+        ] {
+            let task = load_task(name).expect("robosuite assets (scripts/setup.sh)");
+            assert_eq!(scripted_of(task.as_ref()).unwrap().default_mix(), mix, "{name}");
+        }
     }
 
     /// Goal-free frames (`scenarios::pusht::goal_free`) of a dataset `collect` wrote: the

@@ -13,9 +13,8 @@
 //! (Lift and Can with `--no-early-stop`: at the step limit, so that success lasts).
 //! So the dataset is a pure function of the arguments, whatever `--jobs` is.
 //!
-//! Episodes are written by [`super::record::Sink`]: Push-T's layout for Push-T, the
-//! robosuite one (agentview frames, 7-D actions, the task's state columns,
-//! `data/success`) for Lift and Can.
+//! Episodes are written by [`super::record::Sink`] in the task's own dataset layout, as
+//! its scripted `collect` writes them.
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -26,7 +25,8 @@ use harness::replay::attrs::{CheckpointEntry, EpisodeEntry, Source, total_steps}
 use harness::task::Task;
 use policies::dir::checkpoint_dirs;
 
-use super::record::{Layout, Sink};
+use super::collect::{load_task, refuse_no_early_stop, scripted_of};
+use super::record::Sink;
 use crate::cli::CollectArgs;
 use crate::policy_kinds::{expectations, load_any};
 use crate::progress;
@@ -40,29 +40,26 @@ pub fn run(args: &CollectArgs, dir: &Path, quiet: bool) -> Result<ExitCode> {
     if c.noise != 0.0 || c.lag != 0 {
         bail!("--noise and --lag perturb the scripted expert; they do not apply to --policy");
     }
-    let (task, layout) = Layout::load(&c.scenario)?;
-    if task.name() == "pusht" {
-        super::collect::refuse_run_on_for_pusht(args.no_early_stop)?;
-    }
+    let task = load_task(&c.scenario)?;
+    refuse_no_early_stop(task.as_ref(), args.no_early_stop)?;
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
     if c.episodes == 0 {
         bail!("--episodes must be at least 1");
     }
     let inputs = crate::output::Inputs::new().scenario(&c.scenario).add("--policy", dir);
-    let mut sink = Sink::create(layout, &args.out, c.force, &inputs)?;
+    let mut sink = Sink::create(task.as_ref(), &args.out, c.force, &inputs)?;
     let (episodes, checkpoints) = roll_out(args, dir, task.as_ref(), max_steps, &mut sink, quiet)?;
     let (n, steps) = (episodes.len(), total_steps(&episodes));
-    // Push-T datasets say how the expert was perturbed (not at all here), as `collect`'s do.
+    // The scripted datasets' source fields, with no perturbation: --noise and --lag are
+    // refused above.
     let n_checkpoints = checkpoints.len();
     let source = Source {
         policy: Some(dir.display().to_string()),
         checkpoints: Some(checkpoints),
+        noise: Some(0.0),
+        lag: Some(0),
+        no_early_stop: scripted_of(task.as_ref())?.early_stop_optional().then_some(args.no_early_stop),
         ..Source::default()
-    };
-    let source = if task.name() == "pusht" {
-        Source { noise: Some(0.0), lag: Some(0), ..source }
-    } else {
-        Source { no_early_stop: Some(args.no_early_stop), ..source }
     };
     let path = sink.finish(c.seed_start, source, max_steps, episodes)?;
     outln!(
@@ -82,7 +79,7 @@ fn roll_out(
     dir: &Path,
     task: &dyn Task,
     max_steps: usize,
-    sink: &mut Sink,
+    sink: &mut Sink<'_>,
     quiet: bool,
 ) -> Result<(Vec<EpisodeEntry>, Vec<CheckpointEntry>)> {
     let c = &args.common;

@@ -2,8 +2,6 @@
 
 pub(crate) mod agreement;
 mod collect;
-mod collect_arm;
-mod collect_mix;
 mod collect_policy;
 mod dataset;
 mod dataset_merge;
@@ -19,14 +17,9 @@ mod read_judge;
 mod record;
 mod scripted;
 mod simulate;
-mod simulate_arm;
 mod simulate_policy;
 mod simulate_replay;
 mod tasks;
-mod train;
-mod train_judge;
-mod train_policy;
-mod train_wm;
 mod wm_export;
 
 use std::process::ExitCode;
@@ -55,13 +48,21 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
             dataset_merge::run(inputs, out, *force, cli.quiet)
         }
         Command::Train(t) => {
-            train::stop_on_signals();
-            match t {
-                TrainCommand::Autoencoder(a) => train::autoencoder(a, cli.quiet),
-                TrainCommand::WorldModel(a) => train_wm::run(a, cli.quiet),
-                TrainCommand::Policy(a) => train_policy::run(a, cli.quiet),
-                TrainCommand::Judge(a) => train_judge::run(a, cli.quiet),
-            }
+            stop_on_signals();
+            let subcommand = match t {
+                TrainCommand::Autoencoder(_) => "autoencoder",
+                TrainCommand::WorldModel(_) => "world-model",
+                TrainCommand::Policy(_) => "policy",
+                TrainCommand::Judge(_) => "judge",
+            };
+            let inv = trainers::Invocation {
+                command_line: crate::stdout::command_line(),
+                commit: git_commit(),
+                given: crate::cli::given_on_command_line(&["train", subcommand]),
+                quiet: cli.quiet,
+            };
+            trainers::run(t, &inv, &mut |line| outln!("{line}"))?;
+            Ok(ExitCode::SUCCESS)
         }
         Command::Agreement(a) => agreement::run(a),
         Command::Rank(a) => rank::run(a, cli.render_workers, cli.quiet),
@@ -90,5 +91,21 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         Command::Scripted(a) => scripted::run(a),
         Command::ExportPolicies(a) => export_policies::run(a),
         Command::ReadJudge(a) => read_judge::run(a),
+    }
+}
+
+/// Ctrl-C / SIGTERM during training: the first asks the trainer to stop after the
+/// step in progress (it saves its checkpoint and provenance; `--resume` continues);
+/// a second one exits at once with code 2.
+fn stop_on_signals() {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    let flag = harness::stop::flag();
+    for sig in [SIGINT, SIGTERM] {
+        // The conditional shutdown runs first and exits only if the flag is already set.
+        let registered = signal_hook::flag::register_conditional_shutdown(sig, 2, flag.clone())
+            .and_then(|_| signal_hook::flag::register(sig, flag.clone()));
+        if let Err(e) = registered {
+            tracing::warn!(signal = sig, error = %e, "cannot catch the signal; an interrupt loses the steps since the last checkpoint");
+        }
     }
 }

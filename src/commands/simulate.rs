@@ -1,22 +1,84 @@
-//! `evalharness simulate`: run a behaviour in the MuJoCo reference simulator.
+//! `evalharness simulate`: a task's scripted behaviour in the MuJoCo reference simulator
+//! (a policy checkpoint folder goes to [`super::simulate_policy`] or, with
+//! `--replay-imagined`, [`super::simulate_replay`]).
 //!
-//! Writes `summary.json`, `episodes.jsonl` (one line per control step),
-//! `config.json` (the resolved scenario and arguments) and a GIF of the first
-//! episode into `--out`, staged so that an interrupted run leaves only `OUT.partial`.
+//! Writes into `--out`, staged so that an interrupted run leaves only `OUT.partial`:
+//! - `config.json`: the resolved scenario and arguments ([`RunConfig`]);
+//! - `episodes.jsonl`: one line per control step, in the task's own columns;
+//! - `initial_states.jsonl`: each episode's drawn initial state, for tasks whose initial
+//!   state another simulator can start from (Lift, Can);
+//! - `summary.json`: the score, success and steps of every episode ([`Summary`]);
+//! - a GIF of the first episode, and with `--renderer mujoco` (tasks with a renderer of
+//!   their own beside MuJoCo's: Push-T) `render_crosscheck.json`.
+//!
+//! Episodes run on `--jobs` threads and come back in seed order, so any `--jobs` gives
+//! byte-identical files.
 
 use std::io::{BufWriter, Write};
+use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
-use serde_json::json;
+use harness::scripted::{FrameRequest, Settings};
+use harness::task::{ScoreKind, Task};
+use serde::Serialize;
 
-use crate::cli::RendererKind;
-use crate::cli::SimulateArgs;
+use super::collect::{behaviour_index, from_task, load_task, refuse_no_early_stop, scripted_of, to_task};
+use crate::cli::{RendererKind, SimulateArgs};
 use crate::output::{Staged, write_json};
 use crate::progress;
-use scenarios::pusht::runs::{BehaviourKind, FrameSpec, Perturbation};
 
-/// Mean absolute difference between the left (MuJoCo) and right (raster) halves.
+/// `config.json`: the resolved scenario and arguments of the run. The fields of this
+/// module's files are declared alphabetically: the key order they had as sorted maps.
+#[derive(Serialize)]
+struct RunConfig<'a> {
+    command: &'static str,
+    episodes: u64,
+    evalharness_version: &'static str,
+    lag: usize,
+    max_steps: usize,
+    noise: f64,
+    policy: &'a str,
+    renderer: RendererKind,
+    scenario: &'a str,
+    scenario_config: serde_json::Value,
+    seed_start: u64,
+    state_columns: Vec<String>,
+    stop_at_success: bool,
+}
+
+/// One episode's entry in `summary.json`.
+#[derive(Serialize)]
+struct EpisodeSummary {
+    score: f64,
+    seed: u64,
+    steps: usize,
+    /// Control steps until the first success (none for a failure).
+    steps_to_success: Option<usize>,
+    success: bool,
+}
+
+/// `summary.json`.
+#[derive(Serialize)]
+struct Summary<'a> {
+    episodes: usize,
+    mean_score: f64,
+    per_episode: Vec<EpisodeSummary>,
+    policy: &'a str,
+    scenario: &'a str,
+    success_rate: f64,
+}
+
+/// `render_crosscheck.json`: MuJoCo's frames against the task's own renderer's.
+#[derive(Serialize)]
+struct Crosscheck {
+    episode_seed: u64,
+    mean_abs_diff: f64,
+    size: usize,
+    what: &'static str,
+}
+
+/// Mean absolute difference between the left (MuJoCo) and right (the task's own) halves.
 fn side_by_side_difference(frames: &[Vec<u8>], size: usize) -> f64 {
     let row = size * 3;
     let mut sum = 0.0;
@@ -31,190 +93,164 @@ fn side_by_side_difference(frames: &[Vec<u8>], size: usize) -> f64 {
     sum / n.max(1) as f64
 }
 
-/// One episode's entry in `summary.json`.
-#[derive(serde::Serialize)]
-struct EpisodeSummary {
-    seed: u64,
-    score: f64,
-    success: bool,
-    steps: usize,
-}
-
-/// Writes `summary.json` (and `render_crosscheck.json` when MuJoCo's frames were drawn beside
-/// the rasteriser's, for the first episode: its frame side and seed); returns the mean score
-/// and the success rate.
-fn write_summaries(
-    out: &Staged,
-    kind: BehaviourKind,
-    per_episode: Vec<EpisodeSummary>,
-    crosscheck: Option<f64>,
-    (gif_size, first_seed): (usize, u64),
-) -> Result<(f64, f64)> {
-    let n = per_episode.len().max(1) as f64;
-    let mean_score = per_episode.iter().map(|e| e.score).sum::<f64>() / n;
-    let success_rate = per_episode.iter().filter(|e| e.success).count() as f64 / n;
-    write_json(
-        &out.file("summary.json"),
-        &json!({
-            "scenario": "pusht",
-            "policy": kind.name(),
-            "episodes": per_episode.len(),
-            "mean_score": mean_score,
-            "success_rate": success_rate,
-            "per_episode": per_episode,
-        }),
-    )?;
-    if let Some(mad) = crosscheck {
-        write_json(
-            &out.file("render_crosscheck.json"),
-            &json!({
-                "what": "mean absolute difference per channel (0-255) between MuJoCo's renderer and \
-                         the rasteriser over the first episode's frames",
-                "size": gif_size,
-                "episode_seed": first_seed,
-                "mean_abs_diff": mad,
-            }),
-        )?;
+/// Refuses the flags that only a policy checkpoint takes, naming them.
+fn refuse_checkpoint_flags(args: &SimulateArgs) -> Result<()> {
+    let policy = &args.policy;
+    if let Some(seed) = args.seed {
+        bail!(
+            "--seed {seed}: it seeds a policy checkpoint's sampling noise; --policy {policy} is a built-in behaviour"
+        );
     }
-    Ok((mean_score, success_rate))
+    if let Some(wm) = &args.replay_imagined {
+        bail!(
+            "--replay-imagined {}: only a policy checkpoint acts on imagined frames; --policy {policy} is not a \
+             checkpoint folder",
+            wm.display()
+        );
+    }
+    if let Some(wm) = &args.observe_through {
+        bail!(
+            "--observe-through {}: only a policy checkpoint sees frames; --policy {policy} is a built-in behaviour",
+            wm.display()
+        );
+    }
+    // Behaviour names have no path separator: one that does meant a checkpoint folder.
+    if policy.contains(std::path::MAIN_SEPARATOR) {
+        bail!("--policy {policy}: no such checkpoint folder (a folder, or a built-in behaviour's name)");
+    }
+    Ok(())
 }
 
 /// Runs the command.
 pub fn run(args: &SimulateArgs, quiet: bool) -> Result<ExitCode> {
-    let path = std::path::Path::new(&args.policy);
-    if path.is_dir() {
+    if Path::new(&args.policy).is_dir() {
         if let Some(wm) = &args.replay_imagined {
             return super::simulate_replay::run(args, wm, quiet);
         }
         return super::simulate_policy::run(args, quiet);
     }
-    if let Some(seed) = args.seed {
-        bail!(
-            "--seed {seed}: it seeds a policy checkpoint's sampling noise; --policy {} is a built-in behaviour",
-            args.policy
-        );
-    }
-    if let Some(wm) = &args.replay_imagined {
-        bail!(
-            "--replay-imagined {}: only a policy checkpoint acts on imagined frames; --policy {} is not a checkpoint folder",
-            wm.display(),
-            args.policy
-        );
-    }
-    if let Some(wm) = &args.observe_through {
-        bail!(
-            "--observe-through {}: only a policy checkpoint sees frames; --policy {} is a built-in behaviour",
-            wm.display(),
-            args.policy
-        );
-    }
-    // Behaviour names have no path separator: one that does meant a checkpoint folder.
-    if args.policy.contains(std::path::MAIN_SEPARATOR) {
-        bail!(
-            "--policy {}: no such checkpoint folder (a folder, or a built-in behaviour's name)",
-            path.display()
-        );
-    }
-    let c = &args.common;
-    let cfg =
-        match scenarios::scenario(&c.scenario).with_context(|| format!("loading scenario {}", c.scenario))? {
-            scenarios::Scenario::Lift(cfg) => {
-                let task = scenarios::lift::LiftSim::new(cfg).context("setting up Lift")?;
-                return super::simulate_arm::run(args, &task, quiet);
-            }
-            scenarios::Scenario::Can(cfg) => {
-                let task = scenarios::can::CanSim::new(cfg).context("setting up Can")?;
-                return super::simulate_arm::run(args, &task, quiet);
-            }
-            scenarios::Scenario::PushT(cfg) => *cfg,
-        };
-    run_pusht(args, cfg, quiet)
+    refuse_checkpoint_flags(args)?;
+    let task = load_task(&args.common.scenario)?;
+    run_scripted(args, task.as_ref(), quiet)
 }
 
-/// A Push-T scripted behaviour `args` names, simulated with the scenario `cfg`.
-fn run_pusht(args: &SimulateArgs, cfg: scenarios::pusht::PushTConfig, quiet: bool) -> Result<ExitCode> {
+/// The scripted behaviour `args` names, simulated in `task`.
+fn run_scripted(args: &SimulateArgs, task: &dyn Task, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
-    super::collect::refuse_run_on_for_pusht(args.no_early_stop)?;
-    let kind = BehaviourKind::parse(&args.policy)?;
-    if !(16..=1024).contains(&args.gif_size) {
-        anyhow::bail!("--gif-size must be in 16..=1024, got {}", args.gif_size);
+    let scripted = scripted_of(task)?;
+    refuse_no_early_stop(task, args.no_early_stop)?;
+    let kind = behaviour_index(task, &args.policy, "; or a checkpoint folder")?;
+    let beside = args.renderer == RendererKind::Mujoco;
+    if beside && !scripted.second_renderer() {
+        bail!(
+            "--renderer mujoco: the {} task's frames are MuJoCo's already (no second renderer)",
+            task.name()
+        );
     }
-    let runner =
-        super::collect::pusht_runner(cfg, c.jobs, c.max_steps, Perturbation { noise: c.noise, lag: c.lag })?;
-    let work: Vec<(u64, BehaviourKind)> =
+    let settings = Settings {
+        noise: c.noise,
+        lag: c.lag,
+        max_steps: c.max_steps.map_or(task.max_steps(), |m| m as usize),
+        stop_at_success: !args.no_early_stop,
+        jobs: c.jobs,
+    };
+    let work: Vec<(u64, usize)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, kind)).collect();
     let out = Staged::new(&args.out, c.force, &args.inputs())?;
-    write_json(
-        &out.file("config.json"),
-        &json!({
-            "command": "simulate",
-            "scenario": runner.cfg,
-            "policy": kind.name(),
-            "episodes": c.episodes,
-            "seed_start": c.seed_start,
-            "max_steps": runner.max_steps,
-            "noise": c.noise,
-            "lag": c.lag,
-            "renderer": args.renderer,
-            "evalharness_version": env!("CARGO_PKG_VERSION"),
-        }),
-    )?;
-    let jsonl_path = out.file("episodes.jsonl");
-    let mut jsonl = BufWriter::new(
-        std::fs::File::create(&jsonl_path).with_context(|| format!("creating {}", jsonl_path.display()))?,
-    );
-    let pb = progress::bar(c.episodes, "simulate", quiet);
+    let config = RunConfig {
+        command: "simulate",
+        scenario: task.name(),
+        scenario_config: scripted.config_json(),
+        policy: &args.policy,
+        episodes: c.episodes,
+        seed_start: c.seed_start,
+        max_steps: settings.max_steps,
+        stop_at_success: settings.stop_at_success,
+        noise: c.noise,
+        lag: c.lag,
+        renderer: args.renderer,
+        state_columns: scripted.state_columns(),
+        evalharness_version: env!("CARGO_PKG_VERSION"),
+    };
+    write_json(&out.file("config.json"), &config)?;
+    let open = |name: &str| -> Result<(std::path::PathBuf, BufWriter<std::fs::File>)> {
+        let p = out.file(name);
+        let f = std::fs::File::create(&p).with_context(|| format!("creating {}", p.display()))?;
+        Ok((p, BufWriter::new(f)))
+    };
+    let (jsonl_path, mut jsonl) = open("episodes.jsonl")?;
+    let mut inits: Option<(std::path::PathBuf, BufWriter<std::fs::File>)> = None;
+    let pb = progress::bar(c.episodes, &format!("simulate {}", task.name()), quiet);
     let mut per_episode = Vec::new();
     let mut crosscheck = None;
     let gif_size = args.gif_size;
-    runner.run(
-        &work,
-        |i| {
-            (i == 0)
-                .then_some(FrameSpec { size: gif_size, beside_mujoco: args.renderer == RendererKind::Mujoco })
-        },
-        |i, ep| {
-            for r in &ep.rows {
-                let line = json!({
-                    "seed": ep.seed,
-                    "step": r.step,
-                    "agent": r.agent,
-                    "block": r.block.to_array(),
-                    "goal": ep.goal.to_array(),
-                    "action": r.action,
-                    "coverage": r.coverage,
-                });
-                writeln!(jsonl, "{line}").with_context(|| format!("writing {}", jsonl_path.display()))?;
+    let frames = |i| (i == 0).then_some(FrameRequest { size: gif_size, beside_reference: beside });
+    let gif_delay_ms = (1000.0 / task.control_hz()).round() as u32;
+    let mut done = |i: usize, ep: harness::scripted::ScriptedEpisode| -> Result<()> {
+        for line in &ep.step_lines {
+            writeln!(jsonl, "{line}").with_context(|| format!("writing {}", jsonl_path.display()))?;
+        }
+        if let Some(line) = &ep.initial_state {
+            if inits.is_none() {
+                inits = Some(open("initial_states.jsonl")?);
             }
-            if i == 0 {
-                let h = u16::try_from(gif_size).unwrap_or(u16::MAX);
-                let w = if args.renderer == RendererKind::Mujoco { 2 * h } else { h };
-                let gif = out.file(&format!("episode_{}.gif", ep.seed));
-                reports::gif::write_gif(&gif, &ep.frames, w, h, 100)?;
-                if args.renderer == RendererKind::Mujoco {
-                    crosscheck = Some(side_by_side_difference(&ep.frames, gif_size));
-                }
+            if let Some((path, w)) = inits.as_mut() {
+                writeln!(w, "{line}").with_context(|| format!("writing {}", path.display()))?;
             }
-            per_episode.push(EpisodeSummary {
-                seed: ep.seed,
-                score: ep.score,
-                success: ep.success,
-                steps: ep.rows.len(),
-            });
-            pb.inc(1);
-            anyhow::Ok(())
-        },
-    )?;
+        }
+        if i == 0 {
+            let h = u16::try_from(gif_size).unwrap_or(u16::MAX);
+            let w = if beside { 2 * h } else { h };
+            let gif = out.file(&format!("episode_{}.gif", ep.seed));
+            reports::gif::write_gif(&gif, &ep.frames, w, h, gif_delay_ms)?;
+            crosscheck = beside.then(|| side_by_side_difference(&ep.frames, gif_size));
+        }
+        per_episode.push(EpisodeSummary {
+            seed: ep.seed,
+            score: ep.score,
+            success: ep.success,
+            steps: ep.steps,
+            steps_to_success: ep.steps_to_success,
+        });
+        pb.inc(1);
+        Ok(())
+    };
+    scripted.run(&work, &settings, &frames, &mut |i, ep| done(i, ep).map_err(to_task)).map_err(from_task)?;
     pb.finish_and_clear();
     jsonl.flush().with_context(|| format!("writing {}", jsonl_path.display()))?;
-    let (mean_score, success_rate) =
-        write_summaries(&out, kind, per_episode, crosscheck, (gif_size, c.seed_start))?;
-    let dir = out.commit()?;
-    outln!(
-        "pusht {}: {} episodes, mean score {:.3}, success rate {:.1}% -> {}",
-        kind.name(),
-        c.episodes,
+    if let Some((path, mut w)) = inits {
+        w.flush().with_context(|| format!("writing {}", path.display()))?;
+    }
+    let n = per_episode.len().max(1) as f64;
+    let mean_score = per_episode.iter().map(|e| e.score).sum::<f64>() / n;
+    let success_rate = per_episode.iter().filter(|e| e.success).count() as f64 / n;
+    let summary = Summary {
+        scenario: task.name(),
+        policy: &args.policy,
+        episodes: per_episode.len(),
         mean_score,
+        success_rate,
+        per_episode,
+    };
+    write_json(&out.file("summary.json"), &summary)?;
+    if let Some(mean_abs_diff) = crosscheck {
+        let what = "mean absolute difference per channel (0-255) between MuJoCo's renderer and the task's own \
+                    renderer over the first episode's frames";
+        let check = Crosscheck { what, size: gif_size, episode_seed: c.seed_start, mean_abs_diff };
+        write_json(&out.file("render_crosscheck.json"), &check)?;
+    }
+    let dir = out.commit()?;
+    // A task scored by success alone has no mean score apart from its success rate.
+    let score = if task.score_kind() == ScoreKind::Success {
+        String::new()
+    } else {
+        format!(", mean score {mean_score:.3}")
+    };
+    outln!(
+        "{} {}: {} episodes{score}, success rate {:.1}% -> {}",
+        task.name(),
+        args.policy,
+        c.episodes,
         100.0 * success_rate,
         dir.display()
     );

@@ -22,8 +22,9 @@ use policies::dir::{checkpoint_dirs, checkpoint_name};
 use serde::Serialize;
 use world_model::model::WorldModel;
 
+use super::collect::load_task;
 use super::rank::defaults;
-use super::record::{Layout, Sink};
+use super::record::Sink;
 use crate::cli::SimulateArgs;
 use crate::output::{Staged, write_json};
 use crate::policy_kinds::{expectations, load_any};
@@ -50,7 +51,7 @@ struct Replayed {
 /// Runs the three branches for every checkpoint under `--policy`.
 pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> {
     let c = &args.common;
-    let (task, layout) = Layout::load(&c.scenario)?;
+    let task = load_task(&c.scenario)?;
     let max_steps = c.max_steps.map_or(task.max_steps(), |m| m as usize);
     let device = nn::device::selected()?;
     let wm = load_world_model(wm_dir, None, args.noise_scale, &device)?;
@@ -78,7 +79,7 @@ pub fn run(args: &SimulateArgs, wm_dir: &Path, quiet: bool) -> Result<ExitCode> 
     let mut sink = match &args.record {
         Some(path) => {
             let inputs = inputs.clone().add("--out", &args.out);
-            Some((Sink::create(layout, path, c.force, &inputs)?, Vec::new()))
+            Some((Sink::create(task.as_ref(), path, c.force, &inputs)?, Vec::new()))
         }
         None => None,
     };

@@ -22,10 +22,10 @@ use world_model::model::{FolderConfig, WorldModel};
 use world_model::train_ae::load_autoencoder;
 
 use super::git_commit;
-use super::train_wm::relative_to;
 use crate::cli::WmExportArgs;
 use crate::output::{Staged, write_json};
 use harness::sessions::stale_provenance;
+use trainers::world_model::relative_to;
 
 /// Copied when present; `ema.bpk` is required.
 const FILES: [&str; 5] =

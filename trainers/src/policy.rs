@@ -1,9 +1,8 @@
 //! `evalharness train policy`: trains a diffusion policy on the dataset's expert
 //! demonstrations and saves a checkpoint every `--save-every` epochs.
 
-use std::process::ExitCode;
-
-use anyhow::{Context, Result, bail};
+use crate::error::{Context, Result, refuse};
+use crate::{Invocation, say};
 use policies::data::Demos;
 use policies::diffusion::{DiffusionConfig, Normalisation};
 use policies::dir::{diffusion_config, read_policy_file};
@@ -11,19 +10,17 @@ use policies::net::NetConfig;
 use policies::provenance::{DemosUsed, PolicyProvenance, PolicyStart};
 use policies::train::{Phase, PolicyRun, PolicyTrainConfig, RunConfigs, train_policy};
 
-use super::git_commit;
-use super::train::{dataset_origin, dataset_task, fixed, prepare_out, refuse_contradicting_flags};
-use crate::cli::TrainPolicyArgs;
-use crate::progress;
+use crate::args::TrainPolicyArgs;
+use crate::common::{dataset_origin, dataset_task, fixed, prepare_out, refuse_contradicting_flags};
 use harness::sessions::{open_session, read_step, record_session};
 
 /// `evalharness train policy`.
-pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
+pub fn run(a: &TrainPolicyArgs, inv: &Invocation, say: &mut dyn FnMut(&str)) -> Result<()> {
     if a.batch == 0 || a.epochs == Some(0) || a.save_every == 0 {
-        bail!("--batch, --epochs and --save-every must be positive");
+        refuse!("--batch, --epochs and --save-every must be positive");
     }
     if a.ema.is_some_and(|d| !(0.0..1.0).contains(&d)) {
-        bail!("--ema must be in [0, 1), got {}", a.ema.unwrap_or_default());
+        refuse!("--ema must be in [0, 1), got {}", a.ema.unwrap_or_default());
     }
     let task = dataset_task(&a.data)?;
     let (ad, pd) = (task.action_spec().dim, task.observation_spec().proprio.len());
@@ -37,7 +34,8 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         inference_steps: a.inference_steps,
         ..DiffusionConfig::default()
     };
-    let start = a.init_from.as_deref().map(|dir| starting_checkpoint(dir, &policy)).transpose()?;
+    let start =
+        a.init_from.as_deref().map(|dir| starting_checkpoint(dir, &policy, &inv.given)).transpose()?;
     if let Some(s) = &start {
         policy = s.config.clone();
     }
@@ -57,7 +55,7 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         }
         None => demos.normalisation(),
     };
-    let args: Vec<String> = crate::stdout::command_line();
+    let args: Vec<String> = inv.command_line.clone();
     let configs = RunConfigs {
         train: PolicyTrainConfig {
             epochs: a.epochs.unwrap_or(20),
@@ -91,13 +89,13 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
                 step: s.step,
             }),
             seed: Some(a.seed),
-            ..PolicyProvenance::new(args.join(" "), git_commit())
+            ..PolicyProvenance::new(args.join(" "), inv.commit.clone())
         },
         policy,
         task: Some(task.name().to_string()),
     };
     if a.session.resume {
-        check_resume_flags(&a.out.join(".train").join("config.json"), &configs)?;
+        check_resume_flags(&a.out.join(".train").join("config.json"), &configs, &inv.given)?;
     }
     if let Some(from) = a.encoder_from.as_ref().filter(|_| !a.session.resume) {
         let dst = a.out.join(".train");
@@ -112,8 +110,8 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
     // as for the other trainers.
     let train_dir = a.out.join(".train");
     let from_step = if a.session.resume { read_step(&train_dir)? } else { 0 };
-    open_session(&train_dir, &args.join(" "), &git_commit(), from_step)?;
-    let pb = progress::bar(1, "policy", quiet);
+    open_session(&train_dir, &args.join(" "), &inv.commit, from_step)?;
+    let pb = runner::progress::bar(1, "policy", inv.quiet);
     let run = PolicyRun {
         resume: a.session.resume,
         epochs: a.epochs,
@@ -129,11 +127,12 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         });
     })?;
     pb.finish_and_clear();
-    record_session(&train_dir, &args.join(" "), &git_commit(), (from_step, outcome.step), outcome.elapsed_s)?;
+    record_session(&train_dir, &args.join(" "), &inv.commit, (from_step, outcome.step), outcome.elapsed_s)?;
     for ck in &outcome.saved {
-        outln!("saved {}", ck.display());
+        say!(say, "saved {}", ck.display());
     }
-    outln!(
+    say!(
+        say,
         "policy: step {}/{}{}, mean loss (last 50 steps) {:.4} -> {}",
         outcome.step,
         outcome.total,
@@ -142,13 +141,13 @@ pub fn run(a: &TrainPolicyArgs, quiet: bool) -> Result<ExitCode> {
         a.out.display()
     );
     out_dir.finish(outcome.step >= outcome.total)?;
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }
 
 /// `--resume` continues a run with its saved `.train/config.json`: the model, data and
 /// optimiser flags typed on this command line must agree with it (`--epochs`, `--ema`
 /// and the session flags may change; see [`refuse_contradicting_flags`]).
-fn check_resume_flags(path: &std::path::Path, fresh: &RunConfigs) -> Result<()> {
+fn check_resume_flags(path: &std::path::Path, fresh: &RunConfigs, given: &[String]) -> Result<()> {
     let saved: RunConfigs = harness::runfile::read(path)?;
     let (ours, theirs) = (&fresh.train, &saved.train);
     let data = |c: &RunConfigs| c.provenance.data.as_ref().map(|d| (d.behaviour.clone(), d.episodes)).unzip();
@@ -168,7 +167,7 @@ fn check_resume_flags(path: &std::path::Path, fresh: &RunConfigs) -> Result<()> 
         fixed("behaviour", &our_behaviour, &their_behaviour),
         fixed("episodes", &our_episodes, &their_episodes),
     ];
-    refuse_contradicting_flags(path, "policy", &fixed)
+    refuse_contradicting_flags(path, given, &fixed)
 }
 
 /// The checkpoint `--init-from` names, read and checked against the flags typed
@@ -182,13 +181,12 @@ struct Start {
     provenance: PolicyProvenance,
 }
 
-fn starting_checkpoint(dir: &std::path::Path, typed: &DiffusionConfig) -> Result<Start> {
+fn starting_checkpoint(dir: &std::path::Path, typed: &DiffusionConfig, given: &[String]) -> Result<Start> {
     let file = read_policy_file(dir)?;
     let mut config = diffusion_config(dir, &file)?;
-    let given = crate::cli::given_on_command_line(&["train", "policy"]);
     let is_given = |id: &str| given.iter().any(|g| g == id);
     if is_given("encoder_width") && typed.net.encoder_width != config.net.encoder_width {
-        bail!(
+        refuse!(
             "--init-from {}: its encoder width is {}, not {}",
             dir.display(),
             config.net.encoder_width,
@@ -196,7 +194,7 @@ fn starting_checkpoint(dir: &std::path::Path, typed: &DiffusionConfig) -> Result
         );
     }
     if is_given("down_dims") && typed.net.down_dims != config.net.down_dims {
-        bail!(
+        refuse!(
             "--init-from {}: its U-Net has channels {:?}, not {:?}",
             dir.display(),
             config.net.down_dims,

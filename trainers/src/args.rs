@@ -45,16 +45,16 @@ pub struct TrainJudgeArgs {
     #[arg(long, default_value_t = 2000)]
     pub steps: u64,
     /// Frames per step.
-    #[arg(long, default_value_t = 64, value_parser = crate::cli::bounds::batch())]
+    #[arg(long, default_value_t = 64, value_parser = runner::bounds::batch())]
     pub batch: usize,
     /// Peak learning rate (after a 100-step warm-up).
     #[arg(long, default_value_t = 1e-3)]
     pub lr: f64,
     /// Frame-encoder width.
-    #[arg(long, default_value_t = 16, value_parser = crate::cli::bounds::width())]
+    #[arg(long, default_value_t = 16, value_parser = runner::bounds::width())]
     pub encoder_width: usize,
     /// Feature size before the one-logit head.
-    #[arg(long, default_value_t = 64, value_parser = crate::cli::bounds::width())]
+    #[arg(long, default_value_t = 64, value_parser = runner::bounds::width())]
     pub feature_dim: usize,
     /// Use at most this many episodes (the first ones).
     #[arg(long)]
@@ -104,13 +104,13 @@ pub struct TrainPolicyArgs {
     #[arg(long)]
     pub episodes: Option<usize>,
     /// Samples per step.
-    #[arg(long, default_value_t = 64, value_parser = crate::cli::bounds::batch())]
+    #[arg(long, default_value_t = 64, value_parser = runner::bounds::batch())]
     pub batch: usize,
     /// Learning rate (after a 200-step warm-up).
     #[arg(long, default_value_t = 3e-4)]
     pub lr: f64,
     /// Frame-encoder width.
-    #[arg(long, default_value_t = 16, value_parser = crate::cli::bounds::width())]
+    #[arg(long, default_value_t = 16, value_parser = runner::bounds::width())]
     pub encoder_width: usize,
     /// U-Net channels per level, comma-separated.
     #[arg(long, default_value = "32,64,128", value_delimiter = ',')]
@@ -311,7 +311,7 @@ pub struct TrainAutoencoderArgs {
     #[arg(long)]
     pub steps: Option<u64>,
     /// Frames per step.
-    #[arg(long, default_value_t = 16, value_parser = crate::cli::bounds::batch())]
+    #[arg(long, default_value_t = 16, value_parser = runner::bounds::batch())]
     pub batch: usize,
     /// Peak learning rate (after a 200-step warm-up).
     #[arg(long, default_value_t = 1e-3)]

@@ -4,9 +4,9 @@
 //! model), and writes the run's provenance.
 
 use std::path::{Component, Path, PathBuf};
-use std::process::ExitCode;
 
-use anyhow::{Context, Result, bail};
+use crate::error::{Context, Result, refuse};
+use crate::{Invocation, say};
 use burn::tensor::Device;
 use harness::provenance::{Source, WorldModelMetrics, WorldModelProvenance};
 use scenarios::pusht::goal_free::{self, DatasetScene};
@@ -21,15 +21,13 @@ use world_model::train_ae::read_configs;
 use world_model::train_wm::{TrainingFrames, WmConfigs, WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
-use super::git_commit;
-use super::train::{data_provenance, fixed, prepare_out, refuse_contradicting_flags};
-use crate::cli::{FieldArg, ObjectiveArg, PredictionArg, TrainWorldModelArgs, WmConfigArg};
-use crate::output::{read_json, write_json};
-use crate::progress;
+use crate::args::{FieldArg, ObjectiveArg, PredictionArg, TrainWorldModelArgs, WmConfigArg};
+use crate::common::{data_provenance, fixed, prepare_out, refuse_contradicting_flags};
+use crate::common::{read_json, write_json};
 use harness::sessions::{open_session, read_step, record_session};
 
 /// `target` relative to the folder `base` (both must exist), e.g. `../autoencoder`.
-pub(super) fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
+pub fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
     let b = base.canonicalize().with_context(|| format!("resolving {}", base.display()))?;
     let t = target.canonicalize().with_context(|| format!("resolving {}", target.display()))?;
     let (bc, tc): (Vec<Component>, Vec<Component>) = (b.components().collect(), t.components().collect());
@@ -55,12 +53,12 @@ const DEFAULT_ALPHA: f32 = 2.5;
 /// # Errors
 /// A task that cannot be loaded, or actions of another width than the task's.
 fn action_scale_of(data: &Path, action_dim: usize) -> Result<Option<world_model::action::ActionScale>> {
-    let task = super::train::dataset_task(data)?;
+    let task = crate::common::dataset_task(data)?;
     let scenario = task.name();
     let spec = (scenario != "pusht").then(|| task.action_spec());
     let expected = spec.as_ref().map_or(2, |s| s.dim);
     if action_dim != expected {
-        bail!("{}: actions of {action_dim} entries, a {scenario} task's have {expected}", data.display());
+        refuse!("{}: actions of {action_dim} entries, a {scenario} task's have {expected}", data.display());
     }
     Ok(spec.map(|s| world_model::action::ActionScale { low: s.low, high: s.high }))
 }
@@ -94,34 +92,36 @@ fn train_config(a: &TrainWorldModelArgs, objective: Objective) -> Result<WmTrain
         ..defaults
     };
     if !(0.0..1.0).contains(&cfg.ema_decay) {
-        bail!("--ema-decay: needs a value in [0, 1), got {}", cfg.ema_decay);
+        refuse!("--ema-decay: needs a value in [0, 1), got {}", cfg.ema_decay);
     }
     if !(a.context_noise.is_finite() && a.context_noise >= 0.0) {
-        bail!("--context-noise: needs a finite level >= 0, got {}", a.context_noise);
+        refuse!("--context-noise: needs a finite level >= 0, got {}", a.context_noise);
     }
     if a.self_forcing == 0 || (a.self_forcing > 1 && objective != Objective::Drifting) {
-        bail!("--self-forcing: needs a chunk count >= 1, and more than 1 only with --objective drifting");
+        refuse!("--self-forcing: needs a chunk count >= 1, and more than 1 only with --objective drifting");
     }
     if cfg.motion.is_some() && (objective != Objective::Drifting || cfg.field != FieldKind::Token) {
-        bail!(
+        refuse!(
             "--motion-weighting weighs per-token drifting losses: it needs --objective drifting --field token"
         );
     }
     if !a.session.resume && a.prediction != PredictionArg::V && objective != Objective::Diffusion {
-        bail!("--prediction chooses the diffusion baseline's output: it needs --objective diffusion");
+        refuse!("--prediction chooses the diffusion baseline's output: it needs --objective diffusion");
     }
     if !a.session.resume && a.accentuation && objective != Objective::Drifting {
-        bail!("--accentuation adds a weighted negative to the drifting loss: it needs --objective drifting");
+        refuse!(
+            "--accentuation adds a weighted negative to the drifting loss: it needs --objective drifting"
+        );
     }
     if let Some(alpha) = a.alpha
         && (!a.accentuation || !alpha.is_finite() || alpha < 1.0)
     {
-        bail!(
+        refuse!(
             "--alpha: the inference strength of an --accentuation model, a finite value >= 1 (got {alpha})"
         );
     }
     if objective == Objective::Drifting && cfg.samples < 2 {
-        bail!(
+        refuse!(
             "--samples: drifting needs at least 2 samples per context (the other samples are the negatives)"
         );
     }
@@ -129,10 +129,10 @@ fn train_config(a: &TrainWorldModelArgs, objective: Objective) -> Result<WmTrain
         // Checked before --force clears the output folder, so a refused run keeps it.
         WorldModelConfig::read(dir).with_context(|| format!("--init-from {}", dir.display()))?;
         if !dir.join("ema.bpk").is_file() {
-            bail!("--init-from {}: no ema.bpk (not a world-model run or export)", dir.display());
+            refuse!("--init-from {}: no ema.bpk (not a world-model run or export)", dir.display());
         }
         if same_folder(dir, &a.out) {
-            bail!("--init-from {} is the output folder itself", dir.display());
+            refuse!("--init-from {} is the output folder itself", dir.display());
         }
     }
     Ok(cfg)
@@ -153,7 +153,7 @@ fn fresh_model_config(
 ) -> Result<WorldModelConfig> {
     let actions = action_scale_of(&a.data, data.action_dim)?;
     if actions.is_some() && a.action_maps {
-        bail!(
+        refuse!(
             "--action-maps draws Push-T's 2-D targets onto the frame; {} holds other actions",
             a.data.display()
         );
@@ -175,7 +175,7 @@ fn fresh_model_config(
         ..family
     };
     if let Err(e) = unet.check() {
-        bail!("--base-channels {}: {e}", unet.model_channels);
+        refuse!("--base-channels {}: {e}", unet.model_channels);
     }
     let stats = match &a.init_from {
         Some(dir) => warm_start_stats(dir, &unet, a.autoencoder.as_deref())?,
@@ -204,7 +204,7 @@ fn fresh_model_config(
 }
 
 /// `evalharness train world-model`.
-pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
+pub fn run(a: &TrainWorldModelArgs, inv: &Invocation, say: &mut dyn FnMut(&str)) -> Result<()> {
     let objective = fresh_objective(a.objective);
     let cfg = train_config(a, objective)?;
     let mut inputs: Vec<(&str, &Path)> = vec![("--data", &a.data)];
@@ -213,7 +213,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     let out_dir = prepare_out(&a.out, a.session.resume, a.session.force, "state.json", &inputs)?;
     let from_step = read_step(&a.out)?;
     if a.session.resume {
-        check_resume_flags(a, &cfg)?;
+        check_resume_flags(a, &cfg, &inv.given)?;
     }
     if let (true, Some(decay)) = (a.session.resume, a.ema_decay) {
         set_saved_ema_decay(&a.out, decay)?;
@@ -242,9 +242,9 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         Some(saved) => saved,
         None => fresh_model_config(a, objective, &data, &codec, &inner)?,
     };
-    let args: Vec<String> = crate::stdout::command_line();
-    open_session(&a.out, &args.join(" "), &git_commit(), from_step)?;
-    let pb = progress::bar(cfg.steps, objective.name(), quiet);
+    let args: Vec<String> = inv.command_line.clone();
+    open_session(&a.out, &args.join(" "), &inv.commit, from_step)?;
+    let pb = runner::progress::bar(cfg.steps, objective.name(), inv.quiet);
     let run = RunOptions {
         resume: a.session.resume,
         extend: a.steps.is_some(),
@@ -267,7 +267,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
     )?;
     pb.finish_and_clear();
     let sessions =
-        record_session(&a.out, &args.join(" "), &git_commit(), (from_step, outcome.step), outcome.elapsed_s)?;
+        record_session(&a.out, &args.join(" "), &inv.commit, (from_step, outcome.step), outcome.elapsed_s)?;
     let saved = WorldModelConfig::read(&a.out)?;
     let frames = if goal_free {
         "re-rendered without the goal from data/state (--goal-free)"
@@ -278,7 +278,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         autoencoder: saved.autoencoder.as_ref().map(|ae| ae.display().to_string()),
         autoencoder_replaced: None,
         command: args.join(" "),
-        commit: git_commit(),
+        commit: inv.commit.clone(),
         data: data_prov,
         elapsed_s: outcome.elapsed_s,
         exported: Vec::new(),
@@ -300,7 +300,8 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         other: Default::default(),
     };
     write_json(&a.out.join("provenance.json"), &provenance)?;
-    outln!(
+    say!(
+        say,
         "world model ({}): step {}/{}{}, held-out one-chunk latent MSE {:.5} -> {}",
         saved.objective.name(),
         outcome.step,
@@ -310,7 +311,7 @@ pub fn run(a: &TrainWorldModelArgs, quiet: bool) -> Result<ExitCode> {
         a.out.display()
     );
     out_dir.finish(outcome.finished)?;
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }
 
 /// The diffusion parameterisation `--prediction` names.
@@ -340,11 +341,11 @@ fn fresh_codec(a: &TrainWorldModelArgs, device: &Device) -> Result<FrameCodec> {
     match (a.config, &a.autoencoder) {
         (WmConfigArg::PushtLatent, Some(ae)) => Ok(FrameCodec::autoencoder(ae, device)?),
         (WmConfigArg::PushtLatent, None) => {
-            bail!("--config pusht-latent trains on autoencoder latents: pass --autoencoder DIR")
+            refuse!("--config pusht-latent trains on autoencoder latents: pass --autoencoder DIR")
         }
         (WmConfigArg::PushtPixel, None) => Ok(FrameCodec::pixels(96)),
         (WmConfigArg::PushtPixel, Some(_)) => {
-            bail!("--config pusht-pixel trains on pixels: it takes no --autoencoder")
+            refuse!("--config pusht-pixel trains on pixels: it takes no --autoencoder")
         }
     }
 }
@@ -353,13 +354,13 @@ fn fresh_codec(a: &TrainWorldModelArgs, device: &Device) -> Result<FrameCodec> {
 fn resumed_codec(a: &TrainWorldModelArgs, saved: &WorldModelConfig, device: &Device) -> Result<FrameCodec> {
     let theirs = saved.autoencoder.as_ref().map(|p| a.out.join(p));
     match (&theirs, &a.autoencoder) {
-        (Some(t), Some(o)) if !same_folder(t, o) => bail!(
+        (Some(t), Some(o)) if !same_folder(t, o) => refuse!(
             "--resume: {} was trained on the autoencoder {}, not {}",
             a.out.display(),
             t.display(),
             o.display()
         ),
-        (None, Some(o)) => bail!(
+        (None, Some(o)) => refuse!(
             "--resume: {} is a pixel-space model, it takes no --autoencoder (got {})",
             a.out.display(),
             o.display()
@@ -380,7 +381,7 @@ fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: Option<&Path>) -
     let from = WorldModelConfig::read(dir).context("--init-from")?;
     // The differences a warm start bridges: adding action maps or a timestep embedding.
     if !unet.can_start_from(&from.unet) {
-        bail!(
+        refuse!(
             "--init-from {}: its U-Net config differs from this run's ({:?} vs {:?})",
             dir.display(),
             from.unet,
@@ -396,7 +397,7 @@ fn warm_start_stats(dir: &Path, unet: &UNetConfig, autoencoder: Option<&Path>) -
     if !same {
         let name =
             |p: Option<&Path>| p.map_or("pixels".to_string(), |p| format!("autoencoder {}", p.display()));
-        bail!(
+        refuse!(
             "--init-from {}: it was trained on {}, this run on {}",
             dir.display(),
             name(theirs.as_deref()),
@@ -446,7 +447,7 @@ fn set_saved_ema_decay(out: &Path, decay: f64) -> Result<()> {
 /// `--resume` continues a run with its saved `config.json`: the model and loss flags
 /// typed on this command line must agree with it (`--steps`, `--ema-decay` and the
 /// session flags may change; see [`refuse_contradicting_flags`]).
-fn check_resume_flags(a: &TrainWorldModelArgs, fresh: &WmTrainConfig) -> Result<()> {
+fn check_resume_flags(a: &TrainWorldModelArgs, fresh: &WmTrainConfig, given: &[String]) -> Result<()> {
     let path = a.out.join("config.json");
     let WmConfigs { model, train } = read_configs(&path)?;
     // The same starting folder, however it is spelt, is no contradiction.
@@ -483,5 +484,5 @@ fn check_resume_flags(a: &TrainWorldModelArgs, fresh: &WmTrainConfig) -> Result<
         fixed("sample_steps", &a.sample_steps, &model.sample_steps),
         fixed("prediction", &prediction(a), &model.prediction.unwrap_or_default()),
     ];
-    refuse_contradicting_flags(&path, "world-model", &fixed)
+    refuse_contradicting_flags(&path, given, &fixed)
 }

@@ -5,9 +5,8 @@
 //! ([`judges::run`]): `--resume` goes on from a session that ran out of time or was
 //! stopped, as the other trainers do.
 
-use std::process::ExitCode;
-
-use anyhow::{Context, Result, bail};
+use crate::error::{Context, Result, refuse};
+use crate::{Invocation, say};
 use judges::folder::{JudgeFile, Label, write_judge};
 use judges::metrics::JudgeMetrics;
 use judges::provenance::{JudgeProvenance, LabelledData};
@@ -16,10 +15,8 @@ use judges::run::JudgeRunConfig;
 use judges::train::{JudgeSession, JudgeTrainConfig, train_judge};
 use policies::net::NetConfig;
 
-use super::git_commit;
-use super::train::{dataset_origin, fixed, prepare_out, refuse_contradicting_flags};
-use crate::cli::{JudgeLabelArg, TrainJudgeArgs};
-use crate::progress;
+use crate::args::{JudgeLabelArg, TrainJudgeArgs};
+use crate::common::{dataset_origin, fixed, prepare_out, refuse_contradicting_flags};
 use harness::driver::Clock;
 use harness::sessions::{open_session, read_step, record_session};
 
@@ -46,13 +43,14 @@ fn label_of(a: &TrainJudgeArgs) -> Result<Label> {
 /// Dataset attributes that cannot be read for the provenance.
 fn judge_file(
     a: &TrainJudgeArgs,
+    inv: &Invocation,
     (label, threshold): (Label, f64),
     data: &JudgeData,
     net: NetConfig,
     cfg: &JudgeTrainConfig,
 ) -> Result<JudgeFile> {
     let frames = data.labels.len();
-    let args: Vec<String> = crate::stdout::command_line();
+    let args: Vec<String> = inv.command_line.clone();
     Ok(JudgeFile {
         pose_base: None,
         kind: "learned".into(),
@@ -65,7 +63,7 @@ fn judge_file(
         heldout: JudgeMetrics::default(),
         provenance: JudgeProvenance {
             command: Some(args.join(" ")),
-            commit: git_commit(),
+            commit: inv.commit.clone(),
             data: Some(LabelledData {
                 collected_with: dataset_origin(&a.data)?,
                 episodes: data.episodes.len(),
@@ -83,7 +81,12 @@ fn judge_file(
 }
 
 /// The held-out metrics, said in one line.
-fn say_result(a: &TrainJudgeArgs, (label, threshold): (Label, f64), heldout: &JudgeMetrics) {
+fn say_result(
+    a: &TrainJudgeArgs,
+    (label, threshold): (Label, f64),
+    heldout: &JudgeMetrics,
+    say: &mut dyn FnMut(&str),
+) {
     let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.1}%", 100.0 * v));
     let whole = heldout.episodes.map_or(String::new(), |e| {
         format!(
@@ -91,7 +94,8 @@ fn say_result(a: &TrainJudgeArgs, (label, threshold): (Label, f64), heldout: &Ju
             a.persist, e.agree, e.episodes, e.successes, e.false_successes, e.missed_successes
         )
     });
-    outln!(
+    say!(
+        say,
         "judge of {}: held-out {} frames ({} above {threshold}): mean abs error {:.4}, accuracy {}, recall {}, precision {}{whole} -> {}",
         label.array(),
         heldout.frames,
@@ -105,15 +109,15 @@ fn say_result(a: &TrainJudgeArgs, (label, threshold): (Label, f64), heldout: &Ju
 }
 
 /// `evalharness train judge`.
-pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
+pub fn run(a: &TrainJudgeArgs, inv: &Invocation, say: &mut dyn FnMut(&str)) -> Result<()> {
     if a.steps == 0 || a.batch == 0 || a.eval_every == 0 || a.persist == 0 {
-        bail!("--steps, --batch, --eval-every and --persist must be positive");
+        refuse!("--steps, --batch, --eval-every and --persist must be positive");
     }
     if !(a.lr.is_finite() && a.lr > 0.0) {
-        bail!("--lr {}: must be a positive number", a.lr);
+        refuse!("--lr {}: must be a positive number", a.lr);
     }
     if !a.data.exists() {
-        bail!("--data {}: no such file or folder", a.data.display());
+        refuse!("--data {}: no such file or folder", a.data.display());
     }
     // The dataset is read before `--out` is touched, so a refused run leaves it as it was.
     let label = label_of(a)?;
@@ -137,20 +141,21 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
         symmetries: a.symmetries,
         eval_every: a.eval_every,
     };
-    let fresh = JudgeRunConfig { judge: judge_file(a, (label, threshold), &data, net, &cfg)?, train: cfg };
+    let fresh =
+        JudgeRunConfig { judge: judge_file(a, inv, (label, threshold), &data, net, &cfg)?, train: cfg };
     let (resume, force) = (a.session.resume, a.session.force);
     let out_dir = prepare_out(&a.out, resume, force, ".train/state.json", &[("--data", &a.data)])?;
     let train_dir = a.out.join(".train");
     if resume {
-        check_resume_flags(&train_dir.join("config.json"), &fresh)?;
+        check_resume_flags(&train_dir.join("config.json"), &fresh, &inv.given)?;
     }
-    let given = crate::cli::given_on_command_line(&["train", "judge"]);
+    let given = &inv.given;
     let steps = given.iter().any(|g| g == "steps").then_some(a.steps);
     let run = judges::run::resume_or_start(&train_dir, fresh, resume, steps)?;
-    let args = crate::stdout::command_line().join(" ");
+    let args = inv.command_line.clone().join(" ");
     let from_step = if resume { read_step(&train_dir)? } else { 0 };
-    open_session(&train_dir, &args, &git_commit(), from_step)?;
-    let pb = progress::bar(run.train.steps, "judge", quiet);
+    open_session(&train_dir, &args, &inv.commit, from_step)?;
+    let pb = runner::progress::bar(run.train.steps, "judge", inv.quiet);
     pb.set_position(from_step);
     let session = JudgeSession { dir: &train_dir, resume, clock: Clock::start(a.session.max_minutes) };
     let outcome = train_judge(
@@ -168,13 +173,13 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
     )?;
     pb.finish_and_clear();
     let sessions =
-        record_session(&train_dir, &args, &git_commit(), (from_step, outcome.step), outcome.elapsed_s)?;
+        record_session(&train_dir, &args, &inv.commit, (from_step, outcome.step), outcome.elapsed_s)?;
     let total = run.train.steps;
     let finished = outcome.step >= total;
     let Some((net, heldout)) = outcome.judge else {
-        outln!("judge: stopped before its first step; --resume continues -> {}", a.out.display());
+        say!(say, "judge: stopped before its first step; --resume continues -> {}", a.out.display());
         out_dir.finish(false)?;
-        return Ok(ExitCode::SUCCESS);
+        return Ok(());
     };
     let mut file = run.judge;
     file.heldout = heldout;
@@ -187,18 +192,18 @@ pub fn run(a: &TrainJudgeArgs, quiet: bool) -> Result<ExitCode> {
         )
     });
     write_judge(&a.out, Some(&net), &file)?;
-    say_result(a, (label, threshold), &heldout);
+    say_result(a, (label, threshold), &heldout, say);
     if !finished {
-        outln!("judge: step {} of {total} (stopped early; --resume continues)", outcome.step);
+        say!(say, "judge: step {} of {total} (stopped early; --resume continues)", outcome.step);
     }
     out_dir.finish(finished)?;
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }
 
 /// `--resume` continues a run with its saved `.train/config.json`: the flags typed on this
 /// command line must agree with it (`--steps` and the session flags may change; see
 /// [`refuse_contradicting_flags`]).
-fn check_resume_flags(path: &std::path::Path, fresh: &JudgeRunConfig) -> Result<()> {
+fn check_resume_flags(path: &std::path::Path, fresh: &JudgeRunConfig, given: &[String]) -> Result<()> {
     let saved: JudgeRunConfig = harness::runfile::read(path)?;
     let (ours, theirs) = (&fresh.train, &saved.train);
     let (our_net, their_net) = (&fresh.judge.net, &saved.judge.net);
@@ -216,5 +221,5 @@ fn check_resume_flags(path: &std::path::Path, fresh: &JudgeRunConfig) -> Result<
         fixed("persist", &fresh.judge.persist_frames, &saved.judge.persist_frames),
         fixed("episodes", &episodes(fresh), &episodes(&saved)),
     ];
-    refuse_contradicting_flags(path, "judge", &fixed)
+    refuse_contradicting_flags(path, given, &fixed)
 }

@@ -1,0 +1,135 @@
+//! What can stop a training command: a flag or input refused before anything is written,
+//! the libraries it drives (each error kept whole, with its source), and the context a
+//! step adds ("--init-from DIR", "reading FILE") around one of them.
+
+use std::fmt::Display;
+use std::path::PathBuf;
+
+/// A failed training command.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    /// A flag, or the combination of flags and inputs, refused; the message names them.
+    #[error("{0}")]
+    Refused(String),
+    /// What the command was doing when `source` failed.
+    #[error("{what}")]
+    In {
+        /// The step, naming its flag or file.
+        what: String,
+        /// What failed.
+        #[source]
+        source: Box<TrainError>,
+    },
+    /// A JSON file that cannot be read or written.
+    #[error("{}: {source}", path.display())]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// The parser's error.
+        source: serde_json::Error,
+    },
+    /// An input or output folder, or a file in it.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// The output folder (or an input placed inside it).
+    #[error(transparent)]
+    Output(#[from] runner::output::OutputError),
+    /// The device the environment names.
+    #[error(transparent)]
+    Device(#[from] nn::device::DeviceError),
+    /// A run's configuration or state file.
+    #[error(transparent)]
+    RunFile(#[from] harness::runfile::RunFileError),
+    /// A run's sessions.
+    #[error(transparent)]
+    Sessions(#[from] harness::sessions::SessionError),
+    /// A dataset's arrays or attributes.
+    #[error(transparent)]
+    Replay(#[from] harness::replay::ReplayError),
+    /// A dataset's zarr metadata.
+    #[error(transparent)]
+    Zarr(#[from] harness::zarr::ZarrError),
+    /// The task a dataset names.
+    #[error(transparent)]
+    Scenario(#[from] scenarios::ScenarioError),
+    /// Goal-free frames that cannot be made from a dataset.
+    #[error(transparent)]
+    GoalFree(#[from] scenarios::pusht::goal_free::GoalFreeError),
+    /// The autoencoder or world-model trainer, or a model folder it reads.
+    #[error(transparent)]
+    WorldModel(#[from] world_model::WorldModelError),
+    /// The policy trainer, or a policy checkpoint it reads.
+    #[error(transparent)]
+    Policy(#[from] policies::dir::PolicyLoadError),
+    /// A policy's demonstrations.
+    #[error(transparent)]
+    Demos(#[from] policies::data::DataError),
+    /// The judge trainer, or a judge folder it writes.
+    #[error(transparent)]
+    Judge(#[from] judges::JudgeError),
+    /// The autoencoder's filmstrip of reconstructions.
+    #[error(transparent)]
+    Png(#[from] reports::png::PngError),
+}
+
+/// A training command's result.
+pub type Result<T, E = TrainError> = std::result::Result<T, E>;
+
+/// Refuses the command: returns [`TrainError::Refused`] with the formatted message.
+macro_rules! refuse {
+    ($($arg:tt)*) => {
+        return Err($crate::error::TrainError::Refused(format!($($arg)*)))
+    };
+}
+pub(crate) use refuse;
+
+/// Says what the command was doing when an error (or an absent value) stopped it.
+pub trait Context<T> {
+    /// Wraps the error in [`TrainError::In`] with `what()`.
+    ///
+    /// # Errors
+    /// The wrapped error.
+    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T>;
+
+    /// Wraps the error in [`TrainError::In`] with `what`.
+    ///
+    /// # Errors
+    /// The wrapped error.
+    fn context<S: Display>(self, what: S) -> Result<T>;
+}
+
+impl<T, E: Into<TrainError>> Context<T> for std::result::Result<T, E> {
+    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T> {
+        self.map_err(|e| TrainError::In { what: what().to_string(), source: Box::new(e.into()) })
+    }
+
+    fn context<S: Display>(self, what: S) -> Result<T> {
+        self.with_context(|| what)
+    }
+}
+
+impl<T> Context<T> for Option<T> {
+    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T> {
+        self.ok_or_else(|| TrainError::Refused(what().to_string()))
+    }
+
+    fn context<S: Display>(self, what: S) -> Result<T> {
+        self.with_context(|| what)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn context_keeps_the_error_as_its_source() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "no such file");
+        let e = Err::<(), _>(io).context("reading x.json").unwrap_err();
+        assert_eq!(e.to_string(), "reading x.json");
+        let source = std::error::Error::source(&e).map(ToString::to_string);
+        assert_eq!(source.as_deref(), Some("no such file"));
+        let none = None::<u8>.context("--data d: no data/coverage array").unwrap_err();
+        assert_eq!(none.to_string(), "--data d: no data/coverage array");
+    }
+}

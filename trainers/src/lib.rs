@@ -1,0 +1,59 @@
+//! `evalharness train ...`: the four training commands (the frame autoencoder, the world
+//! model, a diffusion policy, a judge of imagined frames), from their typed arguments
+//! ([`args`]) to a finished run folder.
+//!
+//! Each command checks its flags and inputs before the output folder is touched, prepares
+//! the folder (`--resume` continues a run, `--force` replaces one only once the new run is
+//! complete), refuses a `--resume` whose typed flags contradict the saved run, records the
+//! session, hands the work to its library trainer (`world_model::train_ae`,
+//! `world_model::train_wm`, `policies::train`, `judges::train`), and writes the run's
+//! provenance. A run can be time-boxed with `--max-minutes` and continued with `--resume`.
+//!
+//! Why a crate of its own: the binary only parses the command line and dispatches here,
+//! handing over what it knows of the process ([`Invocation`]); the commands' logic, their
+//! errors ([`error::TrainError`]) and their tests live beside the trainers they drive.
+
+pub mod args;
+mod autoencoder;
+mod common;
+pub mod error;
+mod judge;
+mod policy;
+pub mod world_model;
+
+pub use error::TrainError;
+
+/// Writes one result line to the command's output (the binary's stdout).
+macro_rules! say {
+    ($say:expr, $($arg:tt)*) => {
+        ($say)(&format!($($arg)*))
+    };
+}
+pub(crate) use say;
+
+/// What a training command knows of the process that runs it.
+#[derive(Clone, Debug, Default)]
+pub struct Invocation {
+    /// The process's command line, recorded in the run's sessions and provenance.
+    pub command_line: Vec<String>,
+    /// The commit the binary was built from, recorded beside it.
+    pub commit: String,
+    /// The ids of the flags typed on the command line (not defaulted), e.g. `steps`: a
+    /// `--resume` refuses those that contradict the saved run.
+    pub given: Vec<String>,
+    /// No progress bars.
+    pub quiet: bool,
+}
+
+/// Runs the training command `cmd`; each result line goes to `say`.
+///
+/// # Errors
+/// A refused flag or input, or what the trainer and the run folder report.
+pub fn run(cmd: &args::TrainCommand, inv: &Invocation, say: &mut dyn FnMut(&str)) -> Result<(), TrainError> {
+    match cmd {
+        args::TrainCommand::Autoencoder(a) => autoencoder::autoencoder(a, inv, say),
+        args::TrainCommand::WorldModel(a) => world_model::run(a, inv, say),
+        args::TrainCommand::Policy(a) => policy::run(a, inv, say),
+        args::TrainCommand::Judge(a) => judge::run(a, inv, say),
+    }
+}
