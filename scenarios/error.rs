@@ -85,7 +85,7 @@ pub enum ScenarioError {
         /// Control step.
         step: u32,
         /// The action.
-        action: [f64; 2],
+        action: Vec<f64>,
     },
     /// An action with the wrong number of entries for the task.
     #[error("action of {got} entries at seed {seed}: the task takes {expected}")]

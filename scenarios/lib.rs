@@ -11,6 +11,7 @@ pub mod can;
 pub mod error;
 pub mod lift;
 pub mod pusht;
+pub mod reach;
 pub mod robosuite;
 
 pub use error::ScenarioError;
@@ -46,6 +47,7 @@ const TASKS: &[Registered] = &[
     Registered { name: "pusht-gpc", load: pusht::registered_gpc, render_model: None },
     Registered { name: "lift", load: lift::registered, render_model: Some(lift::render_model) },
     Registered { name: "can", load: can::registered, render_model: Some(can::render_model) },
+    Registered { name: "reach", load: reach::registered, render_model: None },
 ];
 
 /// Names of the scenarios this build can simulate.
@@ -167,14 +169,16 @@ mod tests {
         let err = super::load_task(unnamed.to_str().unwrap()).err().unwrap().to_string();
         assert!(err.contains("p.toml") && err.contains("missing field `name`"), "{err}");
         let err = super::load_task("pushq").err().unwrap().to_string();
-        assert_eq!(err, "unknown scenario 'pushq' (available: pusht, pusht-gpc, lift, can)");
+        assert_eq!(err, "unknown scenario 'pushq' (available: pusht, pusht-gpc, lift, can, reach)");
     }
 
     #[test]
     fn every_task_says_without_a_reset_whether_its_episodes_judge_their_frames() {
         // `rank` asks `judges_own_frames` to pick a learned judge; the episodes' own
         // `judge` must agree with it (Push-T: its frame scorer; Lift and Can: none).
-        for (name, own) in [("pusht", true), ("pusht-gpc", true), ("lift", false), ("can", false)] {
+        for (name, own) in
+            [("pusht", true), ("pusht-gpc", true), ("lift", false), ("can", false), ("reach", true)]
+        {
             let task = super::load_task(name).expect("robosuite assets (scripts/setup.sh)");
             assert_eq!(task.judges_own_frames(), own, "{name}");
             assert_eq!(task.reset(7).unwrap().judge().is_some(), own, "{name}");

@@ -235,7 +235,7 @@ pub struct TasksArgs {
 /// Options shared by commands that run a scenario.
 #[derive(Debug, Args)]
 pub struct ScenarioArgs {
-    /// Scenario name (pusht, pusht-gpc, lift, can) or path to a scenario .toml file.
+    /// Scenario name (pusht, pusht-gpc, lift, can, reach) or path to a scenario .toml file.
     #[arg(long, default_value = "pusht")]
     pub scenario: String,
     /// Number of episodes.

@@ -298,16 +298,22 @@ fn damaged_datasets_scenarios_and_results_are_refused_by_name() {
     std::fs::write(&path, r.to_string()).unwrap();
     let (_, err) = expect_code(&run(&["report", s(&out)]), 2);
     assert!(err.contains("missing field `agreement`"), "{err}");
-    // The previous layout (no schema_version) is reported; a later one is refused by name.
+    // The earlier layouts (version 2 without `scoring`, version 1 without `schema_version`
+    // either) are reported; a later one is refused by name.
     r = serde_json::from_str(&good).unwrap();
-    assert_eq!(r["schema_version"], 2);
+    assert_eq!(r["schema_version"], 3);
+    assert_eq!(r["scoring"], "max over the episode of clip(coverage / 0.95, 0, 1)");
+    r.as_object_mut().unwrap().remove("scoring");
+    r["schema_version"] = serde_json::json!(2);
+    std::fs::write(&path, r.to_string()).unwrap();
+    expect_code(&run(&["report", s(&out)]), 0);
     r.as_object_mut().unwrap().remove("schema_version");
     std::fs::write(&path, r.to_string()).unwrap();
     expect_code(&run(&["report", s(&out)]), 0);
-    r["schema_version"] = serde_json::json!(3);
+    r["schema_version"] = serde_json::json!(4);
     std::fs::write(&path, r.to_string()).unwrap();
     let (_, err) = expect_code(&run(&["report", s(&out)]), 2);
-    assert!(err.contains("results schema version 3, written by a later evalharness"), "{err}");
+    assert!(err.contains("results schema version 4, written by a later evalharness"), "{err}");
     // A damaged filmstrip index, or a missing PNG, is reported and marked in the page.
     std::fs::write(&path, &good).unwrap();
     let index = out.join("filmstrips/index.json");

@@ -12,6 +12,7 @@ mod lift;
 mod lift_models;
 mod pipeline;
 mod plan;
+mod reach;
 mod reliability;
 mod render_workers;
 mod shipped;

@@ -251,9 +251,11 @@ pub struct RunTiming {
 }
 
 /// The layout of `results.json` this build writes. Version 1 is the files written before
-/// 2026-12-02, which have no `schema_version` and the same fields; a file of a later version
-/// than this is refused by name rather than read as one of this version.
-pub const RESULTS_SCHEMA: u32 = 2;
+/// 2026-12-02, which have no `schema_version` and the same fields; version 2 added
+/// `schema_version`; version 3 adds `scoring`, how the task scores an episode (absent, and
+/// unknown to the report, in the earlier versions, which are still read). A file of a later
+/// version than this is refused by name rather than read as one of this version.
+pub const RESULTS_SCHEMA: u32 = 3;
 
 /// The version a `results.json` without `schema_version` was written in.
 fn first_schema() -> u32 {
@@ -276,6 +278,9 @@ pub struct RankResults {
     pub seed_start: u64,
     /// Control steps per episode.
     pub max_steps: usize,
+    /// How the task scores an episode ([`crate::task::ScoreKind::describe`]); from version 3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scoring: Option<String>,
     /// Ranked policies, in run order.
     pub policies: Vec<PolicyResult>,
     /// Agreement across them.
@@ -414,17 +419,27 @@ mod tests {
     fn reads_the_previous_version_and_refuses_a_later_one() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("results.json");
-        // Version 1: no schema_version, the same fields.
+        // Version 2: no scoring; version 1: no schema_version either.
+        std::fs::write(&path, sample().to_string()).unwrap();
+        let v2 = RankResults::read(&path).unwrap();
+        assert_eq!((v2.schema_version, v2.scoring), (2, None));
         let mut v1 = sample();
         v1.as_object_mut().unwrap().remove("schema_version");
         std::fs::write(&path, v1.to_string()).unwrap();
         assert_eq!(RankResults::read(&path).unwrap().schema_version, 1);
+        // Version 3 names the scoring.
+        let mut v3 = sample();
+        v3["schema_version"] = serde_json::json!(3);
+        v3["scoring"] = serde_json::json!("1 if the task succeeded at some step, else 0");
+        std::fs::write(&path, v3.to_string()).unwrap();
+        let scoring = RankResults::read(&path).unwrap().scoring;
+        assert_eq!(scoring.as_deref(), Some("1 if the task succeeded at some step, else 0"));
         // A later version is named, whatever else it holds.
         let later = serde_json::json!({"schema_version": RESULTS_SCHEMA + 1, "rows": "elsewhere"});
         std::fs::write(&path, later.to_string()).unwrap();
         let err = RankResults::read(&path).unwrap_err().to_string();
-        assert!(err.contains("results schema version 3, written by a later evalharness"), "{err}");
-        assert!(err.contains("reads versions 1 to 2") && err.contains("results.json"), "{err}");
+        assert!(err.contains("results schema version 4, written by a later evalharness"), "{err}");
+        assert!(err.contains("reads versions 1 to 3") && err.contains("results.json"), "{err}");
     }
 
     #[test]

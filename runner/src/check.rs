@@ -100,6 +100,7 @@ mod tests {
             episodes: 4,
             seed_start: 0,
             max_steps: 10,
+            scoring: None,
             policies,
             agreement,
             failed_policies: Vec::new(),

@@ -91,8 +91,11 @@ pub fn write_report(out: &Path) -> Result<PathBuf, RunError> {
     )];
     let errs: Vec<f64> = results.policies.iter().map(|p| p.frame_scorer_mean_abs_error).collect();
     if !errs.is_empty() {
+        let judge = config.judge.as_ref().map_or("the task's own judge".to_string(), |j| {
+            format!("the learned judge {}", j.path.display())
+        });
         notes.push(format!(
-            "The world-model branch is scored from frames (goal mask × block colour). On real rendered frames its coverage differs from the exact polygon coverage by {:.4} on average.",
+            "The world-model branch is scored from its frames by {judge}. On the simulator's real frames its score differs from the exact one by {:.4} on average.",
             errs.iter().sum::<f64>() / errs.len() as f64
         ));
     }
@@ -103,7 +106,10 @@ pub fn write_report(out: &Path) -> Result<PathBuf, RunError> {
     if let Some((text, _)) = reports::scene::scene_note(&results.policies) {
         notes.push(text);
     }
-    notes.push("Score = max over the episode of clip(coverage / 0.95, 0, 1); success = coverage > 0.95 at some step.".into());
+    // Written by the run from version 3 of results.json; an earlier run's is not known here.
+    if let Some(scoring) = &results.scoring {
+        notes.push(format!("An episode's score: {scoring}."));
+    }
     let config = serde_json::to_string_pretty(&config).unwrap_or_default();
     let extras = Extras { plots, filmstrips, config, provenance: prov, notes };
     let html = out.join("report.html");

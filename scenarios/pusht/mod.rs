@@ -190,7 +190,11 @@ impl PushTEnv {
     /// [`ScenarioError::NonFinite`] when the simulation diverges; both name seed and step.
     pub fn step(&mut self, action: [f64; 2]) -> Result<Score, ScenarioError> {
         if !action.iter().all(|v| v.is_finite()) {
-            return Err(ScenarioError::BadAction { seed: self.seed, step: self.step, action });
+            return Err(ScenarioError::BadAction {
+                seed: self.seed,
+                step: self.step,
+                action: action.to_vec(),
+            });
         }
         self.physics.control_step(action);
         self.step += 1;

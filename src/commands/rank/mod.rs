@@ -220,6 +220,7 @@ fn run_with(
         episodes: r.episodes,
         seed_start: a.seed_start,
         max_steps: r.max_steps,
+        scoring: Some(task.score_kind().describe()),
         policies,
         agreement,
         failed_policies: failed.clone(),
