@@ -11,7 +11,6 @@ mod commands;
 #[cfg(test)]
 mod fuzz;
 mod output;
-mod policy_kinds;
 use runner::progress;
 mod render_workers;
 mod scenario;

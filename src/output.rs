@@ -2,8 +2,8 @@
 //! inputs checked before outputs, one writer per output), re-exported for the
 //! commands, and the JSON helpers they write their small files with.
 
+pub use runner::output::lock;
 pub use runner::output::{Inputs, RunDir, Staged, make_owned};
-pub use runner::output::{dataset, lock};
 
 use std::path::Path;
 

@@ -1,15 +1,16 @@
 //! Loading a checkpoint of any policy kind.
 //!
-//! The learned kinds live in `policies` (burn) and the `scripted` kind belongs to
-//! the task (its expert plans with the task's simulator); the crates do not know
-//! each other, so the binary, which sees both, dispatches on `policy.json`'s `kind`.
+//! The learned kinds live here (burn) and the `scripted` kind belongs to the task (its
+//! expert plans with the task's simulator, `Task::scripted_policy`); this crate does not
+//! know the tasks, so it dispatches on `policy.json`'s `kind` and hands a `scripted` folder
+//! to the task it is given.
 
 use std::path::Path;
 
+use crate::dir::{Expectations, PolicyLoadError, load_policy};
 use burn::tensor::Device;
 use harness::policy::Policy;
 use harness::task::Task;
-use policies::dir::{Expectations, PolicyLoadError, load_policy};
 
 /// Loads the checkpoint folder `dir` for `task`.
 ///
@@ -22,7 +23,7 @@ pub fn load_any(
     device: &Device,
     task: &dyn Task,
 ) -> Result<Box<dyn Policy>, PolicyLoadError> {
-    if policies::dir::policy_kind(dir).as_deref() == Some("scripted") {
+    if crate::dir::policy_kind(dir).as_deref() == Some("scripted") {
         return task.scripted_policy(dir).map_err(|e| PolicyLoadError::new(dir, e.to_string()));
     }
     load_policy(dir, expect, device)

@@ -9,7 +9,8 @@
 //! - [`pretrain`]: pose pre-training of the frame encoder and the frozen-feature cache;
 //! - [`symmetry`]: the 8 symmetries of Push-T's square world, exact augmentations;
 //! - [`train`]: the trainer, which saves a checkpoint every few epochs;
-//! - [`dir`]: the policy directory format and its validating loader;
+//! - [`dir`]: the policy directory format and its validating loader; [`kinds`]: a checkpoint
+//!   of any kind loaded for a task (a `scripted` one by the task itself);
 //! - [`provenance`]: how a checkpoint was made and what it scored, typed;
 //! - [`imported_policy`], [`import_gpc`], [`import_lerobot`], [`resnet_gn`]: diffusion policies
 //!   trained elsewhere (DriftWorld/GPC's Push-T policies, LeRobot's), imported once: the
@@ -31,6 +32,7 @@ pub mod import_robomimic;
 pub mod imported_config;
 pub mod imported_policy;
 pub mod imported_sampling;
+pub mod kinds;
 mod lerobot_config;
 pub mod net;
 pub mod pretrain;

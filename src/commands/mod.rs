@@ -1,24 +1,12 @@
 //! One module per subcommand (`rank` and `plan`, the largest, are folders); [`run`] dispatches.
 
 pub(crate) mod agreement;
-mod collect;
-mod collect_policy;
-mod dataset;
-mod dataset_merge;
 mod export_policies;
-mod import_judge;
-mod import_policy;
-mod import_robomimic;
-mod import_wm;
 mod merge;
 pub(crate) mod plan;
 pub(crate) mod rank;
 mod read_judge;
-mod record;
 mod scripted;
-mod simulate;
-mod simulate_policy;
-mod simulate_replay;
 mod tasks;
 mod wm_export;
 
@@ -26,7 +14,7 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 
-use crate::cli::{Cli, Command, DatasetCommand, ImportCommand, TrainCommand, WmCommand};
+use crate::cli::{Cli, Command, TrainCommand, WmCommand};
 
 /// The commit this binary was built from (`+dirty` if tracked files differed from it;
 /// "unknown" when built outside a git checkout), recorded by `build.rs`: the
@@ -38,14 +26,17 @@ pub(crate) fn git_commit() -> String {
 /// Runs the parsed command; the exit code is 0 unless a gate failed (1).
 pub fn run(cli: &Cli) -> Result<ExitCode> {
     match &cli.command {
-        Command::Simulate(a) => simulate::run(a, cli.quiet),
-        Command::Collect(a) => match &a.policy {
-            Some(dir) => collect_policy::run(a, dir, cli.quiet),
-            None => collect::run(a, cli.quiet),
-        },
-        Command::Dataset(DatasetCommand::Info { path, json }) => dataset::info(path, *json),
-        Command::Dataset(DatasetCommand::Merge { inputs, out, force }) => {
-            dataset_merge::run(inputs, out, *force, cli.quiet)
+        Command::Simulate(a) => {
+            let all_ran = simulation::simulate(a, &data_invocation(cli), &mut |line| outln!("{line}"))?;
+            Ok(if all_ran { ExitCode::SUCCESS } else { ExitCode::from(1) })
+        }
+        Command::Collect(a) => {
+            simulation::collect(a, &data_invocation(cli), &mut |line| outln!("{line}"))?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Dataset(d) => {
+            simulation::dataset(d, &data_invocation(cli), &mut |line| outln!("{line}"))?;
+            Ok(ExitCode::SUCCESS)
         }
         Command::Train(t) => {
             stop_on_signals();
@@ -85,9 +76,12 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Wm(WmCommand::Export(a)) => wm_export::run(a),
-        Command::Import(ImportCommand::WorldModel(a)) => import_wm::run(a),
-        Command::Import(ImportCommand::Judge(a)) => import_judge::run(a),
-        Command::Import(ImportCommand::Policy(a)) => import_policy::run(a),
+        Command::Import(i) => {
+            let inv =
+                importers::Invocation { command_line: crate::stdout::command_line(), commit: git_commit() };
+            importers::run(i, &inv, &mut |line| outln!("{line}"))?;
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Scripted(a) => scripted::run(a),
         Command::ExportPolicies(a) => export_policies::run(a),
         Command::ReadJudge(a) => read_judge::run(a),
@@ -107,5 +101,14 @@ fn stop_on_signals() {
         if let Err(e) = registered {
             tracing::warn!(signal = sig, error = %e, "cannot catch the signal; an interrupt loses the steps since the last checkpoint");
         }
+    }
+}
+
+/// What the data commands (`simulate`, `collect`, `dataset`) are told of this process.
+fn data_invocation(cli: &Cli) -> simulation::Invocation {
+    simulation::Invocation {
+        command_line: crate::stdout::command_line(),
+        commit: git_commit(),
+        quiet: cli.quiet,
     }
 }

@@ -48,52 +48,8 @@ pub fn run(a: &TrainPolicyArgs, inv: &Invocation, say: &mut dyn FnMut(&str)) -> 
     tracing::info!(data = %a.data.display(), ?behaviour, "loading demonstrations");
     let demos = Demos::load(&a.data, task.as_ref(), behaviour, a.episodes, policy.net.image_size)?;
     tracing::info!(episodes = demos.episodes.len(), samples = demos.len(), "loaded");
-    let normalisation = match &start {
-        Some(s) => {
-            warn_outside(&demos.normalisation(), &s.normalisation);
-            s.normalisation.clone()
-        }
-        None => demos.normalisation(),
-    };
+    let configs = run_configs(a, inv, (task.name(), policy, start.as_ref()), &demos)?;
     let args: Vec<String> = inv.command_line.clone();
-    let configs = RunConfigs {
-        train: PolicyTrainConfig {
-            epochs: a.epochs.unwrap_or(20),
-            save_every: a.save_every,
-            batch: a.batch,
-            lr: a.lr,
-            warmup: 200,
-            weight_decay: 1e-6,
-            seed: a.seed,
-            checkpoint_every: 50,
-            encoder_steps: if start.is_some() { 0 } else { a.encoder_steps },
-            encoder_lr: a.encoder_lr,
-            ema: a.ema.unwrap_or(0.999),
-            init_from: a.init_from.clone(),
-        },
-        normalisation,
-        provenance: PolicyProvenance {
-            data: Some(DemosUsed {
-                behaviour: a.behaviour.clone(),
-                collected_with: dataset_origin(&a.data)?,
-                episodes: demos.episodes.len(),
-                path: a.data.display().to_string(),
-                samples: demos.len(),
-                other: Default::default(),
-            }),
-            encoder_from: a.encoder_from.as_ref().map(|p| p.display().to_string()),
-            init_from: start.as_ref().map(|s| PolicyStart {
-                epoch: s.epoch,
-                path: s.dir.display().to_string(),
-                provenance: serde_json::to_value(&s.provenance).unwrap_or_default(),
-                step: s.step,
-            }),
-            seed: Some(a.seed),
-            ..PolicyProvenance::new(args.join(" "), inv.commit.clone())
-        },
-        policy,
-        task: Some(task.name().to_string()),
-    };
     if a.session.resume {
         check_resume_flags(&a.out.join(".train").join("config.json"), &configs, &inv.given)?;
     }
@@ -142,6 +98,64 @@ pub fn run(a: &TrainPolicyArgs, inv: &Invocation, say: &mut dyn FnMut(&str)) -> 
     );
     out_dir.finish(outcome.step >= outcome.total)?;
     Ok(())
+}
+
+/// The run's settings: the training flags, the normalisation (the data's, or the starting
+/// checkpoint's), and the provenance every saved checkpoint carries.
+///
+/// # Errors
+/// Dataset attributes that cannot be read for the provenance.
+fn run_configs(
+    a: &TrainPolicyArgs,
+    inv: &Invocation,
+    (task, policy, start): (&str, DiffusionConfig, Option<&Start>),
+    demos: &Demos,
+) -> Result<RunConfigs> {
+    let normalisation = match &start {
+        Some(s) => {
+            warn_outside(&demos.normalisation(), &s.normalisation);
+            s.normalisation.clone()
+        }
+        None => demos.normalisation(),
+    };
+    Ok(RunConfigs {
+        train: PolicyTrainConfig {
+            epochs: a.epochs.unwrap_or(20),
+            save_every: a.save_every,
+            batch: a.batch,
+            lr: a.lr,
+            warmup: 200,
+            weight_decay: 1e-6,
+            seed: a.seed,
+            checkpoint_every: 50,
+            encoder_steps: if start.is_some() { 0 } else { a.encoder_steps },
+            encoder_lr: a.encoder_lr,
+            ema: a.ema.unwrap_or(0.999),
+            init_from: a.init_from.clone(),
+        },
+        normalisation,
+        provenance: PolicyProvenance {
+            data: Some(DemosUsed {
+                behaviour: a.behaviour.clone(),
+                collected_with: dataset_origin(&a.data)?,
+                episodes: demos.episodes.len(),
+                path: a.data.display().to_string(),
+                samples: demos.len(),
+                other: Default::default(),
+            }),
+            encoder_from: a.encoder_from.as_ref().map(|p| p.display().to_string()),
+            init_from: start.map(|s| PolicyStart {
+                epoch: s.epoch,
+                path: s.dir.display().to_string(),
+                provenance: serde_json::to_value(&s.provenance).unwrap_or_default(),
+                step: s.step,
+            }),
+            seed: Some(a.seed),
+            ..PolicyProvenance::new(inv.command_line.join(" "), inv.commit.clone())
+        },
+        policy,
+        task: Some(task.to_string()),
+    })
 }
 
 /// `--resume` continues a run with its saved `.train/config.json`: the model, data and

@@ -269,15 +269,43 @@ pub fn run(a: &TrainWorldModelArgs, inv: &Invocation, say: &mut dyn FnMut(&str))
     let sessions =
         record_session(&a.out, &args.join(" "), &inv.commit, (from_step, outcome.step), outcome.elapsed_s)?;
     let saved = WorldModelConfig::read(&a.out)?;
+    let provenance = provenance(a, inv, (&saved, goal_free), data_prov, (&outcome, sessions))?;
+    write_json(&a.out.join("provenance.json"), &provenance)?;
+    say!(
+        say,
+        "world model ({}): step {}/{}{}, held-out one-chunk latent MSE {:.5} -> {}",
+        saved.objective.name(),
+        outcome.step,
+        outcome.total,
+        if outcome.finished { "" } else { " (stopped early; --resume continues)" },
+        outcome.eval_mse,
+        a.out.display()
+    );
+    out_dir.finish(outcome.finished)?;
+    Ok(())
+}
+
+/// The run's `provenance.json`: the command and commit, the data, the frames it saw, the
+/// warm start, the sessions and the held-out error at the end.
+///
+/// # Errors
+/// The run's saved configuration, or the warm start's provenance, unreadable.
+fn provenance(
+    a: &TrainWorldModelArgs,
+    inv: &Invocation,
+    (saved, goal_free): (&WorldModelConfig, bool),
+    data_prov: harness::provenance::FramesUsed,
+    (outcome, sessions): (&world_model::train_wm::WmOutcome, Vec<harness::sessions::Session>),
+) -> Result<WorldModelProvenance> {
     let frames = if goal_free {
         "re-rendered without the goal from data/state (--goal-free)"
     } else {
         "data/img as stored"
     };
-    let provenance = WorldModelProvenance {
+    Ok(WorldModelProvenance {
         autoencoder: saved.autoencoder.as_ref().map(|ae| ae.display().to_string()),
         autoencoder_replaced: None,
-        command: args.join(" "),
+        command: inv.command_line.join(" "),
         commit: inv.commit.clone(),
         data: data_prov,
         elapsed_s: outcome.elapsed_s,
@@ -298,20 +326,7 @@ pub fn run(a: &TrainWorldModelArgs, inv: &Invocation, say: &mut dyn FnMut(&str))
                 .map_or("pixels".into(), |ae| format!("the latents of {}", ae.display()))
         ),
         other: Default::default(),
-    };
-    write_json(&a.out.join("provenance.json"), &provenance)?;
-    say!(
-        say,
-        "world model ({}): step {}/{}{}, held-out one-chunk latent MSE {:.5} -> {}",
-        saved.objective.name(),
-        outcome.step,
-        outcome.total,
-        if outcome.finished { "" } else { " (stopped early; --resume continues)" },
-        outcome.eval_mse,
-        a.out.display()
-    );
-    out_dir.finish(outcome.finished)?;
-    Ok(())
+    })
 }
 
 /// The diffusion parameterisation `--prediction` names.

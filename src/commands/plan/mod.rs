@@ -82,7 +82,7 @@ fn load_proposer(
     }
     let returns = imagine.max(execute);
     if kind != "diffusion" {
-        let expect = crate::policy_kinds::expectations(task);
+        let expect = policies::kinds::expectations(task);
         let p = policies::imported_policy::load_returning(dir, file, &expect, device, Some(returns))?;
         return Ok((p, imagine, execute));
     }
@@ -95,12 +95,15 @@ fn load_proposer(
     Ok((Box::new(DiffusionPolicy::new(name, cfg, file.normalisation, bounds, net, device)), imagine, execute))
 }
 
-/// `evalharness plan`.
-pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
+/// The planners `--planners` names, sorted and once each, after the flags that every run
+/// needs are checked.
+///
+/// # Errors
+/// A zero step limit, batch or proposal count, a spread or margin out of range, or no planner.
+fn planners_of(a: &PlanArgs) -> Result<Vec<Planner>> {
     if a.max_steps == 0 || a.batch == 0 || a.proposals == 0 {
         bail!("--max-steps, --batch and --proposals must be positive");
     }
-    let seeds: Vec<u64> = harness::seed::range(a.seed_start, a.episodes as u64)?.collect();
     if !(a.spread.is_finite() && a.spread > 0.0) {
         bail!("--spread {}: must be a positive number", a.spread);
     }
@@ -113,51 +116,19 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     if planners.is_empty() {
         bail!("--planners: name at least one of none, world-model, simulator");
     }
-    let task = crate::scenario::load_task(&a.scenario)?;
-    let size = task.observation_spec().image_size;
-    // Refused before anything is loaded or written: the task must be one to plan in.
-    let probe = task.reset(seeds[0]).with_context(|| format!("resetting seed {}", seeds[0]))?;
-    if (a.judge.is_none() && probe.plan_cost().is_none()) || probe.fork().is_none() {
-        return Err(engine::EngineError::CannotPlan { task: task.name().to_string() }.into());
-    }
-    let device = nn::device::selected()?;
-    let wm = if planners.contains(&Planner::WorldModel) {
-        let wm = runner::inputs::load_world_model(&a.world_model, a.alpha, None, &device)?;
-        if wm.image_size() != size {
-            bail!(
-                "world model {} generates {1}x{1} frames, the scenario renders {size}x{size}",
-                a.world_model.display(),
-                wm.image_size(),
-            );
-        }
-        Some(wm)
-    } else {
-        None
-    };
-    let (policy, imagine, execute) = load_proposer(a, task.as_ref(), &device)?;
-    let judge = match &a.judge {
-        Some(dir) => {
-            let j = runner::inputs::load_judge(dir, task.as_ref(), &device)?;
-            Some(std::sync::Arc::new(j) as std::sync::Arc<dyn harness::judge::Judge>)
-        }
-        None => None,
-    };
-    // Every input is checked; only now is the output folder touched.
-    let fingerprints = runner::inputs::fingerprints(
-        wm.as_ref().map(|w| (a.world_model.as_path(), w)),
-        std::slice::from_ref(&a.policy),
-        a.judge.as_deref(),
-        &a.scenario,
-    )?;
-    let mut listed = crate::output::Inputs::new().scenario(&a.scenario).add("--policy", &a.policy);
-    if let Some(dir) = &a.judge {
-        listed = listed.add("--judge", dir);
-    }
-    if wm.is_some() {
-        listed = listed.world_model("--world-model", &a.world_model);
-    }
-    let (out_dir, jsonl) = crate::commands::rank::prepare_run(&a.out, &listed, a.resume, a.force)?;
-    let config = runner::PlanConfig {
+    Ok(planners)
+}
+
+/// The run's `config.json`: its settings, the inputs' fingerprints, and the cost the
+/// planners minimise.
+fn plan_config(
+    a: &PlanArgs,
+    planners: &[Planner],
+    wm: Option<&world_model::model::WorldModel>,
+    (imagine, execute): (usize, usize),
+    fingerprints: std::collections::BTreeMap<String, String>,
+) -> runner::PlanConfig {
+    runner::PlanConfig {
         command: crate::stdout::command_line().join(" "),
         scenario: a.scenario.clone(),
         policy: a.policy.clone(),
@@ -183,7 +154,109 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         bootstrap: a.bootstrap,
         record: a.record,
         fingerprints,
+    }
+}
+
+/// The world model, when a planner imagines in it, checked to draw the task's frame size.
+///
+/// # Errors
+/// A world model that does not load, or of another frame size.
+fn world_model_of(
+    a: &PlanArgs,
+    planners: &[Planner],
+    size: usize,
+    device: &burn::tensor::Device,
+) -> Result<Option<world_model::model::WorldModel>> {
+    Ok(if planners.contains(&Planner::WorldModel) {
+        let wm = runner::inputs::load_world_model(&a.world_model, a.alpha, None, device)?;
+        if wm.image_size() != size {
+            bail!(
+                "world model {} generates {1}x{1} frames, the scenario renders {size}x{size}",
+                a.world_model.display(),
+                wm.image_size(),
+            );
+        }
+        Some(wm)
+    } else {
+        None
+    })
+}
+
+/// Runs every planner on every batch of seeds not in `rows` yet (a resumed run's), each
+/// batch appended whole to `jsonl` with its filmstrips in `filmstrips`; returns the time
+/// spent.
+///
+/// # Errors
+/// A batch that fails, naming its planner and seeds, or rows or filmstrips not written.
+fn run_planners(
+    ctx: &PlanCtx<'_>,
+    (planners, batches): (&[Planner], &[&[u64]]),
+    rows: &mut Vec<PlanRow>,
+    (jsonl, filmstrips, size): (&std::path::Path, &std::path::Path, usize),
+    pb: &indicatif::ProgressBar,
+) -> Result<Timing> {
+    let mut timing = Timing::default();
+    for &planner in planners {
+        for &batch in batches {
+            let done = |s: &u64| rows.iter().any(|r| r.planner == planner.name() && r.seed == *s);
+            if batch.iter().all(done) {
+                pb.inc(batch.len() as u64);
+                continue;
+            }
+            // Batches are appended whole, and `resume_rows` dropped any part of one.
+            let out = run_batch(ctx, planner, batch)
+                .with_context(|| format!("planner {} on seeds {:?}", planner.name(), batch))?;
+            harness::rows::append_rows(jsonl, &out.rows)?;
+            timing.add(&out.timing);
+            for (seed, rec) in &out.records {
+                let png = filmstrips.join(format!("{}_seed{seed}.png", planner.name()));
+                results::write_strip(&png, rec, size)?;
+            }
+            rows.extend(out.rows);
+            pb.inc(batch.len() as u64);
+        }
+        tracing::info!(planner = planner.name(), "done");
+    }
+    Ok(timing)
+}
+
+/// `evalharness plan`.
+pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
+    let planners = planners_of(a)?;
+    let seeds: Vec<u64> = harness::seed::range(a.seed_start, a.episodes as u64)?.collect();
+    let task = crate::scenario::load_task(&a.scenario)?;
+    let size = task.observation_spec().image_size;
+    // Refused before anything is loaded or written: the task must be one to plan in.
+    let probe = task.reset(seeds[0]).with_context(|| format!("resetting seed {}", seeds[0]))?;
+    if (a.judge.is_none() && probe.plan_cost().is_none()) || probe.fork().is_none() {
+        return Err(engine::EngineError::CannotPlan { task: task.name().to_string() }.into());
+    }
+    let device = nn::device::selected()?;
+    let wm = world_model_of(a, &planners, size, &device)?;
+    let (policy, imagine, execute) = load_proposer(a, task.as_ref(), &device)?;
+    let judge = match &a.judge {
+        Some(dir) => {
+            let j = runner::inputs::load_judge(dir, task.as_ref(), &device)?;
+            Some(std::sync::Arc::new(j) as std::sync::Arc<dyn harness::judge::Judge>)
+        }
+        None => None,
     };
+    // Every input is checked; only now is the output folder touched.
+    let fingerprints = runner::inputs::fingerprints(
+        wm.as_ref().map(|w| (a.world_model.as_path(), w)),
+        std::slice::from_ref(&a.policy),
+        a.judge.as_deref(),
+        &a.scenario,
+    )?;
+    let mut listed = crate::output::Inputs::new().scenario(&a.scenario).add("--policy", &a.policy);
+    if let Some(dir) = &a.judge {
+        listed = listed.add("--judge", dir);
+    }
+    if wm.is_some() {
+        listed = listed.world_model("--world-model", &a.world_model);
+    }
+    let (out_dir, jsonl) = crate::commands::rank::prepare_run(&a.out, &listed, a.resume, a.force)?;
+    let config = plan_config(a, &planners, wm.as_ref(), (imagine, execute), fingerprints);
     let config_file = a.out.join("config.json");
     if a.resume {
         runner::resume::check(&config_file, &config)?;
@@ -217,28 +290,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     let batches: Vec<&[u64]> = seeds.chunks(a.batch).collect();
     let mut rows: Vec<PlanRow> =
         harness::rows::resume_rows(&jsonl, |r| harness::rows::whole_batches(r, &batches, plan_key, &[()]))?;
-    let mut timing = Timing::default();
-    for &planner in &planners {
-        for &batch in &batches {
-            let done = |s: &u64| rows.iter().any(|r| r.planner == planner.name() && r.seed == *s);
-            if batch.iter().all(done) {
-                pb.inc(batch.len() as u64);
-                continue;
-            }
-            // Batches are appended whole, and `resume_rows` dropped any part of one.
-            let out = run_batch(&ctx, planner, batch)
-                .with_context(|| format!("planner {} on seeds {:?}", planner.name(), batch))?;
-            harness::rows::append_rows(&jsonl, &out.rows)?;
-            timing.add(&out.timing);
-            for (seed, rec) in &out.records {
-                let png = filmstrips.join(format!("{}_seed{seed}.png", planner.name()));
-                results::write_strip(&png, rec, size)?;
-            }
-            rows.extend(out.rows);
-            pb.inc(batch.len() as u64);
-        }
-        tracing::info!(planner = planner.name(), "done");
-    }
+    let timing = run_planners(&ctx, (&planners, &batches), &mut rows, (&jsonl, &filmstrips, size), &pb)?;
     pb.finish_and_clear();
     let settings = PlanSettings {
         policy: policy.name().to_string(),

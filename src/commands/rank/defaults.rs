@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::Result;
 use harness::task::Task;
-pub use runner::defaults::{Resolved, judge};
+pub use runner::defaults::Resolved;
 
 use crate::cli::RankArgs;
 

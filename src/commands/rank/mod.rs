@@ -23,8 +23,8 @@ use engine::Setup;
 use harness::task::Task;
 use policies::dir::{checkpoint_dirs, checkpoint_name};
 
-use crate::policy_kinds::{expectations, load_any};
 use harness::results::{FailedPolicy, RankResults, RunTiming};
+use policies::kinds::{expectations, load_any};
 
 use crate::cli::RankArgs;
 use crate::output::write_json;
@@ -85,30 +85,10 @@ fn run_with(
     if shards > 1 {
         processes::watch_parent();
     }
-    if r.max_steps == 0 || a.batch == 0 {
-        bail!("--max-steps and --batch must be positive");
-    }
+    check_flags(a, r)?;
     let seeds: Vec<u64> = harness::seed::range(a.seed_start, r.episodes as u64)?.collect();
-    match (a.judge_persist, &r.judge) {
-        (Some(0), _) => bail!("--judge-persist 0: must be at least 1 frame"),
-        (Some(_), None) => {
-            bail!("--judge-persist: there is no judge folder to apply it to (the task judges its own frames)")
-        }
-        _ => {}
-    }
     let device = nn::device::selected()?;
-    let wm = runner::inputs::load_world_model(&r.world_model, a.alpha, a.noise_scale, &device)?;
-    if a.float_frames && wm.cfg.is_goal_free() {
-        bail!(
-            "--float-frames: world model {} is goal-free (its frames get the goal drawn back as bytes); use a world model of whole frames",
-            r.world_model.display()
-        );
-    }
-    let mut judge =
-        r.judge.as_deref().map(|d| runner::inputs::load_judge(d, task.as_ref(), &device)).transpose()?;
-    if let (Some(k), Some(j)) = (a.judge_persist, judge.as_mut()) {
-        j.file.persist_frames = k;
-    }
+    let (wm, judge) = load_models(a, r, task.as_ref(), &device)?;
     let dirs = checkpoint_dirs(&r.policies)?;
     let fingerprints =
         runner::inputs::fingerprints(Some((&r.world_model, &wm)), &dirs, r.judge.as_deref(), &a.scenario)?;
@@ -120,32 +100,7 @@ fn run_with(
         .world_model("--world-model", &r.world_model)
         .maybe("--judge", r.judge.as_deref());
     let (out_dir, jsonl) = prepare_run(&a.out, &listed, a.resume, a.force)?;
-    let config = runner::RankConfig {
-        command: crate::stdout::command_line().join(" "),
-        scenario: a.scenario.clone(),
-        policies: r.policies.clone(),
-        world_model: r.world_model.clone(),
-        world_model_config: wm.cfg.clone(),
-        episodes: r.episodes,
-        seed_start: a.seed_start,
-        max_steps: r.max_steps,
-        batch: a.batch,
-        seed: a.seed,
-        bootstrap: a.bootstrap,
-        shard: (shard, shards),
-        checkpoints: dirs.clone(),
-        fingerprints,
-        judge: r.judge.as_ref().zip(judge.as_ref()).map(|(dir, j)| runner::JudgeSettings {
-            path: dir.clone(),
-            label: j.file.label,
-            threshold: j.file.threshold,
-            persist_frames: j.file.persist_frames,
-            heldout: j.file.heldout,
-        }),
-        judge_every_frame: a.judge_every_frame,
-        float_frames: a.float_frames,
-        merged_from: Vec::new(),
-    };
+    let config = rank_config(a, r, (&wm, judge.as_ref()), (&dirs, fingerprints), (shard, shards));
     let config_file = a.out.join("config.json");
     if a.resume {
         runner::resume::check(&config_file, &config)?;
@@ -165,26 +120,9 @@ fn run_with(
         float_frames: a.float_frames,
         ..Setup::new(task.as_ref(), a.seed, r.max_steps, judge.as_ref())
     };
-    let expect = expectations(task.as_ref());
     let pb = progress::bar((dirs.len() * r.episodes) as u64, "rank", quiet);
-    let mut failed: Vec<FailedPolicy> = Vec::new();
-    let mut names = Vec::new();
     let started = Instant::now();
-    // Load every policy first (a policy that fails to load is reported and left out),
-    // then run all their batches on the workers.
-    let mut loaded: Vec<(usize, Box<dyn harness::policy::Policy>)> = Vec::new();
-    for (pi, dir) in dirs.iter().enumerate() {
-        let name = checkpoint_name(dir);
-        names.push(name.clone());
-        match load_any(dir, &expect, &device, task.as_ref()) {
-            Ok(p) => loaded.push((pi, p)),
-            Err(e) => {
-                tracing::error!("{e}; continuing with the other policies");
-                failed.push(FailedPolicy { policy: name, error: e.to_string() });
-                pb.inc(r.episodes as u64);
-            }
-        }
-    }
+    let (names, loaded, failed) = load_policies(&dirs, task.as_ref(), &device, &|| pb.inc(r.episodes as u64));
     let policies: Vec<&dyn harness::policy::Policy> = loaded.iter().map(|(_, p)| p.as_ref()).collect();
     // The report's filmstrips come from the run's own frames (`runner::media::kept`) when the
     // batches in flight can hold them; the shards of `--processes` (which use claims) keep
@@ -213,7 +151,152 @@ fn run_with(
     let ok_names: Vec<String> =
         names.iter().filter(|n| !failed_names.contains(&n.as_str())).cloned().collect();
     let (policies, agreement) = summarise(&rows, &ok_names, a.bootstrap, a.seed);
-    let res = RankResults {
+    let res =
+        results(a, r, task.as_ref(), (policies, agreement, failed.clone()), (shard_times, started, &timing));
+    write_json(&a.out.join("results.json"), &res.to_json()?)?;
+    reports::episode_tables::write_tables(&a.out, &rows)?;
+    // The results are complete (the report can be made again from them with
+    // `evalharness report`): a run this one replaced can go.
+    out_dir.finish(true)?;
+    // The policies that loaded and ran without failing, as the run loaded them.
+    let named: Vec<(String, &dyn harness::policy::Policy)> = loaded
+        .iter()
+        .map(|(pi, p)| (names[*pi].clone(), p.as_ref()))
+        .filter(|(n, _)| !failed_names.contains(&n.as_str()))
+        .collect();
+    let src = runner::media::Sources { rows: &rows, kept: &kept, batches: &batches, setup: &setup, wm: &wm };
+    let html = report(a, shards, (&named, &src), &pool, &kept_dir)?;
+    if let Some((text, true)) = reports::scene::scene_note(&res.policies) {
+        tracing::warn!("{text}");
+    }
+    summary::print(&res, &a.out, html.as_deref());
+    summary::gates(a.min_pearson, a.max_inversions, &res)
+}
+
+/// Refuses flags that contradict each other or the resolved run, before anything is loaded.
+///
+/// # Errors
+/// A zero step limit or batch, or `--judge-persist` without a judge or of 0.
+fn check_flags(a: &RankArgs, r: &defaults::Resolved) -> Result<()> {
+    if r.max_steps == 0 || a.batch == 0 {
+        bail!("--max-steps and --batch must be positive");
+    }
+    match (a.judge_persist, &r.judge) {
+        (Some(0), _) => bail!("--judge-persist 0: must be at least 1 frame"),
+        (Some(_), None) => {
+            bail!("--judge-persist: there is no judge folder to apply it to (the task judges its own frames)")
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+/// The world model and the learned judge (when given, with `--judge-persist` applied) the
+/// run reads.
+///
+/// # Errors
+/// A model or judge that does not load or does not fit the task, or `--float-frames` with a
+/// goal-free world model.
+fn load_models(
+    a: &RankArgs,
+    r: &defaults::Resolved,
+    task: &dyn Task,
+    device: &burn::tensor::Device,
+) -> Result<(world_model::model::WorldModel, Option<judges::folder::FrameJudge>)> {
+    let wm = runner::inputs::load_world_model(&r.world_model, a.alpha, a.noise_scale, device)?;
+    if a.float_frames && wm.cfg.is_goal_free() {
+        bail!(
+            "--float-frames: world model {} is goal-free (its frames get the goal drawn back as bytes); use a world model of whole frames",
+            r.world_model.display()
+        );
+    }
+    let mut judge = r.judge.as_deref().map(|d| runner::inputs::load_judge(d, task, device)).transpose()?;
+    if let (Some(k), Some(j)) = (a.judge_persist, judge.as_mut()) {
+        j.file.persist_frames = k;
+    }
+    Ok((wm, judge))
+}
+
+/// The run's `config.json`: its resolved settings, the checkpoints and every input's
+/// fingerprint, and the judge's settings when one was given.
+fn rank_config(
+    a: &RankArgs,
+    r: &defaults::Resolved,
+    (wm, judge): (&world_model::model::WorldModel, Option<&judges::folder::FrameJudge>),
+    (dirs, fingerprints): (&[std::path::PathBuf], std::collections::BTreeMap<String, String>),
+    (shard, shards): (usize, usize),
+) -> runner::RankConfig {
+    runner::RankConfig {
+        command: crate::stdout::command_line().join(" "),
+        scenario: a.scenario.clone(),
+        policies: r.policies.clone(),
+        world_model: r.world_model.clone(),
+        world_model_config: wm.cfg.clone(),
+        episodes: r.episodes,
+        seed_start: a.seed_start,
+        max_steps: r.max_steps,
+        batch: a.batch,
+        seed: a.seed,
+        bootstrap: a.bootstrap,
+        shard: (shard, shards),
+        checkpoints: dirs.to_vec(),
+        fingerprints,
+        judge: r.judge.as_ref().zip(judge).map(|(dir, j)| runner::JudgeSettings {
+            path: dir.clone(),
+            label: j.file.label,
+            threshold: j.file.threshold,
+            persist_frames: j.file.persist_frames,
+            heldout: j.file.heldout,
+        }),
+        judge_every_frame: a.judge_every_frame,
+        float_frames: a.float_frames,
+        merged_from: Vec::new(),
+    }
+}
+
+/// A loaded checkpoint with its index among the run's.
+type Loaded = (usize, Box<dyn harness::policy::Policy>);
+
+/// Loads every checkpoint of `dirs` for `task`; one that fails is reported and left out
+/// (`skipped` is called for it). Returns every checkpoint's name, the loaded ones with their
+/// index, and the failures.
+fn load_policies(
+    dirs: &[std::path::PathBuf],
+    task: &dyn Task,
+    device: &burn::tensor::Device,
+    skipped: &dyn Fn(),
+) -> (Vec<String>, Vec<Loaded>, Vec<FailedPolicy>) {
+    let expect = expectations(task);
+    let (mut names, mut loaded, mut failed) = (Vec::new(), Vec::new(), Vec::new());
+    for (pi, dir) in dirs.iter().enumerate() {
+        let name = checkpoint_name(dir);
+        names.push(name.clone());
+        match load_any(dir, &expect, device, task) {
+            Ok(p) => loaded.push((pi, p)),
+            Err(e) => {
+                tracing::error!("{e}; continuing with the other policies");
+                failed.push(FailedPolicy { policy: name, error: e.to_string() });
+                skipped();
+            }
+        }
+    }
+    (names, loaded, failed)
+}
+
+/// The run's `results.json`: per-policy statistics, agreement, failures and timing (the
+/// shard processes' when this run joins them, else this process's).
+fn results(
+    a: &RankArgs,
+    r: &defaults::Resolved,
+    task: &dyn Task,
+    (policies, agreement, failed): (
+        Vec<harness::results::PolicyResult>,
+        harness::results::AgreementSummary,
+        Vec<FailedPolicy>,
+    ),
+    (shard_times, started, timing): (Option<RunTiming>, Instant, &engine::Timing),
+) -> RankResults {
+    RankResults {
         schema_version: harness::results::RESULTS_SCHEMA,
         scenario: a.scenario.clone(),
         world_model: r.world_model.clone(),
@@ -223,7 +306,7 @@ fn run_with(
         scoring: Some(task.score_kind().describe()),
         policies,
         agreement,
-        failed_policies: failed.clone(),
+        failed_policies: failed,
         timing: match shard_times {
             Some(t) => RunTiming { wall_seconds: t.wall_seconds + started.elapsed().as_secs_f64(), ..t },
             None => RunTiming {
@@ -235,42 +318,35 @@ fn run_with(
                 note: "this process only (a resumed run times its own part)".into(),
             },
         },
-    };
-    write_json(&a.out.join("results.json"), &res.to_json()?)?;
-    reports::episode_tables::write_tables(&a.out, &rows)?;
-    // The results are complete (the report can be made again from them with
-    // `evalharness report`): a run this one replaced can go.
-    out_dir.finish(true)?;
+    }
+}
+
+/// The run's report (unless `--no-report`) with its filmstrips from `src` for the policies
+/// `named` (a shard writes none: the run that joins the shards does), then the kept frames
+/// removed; returns the report's path.
+///
+/// # Errors
+/// A filmstrip or the report that cannot be written, or kept frames that cannot be removed.
+fn report(
+    a: &RankArgs,
+    shards: usize,
+    (named, src): (&[(String, &dyn harness::policy::Policy)], &runner::media::Sources<'_>),
+    pool: &rayon::ThreadPool,
+    kept_dir: &Path,
+) -> Result<Option<std::path::PathBuf>> {
     let html = if a.no_report {
         None
     } else {
         if shards == 1 {
-            // The policies that loaded and ran without failing, as the run loaded them.
-            let named: Vec<(String, &dyn harness::policy::Policy)> = loaded
-                .iter()
-                .map(|(pi, p)| (names[*pi].clone(), p.as_ref()))
-                .filter(|(n, _)| !failed_names.contains(&n.as_str()))
-                .collect();
-            let src = runner::media::Sources {
-                rows: &rows,
-                kept: &kept,
-                batches: &batches,
-                setup: &setup,
-                wm: &wm,
-            };
-            runner::media::write_filmstrips(&a.out.join("filmstrips"), &named, &src, &pool)?;
+            runner::media::write_filmstrips(&a.out.join("filmstrips"), named, src, pool)?;
         }
         Some(runner::report::write_report(&a.out)?)
     };
     if shards == 1 && kept_dir.exists() {
         // The filmstrips are written (or not asked for): the kept frames are done with.
-        std::fs::remove_dir_all(&kept_dir).with_context(|| format!("removing {}", kept_dir.display()))?;
+        std::fs::remove_dir_all(kept_dir).with_context(|| format!("removing {}", kept_dir.display()))?;
     }
-    if let Some((text, true)) = reports::scene::scene_note(&res.policies) {
-        tracing::warn!("{text}");
-    }
-    summary::print(&res, &a.out, html.as_deref());
-    summary::gates(a.min_pearson, a.max_inversions, &res)
+    Ok(html)
 }
 
 /// Checks that `out` stays apart from every input `listed` (every folder of

@@ -1,0 +1,159 @@
+//! What can stop `simulate`, `collect` or `dataset`: a flag or input refused before
+//! anything is written, the libraries they drive (each error kept whole, with its source),
+//! and the context a step adds ("policy NAME", "loading scenario S") around one of them.
+
+use std::fmt::Display;
+use std::path::PathBuf;
+
+use harness::task::TaskError;
+
+/// A failed data command.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// A flag, or the combination of flags and inputs, refused; the message names them.
+    #[error("{0}")]
+    Refused(String),
+    /// What the command was doing when `source` failed.
+    #[error("{what}")]
+    In {
+        /// The step, naming its flag, file, policy or seed.
+        what: String,
+        /// What failed.
+        #[source]
+        source: Box<SimError>,
+    },
+    /// A JSON file that cannot be read or written.
+    #[error("{}: {source}", path.display())]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// The parser's error.
+        source: serde_json::Error,
+    },
+    /// A value that cannot be written as JSON.
+    #[error("encoding JSON: {0}")]
+    Encode(#[source] serde_json::Error),
+    /// A file or folder.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// The output folder (or an input placed inside it).
+    #[error(transparent)]
+    Output(#[from] runner::output::OutputError),
+    /// The run layer: a world model, judge or default input.
+    #[error(transparent)]
+    Run(#[from] runner::RunError),
+    /// The device the environment names.
+    #[error(transparent)]
+    Device(#[from] nn::device::DeviceError),
+    /// A seed range.
+    #[error(transparent)]
+    Seeds(#[from] harness::seed::SeedRangeError),
+    /// A run's `episodes.jsonl`.
+    #[error(transparent)]
+    Rows(#[from] harness::rows::RowsError),
+    /// A dataset's arrays or attributes.
+    #[error(transparent)]
+    Replay(#[from] harness::replay::ReplayError),
+    /// A dataset's zarr metadata.
+    #[error(transparent)]
+    Zarr(#[from] harness::zarr::ZarrError),
+    /// A task, its scenario file or its episodes.
+    #[error(transparent)]
+    Scenario(#[from] scenarios::ScenarioError),
+    /// A task's episode or scripted run.
+    #[error(transparent)]
+    Task(#[from] TaskError),
+    /// The paired engine.
+    #[error(transparent)]
+    Engine(#[from] engine::EngineError),
+    /// A policy checkpoint.
+    #[error(transparent)]
+    Policy(#[from] policies::dir::PolicyLoadError),
+    /// A world model.
+    #[error(transparent)]
+    WorldModel(#[from] world_model::WorldModelError),
+    /// A judge.
+    #[error(transparent)]
+    Judge(#[from] judges::JudgeError),
+    /// A GIF.
+    #[error(transparent)]
+    Gif(#[from] reports::gif::GifError),
+}
+
+impl SimError {
+    /// A task's error as the command's: the command's own error when its episode sink
+    /// returned one ([`SimError::into_task`]), else the task's.
+    pub fn from_task(e: TaskError) -> Self {
+        match e.0.downcast::<SimError>() {
+            Ok(own) => *own,
+            Err(other) => Self::Task(TaskError(other)),
+        }
+    }
+
+    /// The command's error returned through a task's episode sink.
+    pub fn into_task(self) -> TaskError {
+        TaskError::new(self)
+    }
+}
+
+/// A data command's result.
+pub type Result<T, E = SimError> = std::result::Result<T, E>;
+
+/// Refuses the command: returns [`SimError::Refused`] with the formatted message.
+macro_rules! refuse {
+    ($($arg:tt)*) => {
+        return Err($crate::error::SimError::Refused(format!($($arg)*)))
+    };
+}
+pub(crate) use refuse;
+
+/// Says what the command was doing when an error (or an absent value) stopped it.
+pub trait Context<T> {
+    /// Wraps the error in [`SimError::In`] with `what()`.
+    ///
+    /// # Errors
+    /// The wrapped error.
+    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T>;
+
+    /// Wraps the error in [`SimError::In`] with `what`.
+    ///
+    /// # Errors
+    /// The wrapped error.
+    fn context<S: Display>(self, what: S) -> Result<T>;
+}
+
+impl<T, E: Into<SimError>> Context<T> for std::result::Result<T, E> {
+    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T> {
+        self.map_err(|e| SimError::In { what: what().to_string(), source: Box::new(e.into()) })
+    }
+
+    fn context<S: Display>(self, what: S) -> Result<T> {
+        self.with_context(|| what)
+    }
+}
+
+impl<T> Context<T> for Option<T> {
+    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T> {
+        self.ok_or_else(|| SimError::Refused(what().to_string()))
+    }
+
+    fn context<S: Display>(self, what: S) -> Result<T> {
+        self.with_context(|| what)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_error_sent_through_a_task_comes_back_as_itself() {
+        let own = SimError::Refused("--mix: 'x' is not name=weight".into());
+        let back = SimError::from_task(own.into_task());
+        assert!(matches!(back, SimError::Refused(ref m) if m.contains("--mix")), "{back:?}");
+        let io = std::io::Error::other("disk full");
+        let e = Err::<(), _>(io).context("writing d.zarr").unwrap_err();
+        assert_eq!(e.to_string(), "writing d.zarr");
+        assert_eq!(std::error::Error::source(&e).map(ToString::to_string).as_deref(), Some("disk full"));
+    }
+}

@@ -1,0 +1,10 @@
+//! Bakes the MuJoCo library folder (set by .cargo/config.toml, filled by
+//! scripts/setup.sh) into the rpath of this crate's test binaries, which link
+//! `scenarios` (and so MuJoCo) for the tasks datasets name.
+
+fn main() {
+    println!("cargo::rerun-if-env-changed=MUJOCO_DYNAMIC_LINK_DIR");
+    if let Ok(dir) = std::env::var("MUJOCO_DYNAMIC_LINK_DIR") {
+        println!("cargo::rustc-link-arg=-Wl,-rpath,{dir}");
+    }
+}
