@@ -8,8 +8,6 @@
 mod stdout;
 mod cli;
 mod commands;
-#[cfg(test)]
-mod fuzz;
 mod output;
 use runner::progress;
 mod render_workers;

@@ -2,7 +2,6 @@
 //! importers and loaders it drives (each error kept whole, with its source), and the context
 //! a step adds ("--checkpoint FILE", "checking the imported policy") around one of them.
 
-use std::fmt::Display;
 use std::path::PathBuf;
 
 /// A failed import.
@@ -63,45 +62,6 @@ pub enum ImportCmdError {
 /// An import's result.
 pub type Result<T, E = ImportCmdError> = std::result::Result<T, E>;
 
-/// Refuses the command: returns [`ImportCmdError::Refused`] with the formatted message.
-macro_rules! refuse {
-    ($($arg:tt)*) => {
-        return Err($crate::error::ImportCmdError::Refused(format!($($arg)*)))
-    };
-}
-pub(crate) use refuse;
+runner::context_for!(ImportCmdError);
 
-/// Says what the command was doing when an error (or an absent value) stopped it.
-pub trait Context<T> {
-    /// Wraps the error in [`ImportCmdError::In`] with `what()`.
-    ///
-    /// # Errors
-    /// The wrapped error.
-    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T>;
-
-    /// Wraps the error in [`ImportCmdError::In`] with `what`.
-    ///
-    /// # Errors
-    /// The wrapped error.
-    fn context<S: Display>(self, what: S) -> Result<T>;
-}
-
-impl<T, E: Into<ImportCmdError>> Context<T> for std::result::Result<T, E> {
-    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T> {
-        self.map_err(|e| ImportCmdError::In { what: what().to_string(), source: Box::new(e.into()) })
-    }
-
-    fn context<S: Display>(self, what: S) -> Result<T> {
-        self.with_context(|| what)
-    }
-}
-
-impl<T> Context<T> for Option<T> {
-    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T> {
-        self.ok_or_else(|| ImportCmdError::Refused(what().to_string()))
-    }
-
-    fn context<S: Display>(self, what: S) -> Result<T> {
-        self.with_context(|| what)
-    }
-}
+pub(crate) use runner::refuse;

@@ -20,22 +20,9 @@ mod world_model;
 
 pub use error::ImportCmdError;
 
-/// Writes one result line to the command's output (the binary's stdout).
-macro_rules! say {
-    ($say:expr, $($arg:tt)*) => {
-        ($say)(&format!($($arg)*))
-    };
-}
-pub(crate) use say;
+pub(crate) use runner::say;
 
-/// What an import knows of the process that runs it.
-#[derive(Clone, Debug, Default)]
-pub struct Invocation {
-    /// The process's command line, recorded in the imported model's provenance.
-    pub command_line: Vec<String>,
-    /// The commit the binary was built from, recorded beside it.
-    pub commit: String,
-}
+pub use runner::command::Invocation;
 
 /// Runs the import `cmd`; each result line goes to `say`.
 ///

@@ -124,7 +124,7 @@ fn episodes_jsonl_reader_survives_damaged_rows() {
         std::fs::write(&path, bytes).unwrap();
         let _ = read_rows::<EpisodeRow>(&path);
         let _ = resume_rows(&path, |r: &[EpisodeRow]| {
-            whole_batches(r, &batches, runner::resume::rank_key, &runner::resume::RANK_KINDS)
+            whole_batches(r, &batches, crate::resume::rank_key, &crate::resume::RANK_KINDS)
         });
     });
 }
@@ -164,6 +164,6 @@ fn agreement_csv_parser_survives_damaged_files() {
     let text = b"policy,predicted,actual\na,0.1,0.2\na,0.3,0.25\nb,0.5,0.6\n\"c,d\",0.9,0.8\n";
     fuzz("agreement csv", text, |bytes| {
         std::fs::write(&path, bytes).unwrap();
-        let _ = crate::commands::agreement::read_csv(&path);
+        let _ = crate::agreement::read_csv(&path);
     });
 }

@@ -12,6 +12,8 @@
 //! the batches one process of a run runs, appended as they finish ([`batches`]), and the
 //! models a run reads, loaded, checked and fingerprinted ([`inputs`]); and what a bare
 //! `rank --scenario NAME` runs, from the task's shipped folder and `rank.toml` ([`defaults`]);
+//! and what the command crates share around their errors and output ([`command`]);
+//! and `agreement`'s metrics of any predictor's scores from a CSV ([`agreement`]);
 //! and what every command shares around a run: the ranges of the counts its flags take
 //! ([`bounds`]) and its progress bars on stderr ([`progress`]).
 //!
@@ -20,10 +22,12 @@
 //! and it names types of three crates (the world model's configuration, the judge's
 //! label and metrics), so it sits above them and below the binary.
 
+pub mod agreement;
 pub mod batches;
 pub mod bounds;
 pub mod check;
 pub mod claims;
+pub mod command;
 pub mod config;
 pub mod defaults;
 pub mod error;
@@ -39,3 +43,6 @@ pub mod shards;
 
 pub use config::{JudgeSettings, PlanConfig, RankConfig, RunSettings, Span};
 pub use error::RunError;
+
+#[cfg(test)]
+mod fuzz;

@@ -2,7 +2,6 @@
 //! anything is written, the libraries they drive (each error kept whole, with its source),
 //! and the context a step adds ("policy NAME", "loading scenario S") around one of them.
 
-use std::fmt::Display;
 use std::path::PathBuf;
 
 use harness::task::TaskError;
@@ -99,48 +98,9 @@ impl SimError {
 /// A data command's result.
 pub type Result<T, E = SimError> = std::result::Result<T, E>;
 
-/// Refuses the command: returns [`SimError::Refused`] with the formatted message.
-macro_rules! refuse {
-    ($($arg:tt)*) => {
-        return Err($crate::error::SimError::Refused(format!($($arg)*)))
-    };
-}
-pub(crate) use refuse;
+runner::context_for!(SimError);
 
-/// Says what the command was doing when an error (or an absent value) stopped it.
-pub trait Context<T> {
-    /// Wraps the error in [`SimError::In`] with `what()`.
-    ///
-    /// # Errors
-    /// The wrapped error.
-    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T>;
-
-    /// Wraps the error in [`SimError::In`] with `what`.
-    ///
-    /// # Errors
-    /// The wrapped error.
-    fn context<S: Display>(self, what: S) -> Result<T>;
-}
-
-impl<T, E: Into<SimError>> Context<T> for std::result::Result<T, E> {
-    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T> {
-        self.map_err(|e| SimError::In { what: what().to_string(), source: Box::new(e.into()) })
-    }
-
-    fn context<S: Display>(self, what: S) -> Result<T> {
-        self.with_context(|| what)
-    }
-}
-
-impl<T> Context<T> for Option<T> {
-    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T> {
-        self.ok_or_else(|| SimError::Refused(what().to_string()))
-    }
-
-    fn context<S: Display>(self, what: S) -> Result<T> {
-        self.with_context(|| what)
-    }
-}
+pub(crate) use runner::refuse;
 
 #[cfg(test)]
 mod tests {

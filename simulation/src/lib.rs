@@ -26,25 +26,9 @@ mod simulate_replay;
 
 pub use error::SimError;
 
-/// Writes one result line to the command's output (the binary's stdout).
-macro_rules! say {
-    ($say:expr, $($arg:tt)*) => {
-        ($say)(&format!($($arg)*))
-    };
-}
-pub(crate) use say;
+pub(crate) use runner::say;
 
-/// What a data command knows of the process that runs it.
-#[derive(Clone, Debug, Default)]
-pub struct Invocation {
-    /// The process's command line, recorded where a command writes provenance
-    /// (`simulate --record-scores`).
-    pub command_line: Vec<String>,
-    /// The commit the binary was built from, recorded beside it.
-    pub commit: String,
-    /// No progress bars.
-    pub quiet: bool,
-}
+pub use runner::command::Invocation;
 
 /// `evalharness simulate`: a scripted behaviour, or every checkpoint of a policy folder.
 /// Returns whether every policy ran (a checkpoint that failed is reported and skipped).

@@ -27,15 +27,16 @@ pub(crate) fn git_commit() -> String {
 pub fn run(cli: &Cli) -> Result<ExitCode> {
     match &cli.command {
         Command::Simulate(a) => {
-            let all_ran = simulation::simulate(a, &data_invocation(cli), &mut |line| outln!("{line}"))?;
+            let all_ran =
+                simulation::simulate(a, &invocation(cli, Vec::new()), &mut |line| outln!("{line}"))?;
             Ok(if all_ran { ExitCode::SUCCESS } else { ExitCode::from(1) })
         }
         Command::Collect(a) => {
-            simulation::collect(a, &data_invocation(cli), &mut |line| outln!("{line}"))?;
+            simulation::collect(a, &invocation(cli, Vec::new()), &mut |line| outln!("{line}"))?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Dataset(d) => {
-            simulation::dataset(d, &data_invocation(cli), &mut |line| outln!("{line}"))?;
+            simulation::dataset(d, &invocation(cli, Vec::new()), &mut |line| outln!("{line}"))?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Train(t) => {
@@ -46,12 +47,7 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
                 TrainCommand::Policy(_) => "policy",
                 TrainCommand::Judge(_) => "judge",
             };
-            let inv = trainers::Invocation {
-                command_line: crate::stdout::command_line(),
-                commit: git_commit(),
-                given: crate::cli::given_on_command_line(&["train", subcommand]),
-                quiet: cli.quiet,
-            };
+            let inv = invocation(cli, crate::cli::given_on_command_line(&["train", subcommand]));
             trainers::run(t, &inv, &mut |line| outln!("{line}"))?;
             Ok(ExitCode::SUCCESS)
         }
@@ -77,8 +73,7 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
         }
         Command::Wm(WmCommand::Export(a)) => wm_export::run(a),
         Command::Import(i) => {
-            let inv =
-                importers::Invocation { command_line: crate::stdout::command_line(), commit: git_commit() };
+            let inv = invocation(cli, Vec::new());
             importers::run(i, &inv, &mut |line| outln!("{line}"))?;
             Ok(ExitCode::SUCCESS)
         }
@@ -104,11 +99,14 @@ fn stop_on_signals() {
     }
 }
 
-/// What the data commands (`simulate`, `collect`, `dataset`) are told of this process.
-fn data_invocation(cli: &Cli) -> simulation::Invocation {
-    simulation::Invocation {
+/// What a command crate (`trainers`, `simulation`, `importers`) is told of this process:
+/// its command line and commit, the flags typed (`given`, for a `--resume`'s checks), and
+/// `--quiet`.
+fn invocation(cli: &Cli, given: Vec<String>) -> runner::command::Invocation {
+    runner::command::Invocation {
         command_line: crate::stdout::command_line(),
         commit: git_commit(),
+        given,
         quiet: cli.quiet,
     }
 }

@@ -2,7 +2,6 @@
 //! the libraries it drives (each error kept whole, with its source), and the context a
 //! step adds ("--init-from DIR", "reading FILE") around one of them.
 
-use std::fmt::Display;
 use std::path::PathBuf;
 
 /// A failed training command.
@@ -75,48 +74,9 @@ pub enum TrainError {
 /// A training command's result.
 pub type Result<T, E = TrainError> = std::result::Result<T, E>;
 
-/// Refuses the command: returns [`TrainError::Refused`] with the formatted message.
-macro_rules! refuse {
-    ($($arg:tt)*) => {
-        return Err($crate::error::TrainError::Refused(format!($($arg)*)))
-    };
-}
-pub(crate) use refuse;
+runner::context_for!(TrainError);
 
-/// Says what the command was doing when an error (or an absent value) stopped it.
-pub trait Context<T> {
-    /// Wraps the error in [`TrainError::In`] with `what()`.
-    ///
-    /// # Errors
-    /// The wrapped error.
-    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T>;
-
-    /// Wraps the error in [`TrainError::In`] with `what`.
-    ///
-    /// # Errors
-    /// The wrapped error.
-    fn context<S: Display>(self, what: S) -> Result<T>;
-}
-
-impl<T, E: Into<TrainError>> Context<T> for std::result::Result<T, E> {
-    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T> {
-        self.map_err(|e| TrainError::In { what: what().to_string(), source: Box::new(e.into()) })
-    }
-
-    fn context<S: Display>(self, what: S) -> Result<T> {
-        self.with_context(|| what)
-    }
-}
-
-impl<T> Context<T> for Option<T> {
-    fn with_context<S: Display>(self, what: impl FnOnce() -> S) -> Result<T> {
-        self.ok_or_else(|| TrainError::Refused(what().to_string()))
-    }
-
-    fn context<S: Display>(self, what: S) -> Result<T> {
-        self.with_context(|| what)
-    }
-}
+pub(crate) use runner::refuse;
 
 #[cfg(test)]
 mod tests {

@@ -23,27 +23,9 @@ pub mod world_model;
 
 pub use error::TrainError;
 
-/// Writes one result line to the command's output (the binary's stdout).
-macro_rules! say {
-    ($say:expr, $($arg:tt)*) => {
-        ($say)(&format!($($arg)*))
-    };
-}
-pub(crate) use say;
+pub(crate) use runner::say;
 
-/// What a training command knows of the process that runs it.
-#[derive(Clone, Debug, Default)]
-pub struct Invocation {
-    /// The process's command line, recorded in the run's sessions and provenance.
-    pub command_line: Vec<String>,
-    /// The commit the binary was built from, recorded beside it.
-    pub commit: String,
-    /// The ids of the flags typed on the command line (not defaulted), e.g. `steps`: a
-    /// `--resume` refuses those that contradict the saved run.
-    pub given: Vec<String>,
-    /// No progress bars.
-    pub quiet: bool,
-}
+pub use runner::command::Invocation;
 
 /// Runs the training command `cmd`; each result line goes to `say`.
 ///
