@@ -18,10 +18,10 @@
 use std::time::Instant;
 
 use harness::judge::Judge;
-use harness::results::Branch;
+use harness::results::{Branch, EpisodeRow};
 use harness::rng::Rng;
 use harness::seed::{derive, fnv1a};
-use harness::task::{Imagination, ModelView, Seen};
+use harness::task::{Imagination, ModelView, ScoreKind, Seen};
 use nn::frames::{frames_to_tensor, tensor_to_frames, tensor_to_unit_floats};
 use world_model::model::WorldModel;
 use world_model::rollout::Rollout;
@@ -46,34 +46,10 @@ pub fn wm_branch(
     timing: &mut Timing,
 ) -> Result<BranchOut, EngineError> {
     let Begin { name, n, size, kind, o, mut hist, mut rngs, mut track, mut rec } = start.begin(policy, s);
-    let mut gen_rngs: Vec<Rng> = start
-        .seeds
-        .iter()
-        .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(&name), sd, fnv1a("world_model")])))
-        .collect();
-    // Imagined frames can only be scored by a judge of frames.
-    let judges: Vec<&dyn Judge> = start
-        .judges
-        .iter()
-        .map(|j| j.as_deref().ok_or_else(|| EngineError::NoJudge { task: s.task.name().to_string() }))
-        .collect::<Result<_, _>>()?;
-    for (((t, judge), f), &seed) in track.iter_mut().zip(&judges).zip(&start.first).zip(&start.seeds) {
-        t.persist(judge.persist());
-        t.add(judged(judge.score(&f.frame), &name, seed)?, &kind);
-        t.scene = judge.scene(&f.frame);
-    }
-    let tw = Instant::now();
-    let device = wm.device().clone();
-    let (k, f_max) = (wm.cfg.unet.history, wm.cfg.future);
-    let view = if wm.cfg.is_goal_free() { ModelView::GoalFree } else { ModelView::Observation };
-    let mut imagine: Vec<Box<dyn Imagination>> = start.envs.iter().map(|e| e.imagination(view)).collect();
-    let refs: Vec<&[u8]> = imagine.iter().map(|m| m.first_frame()).collect();
-    let z0 = wm.encode(frames_to_tensor(&refs, size, &device)); // [n, C, s, s]
-    let [_, c, ls, _] = z0.dims();
-    // Latent histories and anchors (the first frame) of the active episodes, in `active`'s order.
-    let anchor = z0.clone(); // [a, C, s, s]
-    let mut roll = Rollout::new(z0.unsqueeze_dim::<5>(1).expand([n, k, c, ls, ls]), anchor); // [a, K, C, s, s]
-    timing.world_model_s += tw.elapsed().as_secs_f64();
+    let mut gen_rngs = generator_rngs(start, s.master_seed, &name);
+    let judges = first_scores(start, s, (&name, &kind), &mut track)?;
+    let f_max = wm.cfg.future;
+    let (mut imagine, mut roll, (c, ls)) = begin(start, wm, size, timing);
     let mut steps = 0;
     let mut active: Vec<usize> = (0..n).collect();
     // With `start.trajectories`: each episode's executed actions.
@@ -158,17 +134,91 @@ pub fn wm_branch(
         active = next;
         timing.world_model_s += tw.elapsed().as_secs_f64();
     }
+    let (rows, episodes) = finish(start, (&name, &kind), &track, start.trajectories.then_some(executed));
+    Ok(BranchOut { rows, frames: rec, episodes })
+}
+
+/// The world model's sampling noise of each episode: its own stream of (master seed,
+/// policy, seed), apart from the policy's.
+fn generator_rngs(start: &Start, master_seed: u64, name: &str) -> Vec<Rng> {
+    start
+        .seeds
+        .iter()
+        .map(|&sd| Rng::new(derive(master_seed, &[fnv1a(name), sd, fnv1a("world_model")])))
+        .collect()
+}
+
+/// Each episode's world-model adaptor and the batch's rollout, started from the encoded
+/// first frames (the history repeats them; the anchor is them). Returns the latents'
+/// channels and side too.
+fn begin(
+    start: &Start,
+    wm: &WorldModel,
+    size: usize,
+    timing: &mut Timing,
+) -> (Vec<Box<dyn Imagination>>, Rollout, (usize, usize)) {
+    let n = start.envs.len();
+    let tw = Instant::now();
+    let device = wm.device().clone();
+    let k = wm.cfg.unet.history;
+    let view = if wm.cfg.is_goal_free() { ModelView::GoalFree } else { ModelView::Observation };
+    let imagine: Vec<Box<dyn Imagination>> = start.envs.iter().map(|e| e.imagination(view)).collect();
+    let refs: Vec<&[u8]> = imagine.iter().map(|m| m.first_frame()).collect();
+    let z0 = wm.encode(frames_to_tensor(&refs, size, &device)); // [n, C, s, s]
+    let [_, c, ls, _] = z0.dims();
+    // Latent histories and anchors (the first frame) of the active episodes, in `active`'s order.
+    let anchor = z0.clone(); // [a, C, s, s]
+    let roll = Rollout::new(z0.unsqueeze_dim::<5>(1).expand([n, k, c, ls, ls]), anchor); // [a, K, C, s, s]
+    timing.world_model_s += tw.elapsed().as_secs_f64();
+    (imagine, roll, (c, ls))
+}
+
+/// Every episode's judge (imagined frames can only be scored by a judge of frames), with
+/// each track started on the judge's score of the first frame and its scene checks.
+///
+/// # Errors
+/// A task without a judge of frames, or a judge's score that is not finite.
+fn first_scores<'a>(
+    start: &'a Start,
+    s: &Setup,
+    (name, kind): (&str, &ScoreKind),
+    track: &mut [Track],
+) -> Result<Vec<&'a dyn Judge>, EngineError> {
+    // Imagined frames can only be scored by a judge of frames.
+    let judges: Vec<&dyn Judge> = start
+        .judges
+        .iter()
+        .map(|j| j.as_deref().ok_or_else(|| EngineError::NoJudge { task: s.task.name().to_string() }))
+        .collect::<Result<_, _>>()?;
+    for (((t, judge), f), &seed) in track.iter_mut().zip(&judges).zip(&start.first).zip(&start.seeds) {
+        t.persist(judge.persist());
+        t.add(judged(judge.score(&f.frame), name, seed)?, kind);
+        t.scene = judge.scene(&f.frame);
+    }
+    Ok(judges)
+}
+
+/// The branch's rows and, when the episodes' `executed` actions were kept, their
+/// trajectories (actions only: nothing imagined is exact), for replaying them in the
+/// simulator.
+fn finish(
+    start: &Start,
+    (name, kind): (&str, &ScoreKind),
+    track: &[Track],
+    executed: Option<Vec<Vec<Vec<f32>>>>,
+) -> (Vec<EpisodeRow>, Vec<Trajectory>) {
+    let n = track.len();
     let rows: Vec<_> = (0..n)
         .map(|i| {
             track[i]
-                .row(&name, start.seeds[i], Branch::WorldModel, &kind)
+                .row(name, start.seeds[i], Branch::WorldModel, kind)
                 .with_poses(None, start.goals[i].unwrap_or_default())
         })
         .collect();
     // The imagined episodes' actions, for replaying them in the simulator (no frames,
     // states or raw scores: nothing here is exact).
-    let episodes = if start.trajectories {
-        executed
+    let episodes = match executed {
+        Some(executed) => executed
             .into_iter()
             .zip(&rows)
             .enumerate()
@@ -180,9 +230,8 @@ pub fn wm_branch(
                 success: row.success,
                 ..Trajectory::default()
             })
-            .collect()
-    } else {
-        Vec::new()
+            .collect(),
+        None => Vec::new(),
     };
-    Ok(BranchOut { rows, frames: rec, episodes })
+    (rows, episodes)
 }

@@ -10,9 +10,10 @@
 
 use std::time::Instant;
 
+use harness::judge::Judge;
 use harness::policy::{ActionChunk, Policy};
-use harness::results::Branch;
-use harness::task::{Env, Seen};
+use harness::results::{Branch, EpisodeRow};
+use harness::task::{Env, ScoreKind, Seen};
 use rayon::prelude::*;
 
 use crate::EngineError;
@@ -73,35 +74,7 @@ pub fn sim_branch(
         for (&i, ch) in active.iter().zip(&chunks) {
             chunk_of[i] = Some(ch);
         }
-        let results: Vec<Option<Result<ChunkOut, EngineError>>> = start
-            .envs
-            .par_iter_mut()
-            .zip(chunk_of.par_iter())
-            .zip(start.judges.par_iter())
-            .map(|((env, chunk), judge)| {
-                let chunk = (*chunk)?;
-                let mut run = || -> Result<ChunkOut, EngineError> {
-                    let mut out = ChunkOut { raw: Vec::with_capacity(len), ..ChunkOut::default() };
-                    for (j, a) in chunk[..len].iter().enumerate() {
-                        let before = trajectories.then(|| (env.observe().frame, env.state()));
-                        let raw = env.step(a)?;
-                        out.raw.push(raw);
-                        if let Some((frame, state)) = before {
-                            out.steps.push((frame, state, a.to_vec()));
-                        }
-                        if j + o >= len {
-                            let seen = env.observe();
-                            if let Some(j) = judge {
-                                out.err += (j.score(&seen.frame) - raw).abs();
-                            }
-                            out.seen.push(seen);
-                        }
-                    }
-                    Ok(out)
-                };
-                Some(run())
-            })
-            .collect();
+        let results = step_chunks(&mut start.envs, &chunk_of, &start.judges, (len, o), trajectories);
         let mut seen: Vec<(usize, Vec<Seen>)> = Vec::with_capacity(active.len());
         for (i, r) in results.into_iter().enumerate() {
             let Some(r) = r else { continue };
@@ -136,19 +109,74 @@ pub fn sim_branch(
             active = still_active(&active, &track);
         }
     }
+    let (rows, episodes) = finish(&start, (&name, &kind), &track, &judge_err, trajectories.then_some(traj));
+    Ok(BranchOut { rows, frames: rec, episodes })
+}
+
+/// Steps each episode that has a chunk in `chunk_of` through its first `len` actions, on the
+/// worker threads: the raw scores, the last `o` observations (with `judges`' error on
+/// them), and with `trajectories` each step's frame, state and action before it. `None` for
+/// an episode without a chunk (ended).
+fn step_chunks(
+    envs: &mut [Box<dyn Env>],
+    chunk_of: &[Option<&ActionChunk>],
+    judges: &[Option<Box<dyn Judge>>],
+    (len, o): (usize, usize),
+    trajectories: bool,
+) -> Vec<Option<Result<ChunkOut, EngineError>>> {
+    envs.par_iter_mut()
+        .zip(chunk_of.par_iter())
+        .zip(judges.par_iter())
+        .map(|((env, chunk), judge)| {
+            let chunk = (*chunk)?;
+            let mut run = || -> Result<ChunkOut, EngineError> {
+                let mut out = ChunkOut { raw: Vec::with_capacity(len), ..ChunkOut::default() };
+                for (j, a) in chunk[..len].iter().enumerate() {
+                    let before = trajectories.then(|| (env.observe().frame, env.state()));
+                    let raw = env.step(a)?;
+                    out.raw.push(raw);
+                    if let Some((frame, state)) = before {
+                        out.steps.push((frame, state, a.to_vec()));
+                    }
+                    if j + o >= len {
+                        let seen = env.observe();
+                        if let Some(j) = judge {
+                            out.err += (j.score(&seen.frame) - raw).abs();
+                        }
+                        out.seen.push(seen);
+                    }
+                }
+                Ok(out)
+            };
+            Some(run())
+        })
+        .collect()
+}
+
+/// The branch's rows (each with its judge's error on the real frames) and, when `traj` was
+/// recorded, its whole trajectories, each ending with the last frame.
+fn finish(
+    start: &Start,
+    (name, kind): (&str, &ScoreKind),
+    track: &[Track],
+    judge_err: &[(f64, usize)],
+    traj: Option<Vec<Trajectory>>,
+) -> (Vec<EpisodeRow>, Vec<Trajectory>) {
+    let n = track.len();
     let rows = (0..n)
         .map(|i| {
             let env = &start.envs[i];
             // The judge's error on the real frames; none without a judge.
             let err = start.judges[i].is_some().then(|| judge_err[i].0 / judge_err[i].1.max(1) as f64);
             track[i]
-                .row(&name, start.seeds[i], Branch::Sim, &kind)
+                .row(name, start.seeds[i], Branch::Sim, kind)
                 .with_poses(env.object_pose(), start.goals[i].unwrap_or_default())
                 .with_scorer_error(err)
         })
         .collect();
-    let episodes = if trajectories {
-        traj.into_iter()
+    let episodes = match traj {
+        Some(traj) => traj
+            .into_iter()
             .enumerate()
             .map(|(i, mut t)| {
                 let env: &dyn Env = start.envs[i].as_ref();
@@ -157,9 +185,8 @@ pub fn sim_branch(
                 (t.seed, t.goal, t.score) = (start.seeds[i], start.goals[i], track[i].best_reward);
                 t
             })
-            .collect()
-    } else {
-        Vec::new()
+            .collect(),
+        None => Vec::new(),
     };
-    Ok(BranchOut { rows, frames: rec, episodes })
+    (rows, episodes)
 }

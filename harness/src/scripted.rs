@@ -100,6 +100,55 @@ pub struct Recorded<'a> {
     pub success: bool,
 }
 
+/// A recorded episode whose arrays do not fit its task's dataset layout.
+#[derive(Debug, thiserror::Error)]
+#[error("recorded episode seed {seed}: {message}")]
+pub struct RecordedMismatch {
+    /// The episode's seed.
+    pub seed: u64,
+    /// What does not fit, naming the step.
+    pub message: String,
+}
+
+impl Recorded<'_> {
+    /// The arrays of a layout that stores each step's frame (`size`² RGB), state (`columns`
+    /// entries) and action (`actions` entries) as recorded, and one extra per step: 1 where
+    /// the raw score after the action is above `threshold` (success), else 0.
+    ///
+    /// # Errors
+    /// Fewer frames than actions, states or scores of another count, or a step whose frame,
+    /// state or action has another size, naming the step.
+    pub fn success_arrays(
+        &self,
+        (size, columns, actions): (usize, usize, usize),
+        threshold: f64,
+    ) -> Result<EpisodeArrays, RecordedMismatch> {
+        let n = self.actions.len();
+        let bad = |message: String| RecordedMismatch { seed: self.seed, message };
+        if self.frames.len() < n || self.states.len() != n || self.raw.len() != n {
+            let (f, s, r) = (self.frames.len(), self.states.len(), self.raw.len());
+            return Err(bad(format!("{f} frames, {s} states, {r} scores for {n} actions")));
+        }
+        let mut arrays = EpisodeArrays::default();
+        for (j, ((f, s), a)) in self.frames.iter().zip(self.states).zip(self.actions).enumerate() {
+            if f.len() != size * size * 3 || s.len() != columns || a.len() != actions {
+                return Err(bad(format!(
+                    "step {j}: frame of {} bytes, state of {} entries or action of {}, expected {}, {columns} and {actions}",
+                    f.len(),
+                    s.len(),
+                    a.len(),
+                    size * size * 3
+                )));
+            }
+            arrays.img.extend_from_slice(f);
+            arrays.state.extend(s.iter().map(|&v| v as f32));
+            arrays.action.extend_from_slice(a);
+        }
+        arrays.extras.push(self.raw.iter().map(|&r| if r > threshold { 1.0 } else { 0.0 }).collect());
+        Ok(arrays)
+    }
+}
+
 /// Receives each episode of [`Scripted::run`] with its index in the work list.
 pub type EpisodeSink<'a> = dyn FnMut(usize, ScriptedEpisode) -> Result<(), TaskError> + 'a;
 
@@ -146,4 +195,49 @@ pub trait Scripted: Send + Sync {
         frames: &FrameChoice<'_>,
         done: &mut EpisodeSink<'_>,
     ) -> Result<(), TaskError>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn recorded<'a>(
+        frames: &'a [Vec<u8>],
+        states: &'a [Vec<f64>],
+        actions: &'a [Vec<f32>],
+        raw: &'a [f64],
+    ) -> Recorded<'a> {
+        Recorded { seed: 7, frames, states, actions, raw, goal: None, score: 0.75, success: true }
+    }
+
+    #[test]
+    fn success_arrays_mark_success_after_each_action_above_the_threshold() {
+        // raw after each of 4 actions: 0, 0.25, 0.5, 0.75; above 0.4: the last two.
+        let (frames, states, actions) = (vec![vec![1; 12]; 5], vec![vec![0.5; 3]; 4], vec![vec![0.1; 7]; 4]);
+        let raw: Vec<f64> = (0..4).map(|j| f64::from(j) / 4.0).collect();
+        let a = recorded(&frames, &states, &actions, &raw).success_arrays((2, 3, 7), 0.4).unwrap();
+        assert_eq!(a.extras, vec![vec![0.0, 0.0, 1.0, 1.0]]);
+        // 4 frames of 2·2·3 bytes (the final frame is not stored), 4·3 states, 4·7 actions.
+        assert_eq!((a.img.len(), a.state.len(), a.action.len()), (48, 12, 28));
+    }
+
+    #[test]
+    fn success_arrays_name_the_step_of_a_wrong_shape() {
+        let (frames, mut states, mut actions) =
+            (vec![vec![1; 12]; 4], vec![vec![0.5; 3]; 3], vec![vec![0.1; 7]; 3]);
+        let raw = vec![0.0; 3];
+        actions[1] = vec![0.0; 6];
+        let err = recorded(&frames, &states, &actions, &raw)
+            .success_arrays((2, 3, 7), 0.5)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("seed 7") && err.contains("step 1") && err.contains("action of 6"), "{err}");
+        actions[1] = vec![0.0; 7];
+        states.pop();
+        let err = recorded(&frames, &states, &actions, &raw)
+            .success_arrays((2, 3, 7), 0.5)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("2 states") && err.contains("3 actions"), "{err}");
+    }
 }

@@ -18,7 +18,6 @@ use serde::Serialize;
 use super::rollout::{ArmTask, Episode, Perturbation};
 use super::runs::ArmRun;
 use super::task::{ArmEngine, IMAGE_SIZE, RobosuiteTask};
-use crate::error::ScenarioError;
 
 /// Behaviours left out of the default mix: `explore` came after the shipped Lift
 /// models' datasets, which were collected with the default, so the default stays
@@ -58,43 +57,6 @@ fn episode_arrays<I, B>(ep: &Episode<I, B>) -> EpisodeArrays {
     }
     arrays.extras.push(success);
     arrays
-}
-
-/// A recorded episode's arrays: the frame and state before each action, the action, and
-/// whether the task succeeded after it (raw score above `threshold`).
-fn recorded_arrays(
-    t: &Recorded<'_>,
-    size: usize,
-    columns: usize,
-    threshold: f64,
-) -> Result<EpisodeArrays, ScenarioError> {
-    let n = t.actions.len();
-    let bad = |message: String| ScenarioError::Recorded { seed: t.seed, message };
-    if t.frames.len() < n || t.states.len() != n || t.raw.len() != n {
-        return Err(bad(format!(
-            "{} frames, {} states, {} scores for {n} actions",
-            t.frames.len(),
-            t.states.len(),
-            t.raw.len()
-        )));
-    }
-    let mut arrays = EpisodeArrays::default();
-    for (j, ((f, s), a)) in t.frames.iter().zip(t.states).zip(t.actions).enumerate() {
-        if f.len() != size * size * 3 || s.len() != columns || a.len() != 7 {
-            return Err(bad(format!(
-                "step {j}: frame of {} bytes, state of {} entries or action of {}, expected {}, {columns} and 7",
-                f.len(),
-                s.len(),
-                a.len(),
-                size * size * 3
-            )));
-        }
-        arrays.img.extend_from_slice(f);
-        arrays.state.extend(s.iter().map(|&v| v as f32));
-        arrays.action.extend_from_slice(a);
-    }
-    arrays.extras.push(t.raw.iter().map(|&r| if r > threshold { 1.0 } else { 0.0 }).collect());
-    Ok(arrays)
 }
 
 /// A finished episode as the data commands write it.
@@ -177,7 +139,8 @@ impl<T: ArmEngine + 'static> Scripted for RobosuiteTask<T> {
 
     fn recorded_arrays(&self, episode: &Recorded<'_>) -> Result<EpisodeArrays, TaskError> {
         let columns = self.sim().state_columns().len();
-        Ok(recorded_arrays(episode, IMAGE_SIZE, columns, self.score_kind().threshold())?)
+        let threshold = self.score_kind().threshold();
+        episode.success_arrays((IMAGE_SIZE, columns, 7), threshold).map_err(TaskError::new)
     }
 
     fn run(
@@ -199,46 +162,5 @@ impl<T: ArmEngine + 'static> Scripted for RobosuiteTask<T> {
             jobs: settings.jobs,
         };
         runner.run(&kinds, |i| frames(i).map(|r| r.size), |i, ep| done(i, scripted_episode(sim, ep)?))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn recorded<'a>(
-        frames: &'a [Vec<u8>],
-        states: &'a [Vec<f64>],
-        actions: &'a [Vec<f32>],
-        raw: &'a [f64],
-    ) -> Recorded<'a> {
-        Recorded { seed: 7, frames, states, actions, raw, goal: None, score: 0.75, success: true }
-    }
-
-    #[test]
-    fn recorded_arrays_mark_success_after_each_action_above_the_threshold() {
-        // raw after each of 4 actions: 0, 0.25, 0.5, 0.75; above 0.4: the last two.
-        let (frames, states, actions) = (vec![vec![1; 12]; 5], vec![vec![0.5; 3]; 4], vec![vec![0.1; 7]; 4]);
-        let raw: Vec<f64> = (0..4).map(|j| f64::from(j) / 4.0).collect();
-        let a = recorded_arrays(&recorded(&frames, &states, &actions, &raw), 2, 3, 0.4).unwrap();
-        assert_eq!(a.extras, vec![vec![0.0, 0.0, 1.0, 1.0]]);
-        // 4 frames of 2·2·3 bytes (the final frame is not stored), 4·3 states, 4·7 actions.
-        assert_eq!((a.img.len(), a.state.len(), a.action.len()), (48, 12, 28));
-    }
-
-    #[test]
-    fn recorded_arrays_name_the_step_of_a_wrong_shape() {
-        let (frames, mut states, mut actions) =
-            (vec![vec![1; 12]; 4], vec![vec![0.5; 3]; 3], vec![vec![0.1; 7]; 3]);
-        let raw = vec![0.0; 3];
-        actions[1] = vec![0.0; 6];
-        let err =
-            recorded_arrays(&recorded(&frames, &states, &actions, &raw), 2, 3, 0.5).unwrap_err().to_string();
-        assert!(err.contains("step 1") && err.contains("action of 6"), "{err}");
-        actions[1] = vec![0.0; 7];
-        states.pop();
-        let err =
-            recorded_arrays(&recorded(&frames, &states, &actions, &raw), 2, 3, 0.5).unwrap_err().to_string();
-        assert!(err.contains("2 states") && err.contains("3 actions"), "{err}");
     }
 }

@@ -11,7 +11,7 @@ use harness::scripted::{FrameRequest, Scripted, Settings};
 use harness::seed::{derive, fnv1a};
 use harness::task::{ScoreKind, Task};
 
-use crate::args::CollectArgs;
+use crate::args::{CollectArgs, ScenarioArgs};
 use runner::output::dataset::StagedDataset;
 
 /// The task `--scenario` names.
@@ -60,6 +60,18 @@ pub(super) fn behaviour_index(task: &dyn Task, name: &str, more: &str) -> Result
             all.join(", ")
         ))
     })
+}
+
+/// How the scripted episodes of `task` run under the shared flags `c` (the step limit the
+/// task's unless `--max-steps`; to the first success unless `--no-early-stop`).
+pub(crate) fn settings(c: &ScenarioArgs, task: &dyn Task, no_early_stop: bool) -> Settings {
+    Settings {
+        noise: c.noise,
+        lag: c.lag,
+        max_steps: c.max_steps.map_or(task.max_steps(), |m| m as usize),
+        stop_at_success: !no_early_stop,
+        jobs: c.jobs,
+    }
 }
 
 /// Parses `name=weight` pairs, naming behaviours with `parse`, into normalised weights.
@@ -144,13 +156,7 @@ pub fn run(args: &CollectArgs, inv: &Invocation, say: &mut dyn FnMut(&str)) -> R
     refuse_no_early_stop(task, args.no_early_stop)?;
     let mix_text = args.mix.clone().unwrap_or_else(|| scripted.default_mix());
     let mix = parse_mix(&mix_text, |name| behaviour_index(task, name, ""))?;
-    let settings = Settings {
-        noise: c.noise,
-        lag: c.lag,
-        max_steps: c.max_steps.map_or(task.max_steps(), |m| m as usize),
-        stop_at_success: !args.no_early_stop,
-        jobs: c.jobs,
-    };
+    let settings = settings(c, task, args.no_early_stop);
     let work: Vec<(u64, usize)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, draw(&mix, seed))).collect();
     let layout = scripted.layout();

@@ -24,7 +24,7 @@ use harness::task::{ScoreKind, Task};
 use serde::Serialize;
 
 use crate::args::{RendererKind, SimulateArgs};
-use crate::collect::{behaviour_index, load_task, refuse_no_early_stop, scripted_of};
+use crate::collect::{behaviour_index, load_task, refuse_no_early_stop, scripted_of, settings};
 use crate::common::write_json;
 use runner::output::Staged;
 
@@ -152,13 +152,7 @@ fn run_scripted(
             task.name()
         );
     }
-    let settings = Settings {
-        noise: c.noise,
-        lag: c.lag,
-        max_steps: c.max_steps.map_or(task.max_steps(), |m| m as usize),
-        stop_at_success: !args.no_early_stop,
-        jobs: c.jobs,
-    };
+    let settings = settings(c, task, args.no_early_stop);
     let work: Vec<(u64, usize)> =
         harness::seed::range(c.seed_start, c.episodes)?.map(|seed| (seed, kind)).collect();
     let out = Staged::new(&args.out, c.force, &args.inputs())?;

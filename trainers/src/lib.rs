@@ -19,6 +19,7 @@ mod common;
 pub mod error;
 mod judge;
 mod policy;
+mod wm_inputs;
 pub mod world_model;
 
 pub use error::TrainError;

@@ -77,53 +77,13 @@ pub fn spread(chunks: &mut [ActionChunk], k: usize, s: f32, low: &[f32], high: &
 /// imagined), or non-finite latents, naming the seed or the policy.
 pub fn run_batch(ctx: &PlanCtx, planner: Planner, seeds: &[u64]) -> Result<PlanOut, EngineError> {
     let size = ctx.task.observation_spec().image_size;
-    let (kind, spec) = (ctx.task.score_kind(), ctx.task.action_spec());
     let o = ctx.policy.obs_horizon().max(1);
     let name = ctx.policy.name().to_string();
     let wm = if planner == Planner::WorldModel { ctx.wm } else { None };
     let view =
         if wm.is_some_and(|w| w.cfg.is_goal_free()) { ModelView::GoalFree } else { ModelView::Observation };
     let wm_k = wm.map_or(0, |w| w.cfg.unet.history);
-    let thr = kind.threshold();
-    let mut live = Vec::with_capacity(seeds.len());
-    for &seed in seeds {
-        let env = ctx.task.reset(seed)?;
-        let cannot = || EngineError::CannotPlan { task: ctx.task.name().to_string() };
-        let cost: Box<dyn harness::task::PlanCost> = match &ctx.judge {
-            // The judge's score of a frame, a pose judge's through the episode's own judge.
-            Some(j) => Box::new(harness::judge::JudgedCost(Box::new(harness::judge::Replaced {
-                scorer: j.clone(),
-                checks: env.judge(),
-            }))),
-            None => env.plan_cost().ok_or_else(cannot)?,
-        };
-        let first = env.observe();
-        let wm_first = if wm.is_some() { env.model_frame(view) } else { first.frame.clone() };
-        let raw = env.score();
-        live.push(Live {
-            seen: (0..o).map(|_| first.clone()).collect(),
-            wm_hist: (0..wm_k).map(|_| wm_first.clone()).collect(),
-            wm_first,
-            imagination: env.imagination(view),
-            cost,
-            row: PlanRow {
-                planner: planner.name().to_string(),
-                seed,
-                score: kind.reward(raw),
-                max_coverage: raw,
-                final_coverage: raw,
-                success: raw > thr,
-                steps: 0,
-                decisions: 0,
-                replaced: 0,
-                agreed: wm.map(|_| 0),
-                regret: wm.map(|_| 0.0),
-                regret_random: wm.map(|_| 0.0),
-            },
-            record: ctx.record.contains(&seed).then(Vec::new),
-            env,
-        });
-    }
+    let mut live = start_episodes(ctx, planner, seeds, (o, wm, view))?;
     let k = if planner == Planner::None { 1 } else { ctx.proposals.max(1) };
     let mut timing = Timing::default();
     let mut steps = 0;
@@ -132,24 +92,7 @@ pub fn run_batch(ctx: &PlanCtx, planner: Planner, seeds: &[u64]) -> Result<PlanO
     while steps < ctx.max_steps && !active.is_empty() {
         // Proposals, k per active episode, episode-major.
         let tp = Instant::now();
-        let obs: Vec<Observation> =
-            active.iter().flat_map(|&i| std::iter::repeat_n(obs_of(&live[i].seen, size), k)).collect();
-        let mut rngs: Vec<Rng> = active
-            .iter()
-            .flat_map(|&i| {
-                let seed = live[i].row.seed;
-                (0..k as u64).map(move |j| (seed, j))
-            })
-            .map(|(seed, j)| Rng::new(derive(ctx.master_seed, &[fnv1a(&name), seed, decision, j])))
-            .collect();
-        let mut chunks = ctx.policy.act(&obs, &mut rngs)?;
-        let need = ctx.imagine.max(ctx.execute);
-        if chunks.len() != obs.len() || chunks.iter().any(|c| c.len() < need) {
-            return Err(EngineError::ShortChunk { policy: name, need });
-        }
-        if k > 1 {
-            spread(&mut chunks, k, ctx.spread, &spec.low, &spec.high);
-        }
+        let chunks = propose(ctx, (&live, &active), k, decision, &name)?;
         timing.policy_s += tp.elapsed().as_secs_f64();
         let d = Decision { live: &live, active: &active, chunks: &chunks, k, index: decision };
         let sim_costs = if planner == Planner::None {
@@ -205,20 +148,7 @@ pub fn run_batch(ctx: &PlanCtx, planner: Planner, seeds: &[u64]) -> Result<PlanO
         // Execute the picks in the simulator.
         let ts = Instant::now();
         let e = ctx.execute.min(ctx.max_steps - steps);
-        let mut pos_of = vec![None; live.len()];
-        for (p, &i) in active.iter().enumerate() {
-            pos_of[i] = Some(p);
-        }
-        let results: Vec<Result<(), EngineError>> = ctx.pool.install(|| {
-            live.par_iter_mut()
-                .zip(pos_of.par_iter())
-                .map(|(l, p)| match p {
-                    Some(p) => execute(l, &chunks[p * k + picks[*p]][..e], o, (wm_k, view), kind),
-                    None => Ok(()),
-                })
-                .collect()
-        });
-        results.into_iter().collect::<Result<Vec<()>, _>>()?;
+        execute_picks(ctx, &mut live, &active, (&chunks, &picks, k), (e, o, wm_k, view))?;
         for (p, &i) in active.iter().enumerate() {
             let row = &mut live[i].row;
             row.decisions += 1;
@@ -231,6 +161,128 @@ pub fn run_batch(ctx: &PlanCtx, planner: Planner, seeds: &[u64]) -> Result<PlanO
     }
     let records = live.iter_mut().filter_map(|l| Some((l.row.seed, l.record.take()?))).collect();
     Ok(PlanOut { rows: live.into_iter().map(|l| l.row).collect(), timing, records })
+}
+
+/// The policy's proposals at `decision`: `k` per active episode, episode-major, each drawn
+/// from its own stream of (master seed, policy, seed, decision, proposal), spread apart
+/// when there are several.
+///
+/// # Errors
+/// A policy error, or chunks shorter than the planner imagines or executes.
+fn propose(
+    ctx: &PlanCtx,
+    (live, active): (&[Live], &[usize]),
+    k: usize,
+    decision: u64,
+    name: &str,
+) -> Result<Vec<ActionChunk>, EngineError> {
+    let (size, spec) = (ctx.task.observation_spec().image_size, ctx.task.action_spec());
+    let obs: Vec<Observation> =
+        active.iter().flat_map(|&i| std::iter::repeat_n(obs_of(&live[i].seen, size), k)).collect();
+    let mut rngs: Vec<Rng> = active
+        .iter()
+        .flat_map(|&i| {
+            let seed = live[i].row.seed;
+            (0..k as u64).map(move |j| (seed, j))
+        })
+        .map(|(seed, j)| Rng::new(derive(ctx.master_seed, &[fnv1a(name), seed, decision, j])))
+        .collect();
+    let mut chunks = ctx.policy.act(&obs, &mut rngs)?;
+    let need = ctx.imagine.max(ctx.execute);
+    if chunks.len() != obs.len() || chunks.iter().any(|c| c.len() < need) {
+        return Err(EngineError::ShortChunk { policy: name.to_string(), need });
+    }
+    if k > 1 {
+        spread(&mut chunks, k, ctx.spread, &spec.low, &spec.high);
+    }
+    Ok(chunks)
+}
+
+/// Every episode of `seeds` reset for `planner`: its cost (the judge's score or the task's
+/// own), its first observations (`o` of them) and world-model history (`wm`'s in `view`),
+/// and its row.
+///
+/// # Errors
+/// A seed whose reset fails, or a task without a plan cost and no judge.
+fn start_episodes(
+    ctx: &PlanCtx,
+    planner: Planner,
+    seeds: &[u64],
+    (o, wm, view): (usize, Option<&world_model::model::WorldModel>, ModelView),
+) -> Result<Vec<Live>, EngineError> {
+    let kind = ctx.task.score_kind();
+    let wm_k = wm.map_or(0, |w| w.cfg.unet.history);
+    let thr = kind.threshold();
+    let mut live = Vec::with_capacity(seeds.len());
+    for &seed in seeds {
+        let env = ctx.task.reset(seed)?;
+        let cannot = || EngineError::CannotPlan { task: ctx.task.name().to_string() };
+        let cost: Box<dyn harness::task::PlanCost> = match &ctx.judge {
+            // The judge's score of a frame, a pose judge's through the episode's own judge.
+            Some(j) => Box::new(harness::judge::JudgedCost(Box::new(harness::judge::Replaced {
+                scorer: j.clone(),
+                checks: env.judge(),
+            }))),
+            None => env.plan_cost().ok_or_else(cannot)?,
+        };
+        let first = env.observe();
+        let wm_first = if wm.is_some() { env.model_frame(view) } else { first.frame.clone() };
+        let raw = env.score();
+        live.push(Live {
+            seen: (0..o).map(|_| first.clone()).collect(),
+            wm_hist: (0..wm_k).map(|_| wm_first.clone()).collect(),
+            wm_first,
+            imagination: env.imagination(view),
+            cost,
+            row: PlanRow {
+                planner: planner.name().to_string(),
+                seed,
+                score: kind.reward(raw),
+                max_coverage: raw,
+                final_coverage: raw,
+                success: raw > thr,
+                steps: 0,
+                decisions: 0,
+                replaced: 0,
+                agreed: wm.map(|_| 0),
+                regret: wm.map(|_| 0.0),
+                regret_random: wm.map(|_| 0.0),
+            },
+            record: ctx.record.contains(&seed).then(Vec::new),
+            env,
+        });
+    }
+    Ok(live)
+}
+
+/// Executes each active episode's picked proposal (its first `e` actions) in the
+/// simulator, on the worker threads.
+///
+/// # Errors
+/// The first episode whose simulation fails.
+fn execute_picks(
+    ctx: &PlanCtx,
+    live: &mut [Live],
+    active: &[usize],
+    (chunks, picks, k): (&[ActionChunk], &[usize], usize),
+    (e, o, wm_k, view): (usize, usize, usize, ModelView),
+) -> Result<(), EngineError> {
+    let kind = ctx.task.score_kind();
+    let mut pos_of = vec![None; live.len()];
+    for (p, &i) in active.iter().enumerate() {
+        pos_of[i] = Some(p);
+    }
+    let results: Vec<Result<(), EngineError>> = ctx.pool.install(|| {
+        live.par_iter_mut()
+            .zip(pos_of.par_iter())
+            .map(|(l, p)| match p {
+                Some(p) => execute(l, &chunks[p * k + picks[*p]][..e], o, (wm_k, view), kind),
+                None => Ok(()),
+            })
+            .collect()
+    });
+    results.into_iter().collect::<Result<Vec<()>, _>>()?;
+    Ok(())
 }
 
 /// Executes `actions` in the real environment, updating the score and the histories
