@@ -26,6 +26,18 @@ fn world_model_loss_variants_train_and_warm_start() {
         run(&[&base[..], &["--out", out.to_str().unwrap()], &tiny[..], extra].concat())
     };
     let wm = |out: &Path, extra: &[&str]| wm_with(out, "16", extra);
+    // The same command twice trains the same model: the fresh weights follow from --seed
+    // (they once came from an unseeded draw, and two runs' first losses differed).
+    let logs = ["wm_a", "wm_b"].map(|name| {
+        let out = dir.path().join(name);
+        expect_code(&wm(&out, &["--steps", "2", "--objective", "mse"]), 0);
+        let log = std::fs::read_to_string(out.join("train_log.jsonl")).unwrap();
+        let mut rows: Vec<serde_json::Value> =
+            log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        rows.iter_mut().for_each(|r| _ = r.as_object_mut().unwrap().remove("elapsed_s"));
+        rows
+    });
+    assert_eq!(logs[0], logs[1]);
     let first = dir.path().join("wm_token");
     let (stdout, _) = expect_code(
         &wm(&first, &["--steps", "2", "--field", "token", "--motion-weighting", "--self-forcing", "2"]),

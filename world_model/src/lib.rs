@@ -8,7 +8,8 @@
 //!   autoencoder latents or pixels, the space the U-Net works in;
 //! - CPU inference on the [`kernels`] crate: [`cpu_decoder`], the decoder, and
 //!   [`unet::cpu`], the U-Net (burn's weights copied by [`nn::weights`]);
-//! - [`latents`], [`train_wm`]: latent windows and the U-Net trainer
+//! - [`latents`], [`train_wm`]: latent windows and the U-Net trainer (its loop's parts in
+//!   `train_wm_parts`: windows, warm start, checkpoints, one step's loss)
 //!   (drifting, MSE and diffusion objectives); [`context_noise`]: corrupted training histories;
 //! - [`model`]: a trained world model for inference; [`rollout`]: autoregressive
 //!   generation, chunk by chunk; [`eval`]: video-quality metrics;
@@ -32,6 +33,7 @@ pub mod motion;
 pub mod rollout;
 pub mod train_ae;
 pub mod train_wm;
+mod train_wm_parts;
 pub mod unet;
 
 pub use error::{SettingError, WorldModelError};

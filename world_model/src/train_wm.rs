@@ -16,21 +16,24 @@ use std::path::Path;
 
 use burn::module::Module;
 use burn::optim::{AdamWConfig, GradientsParams};
-use burn::tensor::{Device, Distribution, Tensor, TensorData};
+use burn::tensor::{Device, Tensor, TensorData};
 use harness::driver::{Clock, Driver};
 use harness::rng::Rng;
-use harness::seed::{derive, splitmix64};
+use harness::seed::derive;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::codec::FrameCodec;
-use crate::data::{EpisodeData, Split};
-use crate::drift_step::{DriftSetup, FieldKind, drifting_loss};
+use crate::data::EpisodeData;
+use crate::drift_step::FieldKind;
 use crate::error::WorldModelError;
-use crate::latents::{Latents, Window, window, window_starts};
-use crate::model::{Objective, Prediction, WorldModel, WorldModelConfig, alpha_bar};
+use crate::latents::{Latents, Window};
+use crate::model::{Objective, WorldModel, WorldModelConfig};
 use crate::motion::MotionWeighting;
 use crate::train_ae::{Configs, RunOptions, State, ckpt, run_configs};
+use crate::train_wm_parts::{
+    Targets, draw_windows, finite, objective_loss, resume, save_checkpoint, warm_start, windows_of,
+};
 use crate::unet::UNet;
 use nn::optim::{Ema, clip_global_norm, warmup_lr};
 
@@ -222,97 +225,43 @@ pub fn train_world_model(
     on_progress: &mut dyn FnMut(&WmProgress),
 ) -> Result<WmOutcome, WorldModelError> {
     let TrainingFrames { data, codec } = frames;
-    let inner = device.clone();
-    let device = inner.clone().autodiff();
+    let (inner, device) = (device.clone(), device.clone().autodiff());
     let fresh = Configs { model: model_cfg.clone(), train: cfg.clone() };
     let (model_cfg, cfg) = run_configs(out, fresh, run, |t: &mut WmTrainConfig| &mut t.steps)?;
     let objective = model_cfg.objective;
     let (k, f) = (model_cfg.unet.history, model_cfg.future);
     // Training windows hold every chunk of a self-forcing rollout; evaluation windows one.
     let chunks = if objective == Objective::Drifting { cfg.chunks.max(1) } else { 1 };
-    let starts = window_starts(data, Split::Train, f * chunks);
-    let held = window_starts(data, Split::HeldOut, f);
-    if starts.is_empty() || held.is_empty() {
-        return Err(WorldModelError::Data {
-            path: data.source.clone(),
-            message: format!("need episodes longer than {f} steps in both splits (every 10th is held out)"),
-        });
-    }
-    let scale = model_cfg.action_scale();
-    scale
-        .check(data.action_dim)
-        .map_err(|e| WorldModelError::Data { path: data.source.clone(), message: e.to_string() })?;
-    let stride = (held.len() / cfg.eval_windows.max(1)).max(1);
-    let eval_windows: Vec<Window> =
-        held.iter().step_by(stride).take(cfg.eval_windows).map(|&t| window(data, t, k, f, &scale)).collect();
+    let (starts, eval_windows, scale) = windows_of(data, &model_cfg, &cfg, chunks)?;
     let mut latents = Latents::new(data, model_cfg.latents.clone(), codec);
+    // The fresh weights are a function of the seed (a run's bytes follow from its command).
+    device.seed(derive(cfg.seed, &[u64::MAX - 1]));
     let mut unet: UNet = model_cfg.unet.init(&device);
     let mut optim = AdamWConfig::new().with_beta_1(0.9).with_beta_2(0.95).with_weight_decay(0.01).init();
     let mut ema = Ema::new(&unet, cfg.ema_decay);
     let mut state = State { step: 0, elapsed_s: 0.0 };
-    let paths = ["model.bpk", "ema.bpk", "optimizer.bpk", "state.json"].map(|p| out.join(p));
     if let Some(dir) = cfg.init_from.as_ref().filter(|_| !run.resume) {
-        // Warm start: both the trained and the EMA weights start from the other run's EMA;
-        // a run may add action maps or a timestep embedding (new layers with zero output).
-        let source = WorldModelConfig::read(dir)?.unet;
-        if !model_cfg.unet.can_start_from(&source) {
-            return Err(ckpt(&dir.join("config.json"), "its U-Net config differs from this run's"));
-        }
-        let path = dir.join("ema.bpk");
-        unet = source.init(&device).try_load_file(&path).map_err(|e| ckpt(&path, e))?;
-        if model_cfg.unet.uses_action_maps() {
-            unet = unet.with_action_maps();
-        }
-        if model_cfg.unet.uses_anchor() {
-            unet = unet.with_anchor();
-        }
-        if model_cfg.unet.timestep_embedding {
-            unet = unet.with_timestep_embedding(&device);
-        }
-        if model_cfg.unet.uses_accentuation() {
-            unet = unet.with_accentuation(&device);
-        }
+        unet = warm_start(dir, &model_cfg, &device)?;
         ema.module = unet.valid(); // the same draw of any new (zero-output) layers
     }
     if run.resume {
-        harness::checkpoint::recover(out, harness::checkpoint::MAIN).map_err(|e| ckpt(&e.path, e.message))?;
-        unet = unet.try_load_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;
-        ema.module = model_cfg.unet.init(&inner).try_load_file(&paths[1]).map_err(|e| ckpt(&paths[1], e))?;
-        optim = optim.load(&paths[2]).map_err(|e| ckpt(&paths[2], e))?;
-        state = harness::driver::read_state(&paths[3]).map_err(|e| ckpt(&e.path, e.message))?;
+        (unet, ema.module, optim, state) = resume(out, (unet, model_cfg.unet.init(&inner), optim))?;
     }
     // Noise continues from a seed of (seed, step), so a resumed run draws fresh noise.
     device.seed(derive(cfg.seed, &[u64::MAX, state.step]));
-    // The four files are one checkpoint: staged, then committed by a manifest.
-    let save = |unet: &UNet, ema: &UNet, optim: &burn::optim::ModuleOptimizer, state: &State| {
-        let fail = |e: harness::runfile::RunFileError| ckpt(&e.path, e.message);
-        let mut stage = harness::checkpoint::begin(out, harness::checkpoint::MAIN).map_err(fail)?;
-        let p = ["model.bpk", "ema.bpk", "optimizer.bpk", "state.json"].map(|n| stage.path(n));
-        unet.clone().save_file(&p[0]).map_err(|e| ckpt(&p[0], e))?;
-        ema.clone().save_file(&p[1]).map_err(|e| ckpt(&p[1], e))?;
-        optim.save(&p[2]).map_err(|e| ckpt(&p[2], e))?;
-        harness::driver::write_state(&p[3], state).map_err(fail)?;
-        stage.commit().map_err(fail)
-    };
-    let clock = Clock::start(run.max_minutes);
-    let mut driver = Driver::start(&out.join("train_log.jsonl"), "step", state.step, state.elapsed_s, clock)
+    let log = out.join("train_log.jsonl");
+    let mut driver = Driver::start(&log, "step", state.step, state.elapsed_s, Clock::start(run.max_minutes))
         .map_err(|e| ckpt(&e.path, e.message))?;
     let eval_model =
         |ema: &UNet| WorldModel::from_parts(model_cfg.clone(), codec.clone(), ema.clone(), &inner);
     let mut last_eval = None;
-    let (c, s) = (model_cfg.latents.channels, model_cfg.latents.size);
     while state.step < cfg.steps {
         if driver.should_stop() {
             break;
         }
         let step = state.step;
         let mut rng = derive(cfg.seed, &[step]);
-        let windows: Vec<Window> = (0..cfg.contexts)
-            .map(|_| {
-                rng = splitmix64(rng);
-                window(data, starts[(rng % starts.len() as u64) as usize], k, f * chunks, &scale)
-            })
-            .collect();
+        let windows = draw_windows(data, &starts, (cfg.contexts, k, f * chunks), &scale, &mut rng);
         let n = if objective == Objective::Drifting { cfg.samples } else { 1 };
         let Stacked { hist: hist_idx, targets: target_idx, anchors, act } = stack(&windows, n, &device);
         for idx in [&hist_idx, &target_idx, &anchors] {
@@ -322,66 +271,14 @@ pub fn train_world_model(
         // Context noise corrupts the history only: the anchor is always a real frame.
         let hist = crate::context_noise::corrupt(hist, cfg.context_noise, derive(cfg.seed, &[step, 7]));
         let anchor = model_cfg.unet.uses_anchor().then(|| anchor_tensor(&latents, &anchors, &device)); // [b n, C, s, s]
-        let b = windows.len();
-        let mut loss_r = Vec::new();
-        let loss = match objective {
-            Objective::Drifting => {
-                let setup = DriftSetup {
-                    field: cfg.field,
-                    temperatures: &cfg.temperatures,
-                    motion: cfg.motion.as_ref(),
-                    chunks,
-                    accentuation: model_cfg.unet.uses_accentuation(),
-                };
-                let (loss, r) = drifting_loss(&unet, &latents, &windows, hist, anchor, act, &setup);
-                loss_r = r;
-                loss
-            }
-            Objective::Mse => {
-                let noise = Tensor::<5>::random([b, c, f, s, s], Distribution::Normal(0.0, 1.0), &device);
-                let target = latents.tensor(&target_idx, f, &device).swap_dims(1, 2); // [b, C, F, s, s]
-                (unet.forward(noise, hist, act, anchor, None) - target).powf_scalar(2.0).mean()
-            }
-            Objective::Diffusion => {
-                let x0 = latents.tensor(&target_idx, f, &device).swap_dims(1, 2); // [b, C, F, s, s]
-                let eps = Tensor::<5>::random([b, c, f, s, s], Distribution::Normal(0.0, 1.0), &device);
-                let t: Vec<f32> = (0..b)
-                    .map(|_| {
-                        rng = splitmix64(rng);
-                        (rng >> 11) as f32 / (1u64 << 53) as f32
-                    })
-                    .collect();
-                let coef = |g: &dyn Fn(f64) -> f64| {
-                    let v: Vec<f32> = t.iter().map(|&t| g(alpha_bar(f64::from(t))) as f32).collect();
-                    Tensor::<1>::from_floats(v.as_slice(), &device).reshape([b, 1, 1, 1, 1])
-                };
-                let (sa, sb) = (coef(&|a| a.sqrt()), coef(&|a| (1.0 - a).sqrt()));
-                let xt = x0.clone() * sa.clone() + eps.clone() * sb.clone();
-                let target = match model_cfg.prediction.unwrap_or_default() {
-                    Prediction::V => eps * sa - x0 * sb,
-                    Prediction::X0 => x0,
-                };
-                let tt = Tensor::<1>::from_floats(t.as_slice(), &device);
-                (unet.forward(xt, hist, act, anchor, Some(tt)) - target).powf_scalar(2.0).mean()
-            }
-        };
+        let targets = Targets { latents: &latents, windows: &windows, indices: &target_idx, chunks };
+        let (loss, loss_r) =
+            objective_loss(&unet, (&model_cfg, &cfg), (hist, anchor, act), &targets, &mut rng);
         let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
-        if !loss_value.is_finite() {
-            return Err(WorldModelError::NonFinite {
-                what: format!("{} loss", objective.name()),
-                step,
-                path: out.to_path_buf(),
-            });
-        }
+        finite(loss_value, || format!("{} loss", objective.name()), (step, out))?;
         let mut grads = GradientsParams::from_grads(loss.backward(), &unet);
         let grad_norm = clip_global_norm(&unet, &mut grads, cfg.clip_norm);
-        if !grad_norm.is_finite() {
-            return Err(WorldModelError::NonFinite {
-                what: "gradient norm".into(),
-                step,
-                path: out.to_path_buf(),
-            });
-        }
+        finite(grad_norm, || "gradient norm".into(), (step, out))?;
         let lr = warmup_lr(step, cfg.lr, cfg.warmup);
         unet = optim.step(lr, unet, grads);
         ema.update(&unet);
@@ -389,26 +286,15 @@ pub fn train_world_model(
         state.elapsed_s = driver.elapsed_s();
         if state.step.is_multiple_of(cfg.eval_every) || state.step == cfg.steps {
             let mse = evaluate(&eval_model(&ema.module), &mut latents, codec, &eval_windows);
-            if !mse.is_finite() {
-                return Err(WorldModelError::NonFinite {
-                    what: "generated frames".into(),
-                    step,
-                    path: out.to_path_buf(),
-                });
-            }
+            finite(mse, || "generated frames".into(), (step, out))?;
             last_eval = Some(mse);
-            tracing::info!(
-                step = state.step,
-                loss = loss_value,
-                eval_mse = mse,
-                "world-model held-out evaluation"
-            );
+            tracing::info!(step = state.step, loss = loss_value, eval_mse = mse, "world-model held-out eval");
         }
         let line = json!({"step": state.step, "loss": loss_value, "loss_r": loss_r, "grad_norm": grad_norm,
             "lr": lr, "eval_mse": last_eval, "elapsed_s": state.elapsed_s});
         driver.log(&line).map_err(|e| ckpt(&e.path, e.message))?;
         if state.step.is_multiple_of(cfg.checkpoint_every) {
-            save(&unet, &ema.module, &optim, &state)?;
+            save_checkpoint(out, (&unet, &ema.module, &optim), &state)?;
         }
         on_progress(&WmProgress {
             step: state.step,
@@ -418,7 +304,7 @@ pub fn train_world_model(
             eval_mse: last_eval,
         });
     }
-    save(&unet, &ema.module, &optim, &state)?;
+    save_checkpoint(out, (&unet, &ema.module, &optim), &state)?;
     let eval_mse = evaluate(&eval_model(&ema.module), &mut latents, codec, &eval_windows);
     Ok(WmOutcome {
         step: state.step,
