@@ -241,13 +241,8 @@ pub fn train_autoencoder(
     }
     let mut optim = AdamWConfig::new().with_beta_1(0.9).with_beta_2(0.95).with_weight_decay(0.01).init();
     let mut state = State { step: 0, elapsed_s: 0.0 };
-    let (model_path, optim_path, state_path) =
-        (out.join("model.bpk"), out.join("optimizer.bpk"), out.join("state.json"));
     if resume {
-        harness::checkpoint::recover(out, harness::checkpoint::MAIN).map_err(|e| ckpt(&e.path, e.message))?;
-        model = model.try_load_file(&model_path).map_err(|e| ckpt(&model_path, e))?;
-        optim = optim.load(&optim_path).map_err(|e| ckpt(&optim_path, e))?;
-        state = harness::driver::read_state(&state_path).map_err(|e| ckpt(&e.path, e.message))?;
+        (model, optim, state) = resume_from(out, model, optim)?;
     }
     let train_idx = data.frame_indices(Split::Train);
     let held = data.frame_indices(Split::HeldOut);
@@ -263,19 +258,6 @@ pub fn train_autoencoder(
     let mut driver = Driver::start(&out.join("train_log.jsonl"), "step", state.step, state.elapsed_s, clock)
         .map_err(|e| ckpt(&e.path, e.message))?;
     let mut last_psnr = None;
-    let save = |model: &Autoencoder,
-                optim: &burn::optim::ModuleOptimizer,
-                state: &State|
-     -> Result<(), WorldModelError> {
-        // The three files are one checkpoint: staged, then committed by a manifest.
-        let fail = |e: harness::runfile::RunFileError| ckpt(&e.path, e.message);
-        let mut stage = harness::checkpoint::begin(out, harness::checkpoint::MAIN).map_err(fail)?;
-        let p = ["model.bpk", "optimizer.bpk", "state.json"].map(|n| stage.path(n));
-        model.clone().save_file(&p[0]).map_err(|e| ckpt(&p[0], e))?;
-        optim.save(&p[1]).map_err(|e| ckpt(&p[1], e))?;
-        harness::driver::write_state(&p[2], state).map_err(fail)?;
-        stage.commit().map_err(fail)
-    };
     while state.step < cfg.steps {
         if driver.should_stop() {
             break;
@@ -299,13 +281,7 @@ pub fn train_autoencoder(
         }; // [b, 3, 96, 96]
         let loss = (recon - x).powf_scalar(2.0).mean();
         let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
-        if !loss_value.is_finite() {
-            return Err(WorldModelError::NonFinite {
-                what: "autoencoder loss".into(),
-                step,
-                path: out.to_path_buf(),
-            });
-        }
+        crate::train_wm_parts::finite(loss_value, || "autoencoder loss".into(), (step, out))?;
         let grads = GradientsParams::from_grads(loss.backward(), &model);
         model = optim.step(lr, model, grads);
         state.step += 1;
@@ -313,22 +289,16 @@ pub fn train_autoencoder(
         if state.step.is_multiple_of(cfg.eval_every) || state.step == cfg.steps {
             let (p, mse, _) = evaluate(&model, data, &eval_idx, &device);
             last_psnr = Some(p);
-            tracing::info!(
-                step = state.step,
-                loss = loss_value,
-                psnr = p,
-                mse,
-                "autoencoder held-out evaluation"
-            );
+            tracing::info!(step = state.step, loss = loss_value, psnr = p, mse, "autoencoder held-out eval");
         }
         let line = json!({"step": state.step, "loss": loss_value, "lr": lr, "psnr": last_psnr, "elapsed_s": state.elapsed_s});
         driver.log(&line).map_err(|e| ckpt(&e.path, e.message))?;
         if state.step.is_multiple_of(cfg.checkpoint_every) {
-            save(&model, &optim, &state)?;
+            save_checkpoint(out, &model, &optim, &state)?;
         }
         on_progress(&AeProgress { step: state.step, total: cfg.steps, loss: loss_value, psnr: last_psnr });
     }
-    save(&model, &optim, &state)?;
+    save_checkpoint(out, &model, &optim, &state)?;
     let (psnr_v, mse, samples) = evaluate(&model, data, &eval_idx, &device);
     Ok(AeOutcome {
         step: state.step,
@@ -339,4 +309,43 @@ pub fn train_autoencoder(
         samples,
         elapsed_s: state.elapsed_s,
     })
+}
+
+/// A resumed run's checkpoint in `out`, recovered first if a save was cut short: the weights
+/// (loaded into `model`), the optimiser and the state.
+///
+/// # Errors
+/// An unreadable checkpoint file, naming it.
+fn resume_from(
+    out: &Path,
+    model: Autoencoder,
+    optim: burn::optim::ModuleOptimizer,
+) -> Result<(Autoencoder, burn::optim::ModuleOptimizer, State), WorldModelError> {
+    let (model_path, optim_path, state_path) =
+        (out.join("model.bpk"), out.join("optimizer.bpk"), out.join("state.json"));
+    harness::checkpoint::recover(out, harness::checkpoint::MAIN).map_err(|e| ckpt(&e.path, e.message))?;
+    let model = model.try_load_file(&model_path).map_err(|e| ckpt(&model_path, e))?;
+    let optim = optim.load(&optim_path).map_err(|e| ckpt(&optim_path, e))?;
+    let state = harness::driver::read_state(&state_path).map_err(|e| ckpt(&e.path, e.message))?;
+    Ok((model, optim, state))
+}
+
+/// Writes the weights, the optimiser and `state` as one checkpoint of `out`: staged, then
+/// committed by a manifest.
+///
+/// # Errors
+/// A file that cannot be written, naming it.
+fn save_checkpoint(
+    out: &Path,
+    model: &Autoencoder,
+    optim: &burn::optim::ModuleOptimizer,
+    state: &State,
+) -> Result<(), WorldModelError> {
+    let fail = |e: harness::runfile::RunFileError| ckpt(&e.path, e.message);
+    let mut stage = harness::checkpoint::begin(out, harness::checkpoint::MAIN).map_err(fail)?;
+    let p = ["model.bpk", "optimizer.bpk", "state.json"].map(|n| stage.path(n));
+    model.clone().save_file(&p[0]).map_err(|e| ckpt(&p[0], e))?;
+    optim.save(&p[1]).map_err(|e| ckpt(&p[1], e))?;
+    harness::driver::write_state(&p[2], state).map_err(fail)?;
+    stage.commit().map_err(fail)
 }
