@@ -87,36 +87,8 @@ impl Demos {
     ) -> Result<Self, DataError> {
         let err = |m: String| DataError { path: path.to_path_buf(), message: m };
         let r = ReplayReader::open(path).map_err(|e| err(e.to_string()))?;
-        let shape = r.img.shape();
-        if shape[1] != size || shape[2] != size {
-            return Err(err(format!("images are {}x{}, the policy takes {size}x{size}", shape[1], shape[2])));
-        }
-        let scenario =
-            harness::replay::origin::scenario_in(path, &r.attrs).map_err(|e| err(e.to_string()))?;
-        if scenario != task.name() {
-            return Err(err(format!("a {scenario} dataset, not {}", task.name())));
-        }
-        let (action_dim, sdim) = (r.action.row_len(), r.state.row_len());
-        if action_dim != task.action_spec().dim {
-            return Err(err(format!(
-                "data/action has {action_dim} columns, {} actions have {}",
-                task.name(),
-                task.action_spec().dim
-            )));
-        }
-        let poses = task.pose_labels();
-        if let Some(p) = poses.filter(|p| sdim < p.columns_needed()) {
-            return Err(err(format!(
-                "data/state has {sdim} columns; {}'s poses are columns {:?} (object) and {:?} (goal)",
-                task.name(),
-                p.object,
-                p.goal
-            )));
-        }
-        let named = task.frame_labels();
-        if let Some((c, name)) = named.iter().find(|(c, _)| *c >= sdim) {
-            return Err(err(format!("data/state has {sdim} columns, label {name} is column {c}")));
-        }
+        let (action_dim, sdim) = check_layout(path, &r, task, size)?;
+        let (poses, named) = (task.pose_labels(), task.frame_labels());
         let proprio_dim = task.observation_spec().proprio.len();
         let behaviours =
             harness::replay::origin::episodes_in(path, &r.attrs).map_err(|e| err(e.to_string()))?;
@@ -237,6 +209,51 @@ fn min_max(rows: &[f32], dim: usize) -> Range {
         }
     }
     r
+}
+
+/// Checks that the dataset at `path` (opened as `r`) is `task`'s, with `size`² frames, the
+/// task's action width and the state columns its labels name; returns the action and state
+/// widths.
+///
+/// # Errors
+/// [`DataError`] naming the dataset and what does not fit.
+fn check_layout(
+    path: &Path,
+    r: &ReplayReader,
+    task: &dyn Task,
+    size: usize,
+) -> Result<(usize, usize), DataError> {
+    let err = |m: String| DataError { path: path.to_path_buf(), message: m };
+    let shape = r.img.shape();
+    if shape[1] != size || shape[2] != size {
+        return Err(err(format!("images are {}x{}, the policy takes {size}x{size}", shape[1], shape[2])));
+    }
+    let scenario = harness::replay::origin::scenario_in(path, &r.attrs).map_err(|e| err(e.to_string()))?;
+    if scenario != task.name() {
+        return Err(err(format!("a {scenario} dataset, not {}", task.name())));
+    }
+    let (action_dim, sdim) = (r.action.row_len(), r.state.row_len());
+    if action_dim != task.action_spec().dim {
+        return Err(err(format!(
+            "data/action has {action_dim} columns, {} actions have {}",
+            task.name(),
+            task.action_spec().dim
+        )));
+    }
+    let poses = task.pose_labels();
+    if let Some(p) = poses.filter(|p| sdim < p.columns_needed()) {
+        return Err(err(format!(
+            "data/state has {sdim} columns; {}'s poses are columns {:?} (object) and {:?} (goal)",
+            task.name(),
+            p.object,
+            p.goal
+        )));
+    }
+    let named = task.frame_labels();
+    if let Some((c, name)) = named.iter().find(|(c, _)| *c >= sdim) {
+        return Err(err(format!("data/state has {sdim} columns, label {name} is column {c}")));
+    }
+    Ok((action_dim, sdim))
 }
 
 #[cfg(test)]

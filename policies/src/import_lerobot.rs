@@ -177,41 +177,54 @@ fn statistics(
     Ok((image_norm, norm, src.path().to_path_buf()))
 }
 
+/// A LeRobot diffusion `config.json`.
+///
+/// # Errors
+/// An unreadable file, or one that is not a LeRobot diffusion config.
+fn read_config(path: &Path) -> Result<LeRobotConfig, ImportError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ImportError::Io {
+        path: path.to_path_buf(),
+        key: "(the file)".into(),
+        source,
+    })?;
+    serde_json::from_str(&text).map_err(|e| ImportError::Layout {
+        path: path.to_path_buf(),
+        what: format!("not a LeRobot diffusion config: {e}"),
+    })
+}
+
+/// The ResNet's base width, from its first convolution's weight (a multiple of 16 under
+/// GroupNorm's 16 groups).
+///
+/// # Errors
+/// A missing first convolution, or one of another shape.
+fn backbone_width(model: &SafeSource, group_norm: bool) -> Result<usize, ImportError> {
+    match model.shapes().get("diffusion.rgb_encoder.backbone.0.weight").map(Vec::as_slice) {
+        Some(&[b, 3, 7, 7]) if b > 0 && (b % 16 == 0 || !group_norm) => Ok(b),
+        Some(s) => Err(ImportError::Shape {
+            path: model.path().into(),
+            key: "diffusion.rgb_encoder.backbone.0.weight".into(),
+            found: s.to_vec(),
+            expected: vec![64, 3, 7, 7],
+        }),
+        None => Err(ImportError::Missing {
+            path: model.path().into(),
+            key: "diffusion.rgb_encoder.backbone.0.weight".into(),
+        }),
+    }
+}
+
 /// Imports a LeRobot `pretrained_model/` folder.
 ///
 /// # Errors
 /// [`ImportError`] naming the file and the `config.json` field or key at fault.
 pub fn import(dir: &Path, device: &Device) -> Result<LeRobotPolicy, ImportError> {
     let cfg_path = dir.join("config.json");
-    let text = std::fs::read_to_string(&cfg_path).map_err(|source| ImportError::Io {
-        path: cfg_path.clone(),
-        key: "(the file)".into(),
-        source,
-    })?;
-    let c: LeRobotConfig = serde_json::from_str(&text).map_err(|e| ImportError::Layout {
-        path: cfg_path.clone(),
-        what: format!("not a LeRobot diffusion config: {e}"),
-    })?;
+    let c = read_config(&cfg_path)?;
     check(&c, &cfg_path)?;
     let (image, shape, state, action) = features(&c, &cfg_path)?;
     let model = SafeSource::open(&dir.join("model.safetensors"))?;
-    let base = match model.shapes().get("diffusion.rgb_encoder.backbone.0.weight").map(Vec::as_slice) {
-        Some(&[b, 3, 7, 7]) if b > 0 && (b % 16 == 0 || !c.use_group_norm) => b,
-        Some(s) => {
-            return Err(ImportError::Shape {
-                path: model.path().into(),
-                key: "diffusion.rgb_encoder.backbone.0.weight".into(),
-                found: s.to_vec(),
-                expected: vec![64, 3, 7, 7],
-            });
-        }
-        None => {
-            return Err(ImportError::Missing {
-                path: model.path().into(),
-                key: "diffusion.rgb_encoder.backbone.0.weight".into(),
-            });
-        }
-    };
+    let base = backbone_width(&model, c.use_group_norm)?;
     let k = c.spatial_softmax_num_keypoints;
     let (image_norm, norm, stats_from) = statistics(dir, &model, &image)?;
     if norm.agent_pos.dim() != state || norm.action.dim() != action {

@@ -247,6 +247,67 @@ pub fn declared(path: &Path) -> Result<Declared, ImportError> {
     Ok(Declared { low_dim: keys(&meta.config, path)?.0, env_name: meta.env_name })
 }
 
+/// The side of the frames the checkpoint was trained on, with its crop checked to start
+/// where torchvision's does (robomimic's eval-time crop starts at ⌊margin / 2⌋).
+///
+/// # Errors
+/// A frame shape that is not square RGB, or a crop that starts elsewhere.
+fn frame_side(meta: &Meta, crop: Option<usize>, path: &Path) -> Result<usize, ImportError> {
+    let side = match meta.shapes.get(IMAGE_KEY).map(Vec::as_slice) {
+        Some(&[3, hh, ww]) if hh == ww && hh > 0 => hh,
+        other => {
+            return Err(layout(
+                path,
+                format!("`shape_metadata.all_shapes.{IMAGE_KEY}` is {other:?}, expected [3, N, N]"),
+            ));
+        }
+    };
+    if let Some(c) = crop.filter(|&c| c > side || centre_offset(side - c) != (side - c) / 2) {
+        return Err(layout(
+            path,
+            format!(
+                "`config` crop {c} of {side}x{side} frames: a crop starting at another pixel than torchvision's is not supported"
+            ),
+        ));
+    }
+    Ok(side)
+}
+
+/// The state and action normalisation ranges, checked against the U-Net's widths
+/// (`state`, `action`); actions without statistics are taken as [-1, 1].
+///
+/// # Errors
+/// Ranges of another width than the U-Net's.
+fn normalisation_of(
+    meta: &Meta,
+    low: &[String],
+    (state, action): (usize, usize),
+    path: &Path,
+) -> Result<Normalisation, ImportError> {
+    let state_norm = state_range(meta, low, path)?;
+    if state_norm.dim() != state {
+        return Err(layout(
+            path,
+            format!(
+                "the low-dimensional keys {low:?} have {} entries, the U-Net reads {state}",
+                state_norm.dim()
+            ),
+        ));
+    }
+    let action_norm =
+        meta.action.clone().unwrap_or(Range { min: vec![-1.0; action], max: vec![1.0; action] });
+    if action_norm.dim() != action {
+        return Err(layout(
+            path,
+            format!(
+                "`action_normalization_stats` has {} entries, the U-Net acts in {action}",
+                action_norm.dim()
+            ),
+        ));
+    }
+    Ok(Normalisation { agent_pos: state_norm, action: action_norm })
+}
+
 /// Imports a robomimic diffusion-policy checkpoint for a scenario rendering `scene_size`² frames.
 ///
 /// # Errors
@@ -264,24 +325,7 @@ pub fn import(
     let (low, image_last) = keys(c, path)?;
     let (sampler, prediction, train_steps, inference_steps) = sampler(c, path)?;
     let crop = crop(c, path)?;
-    let side = match meta.shapes.get(IMAGE_KEY).map(Vec::as_slice) {
-        Some(&[3, hh, ww]) if hh == ww && hh > 0 => hh,
-        other => {
-            return Err(layout(
-                path,
-                format!("`shape_metadata.all_shapes.{IMAGE_KEY}` is {other:?}, expected [3, N, N]"),
-            ));
-        }
-    };
-    // robomimic's eval-time crop starts at ⌊margin / 2⌋; the networks crop as torchvision does.
-    if let Some(c) = crop.filter(|&c| c > side || centre_offset(side - c) != (side - c) / 2) {
-        return Err(layout(
-            path,
-            format!(
-                "`config` crop {c} of {side}x{side} frames: a crop starting at another pixel than torchvision's is not supported"
-            ),
-        ));
-    }
+    let side = frame_side(&meta, crop, path)?;
     let use_ema = weights == RobomimicWeights::Ema && c.algo.ema.enabled;
     let (prefix, which) = if use_ema { ("ema.", "model.ema") } else { ("nets.", "model.nets") };
     let src = Source::open(path, Some("model"), prefix)?;
@@ -313,27 +357,7 @@ pub fn import(
     let state = (cond % o == 0).then(|| (cond / o).checked_sub(features)).flatten().ok_or_else(|| {
         layout(path, format!("conditioning of {cond} entries is not {o} frames of {features} features plus low-dimensional keys"))
     })?;
-    let state_norm = state_range(&meta, &low, path)?;
-    if state_norm.dim() != state {
-        return Err(layout(
-            path,
-            format!(
-                "the low-dimensional keys {low:?} have {} entries, the U-Net reads {state}",
-                state_norm.dim()
-            ),
-        ));
-    }
-    let action_norm =
-        meta.action.clone().unwrap_or(Range { min: vec![-1.0; action], max: vec![1.0; action] });
-    if action_norm.dim() != action {
-        return Err(layout(
-            path,
-            format!(
-                "`action_normalization_stats` has {} entries, the U-Net acts in {action}",
-                action_norm.dim()
-            ),
-        ));
-    }
+    let norm = normalisation_of(&meta, &low, (state, action), path)?;
     let cfg = ImportedConfig {
         resnet_base: base,
         backbone_norm: BackboneNorm::Group,
@@ -383,7 +407,7 @@ pub fn import(
     Ok(RobomimicPolicy {
         net,
         cfg,
-        norm: Normalisation { agent_pos: state_norm, action: action_norm },
+        norm,
         tensors,
         weights: which,
         epoch: meta.epoch,
