@@ -201,13 +201,7 @@ pub fn pretrain_encoder(
     let files = ["encoder.bpk", "encoder_optimizer.bpk", "encoder_state.json"].map(|f| dir.join(f));
     let err = |path: &Path, e: String| PolicyLoadError::new(path, e);
     let device = inner.clone().autodiff();
-    let (train, test): (Vec<usize>, Vec<usize>) = {
-        let mut sets = (Vec::new(), Vec::new());
-        for (e, r) in demos.episodes.iter().enumerate() {
-            if held_out(e) { sets.1.extend(r.clone()) } else { sets.0.extend(r.clone()) }
-        }
-        sets
-    };
+    let (train, test) = split_steps(demos);
     if train.is_empty() {
         return Err(err(dir, "encoder pre-training: no training episodes (every 20th is held out)".into()));
     }
@@ -237,14 +231,7 @@ pub fn pretrain_encoder(
     )
     .map_err(|e| err(&e.path, e.message))?;
     let save = |probe: &PoseProbe, optim: &burn::optim::ModuleOptimizer, state: &PretrainState| {
-        // The three files are one checkpoint: staged, then committed by a manifest.
-        let fail = |e: harness::runfile::RunFileError| err(&e.path, e.message);
-        let mut stage = harness::checkpoint::begin(dir, harness::checkpoint::ENCODER).map_err(fail)?;
-        let p = ["encoder.bpk", "encoder_optimizer.bpk", "encoder_state.json"].map(|n| stage.path(n));
-        probe.clone().save_file(&p[0]).map_err(|e| err(&p[0], e.to_string()))?;
-        optim.save(&p[1]).map_err(|e| err(&p[1], e.to_string()))?;
-        write_state(&p[2], state).map_err(fail)?;
-        stage.commit().map_err(fail)
+        save_encoder(dir, probe, optim, state)
     };
     let s = cfg.image_size;
     while state.step < p.steps {
@@ -298,6 +285,36 @@ pub fn pretrain_encoder(
     }
     save(&probe, &optim, &state)?;
     Ok((state, Some(probe)))
+}
+
+/// The demonstrations' steps in training episodes and in held-out ones (every 20th).
+fn split_steps(demos: &Demos) -> (Vec<usize>, Vec<usize>) {
+    let mut sets = (Vec::new(), Vec::new());
+    for (e, r) in demos.episodes.iter().enumerate() {
+        if held_out(e) { sets.1.extend(r.clone()) } else { sets.0.extend(r.clone()) }
+    }
+    sets
+}
+
+/// Writes the probe, its optimiser and `state` as the encoder stage's checkpoint in `dir`:
+/// the three files staged, then committed by a manifest.
+///
+/// # Errors
+/// A file that cannot be written, naming it.
+fn save_encoder(
+    dir: &Path,
+    probe: &PoseProbe,
+    optim: &burn::optim::ModuleOptimizer,
+    state: &PretrainState,
+) -> Result<(), PolicyLoadError> {
+    let err = |path: &Path, e: String| PolicyLoadError::new(path, e);
+    let fail = |e: harness::runfile::RunFileError| err(&e.path, e.message);
+    let mut stage = harness::checkpoint::begin(dir, harness::checkpoint::ENCODER).map_err(fail)?;
+    let p = ["encoder.bpk", "encoder_optimizer.bpk", "encoder_state.json"].map(|n| stage.path(n));
+    probe.clone().save_file(&p[0]).map_err(|e| err(&p[0], e.to_string()))?;
+    optim.save(&p[1]).map_err(|e| err(&p[1], e.to_string()))?;
+    write_state(&p[2], state).map_err(fail)?;
+    stage.commit().map_err(fail)
 }
 
 /// Up to 512 evenly spaced steps of `steps`, and the probe's outputs on their frames
