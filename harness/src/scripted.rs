@@ -111,6 +111,20 @@ pub struct RecordedMismatch {
 }
 
 impl Recorded<'_> {
+    /// Checks that there is a frame (at least), a state and a raw score for every action.
+    ///
+    /// # Errors
+    /// The counts, when they do not match.
+    pub fn check_counts(&self) -> Result<(), RecordedMismatch> {
+        let n = self.actions.len();
+        if self.frames.len() < n || self.states.len() != n || self.raw.len() != n {
+            let (f, s, r) = (self.frames.len(), self.states.len(), self.raw.len());
+            let message = format!("{f} frames, {s} states, {r} scores for {n} actions");
+            return Err(RecordedMismatch { seed: self.seed, message });
+        }
+        Ok(())
+    }
+
     /// The arrays of a layout that stores each step's frame (`size`² RGB), state (`columns`
     /// entries) and action (`actions` entries) as recorded, and one extra per step: 1 where
     /// the raw score after the action is above `threshold` (success), else 0.
@@ -123,12 +137,8 @@ impl Recorded<'_> {
         (size, columns, actions): (usize, usize, usize),
         threshold: f64,
     ) -> Result<EpisodeArrays, RecordedMismatch> {
-        let n = self.actions.len();
+        self.check_counts()?;
         let bad = |message: String| RecordedMismatch { seed: self.seed, message };
-        if self.frames.len() < n || self.states.len() != n || self.raw.len() != n {
-            let (f, s, r) = (self.frames.len(), self.states.len(), self.raw.len());
-            return Err(bad(format!("{f} frames, {s} states, {r} scores for {n} actions")));
-        }
         let mut arrays = EpisodeArrays::default();
         for (j, ((f, s), a)) in self.frames.iter().zip(self.states).zip(self.actions).enumerate() {
             if f.len() != size * size * 3 || s.len() != columns || a.len() != actions {

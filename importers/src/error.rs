@@ -2,8 +2,6 @@
 //! importers and loaders it drives (each error kept whole, with its source), and the context
 //! a step adds ("--checkpoint FILE", "checking the imported policy") around one of them.
 
-use std::path::PathBuf;
-
 /// A failed import.
 #[derive(Debug, thiserror::Error)]
 pub enum ImportCmdError {
@@ -19,14 +17,9 @@ pub enum ImportCmdError {
         #[source]
         source: Box<ImportCmdError>,
     },
-    /// A JSON file that cannot be written.
-    #[error("{}: {source}", path.display())]
-    Json {
-        /// The file.
-        path: PathBuf,
-        /// The encoder's error.
-        source: serde_json::Error,
-    },
+    /// A small JSON file that cannot be read or written.
+    #[error(transparent)]
+    Json(#[from] runner::command::JsonFileError),
     /// A value that cannot be written as JSON.
     #[error("encoding JSON: {0}")]
     Encode(#[from] serde_json::Error),

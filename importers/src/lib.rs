@@ -11,7 +11,6 @@
 //! handing over what it knows of the process ([`Invocation`]).
 
 pub mod args;
-mod common;
 pub mod error;
 mod judge;
 mod policy;

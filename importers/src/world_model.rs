@@ -14,7 +14,7 @@ use world_model::import::driftworld::{self, ImportRecord, Preset, Weights};
 use world_model::model::{WorldModel, WorldModelConfig};
 
 use crate::args::{ImportPreset, ImportWeights, ImportWorldModelArgs, WorldModelFormat};
-use crate::common::write_json;
+use runner::command::write_json;
 use runner::output::{Inputs, Staged};
 
 /// An imported model's `config.json`.

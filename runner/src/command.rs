@@ -7,6 +7,59 @@
 //! of them needs the same two shapes, a refusal and an error in context. [`Contextual`] is
 //! those two; the rest is written once against it.
 
+use std::path::{Path, PathBuf};
+
+/// A small JSON file of a command's (`config.json`, `summary.json`, `provenance.json`) that
+/// cannot be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum JsonFileError {
+    /// The file cannot be read.
+    #[error("reading {}: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file cannot be written.
+    #[error("writing {}: {source}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The text is not JSON, or the value cannot be written as JSON.
+    #[error("{}: {source}", path.display())]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// The parser's or encoder's error.
+        source: serde_json::Error,
+    },
+}
+
+/// Reads a JSON file.
+///
+/// # Errors
+/// An unreadable or malformed file, naming it.
+pub fn read_json(path: &Path) -> Result<serde_json::Value, JsonFileError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|source| JsonFileError::Read { path: path.to_path_buf(), source })?;
+    serde_json::from_str(&text).map_err(|source| JsonFileError::Json { path: path.to_path_buf(), source })
+}
+
+/// Writes `value` as pretty JSON with a final newline.
+///
+/// # Errors
+/// A value that cannot be encoded, or a file that cannot be written, naming it.
+pub fn write_json<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), JsonFileError> {
+    let mut text = serde_json::to_string_pretty(value)
+        .map_err(|source| JsonFileError::Json { path: path.to_path_buf(), source })?;
+    text.push('\n');
+    std::fs::write(path, text).map_err(|source| JsonFileError::Write { path: path.to_path_buf(), source })
+}
+
 /// What a command knows of the process that runs it, handed over by the binary.
 #[derive(Clone, Debug, Default)]
 pub struct Invocation {

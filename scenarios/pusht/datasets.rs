@@ -66,20 +66,12 @@ fn step_lines(ep: &Episode) -> Vec<String> {
         .collect()
 }
 
-/// A recorded Push-T episode as [`Episode`]: each step's state (agent x, y, block x, y, θ)
-/// before the action, the action and the coverage after it.
+/// A recorded Push-T episode (its counts checked: [`Recorded::check_counts`]) as
+/// [`Episode`]: each step's state (agent x, y, block x, y, θ) before the action, the action
+/// and the coverage after it.
 fn recorded_episode(t: &Recorded<'_>) -> Result<Episode, ScenarioError> {
     let bad = |message: String| ScenarioError::Recorded { seed: t.seed, message };
     let g = t.goal.ok_or_else(|| bad("the episode has no goal pose".into()))?;
-    let n = t.actions.len();
-    if t.frames.len() < n || t.states.len() != n || t.raw.len() != n {
-        return Err(bad(format!(
-            "{} frames, {} states, {} scores for {n} actions",
-            t.frames.len(),
-            t.states.len(),
-            t.raw.len()
-        )));
-    }
     let rows = t
         .states
         .iter()
@@ -157,6 +149,7 @@ impl Scripted for PushTTask {
     }
 
     fn recorded_arrays(&self, episode: &Recorded<'_>) -> Result<EpisodeArrays, TaskError> {
+        episode.check_counts().map_err(TaskError::new)?;
         Ok(episode_arrays(&recorded_episode(episode).map_err(TaskError::new)?))
     }
 

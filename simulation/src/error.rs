@@ -2,8 +2,6 @@
 //! anything is written, the libraries they drive (each error kept whole, with its source),
 //! and the context a step adds ("policy NAME", "loading scenario S") around one of them.
 
-use std::path::PathBuf;
-
 use harness::task::TaskError;
 
 /// A failed data command.
@@ -21,14 +19,9 @@ pub enum SimError {
         #[source]
         source: Box<SimError>,
     },
-    /// A JSON file that cannot be read or written.
-    #[error("{}: {source}", path.display())]
-    Json {
-        /// The file.
-        path: PathBuf,
-        /// The parser's error.
-        source: serde_json::Error,
-    },
+    /// A small JSON file that cannot be read or written.
+    #[error(transparent)]
+    Json(#[from] runner::command::JsonFileError),
     /// A value that cannot be written as JSON.
     #[error("encoding JSON: {0}")]
     Encode(#[source] serde_json::Error),

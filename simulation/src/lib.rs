@@ -15,7 +15,6 @@
 pub mod args;
 mod collect;
 mod collect_policy;
-mod common;
 mod dataset;
 mod dataset_merge;
 pub mod error;

@@ -25,7 +25,7 @@ use serde::Serialize;
 
 use crate::args::{RendererKind, SimulateArgs};
 use crate::collect::{behaviour_index, load_task, refuse_no_early_stop, scripted_of, settings};
-use crate::common::write_json;
+use runner::command::write_json;
 use runner::output::Staged;
 
 /// `config.json`: the resolved scenario and arguments of the run. The fields of this

@@ -17,11 +17,11 @@ use world_model::model::WorldModel;
 
 use crate::args::SimulateArgs;
 use crate::collect::load_task;
-use crate::common::write_json;
 use harness::results::EpisodeRow;
 use harness::rows::append_rows;
 use harness::summarise::branch_stats;
 use policies::kinds::{expectations, load_any};
+use runner::command::write_json;
 use runner::output::Staged;
 
 /// Runs every checkpoint under `--policy` in MuJoCo.
@@ -158,5 +158,5 @@ fn record(
         training: made.provenance,
         other: Default::default(),
     };
-    write_json(&dir.join("provenance.json"), &scores)
+    Ok(write_json(&dir.join("provenance.json"), &scores)?)
 }

@@ -24,9 +24,9 @@ use world_model::model::WorldModel;
 
 use crate::args::SimulateArgs;
 use crate::collect::load_task;
-use crate::common::write_json;
 use crate::record::Sink;
 use policies::kinds::{expectations, load_any};
+use runner::command::write_json;
 use runner::defaults;
 use runner::inputs::{load_judge, load_world_model};
 use runner::output::Staged;

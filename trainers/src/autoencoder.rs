@@ -9,8 +9,9 @@ use world_model::data::EpisodeData;
 use world_model::train_ae::{AeConfigs, AeTrainConfig, RunOptions, read_configs, train_autoencoder};
 
 use crate::args::TrainAutoencoderArgs;
-use crate::common::{data_provenance, fixed, prepare_out, refuse_contradicting_flags, write_json};
+use crate::common::{data_provenance, fixed, prepare_out, refuse_contradicting_flags};
 use harness::sessions::{open_session, read_step, record_session};
+use runner::command::write_json;
 
 /// The autoencoder and training settings the flags ask for; on `--resume`, checked against the
 /// run's saved ones (a flag that contradicts them is refused).

@@ -2,32 +2,10 @@
 //! folder prepared before training (inputs checked, `--resume` and `--force`), the flags a
 //! `--resume` may not change, and the provenance's `data` entry.
 
-use std::path::Path;
-
 use harness::provenance::FramesUsed;
 use harness::replay::attrs::{DatasetAttrs, Recipe};
 
-use crate::error::{Context, Result, TrainError, refuse};
-
-/// Reads a JSON file.
-///
-/// # Errors
-/// An unreadable or malformed file, naming it.
-pub(crate) fn read_json(path: &Path) -> Result<serde_json::Value> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text).map_err(|source| TrainError::Json { path: path.to_path_buf(), source })
-}
-
-/// Writes pretty JSON to a file.
-///
-/// # Errors
-/// A file that cannot be written, naming it.
-pub(crate) fn write_json<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<()> {
-    let mut text = serde_json::to_string_pretty(value)
-        .map_err(|source| TrainError::Json { path: path.to_path_buf(), source })?;
-    text.push('\n');
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
-}
+use crate::error::{Context, Result, refuse};
 
 /// The task a dataset was collected in ([`harness::replay::origin`]: its attributes name
 /// it; another codebase's Push-T replay buffer has none).

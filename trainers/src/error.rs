@@ -2,8 +2,6 @@
 //! the libraries it drives (each error kept whole, with its source), and the context a
 //! step adds ("--init-from DIR", "reading FILE") around one of them.
 
-use std::path::PathBuf;
-
 /// A failed training command.
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
@@ -19,14 +17,9 @@ pub enum TrainError {
         #[source]
         source: Box<TrainError>,
     },
-    /// A JSON file that cannot be read or written.
-    #[error("{}: {source}", path.display())]
-    Json {
-        /// The file.
-        path: PathBuf,
-        /// The parser's error.
-        source: serde_json::Error,
-    },
+    /// A small JSON file that cannot be read or written.
+    #[error(transparent)]
+    Json(#[from] runner::command::JsonFileError),
     /// An input or output folder, or a file in it.
     #[error(transparent)]
     Io(#[from] std::io::Error),

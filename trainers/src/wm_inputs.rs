@@ -14,8 +14,9 @@ use world_model::train_wm::{WmConfigs, WmTrainConfig};
 use world_model::unet::UNetConfig;
 
 use crate::args::{ObjectiveArg, PredictionArg, TrainWorldModelArgs, WmConfigArg};
-use crate::common::{fixed, read_json, refuse_contradicting_flags, write_json};
+use crate::common::{fixed, refuse_contradicting_flags};
 use crate::error::{Context, Result, refuse};
+use runner::command::{read_json, write_json};
 
 /// The diffusion parameterisation `--prediction` names.
 fn prediction(a: &TrainWorldModelArgs) -> Prediction {

@@ -21,13 +21,13 @@ use world_model::train_wm::{TrainingFrames, WmTrainConfig, train_world_model};
 use world_model::unet::UNetConfig;
 
 use crate::args::{FieldArg, PredictionArg, TrainWorldModelArgs, WmConfigArg};
-use crate::common::write_json;
 use crate::common::{data_provenance, prepare_out};
 use crate::wm_inputs::{
     check_resume_flags, fresh_codec, fresh_objective, fresh_prediction, resumed_codec, same_folder,
     set_saved_ema_decay, warm_start_record, warm_start_stats,
 };
 use harness::sessions::{open_session, read_step, record_session};
+use runner::command::write_json;
 
 /// `target` relative to the folder `base` (both must exist), e.g. `../autoencoder`.
 pub fn relative_to(base: &Path, target: &Path) -> Result<PathBuf> {
