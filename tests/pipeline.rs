@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::util::{expect_code, read_json, run, s, with_flag, without_timing};
+use crate::util::{expect_code, old_row_layout, read_json, run, s, with_flag, without_timing};
 
 /// Builds dataset, autoencoder, world model and one policy checkpoint in `dir`.
 fn build(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
@@ -233,18 +233,18 @@ fn pipeline_end_to_end() {
     // (its rendered area is ~1.06 of the polygon's) in MuJoCo, whatever the tiny world
     // model kept in imagination; the run prints the imagined mean.
     for p in res["policies"].as_array().unwrap() {
-        let sim = p["sim"]["block_area"].as_f64().unwrap();
+        let sim = p["sim"]["scene"]["block_area"].as_f64().unwrap();
         assert!((0.8..1.1).contains(&sim), "MuJoCo block area {sim}");
-        assert!(p["world_model"]["block_area"].as_f64().unwrap().is_finite());
-        let goal = p["sim"]["goal_kept"].as_f64().unwrap();
+        assert!(p["world_model"]["scene"]["block_area"].as_f64().unwrap().is_finite());
+        let goal = p["sim"]["scene"]["goal_kept"].as_f64().unwrap();
         assert!((0.85..=1.0).contains(&goal), "MuJoCo goal kept {goal}");
-        assert!(p["world_model"]["goal_kept"].as_f64().unwrap().is_finite());
+        assert!(p["world_model"]["scene"]["goal_kept"].as_f64().unwrap().is_finite());
         // The agent is drawn over everything: all of its disk shows in MuJoCo.
-        let agent = p["sim"]["agent_kept"].as_f64().unwrap();
+        let agent = p["sim"]["scene"]["agent_kept"].as_f64().unwrap();
         assert!((0.8..=1.0).contains(&agent), "MuJoCo agent kept {agent}");
-        assert!(p["world_model"]["agent_kept"].as_f64().unwrap().is_finite());
+        assert!(p["world_model"]["scene"]["agent_kept"].as_f64().unwrap().is_finite());
     }
-    assert!(stdout.contains("block kept") && stdout.contains("agent kept"), "{stdout}");
+    assert!(stdout.contains("block area") && stdout.contains("agent kept"), "{stdout}");
     let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
     assert_eq!(rows.lines().count(), 2 * 3 * 2); // policies x seeds x branches
     // The parquet table holds the same rows, typed.
@@ -257,6 +257,13 @@ fn pipeline_end_to_end() {
     again.push("--resume");
     expect_code(&run(&again), 1);
     assert_eq!(std::fs::read_to_string(out.join("episodes.jsonl")).unwrap(), rows);
+    // A run written before rows named their task's fields (Push-T's `final_block`, `goal`,
+    // `block_area`, `goal_kept`, `agent_kept` and `max_coverage` as fields of their own)
+    // resumes: its rows are read into the named maps, and the results are the same.
+    std::fs::write(out.join("episodes.jsonl"), rows.lines().map(old_row_layout).collect::<String>()).unwrap();
+    expect_code(&run(&again), 1);
+    assert_eq!(read_json(&out.join("results.json"))["policies"], res["policies"]);
+    std::fs::write(out.join("episodes.jsonl"), &rows).unwrap();
     // Resuming under other settings would mix rows of two experiments: refused, and the
     // finished rows stay.
     let (_, err) = expect_code(&run(&with_flag(&again, "--max-steps", "7")), 2);

@@ -122,6 +122,16 @@ fn reach_runs_through_every_command() {
     let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
     // Two policies (the two epochs), 3 seeds, both branches.
     assert_eq!(rows.lines().count(), 12, "{rows}");
+    // The rows name the task's own state (its goal on both branches, the marker's final
+    // position in its simulator), none of Push-T's poses or scene checks; so do the tables.
+    for line in rows.lines() {
+        let row: serde_json::Value = serde_json::from_str(line).unwrap();
+        assert_eq!(row["state"]["goal"], 7.0, "{line}");
+        assert_eq!(row["state"].get("final_x").is_some(), row["branch"] == "sim", "{line}");
+        assert!(row.get("scene").is_none() && row.get("final_block").is_none(), "{line}");
+    }
+    let table = parquet_columns(&out.join("episodes.parquet"));
+    assert!(table.ends_with(&["scorer_abs_error".to_string(), "final_x".into(), "goal".into()]), "{table:?}");
     let (stdout, _) = expect_code(&run(&["report", s(&out)]), 0);
     assert!(stdout.contains("report.html"), "{stdout}");
     // The report states the task's own scoring and judge, not Push-T's coverage.
@@ -129,4 +139,10 @@ fn reach_runs_through_every_command() {
     assert!(html.contains("An episode's score: 1 if the task succeeded at some step, else 0."), "{html}");
     assert!(html.contains("by the task's own judge"), "{html}");
     assert!(!html.contains("coverage"), "{html}");
+}
+
+/// The column names of a run's `episodes.parquet`.
+fn parquet_columns(path: &std::path::Path) -> Vec<String> {
+    let rows = reports::episodes::read_episodes_parquet(path).unwrap();
+    rows[0].get_column_iter().map(|(n, _)| n.clone()).collect()
 }

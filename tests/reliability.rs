@@ -301,8 +301,27 @@ fn damaged_datasets_scenarios_and_results_are_refused_by_name() {
     // The earlier layouts (version 2 without `scoring`, version 1 without `schema_version`
     // either) are reported; a later one is refused by name.
     r = serde_json::from_str(&good).unwrap();
-    assert_eq!(r["schema_version"], 3);
+    assert_eq!(r["schema_version"], 4);
     assert_eq!(r["scoring"], "max over the episode of clip(coverage / 0.95, 0, 1)");
+    // Version 3 kept Push-T's scene checks as fields of their own: read into `scene`, and the
+    // report states them as it does this build's.
+    let html_now = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html_now.contains("goal kept: MuJoCo"), "the report states the scene checks");
+    r["schema_version"] = serde_json::json!(3);
+    for p in r["policies"].as_array_mut().unwrap() {
+        for branch in ["sim", "world_model"] {
+            let b = p[branch].as_object_mut().unwrap();
+            let scene = b.remove("scene").unwrap();
+            for (k, v) in scene.as_object().unwrap() {
+                b.insert(k.clone(), v.clone());
+            }
+        }
+    }
+    std::fs::write(&path, r.to_string()).unwrap();
+    expect_code(&run(&["report", s(&out)]), 0);
+    let html_v3 = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let scene_sentence = |h: &str| h.find("Scene kept").map(|i| h[i..].chars().take(400).collect::<String>());
+    assert_eq!(scene_sentence(&html_v3), scene_sentence(&html_now));
     r.as_object_mut().unwrap().remove("scoring");
     r["schema_version"] = serde_json::json!(2);
     std::fs::write(&path, r.to_string()).unwrap();
@@ -310,10 +329,10 @@ fn damaged_datasets_scenarios_and_results_are_refused_by_name() {
     r.as_object_mut().unwrap().remove("schema_version");
     std::fs::write(&path, r.to_string()).unwrap();
     expect_code(&run(&["report", s(&out)]), 0);
-    r["schema_version"] = serde_json::json!(4);
+    r["schema_version"] = serde_json::json!(5);
     std::fs::write(&path, r.to_string()).unwrap();
     let (_, err) = expect_code(&run(&["report", s(&out)]), 2);
-    assert!(err.contains("results schema version 4, written by a later evalharness"), "{err}");
+    assert!(err.contains("results schema version 5, written by a later evalharness"), "{err}");
     // A damaged filmstrip index, or a missing PNG, is reported and marked in the page.
     std::fs::write(&path, &good).unwrap();
     let index = out.join("filmstrips/index.json");

@@ -156,3 +156,27 @@ pub fn tiny_arm_models(dir: &Path, scenario: &str) -> TinyArm {
     expect_code(&run(&[&args[..], &tiny[..]].concat()), 0);
     TinyArm { data, ae, wm, judge, pol, judge_stdout }
 }
+
+/// An `episodes.jsonl` line of this build in the layout written before 2026-12-02: Push-T's
+/// named state and scene checks as fields of their own, `max_raw` as `max_coverage`.
+pub fn old_row_layout(line: &str) -> String {
+    let mut row: serde_json::Value = serde_json::from_str(line).unwrap();
+    let o = row.as_object_mut().unwrap();
+    let state = o.remove("state").unwrap();
+    let scene = o.remove("scene").unwrap();
+    let pose = |p: &str| -> Option<serde_json::Value> {
+        let v: Option<Vec<f64>> =
+            ["x", "y", "theta"].iter().map(|k| state[format!("{p}_{k}")].as_f64()).collect();
+        v.map(|v| serde_json::json!(v))
+    };
+    o.insert("final_block".into(), pose("final_block").unwrap_or(serde_json::Value::Null));
+    o.insert("goal".into(), pose("goal").unwrap());
+    for (k, v) in scene.as_object().unwrap() {
+        o.insert(k.clone(), v.clone());
+    }
+    for (new, old) in [("max_raw", "max_coverage"), ("final_raw", "final_coverage")] {
+        let v = o.remove(new).unwrap();
+        o.insert(old.into(), v);
+    }
+    format!("{row}\n")
+}

@@ -210,9 +210,7 @@ fn finish(
     let n = track.len();
     let rows: Vec<_> = (0..n)
         .map(|i| {
-            track[i]
-                .row(name, start.seeds[i], Branch::WorldModel, kind)
-                .with_poses(None, start.goals[i].unwrap_or_default())
+            track[i].row(name, start.seeds[i], Branch::WorldModel, kind).with_state(&start.conditions[i])
         })
         .collect();
     // The imagined episodes' actions, for replaying them in the simulator (no frames,

@@ -170,7 +170,8 @@ fn finish(
             let err = start.judges[i].is_some().then(|| judge_err[i].0 / judge_err[i].1.max(1) as f64);
             track[i]
                 .row(name, start.seeds[i], Branch::Sim, kind)
-                .with_poses(env.object_pose(), start.goals[i].unwrap_or_default())
+                .with_state(&start.conditions[i])
+                .with_state(&env.final_state())
                 .with_scorer_error(err)
         })
         .collect();

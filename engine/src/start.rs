@@ -92,8 +92,11 @@ pub struct Start {
     /// given (the simulator branch runs, scoring exactly; the world-model branch refuses).
     pub(crate) judges: Vec<Option<Box<dyn Judge>>>,
     pub(crate) first: Vec<Seen>,
-    /// Each episode's goal pose at reset (for the rows of both branches).
+    /// Each episode's goal pose at reset (for recorded trajectories).
     pub(crate) goals: Vec<Option<[f64; 3]>>,
+    /// Each episode's named conditions at reset ([`Env::conditions`], for the rows of both
+    /// branches).
+    pub(crate) conditions: Vec<Vec<(&'static str, f64)>>,
     pub(crate) policy_rngs: Vec<Rng>,
     pub(crate) seeds: Vec<u64>,
     /// Keep the last frame of every action chunk (for filmstrips and GIFs).
@@ -171,6 +174,7 @@ impl Start {
             judges,
             first: envs.iter().map(|e| e.observe()).collect(),
             goals: envs.iter().map(|e| e.goal_pose()).collect(),
+            conditions: envs.iter().map(|e| e.conditions()).collect(),
             policy_rngs: seeds
                 .iter()
                 .map(|&sd| Rng::new(derive(s.master_seed, &[fnv1a(policy), sd])))
@@ -301,7 +305,7 @@ impl Track {
         self.trace.push((self.best_reward * 1e6).round() / 1e6);
     }
 
-    /// The episode's row (scores, steps and trace; the branch adds poses and checks).
+    /// The episode's row (scores, steps, trace and scene checks; the branch adds the named state).
     pub(crate) fn row(
         &self,
         policy: &str,
@@ -320,7 +324,7 @@ impl Track {
             self.steps,
         )
         .with_trace(self.trace.clone())
-        .with_scene(self.scene)
+        .with_scene(self.scene.as_ref())
     }
 }
 

@@ -100,12 +100,6 @@ impl Env for ReachEnv {
     fn state(&self) -> Vec<f64> {
         vec![self.x]
     }
-    fn object_pose(&self) -> Option<[f64; 3]> {
-        None
-    }
-    fn goal_pose(&self) -> Option<[f64; 3]> {
-        None
-    }
     fn judge(&self) -> Option<Box<dyn Judge>> {
         Some(Box::new(ReachJudge))
     }
@@ -151,8 +145,8 @@ fn a_success_scored_task_runs_through_the_simulator_branch() {
     // The judge reads the frame exactly here (x × 25 truncated keeps x within 0.04):
     // no error on the frames the policy saw.
     assert_eq!(r[0].scorer_abs_error, Some(0.0));
-    // No poses: the task has none; no scene checks: its judge makes none.
-    assert_eq!((r[0].final_block, r[0].goal, r[0].block_area), (None, [0.0; 3], None));
+    // No named state: the task names none; no scene checks: its judge makes none.
+    assert!(r[0].state.is_empty() && r[0].scene.is_empty());
     // Whole trajectories: the state before each action, the actions, the raw scores.
     let t = &out.episodes[0];
     assert_eq!(t.states, vec![vec![0.0], vec![3.5], vec![5.25], vec![6.125]]);
@@ -224,7 +218,7 @@ fn episodes_that_never_succeed_run_to_the_step_limit() {
     let start = Start::new("to-goal", &[1], &setup).unwrap();
     let out = sim_branch(&ToGoal, start, &setup, &mut Timing::default()).unwrap();
     let r = &out.rows[0];
-    assert_eq!((r.steps, r.success, r.score, r.max_coverage), (2, false, 0.0, 0.0));
+    assert_eq!((r.steps, r.success, r.score, r.max_raw), (2, false, 0.0, 0.0));
 }
 
 /// Raises the end effector, gripper open, two actions a decision; checks what it sees.

@@ -19,16 +19,20 @@
 //! flicker of the world model, a cube the fingers hide) cannot end an imagined
 //! episode as a success. With k = 1 (the default) every frame counts alone.
 
-/// Health checks of one frame: is the scene still there? (Not a score.)
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SceneCheck {
-    /// The manipulated object's pixels as a fraction of its true area (about 1 on
-    /// real frames; Push-T: the T block).
-    pub block_area: f64,
-    /// Fraction of the goal still shown (1 on real frames).
-    pub goal_kept: f64,
-    /// Fraction of the agent (Push-T: its disk) still shown.
-    pub agent_kept: f64,
+/// Health checks of one frame: is the scene still there? (Not a score.) Named by the
+/// task's judge, in its own order, each about 1 on real frames and lower where an imagined
+/// rollout lost part of the scene (Push-T's: `block_area`, the T block's pixels as a fraction
+/// of its true area; `goal_kept`, the fraction of the goal still shown; `agent_kept`, the
+/// fraction of the agent's disk). Episode rows keep them by name
+/// ([`EpisodeRow::scene`](crate::results::EpisodeRow::scene)).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SceneCheck(pub Vec<(&'static str, f64)>);
+
+impl SceneCheck {
+    /// The check named `name`, if the judge made it.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        self.0.iter().find(|(n, _)| *n == name).map(|&(_, v)| v)
+    }
 }
 
 /// Scores imagined frames of one episode.
@@ -166,7 +170,7 @@ mod tests {
             -1.0
         }
         fn scene(&self, _: &[u8]) -> Option<SceneCheck> {
-            Some(SceneCheck { block_area: 1.0, goal_kept: 0.5, agent_kept: 0.25 })
+            Some(SceneCheck(vec![("block_area", 1.0), ("goal_kept", 0.5), ("agent_kept", 0.25)]))
         }
     }
 
@@ -175,7 +179,7 @@ mod tests {
         let j = Replaced { scorer: std::sync::Arc::new(Mean), checks: Some(Box::new(Checks)) };
         // Mean of 0 and 255 over 255: 0.5.
         assert_eq!(j.score(&[0, 255]), 0.5);
-        assert_eq!(j.scene(&[0, 255]).map(|c| c.goal_kept), Some(0.5));
+        assert_eq!(j.scene(&[0, 255]).and_then(|c| c.get("goal_kept")), Some(0.5));
         assert_eq!(Mean.scene(&[0]), None);
         // Without the task's judge there are no scene checks.
         let j = Replaced { scorer: std::sync::Arc::new(Mean), checks: None };

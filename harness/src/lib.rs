@@ -35,6 +35,7 @@ pub mod provenance;
 pub mod replay;
 pub mod resize;
 pub mod results;
+mod results_legacy;
 pub mod rng;
 pub mod rows;
 pub mod runfile;

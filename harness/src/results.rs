@@ -7,6 +7,7 @@
 //! the fields below. Reading names the field at fault
 //! (`policies[2].sim.mean: invalid type: string "x", expected f64`).
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -37,10 +38,18 @@ impl Branch {
     }
 }
 
+/// Named numbers of one episode that only its task defines, in key order (what a row's
+/// [`EpisodeRow::state`] and [`EpisodeRow::scene`] hold).
+pub type Named = BTreeMap<String, f64>;
+
 /// One (policy, seed, branch) episode: a line of `episodes.jsonl`, a row of
-/// `episodes.csv` and `episodes.parquet`.
+/// `episodes.csv` and `episodes.parquet`. Task-neutral: the score, success and steps of
+/// every task, and what only one task defines by name (Push-T's block and goal poses and
+/// its scene checks) in [`EpisodeRow::state`] and [`EpisodeRow::scene`]. Rows written
+/// before 2026-12-02 (`final_block`, `goal`, `block_area`, `goal_kept`, `agent_kept`,
+/// `max_coverage`, `final_coverage`) are read into these fields (`results_legacy`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(from = "crate::results_legacy::RowOnDisk")]
 pub struct EpisodeRow {
     /// Policy (checkpoint folder name).
     pub policy: String,
@@ -48,50 +57,51 @@ pub struct EpisodeRow {
     pub seed: u64,
     /// Branch.
     pub branch: Branch,
-    /// Max reward over the rollout (clip(coverage / threshold, 0, 1)).
+    /// Max reward over the rollout (the task's raw score mapped to [0, 1], [`ScoreKind`]).
+    ///
+    /// [`ScoreKind`]: crate::task::ScoreKind
     pub score: f64,
-    /// Max coverage over the rollout.
-    pub max_coverage: f64,
-    /// Coverage at the last step.
-    pub final_coverage: f64,
-    /// Whether the coverage ever exceeded the success threshold.
+    /// Max raw score over the rollout (Push-T: goal coverage; Lift and Can: 1 once
+    /// the task's success holds, or a judge's success probability in imagination).
+    pub max_raw: f64,
+    /// Raw score at the last step.
+    pub final_raw: f64,
+    /// Whether the raw score ever exceeded the task's success threshold.
     pub success: bool,
     /// Control steps.
     pub steps: usize,
-    /// Final block pose (x, y, θ); the world-model branch has none.
-    pub final_block: Option<[f64; 3]>,
-    /// Goal pose.
-    pub goal: [f64; 3],
-    /// Mean |frame-scorer coverage − exact coverage| on this episode's real frames (MuJoCo rows).
+    /// Mean |judge's raw score − exact raw score| on this episode's real frames (MuJoCo rows
+    /// of a task with a judge).
     pub scorer_abs_error: Option<f64>,
     /// Score so far (max reward) at the end of each action chunk.
     #[serde(default)]
     pub score_trace: Vec<f64>,
-    /// Block pixels in the last frame the policy saw, as a fraction of the T's area:
-    /// ≈ 1 in MuJoCo; in the world model, how much of the block its rollout kept.
-    /// Absent in runs written before it existed.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub block_area: Option<f64>,
-    /// How much of the (static) goal T that frame still shows: ≈ 0.94–0.99 in
-    /// MuJoCo; lower when an imagined scene has faded or eroded.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub goal_kept: Option<f64>,
-    /// Agent pixels in that frame as a fraction of the agent disk's area, capped at 1:
-    /// ≈ 1 in MuJoCo; near 0 when an imagined rollout lost the agent.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub agent_kept: Option<f64>,
+    /// The episode's conditions and final state, named by its task ([`Env::conditions`] on
+    /// both branches, [`Env::final_state`] on MuJoCo rows; Push-T: `goal_x`, `goal_y`,
+    /// `goal_theta`, and `final_block_x`, `final_block_y`, `final_block_theta`). Empty for a
+    /// task that names none.
+    ///
+    /// [`Env::conditions`]: crate::task::Env::conditions
+    /// [`Env::final_state`]: crate::task::Env::final_state
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub state: Named,
+    /// The judge's scene checks of the last frame the policy saw ([`SceneCheck`]; Push-T:
+    /// `block_area`, `goal_kept`, `agent_kept`): about 1 in MuJoCo; in the world model, how
+    /// much of the scene its rollout kept. Empty where the judge makes none.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub scene: Named,
 }
 
 impl EpisodeRow {
-    /// A row with the scores; success is `max_cov > thr`.
+    /// A row with the scores; success is `max_raw > thr`.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         policy: &str,
         seed: u64,
         branch: Branch,
         score: f64,
-        max_cov: f64,
-        last_cov: f64,
+        max_raw: f64,
+        last_raw: f64,
         thr: f64,
         steps: usize,
     ) -> Self {
@@ -100,17 +110,14 @@ impl EpisodeRow {
             seed,
             branch,
             score,
-            max_coverage: max_cov,
-            final_coverage: last_cov,
-            success: max_cov > thr,
+            max_raw,
+            final_raw: last_raw,
+            success: max_raw > thr,
             steps,
-            final_block: None,
-            goal: [0.0; 3],
             scorer_abs_error: None,
             score_trace: Vec::new(),
-            block_area: None,
-            goal_kept: None,
-            agent_kept: None,
+            state: Named::new(),
+            scene: Named::new(),
         }
     }
 
@@ -120,10 +127,9 @@ impl EpisodeRow {
         self
     }
 
-    /// With the final block and the goal pose.
-    pub fn with_poses(mut self, block: Option<[f64; 3]>, goal: [f64; 3]) -> Self {
-        self.final_block = block;
-        self.goal = goal;
+    /// With named conditions or state of the episode (added to [`EpisodeRow::state`]).
+    pub fn with_state(mut self, named: &[(&str, f64)]) -> Self {
+        self.state.extend(named.iter().map(|&(k, v)| (k.to_string(), v)));
         self
     }
 
@@ -134,16 +140,16 @@ impl EpisodeRow {
     }
 
     /// With the scene checks of the last frame the policy saw, or none.
-    pub fn with_scene(mut self, checks: Option<SceneCheck>) -> Self {
-        self.block_area = checks.map(|c| c.block_area);
-        self.goal_kept = checks.map(|c| c.goal_kept);
-        self.agent_kept = checks.map(|c| c.agent_kept);
+    pub fn with_scene(mut self, checks: Option<&SceneCheck>) -> Self {
+        self.scene =
+            checks.map_or_else(Named::new, |c| c.0.iter().map(|&(k, v)| (k.to_string(), v)).collect());
         self
     }
 }
 
 /// One branch of one policy in `results.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(from = "crate::results_legacy::BranchOnDisk")]
 pub struct BranchStats {
     /// Mean episode score.
     pub mean: f64,
@@ -159,15 +165,11 @@ pub struct BranchStats {
     pub steps_to_success: Option<f64>,
     /// Episodes.
     pub episodes: usize,
-    /// Mean block area of the last seen frames (null when no row recorded it).
+    /// Mean of each scene check over the rows that made it ([`EpisodeRow::scene`]; Push-T:
+    /// `block_area`, `goal_kept`, `agent_kept`); empty where none did. Results of version 3
+    /// and before held Push-T's three as fields of their own, read into this.
     #[serde(default)]
-    pub block_area: Option<f64>,
-    /// Mean goal kept.
-    #[serde(default)]
-    pub goal_kept: Option<f64>,
-    /// Mean agent kept.
-    #[serde(default)]
-    pub agent_kept: Option<f64>,
+    pub scene: Named,
 }
 
 /// One policy in `results.json`.
@@ -253,9 +255,11 @@ pub struct RunTiming {
 /// The layout of `results.json` this build writes. Version 1 is the files written before
 /// 2026-12-02, which have no `schema_version` and the same fields; version 2 added
 /// `schema_version`; version 3 adds `scoring`, how the task scores an episode (absent, and
-/// unknown to the report, in the earlier versions, which are still read). A file of a later
-/// version than this is refused by name rather than read as one of this version.
-pub const RESULTS_SCHEMA: u32 = 3;
+/// unknown to the report, in the earlier versions, which are still read); version 4 (2026-12-02)
+/// keeps each branch's scene checks by name (`scene`) instead of Push-T's `block_area`,
+/// `goal_kept` and `agent_kept` fields, which are still read. A file of a later version than
+/// this is refused by name rather than read as one of this version.
+pub const RESULTS_SCHEMA: u32 = 4;
 
 /// The version a `results.json` without `schema_version` was written in.
 fn first_schema() -> u32 {
@@ -438,8 +442,8 @@ mod tests {
         let later = serde_json::json!({"schema_version": RESULTS_SCHEMA + 1, "rows": "elsewhere"});
         std::fs::write(&path, later.to_string()).unwrap();
         let err = RankResults::read(&path).unwrap_err().to_string();
-        assert!(err.contains("results schema version 4, written by a later evalharness"), "{err}");
-        assert!(err.contains("reads versions 1 to 3") && err.contains("results.json"), "{err}");
+        assert!(err.contains("results schema version 5, written by a later evalharness"), "{err}");
+        assert!(err.contains("reads versions 1 to 4") && err.contains("results.json"), "{err}");
     }
 
     #[test]
@@ -448,7 +452,9 @@ mod tests {
         let path = dir.path().join("results.json");
         std::fs::write(&path, sample().to_string()).unwrap();
         let r = RankResults::read(&path).unwrap();
-        assert_eq!(r.to_json().unwrap(), sample());
+        let again = dir.path().join("again.json");
+        std::fs::write(&again, r.to_json().unwrap().to_string()).unwrap();
+        assert_eq!(RankResults::read(&again).unwrap(), r);
         // A results.json written before steps to success were recorded still reads (null).
         let mut old = sample();
         old["policies"][0]["sim"].as_object_mut().unwrap().remove("steps_to_success");

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use crate::metrics::agreement;
 use crate::metrics::bootstrap::{agreement_ci, mean_ci, wilson};
 use crate::metrics::ceiling::noise_ceiling;
-use crate::results::{AgreementSummary, Branch, BranchStats, EpisodeRow, PairedSuccess, PolicyResult};
+use crate::results::{AgreementSummary, Branch, BranchStats, EpisodeRow, Named, PairedSuccess, PolicyResult};
 
 /// Mean, bootstrap CI, success rate and Wilson CI of one branch of one policy.
 pub fn branch_stats(rows: &[&EpisodeRow], bootstrap: usize, seed: u64) -> BranchStats {
@@ -26,10 +26,18 @@ pub fn branch_stats(rows: &[&EpisodeRow], bootstrap: usize, seed: u64) -> Branch
         success_ci95: [lo, hi],
         steps_to_success: mean_of(rows.iter().filter(|r| r.success).map(|r| r.steps as f64).collect()),
         episodes: n,
-        block_area: mean_of(rows.iter().filter_map(|r| r.block_area).collect()),
-        goal_kept: mean_of(rows.iter().filter_map(|r| r.goal_kept).collect()),
-        agent_kept: mean_of(rows.iter().filter_map(|r| r.agent_kept).collect()),
+        scene: scene_means(rows),
     }
+}
+
+/// The mean of each scene check over the rows that made it.
+fn scene_means(rows: &[&EpisodeRow]) -> Named {
+    let mut sums: BTreeMap<&str, (f64, usize)> = BTreeMap::new();
+    for (k, v) in rows.iter().flat_map(|r| &r.scene) {
+        let e = sums.entry(k.as_str()).or_default();
+        (e.0, e.1) = (e.0 + v, e.1 + 1);
+    }
+    sums.into_iter().map(|(k, (sum, n))| (k.to_string(), sum / n as f64)).collect()
 }
 
 /// Per-policy statistics and agreement, from rows (any order; sorted here).
@@ -111,8 +119,8 @@ mod tests {
         assert_eq!(s.0[1].sim.success_rate, 0.0);
         assert!((s.1.pearson.unwrap() - 1.0).abs() < 1e-12);
         assert_eq!(s.1.rank_inversions, Some(0));
-        // No scene checks recorded (as in runs made before they existed): null.
-        assert_eq!(s.0[0].sim.block_area, None);
+        // No scene checks recorded (a task without them): none.
+        assert!(s.0[0].sim.scene.is_empty());
         // Same input in another order gives the same summary.
         let mut rev = rows.clone();
         rev.reverse();
@@ -124,6 +132,25 @@ mod tests {
         // resampled runs always order them alike: no inversion.
         let ceiling = s.1.noise_ceiling.as_ref().unwrap();
         assert_eq!((ceiling.rank_inversions, ceiling.replicates), (0.0, 200));
+    }
+
+    #[test]
+    fn scene_checks_are_averaged_by_name_over_the_rows_that_made_them() {
+        // Three MuJoCo rows of one policy: block_area 0.5 and 1.0 (the third row made no
+        // checks), goal_kept 0.25 on the first only: means 0.75 and 0.25.
+        let check = |b: f64, g: Option<f64>| {
+            let mut c = vec![("block_area", b)];
+            c.extend(g.map(|g| ("goal_kept", g)));
+            crate::judge::SceneCheck(c)
+        };
+        let rows = [
+            row("a", 1, Branch::Sim, 0.1).with_scene(Some(&check(0.5, Some(0.25)))),
+            row("a", 2, Branch::Sim, 0.2).with_scene(Some(&check(1.0, None))),
+            row("a", 3, Branch::Sim, 0.3),
+        ];
+        let s = branch_stats(&rows.iter().collect::<Vec<_>>(), 10, 0);
+        let want: Named = [("block_area".to_string(), 0.75), ("goal_kept".to_string(), 0.25)].into();
+        assert_eq!(s.scene, want);
     }
 
     #[test]

@@ -288,10 +288,21 @@ pub trait Env: Send {
     fn score(&self) -> f64;
     /// The privileged state as datasets store it (Push-T: agent x, y, block x, y, θ).
     fn state(&self) -> Vec<f64>;
-    /// The manipulated object's planar pose (x, y, θ), where the task has one.
-    fn object_pose(&self) -> Option<[f64; 3]>;
-    /// The goal pose (x, y, θ), where the task has one.
-    fn goal_pose(&self) -> Option<[f64; 3]>;
+    /// The episode's fixed conditions, named, for both branches' rows (Push-T: `goal_x`,
+    /// `goal_y`, `goal_theta`); read right after reset. None by default.
+    fn conditions(&self) -> Vec<(&'static str, f64)> {
+        Vec::new()
+    }
+    /// Named facts of the current state for the episode's MuJoCo row, read when it ends
+    /// (Push-T: `final_block_x`, `final_block_y`, `final_block_theta`). None by default.
+    fn final_state(&self) -> Vec<(&'static str, f64)> {
+        Vec::new()
+    }
+    /// The goal pose (x, y, θ) a recorded episode keeps, where the task has one (Push-T's
+    /// datasets store it). None by default.
+    fn goal_pose(&self) -> Option<[f64; 3]> {
+        None
+    }
     /// The task's own judge of this episode's imagined frames, from its public
     /// conditions only (Push-T: the goal pose); `None` for a task without a
     /// hand-written one (robomimic's: a learned judge, `rank --judge`, scores them).

@@ -43,3 +43,4 @@ mod robomimic_config;
 mod robomimic_weights;
 pub mod symmetry;
 pub mod train;
+mod train_parts;

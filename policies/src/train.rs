@@ -14,9 +14,8 @@
 
 use std::path::{Path, PathBuf};
 
-use burn::module::Module;
-use burn::optim::{AdamWConfig, GradientsParams};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::optim::GradientsParams;
+use burn::tensor::Device;
 use harness::driver::{Clock, Driver};
 use harness::rng::Rng;
 use harness::seed::derive;
@@ -24,13 +23,10 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::data::Demos;
-use crate::diffusion::{DiffusionConfig, DiffusionNet, Normalisation, alphas_cumprod, frames_to_tensor};
-use crate::dir::{
-    PolicyFile, PolicyLoadError, diffusion_config, diffusion_weights, read_policy_file, write_policy,
-};
-use crate::pretrain::{Pretrain, encode_frames, pretrain_encoder};
-use crate::provenance::{EncoderPretraining, PolicyProvenance, RawWeights, Weights};
-use nn::optim::Ema;
+use crate::diffusion::{DiffusionConfig, DiffusionNet, Normalisation, alphas_cumprod};
+use crate::dir::{PolicyLoadError, diffusion_config, diffusion_weights, read_policy_file};
+use crate::provenance::PolicyProvenance;
+use crate::train_parts::{Features, Training, batch_loss, features, save_epoch};
 
 /// Training hyper-parameters.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -115,16 +111,6 @@ pub struct PolicyProgress {
     pub loss: f64,
 }
 
-/// The resumable state.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-struct State {
-    step: u64,
-    elapsed_s: f64,
-    /// EMA updates so far (they start when `ema` is first set, possibly mid-run).
-    #[serde(default)]
-    ema_updates: u64,
-}
-
 /// Saved configs of a run.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -186,7 +172,6 @@ pub fn train_policy(
         .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
     let (pc, tc) = (&configs.policy, &configs.train);
     let device = inner.clone().autodiff();
-    let (o, h, s) = (pc.net.obs_horizon, pc.horizon, pc.net.image_size);
     let (pd, ad) = (demos.proprio_dim, demos.action_dim);
     if (pc.net.proprio(), pc.net.action_dim) != (pd, ad) {
         return Err(PolicyLoadError::new(
@@ -201,206 +186,80 @@ pub fn train_policy(
     let n = demos.len();
     let per_epoch = n.div_ceil(tc.batch.max(1)) as u64;
     let total = per_epoch * tc.epochs;
-    let mut net = DiffusionNet::new(pc, &device);
-    let mut optim = AdamWConfig::new()
-        .with_beta_1(0.95)
-        .with_beta_2(0.999)
-        .with_weight_decay(tc.weight_decay as f32)
-        .init();
-    let paths = ["model.bpk", "optimizer.bpk", "state.json", "ema.bpk"].map(|p| dir.join(p));
-    let mut state = State::default();
-    if run.resume {
-        harness::checkpoint::recover(&dir, harness::checkpoint::MAIN)
-            .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
-        net = net.try_load_file(&paths[0]).map_err(|e| PolicyLoadError::new(&paths[0], e.to_string()))?;
-        optim = optim.load(&paths[1]).map_err(|e| PolicyLoadError::new(&paths[1], e.to_string()))?;
-        state =
-            harness::driver::read_state(&paths[2]).map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
-    }
-    if let Some(src) = tc.init_from.as_ref().filter(|_| !run.resume) {
-        net = init_weights(src, pc, &device)?;
-    }
-    let mut ema = Ema::new(&net, tc.ema);
-    if tc.ema > 0.0 && state.ema_updates > 0 {
-        let module = ema.module.clone();
-        ema.module =
-            module.try_load_file(&paths[3]).map_err(|e| PolicyLoadError::new(&paths[3], e.to_string()))?;
-    }
-    let save_state =
-        |net: &DiffusionNet, ema: &Ema<DiffusionNet>, optim: &burn::optim::ModuleOptimizer, state: &State| {
-            // The files are one checkpoint: staged, then committed by a manifest.
-            let fail = |e: harness::runfile::RunFileError| PolicyLoadError::new(&e.path, e.message);
-            let mut stage = harness::checkpoint::begin(&dir, harness::checkpoint::MAIN).map_err(fail)?;
-            let p = ["model.bpk", "optimizer.bpk", "state.json"].map(|n| stage.path(n));
-            net.clone().save_file(&p[0]).map_err(|e| PolicyLoadError::new(&p[0], e.to_string()))?;
-            optim.save(&p[1]).map_err(|e| PolicyLoadError::new(&p[1], e.to_string()))?;
-            // The manifest lists only what this checkpoint has (no EMA before its first update).
-            if state.ema_updates > 0 {
-                let e = stage.path("ema.bpk");
-                ema.module.clone().save_file(&e).map_err(|err| PolicyLoadError::new(&e, err.to_string()))?;
-            }
-            harness::driver::write_state(&p[2], state).map_err(fail)?;
-            stage.commit().map_err(fail)
-        };
+    let mut tr = Training::start(&dir, &configs, &run, &device)?;
     // One clock for both stages: `--max-minutes` bounds the session, pre-training included.
     let clock = Clock::start(run.max_minutes);
     let mut provenance = configs.provenance.clone();
     if run.resume {
         provenance.resumed_with = Some(session_command);
     }
-    let features = if tc.encoder_steps > 0 {
-        let p = Pretrain { steps: tc.encoder_steps, lr: tc.encoder_lr, seed: tc.seed };
-        let enc_total = tc.encoder_steps;
-        let (ps, probe) = pretrain_encoder(demos, &pc.net, p, &dir, clock, inner, &mut |step, loss| {
-            on_progress(&PolicyProgress { phase: Phase::Encoder, step, total: enc_total, epoch: 0, loss });
-        })?;
-        let Some(probe) = probe else {
-            // Stopped during pre-training: the run's own state is what `--resume` looks for.
-            save_state(&net, &ema, &optim, &state)?;
-            return Ok(PolicyOutcome {
-                step: state.step,
-                total,
-                saved: Vec::new(),
-                loss: f64::NAN,
-                elapsed_s: state.elapsed_s,
-            });
-        };
-        provenance.encoder_pretraining = Some(EncoderPretraining {
-            heldout_mean_abs_error: ps.heldout_columns.clone(),
-            heldout_pose_error: ps.heldout,
-            steps: ps.step,
-        });
-        if state.step == 0 {
-            net.encoder = probe.encoder;
-            ema = Ema::new(&net, tc.ema);
-        }
-        tracing::info!(frames = demos.len(), "encoding every frame with the frozen encoder");
-        Some(encode_frames(&net.encoder.valid(), demos, s, inner))
-    } else if tc.init_from.is_some() {
-        // The starting checkpoint's encoder (saved unchanged in `.train/model.bpk` on resume).
-        tracing::info!(frames = demos.len(), "encoding every frame with the starting checkpoint's encoder");
-        Some(encode_frames(&net.encoder.valid(), demos, s, inner))
-    } else {
-        None
-    };
+    let features = features(demos, &configs, &mut tr, &mut provenance, (&dir, clock), inner, on_progress)?;
+    if let Features::Stopped = features {
+        // Stopped during pre-training: the run's own state is what `--resume` looks for.
+        tr.save(&dir)?;
+        let (step, elapsed_s) = (tr.state.step, tr.state.elapsed_s);
+        return Ok(PolicyOutcome { step, total, saved: Vec::new(), loss: f64::NAN, elapsed_s });
+    }
     let ac = alphas_cumprod(pc.train_steps);
-    let mut driver = Driver::start(&dir.join("log.jsonl"), "step", state.step, state.elapsed_s, clock)
+    let mut driver = Driver::start(&dir.join("log.jsonl"), "step", tr.state.step, tr.state.elapsed_s, clock)
         .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
     let mut recent = Vec::new();
     let mut saved = Vec::new();
     let mut order: (u64, Vec<usize>) = (u64::MAX, Vec::new());
-    while state.step < total {
-        if driver.should_stop() {
-            break;
-        }
-        let epoch = state.step / per_epoch;
+    while tr.state.step < total && !driver.should_stop() {
+        let epoch = tr.state.step / per_epoch;
         if order.0 != epoch {
             order = (epoch, permutation(n, derive(tc.seed, &[epoch])));
         }
-        let k = (state.step % per_epoch) as usize * tc.batch;
+        let k = (tr.state.step % per_epoch) as usize * tc.batch;
         let batch = &order.1[k..(k + tc.batch).min(n)];
-        let b = batch.len();
-        // Observation steps of the batch, `o` per sample (oldest first).
-        let mut obs = Vec::with_capacity(b * o);
-        let (mut pos, mut act) = (Vec::with_capacity(b * o * pd), Vec::with_capacity(b * h * ad));
-        for &t in batch {
-            let (oi, ai) = demos.sample_indices(t, o, h);
-            obs.extend_from_slice(&oi);
-            pos.extend(
-                oi.iter().flat_map(|&i| configs.normalisation.agent_pos.normalise(demos.proprio_at(i))),
-            );
-            act.extend(ai.iter().flat_map(|&i| configs.normalisation.action.normalise(demos.action_at(i))));
-        }
-        let mut rng = Rng::new(derive(tc.seed, &[u64::MAX, state.step]));
-        let t: Vec<usize> = (0..b).map(|_| rng.below(pc.train_steps as u64) as usize).collect();
-        let noise = Tensor::from_data(TensorData::new(rng.normals_f32(b * h * ad), [b, h, ad]), &device);
-        let cond = match &features {
-            // Frozen encoder: [b, o·(f + pd)] from the cache, no gradient reaches the encoder.
-            Some(cache) => {
-                let f = pc.net.feature_dim;
-                let mut c = Vec::with_capacity(b * o * (f + pd));
-                for (j, &i) in obs.iter().enumerate() {
-                    c.extend_from_slice(&cache[i * f..(i + 1) * f]);
-                    c.extend_from_slice(&pos[j * pd..(j + 1) * pd]);
-                }
-                Tensor::from_data(TensorData::new(c, [b, o * (f + pd)]), &device)
-            }
-            None => {
-                let frames: Vec<&[u8]> = obs.iter().map(|&i| demos.frame(i)).collect();
-                net.obs_cond(
-                    frames_to_tensor(&frames, s, &device),
-                    Tensor::from_data(TensorData::new(pos, [b, o, pd]), &device),
-                )
-            }
-        };
-        let actions = Tensor::from_data(TensorData::new(act, [b, h, ad]), &device);
-        let loss = net.loss(cond, actions, noise, &t, &ac);
+        let loss = batch_loss(&tr.net, demos, &configs, (batch, tr.state.step), &features, &ac, &device);
         let lv: f64 = loss.clone().into_scalar::<f32>().into();
         if !lv.is_finite() {
             return Err(PolicyLoadError::new(
                 out,
-                format!("non-finite loss at training step {}", state.step),
+                format!("non-finite loss at training step {}", tr.state.step),
             ));
         }
-        let grads = GradientsParams::from_grads(loss.backward(), &net);
-        net = optim.step(lr_at(state.step, tc), net, grads);
-        state.step += 1;
+        let grads = GradientsParams::from_grads(loss.backward(), &tr.net);
+        tr.net = tr.optim.step(lr_at(tr.state.step, tc), tr.net, grads);
+        tr.state.step += 1;
         if tc.ema > 0.0 {
-            let k = state.ema_updates as f64;
-            ema.decay = tc.ema.min((1.0 + k) / (10.0 + k));
-            ema.update(&net);
-            state.ema_updates += 1;
+            let k = tr.state.ema_updates as f64;
+            tr.ema.decay = tc.ema.min((1.0 + k) / (10.0 + k));
+            tr.ema.update(&tr.net);
+            tr.state.ema_updates += 1;
         }
-        state.elapsed_s = driver.elapsed_s();
+        tr.state.elapsed_s = driver.elapsed_s();
         recent.push(lv);
         if recent.len() > 50 {
             recent.remove(0);
         }
-        let line = json!({"step": state.step, "epoch": epoch + 1, "loss": lv, "elapsed_s": state.elapsed_s});
+        let line =
+            json!({"step": tr.state.step, "epoch": epoch + 1, "loss": lv, "elapsed_s": tr.state.elapsed_s});
         driver.log(&line).map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
-        if state.step.is_multiple_of(per_epoch) {
-            let done = state.step / per_epoch;
-            if done.is_multiple_of(tc.save_every) || done == tc.epochs {
-                let ck = out.join(format!("epoch-{done:04}"));
-                let mut prov = provenance.clone();
-                prov.weights = Some(if tc.ema > 0.0 {
-                    Weights::Ema { ema_decay: tc.ema, ema_updates: state.ema_updates }
-                } else {
-                    Weights::Raw(RawWeights::Raw)
-                });
-                let file = PolicyFile::diffusion(
-                    pc,
-                    &configs.normalisation,
-                    done,
-                    state.step,
-                    &prov,
-                    lv,
-                    configs.task.as_deref(),
-                );
-                let weights = if tc.ema > 0.0 { ema.module.clone() } else { net.valid() };
-                write_policy(&ck, &file, &weights)?;
-                saved.push(ck);
-            }
+        let step = tr.state.step;
+        let done = step / per_epoch;
+        if step.is_multiple_of(per_epoch) && (done.is_multiple_of(tc.save_every) || done == tc.epochs) {
+            saved.push(save_epoch(out, &configs, &provenance, &tr, (done, lv))?);
         }
-        if state.step.is_multiple_of(tc.checkpoint_every) || state.step.is_multiple_of(per_epoch) {
-            save_state(&net, &ema, &optim, &state)?;
+        if step.is_multiple_of(tc.checkpoint_every) || step.is_multiple_of(per_epoch) {
+            tr.save(&dir)?;
         }
-        on_progress(&PolicyProgress {
-            phase: Phase::Policy,
-            step: state.step,
-            total,
-            epoch: epoch + 1,
-            loss: lv,
-        });
+        on_progress(&PolicyProgress { phase: Phase::Policy, step, total, epoch: epoch + 1, loss: lv });
     }
-    save_state(&net, &ema, &optim, &state)?;
+    tr.save(&dir)?;
     let loss = recent.iter().sum::<f64>() / recent.len().max(1) as f64;
-    Ok(PolicyOutcome { step: state.step, total, saved, loss, elapsed_s: state.elapsed_s })
+    Ok(PolicyOutcome { step: tr.state.step, total, saved, loss, elapsed_s: tr.state.elapsed_s })
 }
 
 /// The weights of the checkpoint a run starts from, which must have the run's
 /// network config.
-fn init_weights(src: &Path, pc: &DiffusionConfig, device: &Device) -> Result<DiffusionNet, PolicyLoadError> {
+pub(crate) fn init_weights(
+    src: &Path,
+    pc: &DiffusionConfig,
+    device: &Device,
+) -> Result<DiffusionNet, PolicyLoadError> {
     let file = read_policy_file(src)?;
     let cfg = diffusion_config(src, &file)?;
     if cfg.net != pc.net || cfg.horizon != pc.horizon || cfg.train_steps != pc.train_steps {

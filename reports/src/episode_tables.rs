@@ -10,7 +10,7 @@ use crate::episodes::{TableError, write_episodes_parquet};
 
 /// The columns of `episodes.csv`.
 const CSV_COLUMNS: [&str; 8] =
-    ["policy", "seed", "branch", "score", "max_coverage", "final_coverage", "success", "steps"];
+    ["policy", "seed", "branch", "score", "max_raw", "final_raw", "success", "steps"];
 
 /// Writes `episodes.csv` and `episodes.parquet` into `out`: `rows` sorted by (policy,
 /// seed, branch).
@@ -35,8 +35,8 @@ fn write_csv(path: &Path, sorted: &[&EpisodeRow]) -> Result<(), TableError> {
             r.seed.to_string(),
             r.branch.as_str().to_string(),
             format!("{:.6}", r.score),
-            format!("{:.6}", r.max_coverage),
-            format!("{:.6}", r.final_coverage),
+            format!("{:.6}", r.max_raw),
+            format!("{:.6}", r.final_raw),
             r.success.to_string(),
             r.steps.to_string(),
         ])
@@ -61,7 +61,7 @@ mod tests {
         write_tables(dir.path(), &rows).unwrap();
         let csv = std::fs::read_to_string(dir.path().join("episodes.csv")).unwrap();
         let lines: Vec<&str> = csv.lines().collect();
-        assert_eq!(lines[0], "policy,seed,branch,score,max_coverage,final_coverage,success,steps");
+        assert_eq!(lines[0], "policy,seed,branch,score,max_raw,final_raw,success,steps");
         assert!(lines[1].starts_with("a,2,sim,0.333333,0.300000,0.200000,"), "{csv}");
         assert!(lines[2].starts_with("a,2,world_model,1.000000,"), "{csv}");
         assert!(lines[3].starts_with("b,1,sim,0.500000,0.250000,0.125000,"), "{csv}");

@@ -10,20 +10,24 @@
 //! | `policy` | str | checkpoint folder name |
 //! | `seed` | u64 | episode seed |
 //! | `branch` | str | `sim` (MuJoCo) or `world_model` |
-//! | `score` | f64 | max over the episode of clip(coverage / threshold, 0, 1) |
-//! | `max_coverage`, `final_coverage` | f64 | coverage of the goal |
-//! | `success` | bool | coverage ever above the threshold |
+//! | `score` | f64 | max over the episode of the task's reward (its raw score mapped to [0, 1]) |
+//! | `max_raw`, `final_raw` | f64 | the raw score's maximum and last value (Push-T: goal coverage; Lift, Can: success) |
+//! | `success` | bool | the raw score ever above the task's threshold |
 //! | `steps` | u32 | control steps executed |
-//! | `final_block_x`, `_y`, `_theta` | f64, null in the world-model branch | final block pose |
-//! | `goal_x`, `goal_y`, `goal_theta` | f64 | goal pose |
-//! | `scorer_abs_error` | f64, null in the world-model branch | frame scorer's mean error on real frames |
-//! | `block_area` | f64, null in runs written before it existed | block pixels in the last frame the policy saw, as a fraction of the T's area (≈ 1.06 in MuJoCo; how much of the block a world-model rollout kept) |
-//! | `goal_kept` | f64, null in runs written before it existed | fraction of the (static) goal T that frame still shows (≈ 0.94–0.99 in MuJoCo) |
-//! | `agent_kept` | f64, null in runs written before it existed | agent pixels in that frame as a fraction of the agent disk's area, capped at 1 (≈ 1 in MuJoCo; near 0 when a world-model rollout lost the agent) |
+//! | `scorer_abs_error` | f64, null in the world-model branch | the judge's mean error on real frames |
+//! | the task's named state, in name order | f64, null where a row lacks it | [`EpisodeRow::state`]; Push-T: `final_block_theta`, `final_block_x`, `final_block_y` (null in the world-model branch), `goal_theta`, `goal_x`, `goal_y`; Lift, Can: `final_object_x`, `_y`, `_yaw` |
+//! | the judge's scene checks, in name order | f64, null where a row lacks it | [`EpisodeRow::scene`]; Push-T: `agent_kept`, `block_area`, `goal_kept` (about 1 in MuJoCo; how much of the scene a world-model rollout kept) |
+//!
+//! The task's columns are those its rows name, so each task's table has its own. A name
+//! that is not a plain identifier (letters, digits, `_`) or that repeats a column is refused.
+//!
+//! [`EpisodeRow::state`]: harness::results::EpisodeRow::state
+//! [`EpisodeRow::scene`]: harness::results::EpisodeRow::scene
 //!
 //! Written with the parquet crate's column writers (snappy pages, fixed options, no
 //! timestamps), so the same rows give the same bytes.
 
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -46,30 +50,20 @@ pub struct TableError {
     pub message: String,
 }
 
-/// The table's schema, in the column order of the module's table.
-const SCHEMA: &str = "message episodes {
+/// The columns every task has, in the module's table's order.
+const FIXED: &str = "
     REQUIRED BYTE_ARRAY policy (STRING);
     REQUIRED INT64 seed (INTEGER(64, false));
     REQUIRED BYTE_ARRAY branch (STRING);
     REQUIRED DOUBLE score;
-    REQUIRED DOUBLE max_coverage;
-    REQUIRED DOUBLE final_coverage;
+    REQUIRED DOUBLE max_raw;
+    REQUIRED DOUBLE final_raw;
     REQUIRED BOOLEAN success;
     REQUIRED INT32 steps (INTEGER(32, false));
-    OPTIONAL DOUBLE final_block_x;
-    OPTIONAL DOUBLE final_block_y;
-    OPTIONAL DOUBLE final_block_theta;
-    REQUIRED DOUBLE goal_x;
-    REQUIRED DOUBLE goal_y;
-    REQUIRED DOUBLE goal_theta;
-    OPTIONAL DOUBLE scorer_abs_error;
-    OPTIONAL DOUBLE block_area;
-    OPTIONAL DOUBLE goal_kept;
-    OPTIONAL DOUBLE agent_kept;
-}";
+    OPTIONAL DOUBLE scorer_abs_error;";
 
-/// Columns of [`SCHEMA`].
-pub const COLUMNS: usize = 18;
+/// Columns every table has ([`FIXED`]).
+pub const FIXED_COLUMNS: usize = 9;
 
 /// One column's values: the present ones, and for an optional column its definition
 /// levels (1 present, 0 null).
@@ -87,33 +81,56 @@ fn optional(v: impl Iterator<Item = Option<f64>>) -> Values {
     Values::Opt(v.iter().flatten().copied().collect(), v.iter().map(|x| i16::from(x.is_some())).collect())
 }
 
-/// The columns of `rows`, in [`SCHEMA`]'s order.
-fn columns(rows: &[&EpisodeRow]) -> Vec<Values> {
+/// The task's named columns of `rows`: every state name, then every scene-check name, each
+/// in name order; `Err` names one that is not an identifier or repeats a column.
+fn named_columns(rows: &[&EpisodeRow]) -> Result<(Vec<String>, Vec<String>), String> {
+    let state: BTreeSet<&String> = rows.iter().flat_map(|r| r.state.keys()).collect();
+    let scene: BTreeSet<&String> = rows.iter().flat_map(|r| r.scene.keys()).collect();
+    let fixed =
+        ["policy", "seed", "branch", "score", "max_raw", "final_raw", "success", "steps", "scorer_abs_error"];
+    let mut seen: BTreeSet<&str> = fixed.into_iter().collect();
+    for name in state.iter().chain(&scene) {
+        let ident = name.chars().next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+            && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+        if !ident {
+            return Err(format!(
+                "a task's column name {name:?} is not a plain identifier (letters, digits, _)"
+            ));
+        }
+        if !seen.insert(name.as_str()) {
+            return Err(format!(
+                "the column name {name:?} appears twice (a task's state or scene check repeats it)"
+            ));
+        }
+    }
+    Ok((state.into_iter().cloned().collect(), scene.into_iter().cloned().collect()))
+}
+
+/// The schema for the named columns after [`FIXED`].
+fn schema(state: &[String], scene: &[String]) -> String {
+    let named: String = state.iter().chain(scene).map(|n| format!("\n    OPTIONAL DOUBLE {n};")).collect();
+    format!("message episodes {{{FIXED}{named}\n}}")
+}
+
+/// The columns of `rows`, in [`schema`]'s order.
+fn columns(rows: &[&EpisodeRow], state: &[String], scene: &[String]) -> Vec<Values> {
     let f = |g: fn(&EpisodeRow) -> f64| Values::F64(rows.iter().map(|r| g(r)).collect());
-    let block = |k: usize| optional(rows.iter().map(|r| r.final_block.map(|b| b[k])));
-    let goal = |k: usize| Values::F64(rows.iter().map(|r| r.goal[k]).collect());
     let text = |g: fn(&EpisodeRow) -> &str| Values::Str(rows.iter().map(|r| ByteArray::from(g(r))).collect());
-    vec![
+    let mut out = vec![
         text(|r| r.policy.as_str()),
         // The parquet type is INT64 annotated unsigned: the bits of the u64.
         Values::U64(rows.iter().map(|r| r.seed as i64).collect()),
         text(|r| r.branch.as_str()),
         f(|r| r.score),
-        f(|r| r.max_coverage),
-        f(|r| r.final_coverage),
+        f(|r| r.max_raw),
+        f(|r| r.final_raw),
         Values::Bool(rows.iter().map(|r| r.success).collect()),
         Values::U32(rows.iter().map(|r| r.steps as i32).collect()),
-        block(0),
-        block(1),
-        block(2),
-        goal(0),
-        goal(1),
-        goal(2),
         optional(rows.iter().map(|r| r.scorer_abs_error)),
-        optional(rows.iter().map(|r| r.block_area)),
-        optional(rows.iter().map(|r| r.goal_kept)),
-        optional(rows.iter().map(|r| r.agent_kept)),
-    ]
+    ];
+    out.extend(state.iter().map(|n| optional(rows.iter().map(|r| r.state.get(n).copied()))));
+    out.extend(scene.iter().map(|n| optional(rows.iter().map(|r| r.scene.get(n).copied()))));
+    out
 }
 
 /// Writes `rows` to `path` (one row group, snappy-compressed pages).
@@ -122,7 +139,8 @@ fn columns(rows: &[&EpisodeRow]) -> Vec<Values> {
 /// [`TableError`] naming `path` if it cannot be created or written.
 pub fn write_episodes_parquet(path: &Path, rows: &[&EpisodeRow]) -> Result<(), TableError> {
     let err = |m: String| TableError { path: path.to_path_buf(), message: m };
-    let schema = Arc::new(parse_message_type(SCHEMA).map_err(|e| err(e.to_string()))?);
+    let (state, scene) = named_columns(rows).map_err(err)?;
+    let schema = Arc::new(parse_message_type(&schema(&state, &scene)).map_err(|e| err(e.to_string()))?);
     let props = Arc::new(
         WriterProperties::builder()
             .set_compression(Compression::SNAPPY)
@@ -132,7 +150,7 @@ pub fn write_episodes_parquet(path: &Path, rows: &[&EpisodeRow]) -> Result<(), T
     let file = std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
     let mut writer = SerializedFileWriter::new(file, schema, props).map_err(|e| err(e.to_string()))?;
     let mut group = writer.next_row_group().map_err(|e| err(e.to_string()))?;
-    for values in columns(rows) {
+    for values in columns(rows, &state, &scene) {
         let Some(mut col) = group.next_column().map_err(|e| err(e.to_string()))? else {
             return Err(err("fewer columns in the schema than in the table".into()));
         };
@@ -176,14 +194,19 @@ mod tests {
     use harness::results::Branch;
 
     fn rows() -> Vec<EpisodeRow> {
+        let goal = [("goal_x", 256.0), ("goal_y", 256.0), ("goal_theta", 0.785)];
         let r = EpisodeRow::new("epoch-0002", 100_000, Branch::Sim, 0.5, 0.475, 0.4, 0.95, 300)
-            .with_poses(Some([250.0, 260.0, 0.5]), [256.0, 256.0, 0.785])
+            .with_state(&goal)
+            .with_state(&[("final_block_x", 250.0), ("final_block_y", 260.0), ("final_block_theta", 0.5)])
             .with_scorer_error(Some(0.01))
-            .with_scene(Some(SceneCheck { block_area: 0.98, goal_kept: 0.95, agent_kept: 0.99 }));
-        let mut w =
-            EpisodeRow { branch: Branch::WorldModel, final_block: None, scorer_abs_error: None, ..r.clone() };
-        w = w.with_scene(None);
-        w.agent_kept = Some(0.02);
+            .with_scene(Some(&SceneCheck(vec![
+                ("block_area", 0.98),
+                ("goal_kept", 0.95),
+                ("agent_kept", 0.99),
+            ])));
+        let w = EpisodeRow::new("epoch-0002", 100_000, Branch::WorldModel, 0.5, 0.475, 0.4, 0.95, 300)
+            .with_state(&goal)
+            .with_scene(Some(&SceneCheck(vec![("agent_kept", 0.02)])));
         vec![r, w]
     }
 
@@ -194,7 +217,12 @@ mod tests {
         write_episodes_parquet(&path, &rows().iter().collect::<Vec<_>>()).unwrap();
         let t = read_episodes_parquet(&path).unwrap();
         assert_eq!(t.len(), 2);
-        assert_eq!(t[0].len(), COLUMNS);
+        // The fixed columns, the six of the state and the three checks.
+        assert_eq!(t[0].len(), FIXED_COLUMNS + 6 + 3);
+        let names: Vec<&str> = t[0].get_column_iter().map(|(n, _)| n.as_str()).skip(FIXED_COLUMNS).collect();
+        let want = ["final_block_theta", "final_block_x", "final_block_y", "goal_theta", "goal_x", "goal_y"];
+        assert_eq!(names[..6], want);
+        assert_eq!(names[6..], ["agent_kept", "block_area", "goal_kept"]);
         let get = |r: usize, name: &str| field(&t[r], name).cloned();
         // Unsigned 64-bit seeds come back as such.
         assert_eq!(get(1, "seed"), Some(Field::ULong(100_000)));
@@ -213,10 +241,25 @@ mod tests {
         );
         assert_eq!(get(1, "branch"), Some(Field::Str("world_model".into())));
         assert_eq!(get(0, "success"), Some(Field::Bool(false)));
+        assert_eq!(get(1, "max_raw"), Some(Field::Double(0.475)));
         // Same rows, same bytes.
         let again = dir.path().join("again.parquet");
         write_episodes_parquet(&again, &rows().iter().collect::<Vec<_>>()).unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), std::fs::read(&again).unwrap());
+    }
+
+    #[test]
+    fn a_task_without_named_columns_has_the_fixed_ones_and_a_bad_name_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("episodes.parquet");
+        let plain = EpisodeRow::new("p", 1, Branch::Sim, 1.0, 1.0, 1.0, 0.5, 4);
+        write_episodes_parquet(&path, &[&plain]).unwrap();
+        assert_eq!(read_episodes_parquet(&path).unwrap()[0].len(), FIXED_COLUMNS);
+        for bad in ["x y", "score", "9lives"] {
+            let row = plain.clone().with_state(&[(bad, 0.0)]);
+            let e = write_episodes_parquet(&path, &[&row]).unwrap_err().to_string();
+            assert!(e.contains(&format!("{bad:?}")) && e.contains("episodes.parquet"), "{e}");
+        }
     }
 
     #[test]

@@ -114,7 +114,7 @@ fn episodes_jsonl_reader_survives_damaged_rows() {
         .flat_map(|s| {
             [Branch::Sim, Branch::WorldModel].map(|b| {
                 EpisodeRow::new("p", s, b, 0.5, 0.4, 0.3, 0.95, 10)
-                    .with_poses(Some([1.0, 2.0, 0.5]), [3.0, 4.0, 0.1])
+                    .with_state(&[("final_block_x", 1.0), ("goal_x", 3.0)])
             })
         })
         .collect();

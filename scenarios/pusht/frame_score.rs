@@ -150,11 +150,11 @@ impl FrameScorer {
 
     /// All three health checks of a frame.
     pub fn scene(&self, frame: &[u8]) -> SceneCheck {
-        SceneCheck {
-            block_area: self.block_area(frame),
-            goal_kept: self.goal_kept(frame),
-            agent_kept: self.agent_kept(frame),
-        }
+        SceneCheck(vec![
+            ("block_area", self.block_area(frame)),
+            ("goal_kept", self.goal_kept(frame)),
+            ("agent_kept", self.agent_kept(frame)),
+        ])
     }
 
     /// Estimated reward: clip(coverage / success threshold, 0, 1).
@@ -350,9 +350,9 @@ mod tests {
         let mut areas = Vec::new();
         for &(x, y) in &[(20.0, 20.0), (256.0, 20.0), (490.0, 490.0), (100.0, 300.0), (400.0, 150.0)] {
             state.agent = [x, y];
-            let s = scorer.scene(&raster.render(&state, &goal));
-            areas.push(s.agent_kept);
-            assert!((0.95..=1.0).contains(&s.agent_kept), "agent at ({x}, {y}): {:.3}", s.agent_kept);
+            let kept = scorer.scene(&raster.render(&state, &goal)).get("agent_kept").unwrap();
+            areas.push(kept);
+            assert!((0.95..=1.0).contains(&kept), "agent at ({x}, {y}): {kept:.3}");
         }
         // Touching the block, the rim pixels mixing blue with red count less (B − R of the
         // mix falls faster than on white), so the check reads a little under 1.

@@ -54,9 +54,6 @@ pub fn mjcf(cfg: &PushTConfig) -> String {
     let damp_rot = b.inertia / b.damping_time;
     // Half-height of the planar slab every colliding geom lives in.
     let h = 10.0;
-    let rgb = |c: [u8; 3]| {
-        format!("{} {} {} 1", f64::from(c[0]) / 255.0, f64::from(c[1]) / 255.0, f64::from(c[2]) / 255.0)
-    };
     let (fill, edge) = (rgb(colors::BLOCK), rgb(colors::BLOCK_EDGE));
     // A visual-only box over `r` grown by `grow` (negative shrinks), its top face at `top`.
     let vbox = |r: &Rect, grow: [f64; 4], top: f64, color: &str| {
@@ -90,38 +87,7 @@ pub fn mjcf(cfg: &PushTConfig) -> String {
     let goal_geoms =
         [&b.bar, &b.stem].map(|r| vbox(r, [0.0; 4], -h + 1.0, &rgb(colors::GOAL))).join("\n      ");
     let s = cfg.world.size;
-    let lo = cfg.world.wall_inset + cfg.world.wall_radius;
-    let hi = s - 1.0 - cfg.world.wall_inset - cfg.world.wall_radius;
-    let thick = 20.0;
-    let mid = (lo + hi) / 2.0;
-    let half_len = (hi - lo) / 2.0 + 2.0 * thick;
-    // Colliding walls are invisible (alpha 0); thin visual walls mark the segments.
-    let wall = |name: &str, x: f64, y: f64, hx: f64, hy: f64| {
-        format!(
-            r#"<geom name="{name}" type="box" pos="{x} {y} 0" size="{hx} {hy} {h}" contype="2" conaffinity="2" condim="1" rgba="0 0 0 0"/>"#
-        )
-    };
-    let (wl, wh, wr) = (cfg.world.wall_inset, s - 1.0 - cfg.world.wall_inset, cfg.world.wall_radius);
-    let wall_rgba = rgb(colors::WALL);
-    let vwall = |x: f64, y: f64, hx: f64, hy: f64| {
-        format!(
-            r#"<geom type="box" pos="{x} {y} {}" size="{hx} {hy} 0.25" contype="0" conaffinity="0" mass="0" rgba="{wall_rgba}"/>"#,
-            -h + 0.5
-        )
-    };
-    let wmid = (wl + wh) / 2.0;
-    let wlen = (wh - wl) / 2.0 + wr;
-    let walls = [
-        wall("wall_left", lo - thick, mid, thick, half_len),
-        wall("wall_right", hi + thick, mid, thick, half_len),
-        wall("wall_top", mid, lo - thick, half_len, thick),
-        wall("wall_bottom", mid, hi + thick, half_len, thick),
-        vwall(wl, wmid, wr, wlen),
-        vwall(wh, wmid, wr, wlen),
-        vwall(wmid, wl, wlen, wr),
-        vwall(wmid, wh, wlen, wr),
-    ]
-    .join("\n    ");
+    let walls = walls(cfg, h);
     let inertia = b.inertia;
     let off = cfg.render.size.max(512);
     format!(
@@ -171,6 +137,49 @@ pub fn mjcf(cfg: &PushTConfig) -> String {
         inner_z = 5.0 + a.radius + 0.5,
         inner_rgba = rgb(colors::AGENT_INNER),
     )
+}
+
+/// The `rgba` attribute of an opaque colour.
+fn rgb(c: [u8; 3]) -> String {
+    format!("{} {} {} 1", f64::from(c[0]) / 255.0, f64::from(c[1]) / 255.0, f64::from(c[2]) / 255.0)
+}
+
+/// The four colliding walls (invisible, alpha 0) and the thin visual walls that mark their
+/// segments, for a slab of half-height `h`.
+fn walls(cfg: &PushTConfig, h: f64) -> String {
+    let s = cfg.world.size;
+    let lo = cfg.world.wall_inset + cfg.world.wall_radius;
+    let hi = s - 1.0 - cfg.world.wall_inset - cfg.world.wall_radius;
+    let thick = 20.0;
+    let mid = (lo + hi) / 2.0;
+    let half_len = (hi - lo) / 2.0 + 2.0 * thick;
+    // Colliding walls are invisible (alpha 0); thin visual walls mark the segments.
+    let wall = |name: &str, x: f64, y: f64, hx: f64, hy: f64| {
+        format!(
+            r#"<geom name="{name}" type="box" pos="{x} {y} 0" size="{hx} {hy} {h}" contype="2" conaffinity="2" condim="1" rgba="0 0 0 0"/>"#
+        )
+    };
+    let (wl, wh, wr) = (cfg.world.wall_inset, s - 1.0 - cfg.world.wall_inset, cfg.world.wall_radius);
+    let wall_rgba = rgb(colors::WALL);
+    let vwall = |x: f64, y: f64, hx: f64, hy: f64| {
+        format!(
+            r#"<geom type="box" pos="{x} {y} {}" size="{hx} {hy} 0.25" contype="0" conaffinity="0" mass="0" rgba="{wall_rgba}"/>"#,
+            -h + 0.5
+        )
+    };
+    let wmid = (wl + wh) / 2.0;
+    let wlen = (wh - wl) / 2.0 + wr;
+    [
+        wall("wall_left", lo - thick, mid, thick, half_len),
+        wall("wall_right", hi + thick, mid, thick, half_len),
+        wall("wall_top", mid, lo - thick, half_len, thick),
+        wall("wall_bottom", mid, hi + thick, half_len, thick),
+        vwall(wl, wmid, wr, wlen),
+        vwall(wh, wmid, wr, wlen),
+        vwall(wmid, wl, wlen, wr),
+        vwall(wmid, wh, wlen, wr),
+    ]
+    .join("\n    ")
 }
 
 /// A Push-T episode in MuJoCo: the model, its data and the PD velocity.

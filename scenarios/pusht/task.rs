@@ -170,8 +170,14 @@ impl Env for PushTEpisode {
         vec![st.agent[0], st.agent[1], st.block.x, st.block.y, st.block.theta]
     }
 
-    fn object_pose(&self) -> Option<[f64; 3]> {
-        Some(self.env.state().block.to_array())
+    fn conditions(&self) -> Vec<(&'static str, f64)> {
+        let [x, y, theta] = self.env.goal().to_array();
+        vec![("goal_x", x), ("goal_y", y), ("goal_theta", theta)]
+    }
+
+    fn final_state(&self) -> Vec<(&'static str, f64)> {
+        let [x, y, theta] = self.env.state().block.to_array();
+        vec![("final_block_x", x), ("final_block_y", y), ("final_block_theta", theta)]
     }
 
     fn goal_pose(&self) -> Option<[f64; 3]> {

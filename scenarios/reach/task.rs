@@ -201,11 +201,11 @@ impl Env for ReachEnv {
     fn state(&self) -> Vec<f64> {
         vec![self.x]
     }
-    fn object_pose(&self) -> Option<[f64; 3]> {
-        None
+    fn conditions(&self) -> Vec<(&'static str, f64)> {
+        vec![("goal", self.cfg.goal)]
     }
-    fn goal_pose(&self) -> Option<[f64; 3]> {
-        None
+    fn final_state(&self) -> Vec<(&'static str, f64)> {
+        vec![("final_x", self.x)]
     }
     fn judge(&self) -> Option<Box<dyn Judge>> {
         Some(Box::new(ReachJudge { goal: self.cfg.goal, tolerance: self.cfg.tolerance }))

@@ -239,16 +239,13 @@ impl<E: TaskEpisode + Send + 'static> Env for ArmEnv<E> {
         self.ep.borrow().arm().state()
     }
 
-    fn object_pose(&self) -> Option<[f64; 3]> {
+    /// The object's final planar pose (the cube's or the can's centre, metres, and the yaw of its
+    /// rotation about the world's z axis).
+    fn final_state(&self) -> Vec<(&'static str, f64)> {
         let ep = self.ep.borrow();
         let ([x, y, _], [w, qx, qy, qz]) = (ep.arm().object_pos(), ep.arm().object_quat());
-        // Yaw of the object's rotation about the world's z axis.
         let yaw = (2.0 * (w * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
-        Some([x, y, yaw])
-    }
-
-    fn goal_pose(&self) -> Option<[f64; 3]> {
-        None
+        vec![("final_object_x", x), ("final_object_y", y), ("final_object_yaw", yaw)]
     }
 
     fn judge(&self) -> Option<Box<dyn Judge>> {
@@ -363,7 +360,7 @@ mod tests {
         );
         let env = t.reset(1).unwrap();
         assert_eq!(env.observe().frame.len(), 96 * 96 * 3);
-        assert!(env.object_pose().is_some());
+        assert_eq!(env.final_state().len(), 3);
         // Labels name the object's position, then the end effector's and the fingers'.
         let labels = t.frame_labels();
         let names: Vec<&str> = labels.iter().map(|(_, n)| n.as_str()).collect();

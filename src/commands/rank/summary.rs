@@ -60,18 +60,14 @@ pub(super) fn gates(
 /// The per-policy table, the agreement line and where the results (and the report,
 /// when one was written) are (stdout carries results only).
 pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
-    let or_nan = |v: Option<f64>| v.unwrap_or(f64::NAN);
-    let scene = res.policies.iter().any(|p| p.world_model.block_area.is_some() || p.sim.block_area.is_some());
+    // The task's scene checks by name (Push-T: agent kept, block area, goal kept), the
+    // world model's means beside the scores.
+    let checks: std::collections::BTreeSet<&str> =
+        res.policies.iter().flat_map(|p| p.world_model.scene.keys().map(String::as_str)).collect();
+    let scene = !checks.is_empty();
     if scene {
-        outln!(
-            "{:<16} {:>10} {:>12} {:>12} {:>10} {:>11}",
-            "policy",
-            "MuJoCo",
-            "world model",
-            "block kept",
-            "goal kept",
-            "agent kept"
-        );
+        let names: String = checks.iter().map(|c| format!(" {:>11}", c.replace('_', " "))).collect();
+        outln!("{:<16} {:>10} {:>12}{names}", "policy", "MuJoCo", "world model");
     } else {
         // A task without scene checks (robomimic's, scored by success alone): the success
         // rates with their Wilson 95% intervals, the mean steps to success, and the seeds
@@ -91,15 +87,11 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
     for p in &res.policies {
         let wm = &p.world_model;
         if scene {
-            outln!(
-                "{:<16} {:>10.3} {:>12.3} {:>12.2} {:>10.2} {:>11.2}",
-                p.name,
-                p.sim.mean,
-                wm.mean,
-                or_nan(wm.block_area),
-                or_nan(wm.goal_kept),
-                or_nan(wm.agent_kept)
-            );
+            let means: String = checks
+                .iter()
+                .map(|c| format!(" {:>11.2}", wm.scene.get(*c).copied().unwrap_or(f64::NAN)))
+                .collect();
+            outln!("{:<16} {:>10.3} {:>12.3}{means}", p.name, p.sim.mean, wm.mean);
         } else {
             let rate = |b: &harness::results::BranchStats| {
                 format!("{:.2} [{:.2}, {:.2}]", b.success_rate, b.success_ci95[0], b.success_ci95[1])
