@@ -43,4 +43,5 @@ mod robomimic_config;
 mod robomimic_weights;
 pub mod symmetry;
 pub mod train;
+mod train_config;
 mod train_parts;

@@ -13,11 +13,13 @@ use harness::seed::derive;
 use serde::{Deserialize, Serialize};
 
 use crate::data::Demos;
-use crate::diffusion::{DiffusionNet, frames_to_tensor};
-use crate::dir::{PolicyFile, PolicyLoadError, write_policy};
+use crate::diffusion::{DiffusionConfig, DiffusionNet, frames_to_tensor};
+use crate::dir::{
+    PolicyFile, PolicyLoadError, diffusion_config, diffusion_weights, read_policy_file, write_policy,
+};
 use crate::pretrain::{Pretrain, encode_frames, pretrain_encoder};
 use crate::provenance::{EncoderPretraining, PolicyProvenance, RawWeights, Weights};
-use crate::train::{Phase, PolicyProgress, PolicyRun, RunConfigs, init_weights};
+use crate::train_config::{Phase, PolicyProgress, PolicyRun, RunConfigs};
 use nn::optim::Ema;
 
 /// The resumable step counter.
@@ -229,4 +231,21 @@ pub(crate) fn save_epoch(
     let weights = if tc.ema > 0.0 { training.ema.module.clone() } else { training.net.valid() };
     write_policy(&ck, &file, &weights)?;
     Ok(ck)
+}
+
+/// The weights of the checkpoint a run starts from, which must have the run's
+/// network config.
+fn init_weights(src: &Path, pc: &DiffusionConfig, device: &Device) -> Result<DiffusionNet, PolicyLoadError> {
+    let file = read_policy_file(src)?;
+    let cfg = diffusion_config(src, &file)?;
+    if cfg.net != pc.net || cfg.horizon != pc.horizon || cfg.train_steps != pc.train_steps {
+        return Err(PolicyLoadError::new(
+            src,
+            format!(
+                "its network ({:?}, horizon {}, {} diffusion steps) is not the run's ({:?}, horizon {}, {})",
+                cfg.net, cfg.horizon, cfg.train_steps, pc.net, pc.horizon, pc.train_steps
+            ),
+        ));
+    }
+    diffusion_weights(src, pc, device)
 }
