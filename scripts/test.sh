@@ -3,6 +3,8 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 scripts/setup.sh --no-build --tests
+# No module of a crate may reach back to one that reaches it (docs/architecture.md).
+python3 scripts/module_cycles.py
 # Mesa's llvmpipe without helper threads, as the binary sets it (scenarios::init_mujoco): the unit
 # tests that render run their own renderers, outside the binary's main.
 export LP_NUM_THREADS=${LP_NUM_THREADS:-0}

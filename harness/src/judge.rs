@@ -2,7 +2,7 @@
 //!
 //! The imagined branch has no simulator state, only decoded frames, so its score
 //! comes from a [`Judge`] that reads a frame and estimates the raw score the task
-//! would give the scene it shows (see [`ScoreKind`](crate::task::ScoreKind)).
+//! would give the scene it shows (see [`ScoreKind`](crate::task_spec::ScoreKind)).
 //! Push-T's colour-mask coverage scorer is one judge; a learned classifier or
 //! regressor trained on simulator frames labelled with the exact score is another,
 //! and needs no hand-written pixel rules. Every run also judges the simulator
@@ -119,12 +119,12 @@ impl Judge for Replaced {
 }
 
 /// A planner's cost from a judge: `1 − score` of the frame (lower is better, as every
-/// [`crate::task::PlanCost`]), `None` where the judge's score is not a number in [0, 1]
+/// [`crate::task_spec::PlanCost`]), `None` where the judge's score is not a number in [0, 1]
 /// (a pose it cannot place, say). What `plan --judge` ranks proposals by, as GPC-RANK
 /// ranks them by its reward predictors.
 pub struct JudgedCost(pub Box<dyn Judge>);
 
-impl crate::task::PlanCost for JudgedCost {
+impl crate::task_spec::PlanCost for JudgedCost {
     fn cost(&self, frame: &[u8]) -> Option<f64> {
         let s = self.0.score(frame);
         (0.0..=1.0).contains(&s).then_some(1.0 - s)
@@ -144,7 +144,7 @@ mod tests {
 
     #[test]
     fn a_judged_cost_is_one_minus_the_score_and_none_off_the_unit_interval() {
-        use crate::task::PlanCost;
+        use crate::task_spec::PlanCost;
         let c = JudgedCost(Box::new(Mean));
         // Mean of [255, 0] over 255 = 0.5; cost 1 - 0.5.
         assert_eq!(c.cost(&[255, 0]), Some(0.5));

@@ -18,7 +18,7 @@ pub struct Observation {
     /// task's observation spec names (Push-T: the agent's position in world units).
     pub proprio: Vec<Vec<f32>>,
     /// The robot's state, oldest first, one vector per frame, laid out as the task's
-    /// [`crate::task::ObservationSpec::robot`] (empty vectors where it gives none).
+    /// [`crate::task_spec::ObservationSpec::robot`] (empty vectors where it gives none).
     pub robot: Vec<Vec<f32>>,
     /// Frame side in pixels.
     pub size: usize,
@@ -27,9 +27,9 @@ pub struct Observation {
     /// that read floats use them, the others read `frames`.
     pub exact: Option<Vec<Vec<f32>>>,
     /// Every frame at the side the camera rendered it at, oldest first, where the scene
-    /// renders at another side and resizes ([`crate::task::Seen::native`]): a policy trained
+    /// renders at another side and resizes ([`crate::task_spec::Seen::native`]): a policy trained
     /// at that side reads these instead of resizing `frames` back. Absent in imagination.
-    pub native: Option<Vec<crate::task::NativeFrame>>,
+    pub native: Option<Vec<crate::task_spec::NativeFrame>>,
 }
 
 /// Actions to execute in order, each with the task's action dimension (Push-T: a

@@ -1,5 +1,5 @@
 //! A task's scripted behaviours and its dataset layout, behind one interface
-//! ([`Scripted`], reached through [`crate::task::Task::scripted`]).
+//! ([`Scripted`], reached through [`crate::task_spec::Task::scripted`]).
 //!
 //! Why here: `simulate` and `collect` run any task's scripted behaviours (an expert and
 //! the ways weak policies fail), and every command that writes a dataset of a task's
@@ -11,7 +11,7 @@
 use crate::replay::EpisodeArrays;
 use crate::replay::ReplaySpec;
 use crate::replay::attrs::DatasetAttrs;
-use crate::task::TaskError;
+use crate::task_spec::TaskError;
 
 /// How scripted episodes run (the data commands' flags, checked by their parser).
 #[derive(Clone, Copy, Debug)]
@@ -86,7 +86,7 @@ pub struct Recorded<'a> {
     pub seed: u64,
     /// At least one frame per action, `size × size × 3` bytes.
     pub frames: &'a [Vec<u8>],
-    /// The state before each action, as [`crate::task::Env::state`] gives it.
+    /// The state before each action, as [`crate::task_spec::Env::state`] gives it.
     pub states: &'a [Vec<f64>],
     /// Each action.
     pub actions: &'a [Vec<f32>],

@@ -9,8 +9,9 @@
 
 use crate::error::{Context, Result, refuse};
 use crate::{Invocation, say};
-use policies::dir::{Expectations, PolicyFile, load_policy, write_policy_f32};
+use policies::dir::{Expectations, PolicyFile, write_policy_f32};
 use policies::import_gpc::{GpcWeights, import};
+use policies::kinds::load_policy;
 use policies::provenance::PolicyProvenance;
 use serde_json::json;
 

@@ -6,8 +6,9 @@
 
 use crate::error::{Context, ImportCmdError, Result, refuse};
 use crate::{Invocation, say};
-use policies::dir::{PolicyFile, load_policy, write_policy_f32};
+use policies::dir::{PolicyFile, write_policy_f32};
 use policies::import_robomimic::{RobomimicWeights, declared, import};
+use policies::kinds::load_policy;
 use policies::provenance::PolicyProvenance;
 use serde_json::json;
 

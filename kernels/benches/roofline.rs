@@ -109,10 +109,10 @@ fn products(c: &mut Criterion) {
         g.bench_function(format!("{name}/gemm_crate"), |bch| {
             bch.iter(|| kernels::matrix::matmul(m, k, n, black_box(&a), black_box(&b), &mut out, false))
         });
-        if kernels::matrix::avx512_enabled() {
+        if kernels::avx512_gemm::avx512_enabled() {
             g.bench_function(format!("{name}/avx512"), |bch| {
                 bch.iter(|| {
-                    kernels::matrix::fast_matmul(m, k, n, black_box(&a), black_box(&b), &mut out, false)
+                    kernels::avx512_gemm::fast_matmul(m, k, n, black_box(&a), black_box(&b), &mut out, false)
                 })
             });
         }

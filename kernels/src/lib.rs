@@ -15,7 +15,7 @@
 //!   and fused with nearest 2x upsampling;
 //! - [`winograd_batch`]: Winograd over whole batches of channel-major images;
 //! - [`matrix`]: matrix products, dense layers, GroupNorm with FiLM, im2col convolutions;
-//! - [`avx512_gemm`]: the world model's matrix products on AVX-512 (`matrix::fast_matmul`);
+//! - [`avx512_gemm`]: the world model's matrix products on AVX-512 (`avx512_gemm::fast_matmul`, falling back to `matrix`);
 //! - [`attention`]: multi-head self-attention over each image's positions.
 //!
 //! This crate is the project's one place for `unsafe` code: AVX2 + FMA and AVX-512 intrinsics,

@@ -116,9 +116,6 @@ pub fn matmul(m: usize, k: usize, n: usize, a: &[f32], b: &[f32], c: &mut [f32],
     );
 }
 
-// The world model's products, on AVX-512 where the CPU has it.
-pub use crate::avx512_gemm::{avx512_enabled, fast_matmul, fast_matmul_strided};
-
 /// `y = x W + b` with burn's layout `W: [d_in, d_out]`.
 #[derive(Clone, Debug)]
 pub struct Dense {

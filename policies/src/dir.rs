@@ -1,4 +1,5 @@
-//! The policy directory format and its loader.
+//! The policy directory format: a checkpoint folder's `policy.json` and weights, read and
+//! written ([`crate::kinds::load_policy`] loads one by its kind).
 //!
 //! A checkpoint is a folder with `policy.json` — kind, config, normalisation
 //! statistics, training epoch, provenance — and its weights (`model.bpk`).
@@ -12,13 +13,13 @@ use std::path::{Path, PathBuf};
 use burn::module::{Module, ModuleMapper, Param};
 use burn::store::{ModuleRecord, RecordError};
 use burn::tensor::{DType, Device, Tensor};
-use harness::policy::Policy;
+
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::provenance::{Made, PolicyProvenance};
 
-use crate::diffusion::{DiffusionConfig, DiffusionNet, DiffusionPolicy, Normalisation};
+use crate::diffusion::{DiffusionConfig, DiffusionNet, Normalisation};
 
 /// A problem with a policy checkpoint, naming its folder or file.
 #[derive(Debug, thiserror::Error)]
@@ -183,72 +184,6 @@ pub fn checkpoint_name(dir: &Path) -> String {
     dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
 
-/// Loads one checkpoint folder.
-///
-/// # Errors
-/// [`PolicyLoadError`] naming the folder for a missing or invalid `policy.json`, an
-/// unknown kind, a config that does not fit the scenario, or weights that are
-/// missing, truncated or do not match the config.
-pub fn load_policy(
-    dir: &Path,
-    expect: &Expectations,
-    device: &Device,
-) -> Result<Box<dyn Policy>, PolicyLoadError> {
-    let err = |m: String| PolicyLoadError::new(dir, m);
-    let file = read_policy_file(dir)?;
-    let name = checkpoint_name(dir);
-    if let (Some(theirs), Some(ours)) = (&file.task, &expect.task)
-        && theirs != ours
-    {
-        return Err(err(format!("was trained on task {theirs}'s demonstrations; this run is task {ours}")));
-    }
-    match file.kind.as_str() {
-        "diffusion" => {
-            let cfg = diffusion_config(dir, &file)?;
-            if cfg.net.image_size != expect.image_size {
-                return Err(err(format!(
-                    "takes {0}x{0} frames, the scenario renders {1}x{1}",
-                    cfg.net.image_size, expect.image_size
-                )));
-            }
-            if cfg.net.action_dim != expect.action_dim() {
-                return Err(err(format!(
-                    "outputs {}-D actions, the scenario takes {}-D",
-                    cfg.net.action_dim,
-                    expect.action_dim()
-                )));
-            }
-            if cfg.net.proprio() != expect.proprio_dim {
-                return Err(err(format!(
-                    "reads {} proprioceptive entries, the scenario gives {}",
-                    cfg.net.proprio(),
-                    expect.proprio_dim
-                )));
-            }
-            let (n, a) = (&file.normalisation, cfg.net.action_dim);
-            let lengths_agree =
-                n.agent_pos.max.len() == n.agent_pos.dim() && n.action.max.len() == n.action.dim();
-            if !lengths_agree || n.agent_pos.dim() != cfg.net.proprio() || n.action.dim() != a {
-                return Err(err(format!(
-                    "policy.json \"normalisation\": {} proprioceptive and {} action entries, the config says {} and {a}",
-                    n.agent_pos.dim(),
-                    n.action.dim(),
-                    cfg.net.proprio()
-                )));
-            }
-            let net = diffusion_weights(dir, &cfg, device)?;
-            let bounds = (expect.action_low.clone(), expect.action_high.clone());
-            Ok(Box::new(DiffusionPolicy::new(name, cfg, file.normalisation, bounds, net, device)))
-        }
-        "gpc-diffusion" | "lerobot-diffusion" | "robomimic-diffusion" => {
-            crate::imported_policy::load(dir, file, expect, device)
-        }
-        other => Err(err(format!(
-            "unknown policy kind \"{other}\" (known: diffusion, gpc-diffusion, lerobot-diffusion, robomimic-diffusion, scripted)"
-        ))),
-    }
-}
-
 /// The `kind` of a checkpoint folder's `policy.json` (every kind's file has one; the rest of
 /// the file depends on it), or `None` for a missing or unreadable file or a file without one.
 pub fn policy_kind(dir: &Path) -> Option<String> {
@@ -392,50 +327,5 @@ mod tests {
         let rel: f32 = ((a.clone() - b).abs().max() / a.abs().max()).into_scalar();
         // f16 has an 11-bit mantissa: relative weight error ≤ 2^-11 ≈ 4.9e-4.
         assert!(rel < 5e-3, "{rel}");
-    }
-
-    #[test]
-    fn errors_name_the_checkpoint() {
-        let tmp = std::env::temp_dir().join(format!("evalharness-policy-{}", std::process::id()));
-        let ck = tmp.join("epoch-0001");
-        std::fs::create_dir_all(&ck).unwrap();
-        let expect = &Expectations::pusht(96);
-        let device = Device::flex();
-        let e = load_policy(&ck, expect, &device).err().unwrap();
-        assert!(e.to_string().contains("epoch-0001") && e.to_string().contains("policy.json"), "{e}");
-        let norm = crate::diffusion::Range { min: vec![0.0; 2], max: vec![1.0; 2] };
-        let mut file = PolicyFile::diffusion(
-            &DiffusionConfig::default(),
-            &Normalisation { agent_pos: norm.clone(), action: norm },
-            1,
-            1,
-            &PolicyProvenance::default(),
-            0.0,
-            Some("pusht"),
-        );
-        file.kind = "transformer".into();
-        std::fs::write(ck.join("policy.json"), serde_json::to_string(&file).unwrap()).unwrap();
-        let e = load_policy(&ck, expect, &device).err().unwrap();
-        assert!(e.to_string().contains("unknown policy kind \"transformer\""), "{e}");
-        file.kind = "diffusion".into();
-        std::fs::write(ck.join("policy.json"), serde_json::to_string(&file).unwrap()).unwrap();
-        let e = load_policy(&ck, &Expectations::pusht(64), &device).err().unwrap();
-        assert!(e.to_string().contains("96x96"), "{e}");
-        // At 92f9f2b a checkpoint of another task with the same widths (Lift's on Can)
-        // loaded and ranked; its recorded task is now checked first.
-        let can = Expectations { task: Some("can".into()), ..Expectations::pusht(96) };
-        let e = load_policy(&ck, &can, &device).err().unwrap();
-        assert!(
-            e.to_string().contains("trained on task pusht's demonstrations; this run is task can"),
-            "{e}"
-        );
-        // Weights missing, then truncated.
-        let e = load_policy(&ck, expect, &device).err().unwrap();
-        assert!(e.to_string().contains("model.bpk"), "{e}");
-        std::fs::write(ck.join("model.bpk"), b"not a burnpack").unwrap();
-        let e = load_policy(&ck, expect, &device).err().unwrap();
-        assert!(e.to_string().contains("model.bpk"), "{e}");
-        assert_eq!(checkpoint_dirs(&tmp).unwrap(), vec![ck.clone()]);
-        std::fs::remove_dir_all(&tmp).unwrap();
     }
 }

@@ -37,12 +37,10 @@ use crate::resnet_gn::BackboneNorm;
 use crate::robomimic_config::{Meta, RobomimicConfig, read};
 #[cfg(test)]
 use crate::robomimic_weights::burn_path;
-use crate::robomimic_weights::{expected_names, weights_of};
+use crate::robomimic_weights::{ENCODER, UNET, expected_names, layout, weights_of};
 
 /// The one camera key imported policies may read.
 pub const IMAGE_KEY: &str = "agentview_image";
-pub(crate) const ENCODER: &str = "policy.obs_encoder.nets.obs.obs_nets.";
-pub(crate) const UNET: &str = "policy.noise_pred_net.";
 
 /// Which copy of the weights to import.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -69,10 +67,6 @@ pub struct RobomimicPolicy {
     pub epoch: Option<i64>,
     /// `env_metadata.env_name`, if recorded (`Lift`, `PickPlaceCan`).
     pub env_name: Option<String>,
-}
-
-pub(crate) fn layout(path: &Path, what: String) -> ImportError {
-    ImportError::Layout { path: path.into(), what }
 }
 
 /// The observation keys, checked: one `agentview_image` and low-dimensional keys, alphabetical.

@@ -13,7 +13,16 @@ use nn::import::tensors::Source;
 
 use crate::import_gpc::official_names;
 use crate::import_keys::{UnetNames, cond_unet, resnet_children};
-use crate::import_robomimic::{UNET, layout};
+
+/// Where a robomimic checkpoint keeps the image encoder's parameters (then the camera key).
+pub(crate) const ENCODER: &str = "policy.obs_encoder.nets.obs.obs_nets.";
+/// Where it keeps the noise-prediction U-Net's.
+pub(crate) const UNET: &str = "policy.noise_pred_net.";
+
+/// A checkpoint whose contents do not have the layout the importer reads.
+pub(crate) fn layout(path: &Path, what: String) -> ImportError {
+    ImportError::Layout { path: path.into(), what }
+}
 
 /// The parameters a robomimic checkpoint of these sizes names (each backbone and pool tensor
 /// once, under `backbone.` and `pool.`): GPC's official list ([`official_names`], the same

@@ -19,7 +19,7 @@ use std::hint::black_box;
 use criterion::{Criterion, criterion_group, criterion_main};
 use scenarios::can::{CanConfig, CanSim};
 use scenarios::lift::{LiftConfig, LiftSim};
-use scenarios::robosuite::episode::release_renderer;
+use scenarios::robosuite::renderer::release_renderer;
 use scenarios::robosuite::visual::Visual;
 
 fn lift(c: &mut Criterion) {

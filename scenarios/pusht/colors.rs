@@ -33,8 +33,9 @@ pub struct BlockPalette {
 impl BlockPalette {
     /// evalharness's own rendering.
     pub const OWN: Self = Self { fill: BLOCK, edge: BLOCK_EDGE };
-    /// GPC's rendering ([`super::gpc_render`]).
-    pub const GPC: Self = Self { fill: super::gpc_render::BLOCK, edge: super::gpc_render::BLOCK_EDGE };
+    /// GPC's rendering ([`super::gpc_render`]): the fill `min(1.2 × (165, 28, 48), 255)` in
+    /// single precision, rounded; the outline the domain's block colour.
+    pub const GPC: Self = Self { fill: [198, 34, 58], edge: [165, 28, 48] };
 
     /// The palette frames of `style` are drawn in.
     pub fn of(style: RenderStyle) -> Self {

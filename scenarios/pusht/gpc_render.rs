@@ -21,16 +21,16 @@
 //! segment; those depend on pymunk's contact set, which MuJoCo does not have. Measured
 //! against GPC's own frames in `tests::matches_gpcs_own_observation_frames`.
 
+use super::colors::BlockPalette;
 use super::config::PushTConfig;
 use super::geometry::{Pose2, Rect};
 use super::physics::PushTState;
 use super::pygame_raster::{Canvas, Rgb};
 use harness::resize::resize_linear_u8;
 
-/// GPC's block fill: `min(1.2 × (165, 28, 48), 255)` in single precision, rounded.
-pub const BLOCK: Rgb = [198, 34, 58];
-/// GPC's block outline (the domain's block colour).
-pub const BLOCK_EDGE: Rgb = [165, 28, 48];
+/// GPC's block fill and outline (the palette's [`BlockPalette::GPC`]).
+const BLOCK: Rgb = BlockPalette::GPC.fill;
+const BLOCK_EDGE: Rgb = BlockPalette::GPC.edge;
 /// The agent disk (RoyalBlue) and its inner disk (1.2 × RoyalBlue, clipped at 255).
 const AGENT: Rgb = [65, 105, 225];
 const AGENT_INNER: Rgb = [78, 126, 255];

@@ -13,6 +13,7 @@ pub mod episode;
 pub mod linalg;
 pub mod osc;
 pub mod render_pool;
+pub mod renderer;
 pub mod robot_state;
 pub mod rollout;
 pub mod runs;

@@ -295,5 +295,5 @@ fn frame(
     }
     data.qpos_mut().copy_from_slice(qpos);
     data.forward();
-    super::episode::render_agentview(data, size)
+    super::renderer::render_agentview(data, size)
 }

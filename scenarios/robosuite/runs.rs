@@ -7,7 +7,7 @@
 
 use rayon::prelude::*;
 
-use super::episode::release_renderer;
+use super::renderer::release_renderer;
 use super::rollout::{ArmTask, Episode, Perturbation, RunLimits};
 use crate::error::ScenarioError;
 

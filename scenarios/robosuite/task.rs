@@ -119,7 +119,7 @@ impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
     }
 
     fn release_thread(&self) {
-        crate::robosuite::episode::release_renderer();
+        crate::robosuite::renderer::release_renderer();
     }
 
     fn scripted(&self) -> Option<&dyn harness::scripted::Scripted> {
@@ -315,9 +315,9 @@ mod tests {
         assert!(a.judge().is_none(), "no hand-written judge of Lift frames");
         assert_ne!(t.reset(4).unwrap().state(), a.state());
         // The frames were rendered on this thread; releasing it drops its GL context.
-        assert!(crate::robosuite::episode::holds_renderer());
+        assert!(crate::robosuite::renderer::holds_renderer());
         t.release_thread();
-        assert!(!crate::robosuite::episode::holds_renderer());
+        assert!(!crate::robosuite::renderer::holds_renderer());
     }
 
     #[test]

@@ -252,7 +252,7 @@ fn frames_along(
         frames.push(arm.render(96).unwrap());
     }
     let took = t.elapsed();
-    crate::robosuite::episode::release_renderer();
+    crate::robosuite::renderer::release_renderer();
     (frames, took)
 }
 

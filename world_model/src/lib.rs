@@ -33,6 +33,7 @@ pub mod motion;
 pub mod rollout;
 pub mod train_ae;
 pub mod train_wm;
+mod train_wm_config;
 mod train_wm_parts;
 pub mod unet;
 

@@ -281,7 +281,7 @@ pub fn train_autoencoder(
         }; // [b, 3, 96, 96]
         let loss = (recon - x).powf_scalar(2.0).mean();
         let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
-        crate::train_wm_parts::finite(loss_value, || "autoencoder loss".into(), (step, out))?;
+        finite(loss_value, || "autoencoder loss".into(), (step, out))?;
         let grads = GradientsParams::from_grads(loss.backward(), &model);
         model = optim.step(lr, model, grads);
         state.step += 1;
@@ -348,4 +348,16 @@ fn save_checkpoint(
     optim.save(&p[1]).map_err(|e| ckpt(&p[1], e))?;
     harness::driver::write_state(&p[2], state).map_err(fail)?;
     stage.commit().map_err(fail)
+}
+
+/// `Err` naming `what` at `step` of the run in `out` unless `value` is finite.
+pub(crate) fn finite(
+    value: f64,
+    what: impl FnOnce() -> String,
+    (step, out): (u64, &Path),
+) -> Result<(), WorldModelError> {
+    if value.is_finite() {
+        return Ok(());
+    }
+    Err(WorldModelError::NonFinite { what: what(), step, path: out.to_path_buf() })
 }

@@ -4,9 +4,9 @@
 //!
 //! One drifting step: B contexts, each repeated N times with fresh noise; the U-Net
 //! predicts F frames per clip in one pass; each (context, future frame) — or, with
-//! [`FieldKind::Token`], each (context, future frame, latent cell) — is its own
-//! drift problem with the N generated samples as negatives and the truth as the
-//! single positive. AdamW β = (0.9, 0.95), weight decay 0.01, linear warm-up then a
+//! [`FieldKind::Token`](crate::drift_step::FieldKind::Token), each (context, future
+//! frame, latent cell) — is its own drift problem with the N generated samples as
+//! negatives and the truth as the single positive. AdamW β = (0.9, 0.95), weight decay 0.01, linear warm-up then a
 //! constant rate, global grad-norm clip, EMA of the weights (all sampling uses it).
 //!
 //! Output folder: `config.json` (model + training config), `model.bpk`, `ema.bpk`,
@@ -20,104 +20,21 @@ use burn::tensor::{Device, Tensor, TensorData};
 use harness::driver::{Clock, Driver};
 use harness::rng::Rng;
 use harness::seed::derive;
-use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::codec::FrameCodec;
 use crate::data::EpisodeData;
-use crate::drift_step::FieldKind;
 use crate::error::WorldModelError;
 use crate::latents::{Latents, Window};
 use crate::model::{Objective, WorldModel, WorldModelConfig};
-use crate::motion::MotionWeighting;
-use crate::train_ae::{Configs, RunOptions, State, ckpt, run_configs};
+use crate::train_ae::{Configs, RunOptions, State, ckpt, finite, run_configs};
 use crate::train_wm_parts::{
-    Targets, draw_windows, finite, objective_loss, resume, save_checkpoint, warm_start, windows_of,
+    Targets, draw_windows, objective_loss, resume, save_checkpoint, warm_start, windows_of,
 };
 use crate::unet::UNet;
 use nn::optim::{Ema, clip_global_norm, warmup_lr};
 
-/// Training hyper-parameters.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct WmTrainConfig {
-    /// Optimizer steps in total.
-    pub steps: u64,
-    /// Contexts per step B.
-    pub contexts: usize,
-    /// Generated samples per context N (drifting; 1 for the baselines).
-    pub samples: usize,
-    /// Peak learning rate.
-    pub lr: f64,
-    /// Warm-up steps.
-    pub warmup: u64,
-    /// Seed of the initial weights, windows and noise.
-    pub seed: u64,
-    /// EMA decay per step.
-    pub ema_decay: f64,
-    /// Global gradient-norm clip.
-    pub clip_norm: f64,
-    /// Drift temperatures.
-    pub temperatures: Vec<f32>,
-    /// Held-out evaluation every this many steps.
-    pub eval_every: u64,
-    /// Held-out windows in that evaluation.
-    pub eval_windows: usize,
-    /// Checkpoint every this many steps.
-    pub checkpoint_every: u64,
-    /// How generated latents are cut into drift problems (runs saved before this
-    /// option existed used whole frames).
-    #[serde(default)]
-    pub field: FieldKind,
-    /// A world-model folder whose EMA weights initialise this run (same U-Net).
-    #[serde(default)]
-    pub init_from: Option<std::path::PathBuf>,
-    /// Motion weighting of the per-token losses (spec §4; needs [`FieldKind::Token`]).
-    #[serde(default)]
-    pub motion: Option<MotionWeighting>,
-    /// Chunks per training rollout (drifting): 1 = phase 1 (true history); L > 1 =
-    /// self-forcing over L chunks (spec §7).
-    #[serde(default = "one")]
-    pub chunks: usize,
-    /// Context-noise augmentation: each training history row gets Gaussian noise of
-    /// a level drawn from U[0, this] (normalised latent units; 0 = off; not in the paper).
-    #[serde(default)]
-    pub context_noise: f32,
-}
-
-fn one() -> usize {
-    1
-}
-
-impl WmTrainConfig {
-    /// Defaults sized for a 2-core CPU: 4 contexts x 8 samples for drifting,
-    /// 32 contexts x 1 for the baselines (the same number of clips per step).
-    pub fn for_objective(objective: Objective) -> Self {
-        let (contexts, samples) = if objective == Objective::Drifting { (4, 8) } else { (32, 1) };
-        Self {
-            steps: 6000,
-            contexts,
-            samples,
-            lr: 2e-4,
-            warmup: 500,
-            seed: 1,
-            ema_decay: 0.999,
-            clip_norm: 2.0,
-            temperatures: crate::drift::PUSHT_TEMPERATURES.to_vec(),
-            eval_every: 250,
-            eval_windows: 32,
-            checkpoint_every: 50,
-            field: FieldKind::Frame,
-            init_from: None,
-            motion: None,
-            chunks: 1,
-            context_noise: 0.0,
-        }
-    }
-}
-
-/// A world-model run's `config.json`: the model's configuration and the training's.
-pub type WmConfigs = Configs<crate::model::WorldModelConfig, WmTrainConfig>;
+pub use crate::train_wm_config::{WmConfigs, WmTrainConfig};
 
 /// A training progress report.
 #[derive(Clone, Debug)]

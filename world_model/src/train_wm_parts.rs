@@ -15,7 +15,7 @@ use crate::error::WorldModelError;
 use crate::latents::{Latents, Window, window, window_starts};
 use crate::model::{Objective, Prediction, WorldModelConfig, alpha_bar};
 use crate::train_ae::{State, ckpt};
-use crate::train_wm::WmTrainConfig;
+use crate::train_wm_config::WmTrainConfig;
 use crate::unet::UNet;
 
 /// The training windows' starts (`chunks` chunks long), the held-out windows the run is
@@ -170,19 +170,6 @@ pub(crate) fn objective_loss(
     };
     (loss, loss_r)
 }
-
-/// `Err` naming `what` at `step` of the run in `out` unless `value` is finite.
-pub(crate) fn finite(
-    value: f64,
-    what: impl FnOnce() -> String,
-    (step, out): (u64, &Path),
-) -> Result<(), WorldModelError> {
-    if value.is_finite() {
-        return Ok(());
-    }
-    Err(WorldModelError::NonFinite { what: what(), step, path: out.to_path_buf() })
-}
-
 /// A resumed run's checkpoint in `out`, recovered first if a save was cut short: the trained
 /// and EMA weights (loaded into `unet` and `ema`), the optimiser and the state.
 ///

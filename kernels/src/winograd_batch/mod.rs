@@ -15,7 +15,7 @@
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 
-use crate::matrix::fast_matmul;
+use crate::avx512_gemm::fast_matmul;
 use crate::winograd::{Winograd3x3, input_2d, output_2d, transform_filter};
 
 /// Floats per transformed buffer (`[16, c, tiles]`) per chunk of images: 8 MB.

@@ -14,6 +14,7 @@ use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
 use super::OutputError;
+use super::lock::absolute;
 
 type Result<T, E = OutputError> = std::result::Result<T, E>;
 
@@ -144,26 +145,6 @@ pub fn sibling(path: &Path, suffix: &str) -> PathBuf {
     let mut s: OsString = path.as_os_str().to_owned();
     s.push(suffix);
     PathBuf::from(s)
-}
-
-/// `p` as an absolute path with its existing part resolved (symbolic links, `..`),
-/// so two spellings of one folder compare equal even when `p` does not exist yet.
-pub fn absolute(p: &Path) -> PathBuf {
-    let p = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
-    let mut tail = Vec::new();
-    let mut head = p.as_path();
-    loop {
-        if let Ok(real) = head.canonicalize() {
-            return tail.iter().rev().fold(real, |acc, c| acc.join(c));
-        }
-        match (head.parent(), head.file_name()) {
-            (Some(parent), Some(name)) => {
-                tail.push(name.to_os_string());
-                head = parent;
-            }
-            _ => return p,
-        }
-    }
 }
 
 /// Refuses an `--out` that is a symbolic link to nothing: creating the folder would

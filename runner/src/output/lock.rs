@@ -19,7 +19,6 @@ use std::sync::Mutex;
 
 use super::OutputError;
 use super::error::io;
-use super::inputs::absolute;
 
 /// The locks this process holds, by lock file, with their holders' count.
 static HELD: Mutex<Option<HashMap<PathBuf, usize>>> = Mutex::new(None);
@@ -90,6 +89,26 @@ impl Drop for OutLock {
             // Unlink first, then unlock (by closing): a waiting taker re-checks the path.
             let _ = std::fs::remove_file(&self.path);
             drop(self.file.take());
+        }
+    }
+}
+
+/// `p` as an absolute path with its existing part resolved (symbolic links, `..`),
+/// so two spellings of one folder compare equal even when `p` does not exist yet.
+pub fn absolute(p: &Path) -> PathBuf {
+    let p = std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let mut tail = Vec::new();
+    let mut head = p.as_path();
+    loop {
+        if let Ok(real) = head.canonicalize() {
+            return tail.iter().rev().fold(real, |acc, c| acc.join(c));
+        }
+        match (head.parent(), head.file_name()) {
+            (Some(parent), Some(name)) => {
+                tail.push(name.to_os_string());
+                head = parent;
+            }
+            _ => return p,
         }
     }
 }

@@ -23,10 +23,9 @@ use burn::nn::PaddingConfig2d;
 use super::blocks::{Attention, Conv3dF, ResBlock};
 use super::{Level, UNet};
 use kernels::attention::{Heads, attend};
+use kernels::avx512_gemm::{fast_matmul, fast_matmul_strided};
 use kernels::direct_conv::{Norm, winograd_enabled};
-use kernels::matrix::{
-    Conv2dShape, Dense, Film, View, ViewMut, fast_matmul, fast_matmul_strided, group_norm_cols, silu,
-};
+use kernels::matrix::{Conv2dShape, Dense, Film, View, ViewMut, group_norm_cols, silu};
 use kernels::winograd_batch::BatchWinograd;
 use nn::UnsupportedLayer;
 use nn::weights::norm_of;

@@ -7,7 +7,7 @@
 
 use serde::Deserialize;
 
-use crate::results::{Branch, BranchStats, EpisodeRow, Named};
+use super::{Branch, BranchStats, EpisodeRow, Named};
 
 /// An `episodes.jsonl` line as read: this build's fields, and those of rows written before
 /// the task-specific ones moved into [`EpisodeRow::state`] and [`EpisodeRow::scene`].

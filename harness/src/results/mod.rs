@@ -16,6 +16,8 @@ use crate::judge::SceneCheck;
 use crate::metrics::Agreement;
 use crate::metrics::bootstrap::AgreementCi;
 use crate::metrics::ceiling::NoiseCeiling;
+
+mod legacy;
 pub use crate::paired_success::PairedSuccess;
 
 /// Which branch an episode ran in.
@@ -47,9 +49,9 @@ pub type Named = BTreeMap<String, f64>;
 /// every task, and what only one task defines by name (Push-T's block and goal poses and
 /// its scene checks) in [`EpisodeRow::state`] and [`EpisodeRow::scene`]. Rows written
 /// before 2026-12-02 (`final_block`, `goal`, `block_area`, `goal_kept`, `agent_kept`,
-/// `max_coverage`, `final_coverage`) are read into these fields (`results_legacy`).
+/// `max_coverage`, `final_coverage`) are read into these fields ([`legacy`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(from = "crate::results_legacy::RowOnDisk")]
+#[serde(from = "legacy::RowOnDisk")]
 pub struct EpisodeRow {
     /// Policy (checkpoint folder name).
     pub policy: String,
@@ -149,7 +151,7 @@ impl EpisodeRow {
 
 /// One branch of one policy in `results.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(from = "crate::results_legacy::BranchOnDisk")]
+#[serde(from = "legacy::BranchOnDisk")]
 pub struct BranchStats {
     /// Mean episode score.
     pub mean: f64,
