@@ -86,7 +86,7 @@ fn file_names(path: &Path) -> Result<Option<String>, ScenarioError> {
 }
 
 /// A robosuite task of its shipped parameters or of a scenario file, as a [`Task`].
-fn arm_task<T: robosuite::task::ArmEngine + 'static>(sim: T) -> Box<dyn Task> {
+fn arm_task<S: robosuite::arm_sim::ArmScene>(sim: robosuite::arm_sim::ArmSim<S>) -> Box<dyn Task> {
     Box::new(RobosuiteTask::new(sim))
 }
 

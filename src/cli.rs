@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::{Args, Parser, Subcommand};
 
 pub use runner::bounds;
-pub use runner::bounds::{bootstrap_replicates, correlation};
+pub use runner::bounds::bootstrap_replicates;
 mod judge;
 mod plan;
 mod rank;
@@ -13,6 +13,7 @@ pub use importers::args::*;
 pub use judge::*;
 pub use plan::*;
 pub use rank::*;
+pub use ranking::args::RankArgs;
 pub use simulation::args::*;
 pub use trainers::args::*;
 

@@ -4,4 +4,4 @@
 
 pub use runner::command::write_json;
 pub use runner::output::lock;
-pub use runner::output::{Inputs, RunDir, Staged, make_owned};
+pub use runner::output::{Inputs, Staged};

@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 /// This program's path cannot be found, or a worker cannot be started.
 pub fn start(n: usize) -> Result<()> {
     let exe = std::env::current_exe().context("finding this program to start its render workers")?;
-    scenarios::robosuite::render_pool::start(&exe, &["-q", "render-worker"], n)
+    scenarios::robosuite::render_pool::start(&exe, &ranking::run::RENDER_WORKER_COMMAND, n)
         .with_context(|| format!("--render-workers {n}"))
 }
 

@@ -9,8 +9,8 @@ pub mod rollout;
 pub mod sim;
 
 pub use config::CanConfig;
-pub use rollout::{CanBehaviour, CanEpisodeRecord};
-pub use sim::{CanEpisode, CanInit, CanSim, STATE_COLUMNS};
+pub use rollout::CanBehaviour;
+pub use sim::{Can, CanEpisode, CanEpisodeRecord, CanInit, CanSim, STATE_COLUMNS};
 
 /// Can for the task table (`crate::load_task`): the shipped parameters, or a scenario file's.
 pub(crate) fn registered(

@@ -1,11 +1,10 @@
-//! Can's scripted behaviours, and Can as an [`ArmTask`] for the data commands.
+//! Can's scripted behaviours: the expert, its flawed variants, random actions and the
+//! wandering expert, by name.
 
+use super::config::CanConfig;
 use super::expert::{CanExpert, CanFlaws};
-use super::sim::{CanEpisode, CanInit, CanSim, STATE_COLUMNS};
-use crate::error::ScenarioError;
+use crate::robosuite::arm_sim::Actor;
 use crate::robosuite::episode::ArmEpisode;
-use crate::robosuite::rollout::{ArmTask, Episode, Perturbation, RandomActions, RunLimits, TaskEpisode, run};
-use crate::robosuite::wander::Wander;
 
 /// The scripted Can behaviours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -42,6 +41,27 @@ impl CanBehaviour {
         ("explore", Self::Explore),
     ];
 
+    /// Its actions: the expert with this behaviour's flaws, carrying to its quadrant of `cfg`'s
+    /// bin 2 (the drift of `explore` is added by the simulator), or `None` for uniform random
+    /// actions.
+    pub(super) fn actor(self, cfg: &CanConfig) -> Option<Actor<'static>> {
+        if self == Self::Random {
+            return None;
+        }
+        let flaws = self.flaws();
+        // The can's quadrant is 3; the wrong one is bread's (1), beside it in y.
+        let (x, y) = cfg.quadrant(if flaws.wrong_bin { 1 } else { 3 });
+        // The quadrant's corner nearest the robot, moved in by the dividers'
+        // half thickness (0.01 m), the can's radius (0.033 m) and a margin: the
+        // quadrant's centre lies beyond the Panda's reach with the gripper
+        // pointing down.
+        let inset = 0.01 + 0.033 + 0.017;
+        let target = [x[0] + inset, if flaws.wrong_bin { y[1] - inset } else { y[0] + inset }];
+        let bin_z = cfg.bin2_pos[2];
+        let mut expert = CanExpert::new(target, flaws);
+        Some(Box::new(move |arm: &ArmEpisode| expert.act(arm, bin_z)))
+    }
+
     fn flaws(self) -> CanFlaws {
         match self {
             Self::Miss => CanFlaws { aim_offset: 0.04, ..CanFlaws::default() },
@@ -51,91 +71,5 @@ impl CanBehaviour {
             Self::Hesitate => CanFlaws { hesitate: 15, ..CanFlaws::default() },
             Self::Expert | Self::Random | Self::Explore => CanFlaws::default(),
         }
-    }
-}
-
-/// A finished Can episode.
-pub type CanEpisodeRecord = Episode<CanInit, CanBehaviour>;
-
-impl crate::robosuite::task::ArmEngine for CanSim {
-    type Ep = CanEpisode;
-
-    fn reset_episode(&self, seed: u64) -> Result<CanEpisode, ScenarioError> {
-        self.reset(seed)
-    }
-}
-
-impl TaskEpisode for CanEpisode {
-    fn arm(&self) -> &ArmEpisode {
-        self.arm()
-    }
-
-    fn arm_mut(&mut self) -> &mut ArmEpisode {
-        self.arm_mut()
-    }
-
-    fn success(&self) -> bool {
-        self.success()
-    }
-}
-
-/// The Can task for the data commands.
-impl ArmTask for CanSim {
-    type Init = CanInit;
-    type Behaviour = CanBehaviour;
-
-    fn name(&self) -> &'static str {
-        "can"
-    }
-
-    fn behaviours(&self) -> &'static [(&'static str, CanBehaviour)] {
-        &CanBehaviour::ALL
-    }
-
-    fn state_columns(&self) -> Vec<&'static str> {
-        STATE_COLUMNS.to_vec()
-    }
-
-    fn max_steps(&self) -> usize {
-        self.config().max_steps
-    }
-
-    fn config_json(&self) -> serde_json::Value {
-        serde_json::to_value(self.config()).unwrap_or_default()
-    }
-
-    fn episode(
-        &self,
-        seed: u64,
-        behaviour: CanBehaviour,
-        perturbation: Perturbation,
-        limits: RunLimits,
-    ) -> Result<CanEpisodeRecord, ScenarioError> {
-        let mut ep = self.reset(seed)?;
-        let init = *ep.init();
-        let name = self.behaviour_name(behaviour);
-        let r = if behaviour == CanBehaviour::Random {
-            let mut random = RandomActions::new("can", seed);
-            run(&mut ep, |_| random.action(), perturbation, name, limits)?
-        } else {
-            let flaws = behaviour.flaws();
-            // The can's quadrant is 3; the wrong one is bread's (1), beside it in y.
-            let (x, y) = self.config().quadrant(if flaws.wrong_bin { 1 } else { 3 });
-            // The quadrant's corner nearest the robot, moved in by the dividers'
-            // half thickness (0.01 m), the can's radius (0.033 m) and a margin: the
-            // quadrant's centre lies beyond the Panda's reach with the gripper
-            // pointing down.
-            let inset = 0.01 + 0.033 + 0.017;
-            let target = [x[0] + inset, if flaws.wrong_bin { y[1] - inset } else { y[0] + inset }];
-            let bin_z = self.config().bin2_pos[2];
-            let mut expert = CanExpert::new(target, flaws);
-            let mut wander = (behaviour == CanBehaviour::Explore).then(|| Wander::new("can", seed));
-            let act = |e: &CanEpisode| {
-                let a = expert.act(e.arm(), bin_z);
-                wander.as_mut().map_or(a, |w| w.apply(a))
-            };
-            run(&mut ep, act, perturbation, name, limits)?
-        };
-        Ok(Episode::new(seed, init, behaviour, r))
     }
 }

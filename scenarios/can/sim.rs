@@ -1,12 +1,12 @@
-//! The Can reference simulator (robosuite's `PickPlaceCan`): the bins arena, the
-//! Panda, the Coke can in bin 1 and the four translucent target markers in bin
-//! 2, its seeded reset and success check.
+//! Can's scene for the robosuite tasks' simulator ([`ArmSim`]; robosuite's `PickPlaceCan`):
+//! the bins arena, the Panda, the Coke can in bin 1 and the four translucent target markers
+//! in bin 2, the can's seeded placement and the success check.
 //!
 //! robosuite's `PickPlaceCan` builds all four PickPlace objects and parks the
 //! three it does not use at (10, 10, 10), far outside the scene; they never
 //! touch the robot or the can, so they are left out here.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use harness::seed::{derive, fnv1a};
 use mujoco_rs::prelude::*;
@@ -14,10 +14,12 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::config::CanConfig;
+use super::rollout::CanBehaviour;
 use crate::error::ScenarioError;
+use crate::robosuite::arm_sim::{Actor, ArmScene, ArmSim, SceneEpisode};
 use crate::robosuite::assets::assets_dir;
 use crate::robosuite::episode::{ArmEpisode, ObjectNames, noisy_init_qpos};
-use crate::robosuite::render_pool::ModelKey;
+use crate::robosuite::rollout::Episode;
 use crate::robosuite::scene::SceneBuilder;
 
 /// Names of the state columns, in order.
@@ -105,101 +107,111 @@ pub fn can_model(cfg: &CanConfig, dir: &Path) -> Result<MjModel, ScenarioError> 
     b.compile("can")
 }
 
-/// The Can task's simulator factory: one compiled model for every episode (the
-/// scene does not change between episodes).
-pub struct CanSim {
+/// Can's scene: its parameters and the model compiled once for every episode (the scene does
+/// not change between episodes). The simulator is the robosuite tasks' one ([`ArmSim`]).
+pub struct Can {
     cfg: CanConfig,
     model: MjModel,
-    /// The asset folder it was compiled from (a render worker compiles the same).
-    dir: PathBuf,
 }
 
-impl CanSim {
+/// The Can simulator.
+pub type CanSim = ArmSim<Can>;
+/// One Can episode in progress.
+pub type CanEpisode = SceneEpisode<Can>;
+/// A finished Can episode.
+pub type CanEpisodeRecord = Episode<CanInit, CanBehaviour>;
+
+impl ArmSim<Can> {
     /// Checks the config, finds the assets and compiles the scene.
     ///
     /// # Errors
     /// A missing asset folder, an invalid config, or a model MuJoCo refuses.
     pub fn new(cfg: CanConfig) -> Result<Self, ScenarioError> {
         cfg.validate(Path::new("<can>"))?;
-        let dir: PathBuf = assets_dir()?;
+        let dir = assets_dir()?;
         let model = can_model(&cfg, &dir)?;
-        Ok(Self { cfg, model, dir })
-    }
-
-    /// The config.
-    pub fn config(&self) -> &CanConfig {
-        &self.cfg
-    }
-
-    /// Episode `seed` at its initial state.
-    ///
-    /// # Errors
-    /// A model without the Panda or the can (never, for the composed scene).
-    pub fn reset(&self, seed: u64) -> Result<CanEpisode, ScenarioError> {
-        self.reset_to(seed, CanInit::draw(&self.cfg, seed))
-    }
-
-    /// An episode from a given initial state.
-    ///
-    /// # Errors
-    /// As [`CanSim::reset`].
-    pub fn reset_to(&self, seed: u64, init: CanInit) -> Result<CanEpisode, ScenarioError> {
-        let model = self.model.clone();
-        let [x, y, z] = init.can_pos;
-        let [qw, qx, qy, qz] = init.can_quat;
-        let names = ObjectNames { body: "Can_main", joint: "Can_joint0" };
-        let key = ModelKey {
-            task: "can".into(),
-            config: serde_json::to_string(&self.cfg)
-                .map_err(|e| ScenarioError::Render { message: e.to_string() })?,
-            assets: self.dir.clone(),
-            object_half: None,
-        };
-        let arm = ArmEpisode::start("can", seed, model, &names, init.arm_q, [x, y, z, qw, qx, qy, qz])?
-            .with_model_key(&key)?
-            .with_render_size(self.cfg.visual.render_size.map(|r| r as usize));
-        Ok(CanEpisode { arm, cfg: self.cfg.clone(), init })
+        Ok(Self::of(Can { cfg, model }, dir))
     }
 }
 
-/// One Can episode in progress.
-pub struct CanEpisode {
-    arm: ArmEpisode,
-    cfg: CanConfig,
-    init: CanInit,
-}
-
-impl CanEpisode {
-    /// The arm, the can and their state.
-    pub fn arm(&self) -> &ArmEpisode {
-        &self.arm
-    }
-
-    /// The arm, mutably.
-    pub fn arm_mut(&mut self) -> &mut ArmEpisode {
-        &mut self.arm
-    }
-
-    /// The initial state the episode started from.
-    pub fn init(&self) -> &CanInit {
-        &self.init
-    }
-
+impl Can {
     /// Whether the can lies in its target quadrant of bin 2, as robosuite's
     /// `PickPlace.not_in_bin` bounds it (strictly inside in x and y, its origin
     /// between the bin's reference height and 0.1 m above).
-    pub fn in_target_bin(&self) -> bool {
-        let p = self.arm.object_pos();
+    pub fn in_target_bin(&self, arm: &ArmEpisode) -> bool {
+        let p = arm.object_pos();
         let (x, y) = self.cfg.quadrant(3);
         let z = self.cfg.bin2_pos[2];
         x[0] < p[0] && p[0] < x[1] && y[0] < p[1] && p[1] < y[1] && z < p[2] && p[2] < z + 0.1
     }
+}
+
+impl SceneEpisode<Can> {
+    /// Whether the can lies in its target quadrant of bin 2 ([`Can::in_target_bin`]).
+    pub fn in_target_bin(&self) -> bool {
+        self.scene().in_target_bin(self.arm())
+    }
+}
+
+impl ArmScene for Can {
+    type Config = CanConfig;
+    type Init = CanInit;
+    type Behaviour = CanBehaviour;
+    const NAME: &'static str = "can";
+    const STATE_COLUMNS: &'static [&'static str] = &STATE_COLUMNS;
+    const OBJECT: ObjectNames<'static> = ObjectNames { body: "Can_main", joint: "Can_joint0" };
+
+    fn config(&self) -> &CanConfig {
+        &self.cfg
+    }
+
+    fn max_steps(&self) -> usize {
+        self.cfg.max_steps
+    }
+
+    fn render_size(&self) -> Option<u32> {
+        self.cfg.visual.render_size
+    }
+
+    fn place(&self, seed: u64) -> CanInit {
+        CanInit::draw(&self.cfg, seed)
+    }
+
+    fn arm_q(init: &CanInit) -> [f64; 7] {
+        init.arm_q
+    }
+
+    fn object_pose(init: &CanInit) -> [f64; 7] {
+        let ([x, y, z], [qw, qx, qy, qz]) = (init.can_pos, init.can_quat);
+        [x, y, z, qw, qx, qy, qz]
+    }
+
+    fn object_half(_: &CanInit) -> Option<[f64; 3]> {
+        None
+    }
+
+    /// The one model compiled at construction (MuJoCo copies it).
+    fn compose(&self, _dir: &Path, _init: &CanInit) -> Result<MjModel, ScenarioError> {
+        Ok(self.model.clone())
+    }
 
     /// robosuite's `PickPlace._check_success` for the can alone: in its target
     /// quadrant, with the gripper more than `release_distance` away.
-    pub fn success(&self) -> bool {
-        let (p, e) = (self.arm.object_pos(), self.arm.eef_pos());
+    fn success(&self, arm: &ArmEpisode) -> bool {
+        let (p, e) = (arm.object_pos(), arm.eef_pos());
         let d = ((p[0] - e[0]).powi(2) + (p[1] - e[1]).powi(2) + (p[2] - e[2]).powi(2)).sqrt();
-        self.in_target_bin() && d > self.cfg.release_distance
+        self.in_target_bin(arm) && d > self.cfg.release_distance
+    }
+
+    fn behaviours(&self) -> &'static [(&'static str, CanBehaviour)] {
+        &CanBehaviour::ALL
+    }
+
+    fn actor(&self, behaviour: CanBehaviour) -> Option<Actor<'_>> {
+        behaviour.actor(&self.cfg)
+    }
+
+    fn wanders(behaviour: CanBehaviour) -> bool {
+        behaviour == CanBehaviour::Explore
     }
 }

@@ -1,7 +1,7 @@
 //! Can on tiny episodes: seeded resets, success detection and the expert.
 
 use super::*;
-use crate::robosuite::rollout::{ArmTask, Perturbation, RunLimits};
+use crate::robosuite::rollout::{Perturbation, RunLimits};
 
 fn sim() -> CanSim {
     CanSim::new(CanConfig::default()).expect("robosuite assets (scripts/setup.sh)")

@@ -7,7 +7,7 @@
 //! lifts. Each action is the clipped proportional step toward the current
 //! waypoint, in units of the controller's 0.05 m / 0.5 rad limits.
 
-use super::sim::LiftEpisode;
+use crate::robosuite::episode::ArmEpisode;
 use crate::robosuite::linalg::Mat;
 use crate::robosuite::osc::{orientation_error, pointing_down, servo_action};
 
@@ -73,8 +73,7 @@ impl LiftExpert {
     }
 
     /// The action for the episode's current state.
-    pub fn act(&mut self, ep: &LiftEpisode) -> [f64; 7] {
-        let ep = ep.arm();
+    pub fn act(&mut self, ep: &ArmEpisode) -> [f64; 7] {
         let cube = ep.object_pos();
         let eef = ep.eef_pos();
         let target_ori = grasp_orientation(&ep.eef_mat(), ep.object_quat());

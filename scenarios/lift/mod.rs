@@ -10,8 +10,8 @@ pub mod sim;
 
 pub use config::LiftConfig;
 pub use expert::{LiftExpert, LiftFlaws};
-pub use rollout::{LiftBehaviour, LiftEpisodeRecord};
-pub use sim::{LiftEpisode, LiftInit, LiftSim, STATE_COLUMNS};
+pub use rollout::LiftBehaviour;
+pub use sim::{Lift, LiftEpisode, LiftEpisodeRecord, LiftInit, LiftSim, STATE_COLUMNS};
 
 /// Lift for the task table (`crate::load_task`): the shipped parameters, or a scenario file's.
 pub(crate) fn registered(

@@ -1,11 +1,9 @@
-//! Lift's scripted behaviours, and Lift as an [`ArmTask`] for the data commands.
+//! Lift's scripted behaviours: the expert, its flawed variants, random actions and the
+//! wandering expert, by name.
 
 use super::expert::{LiftExpert, LiftFlaws};
-use super::sim::{LiftEpisode, LiftInit, LiftSim, STATE_COLUMNS};
-use crate::error::ScenarioError;
+use crate::robosuite::arm_sim::Actor;
 use crate::robosuite::episode::ArmEpisode;
-use crate::robosuite::rollout::{ArmTask, Episode, Perturbation, RandomActions, RunLimits, TaskEpisode, run};
-use crate::robosuite::wander::Wander;
 
 /// The scripted Lift behaviours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -51,6 +49,16 @@ impl LiftBehaviour {
         Self::ALL.iter().find(|(_, b)| *b == self).map_or("?", |(n, _)| n)
     }
 
+    /// Its actions: the expert with this behaviour's flaws (the drift of `explore` is added
+    /// by the simulator), or `None` for uniform random actions.
+    pub(super) fn actor(self) -> Option<Actor<'static>> {
+        if self == Self::Random {
+            return None;
+        }
+        let mut expert = LiftExpert::new(self.flaws());
+        Some(Box::new(move |arm: &ArmEpisode| expert.act(arm)))
+    }
+
     fn flaws(self) -> LiftFlaws {
         match self {
             Self::Miss => LiftFlaws { aim_offset: 0.03, ..LiftFlaws::default() },
@@ -59,80 +67,5 @@ impl LiftBehaviour {
             Self::Hesitate => LiftFlaws { hesitate: 15, ..LiftFlaws::default() },
             Self::Expert | Self::Random | Self::Explore => LiftFlaws::default(),
         }
-    }
-}
-
-/// The Lift task for the data commands.
-impl ArmTask for LiftSim {
-    type Init = LiftInit;
-    type Behaviour = LiftBehaviour;
-
-    fn name(&self) -> &'static str {
-        "lift"
-    }
-
-    fn behaviours(&self) -> &'static [(&'static str, LiftBehaviour)] {
-        &LiftBehaviour::ALL
-    }
-
-    fn state_columns(&self) -> Vec<&'static str> {
-        STATE_COLUMNS.to_vec()
-    }
-
-    fn max_steps(&self) -> usize {
-        self.config().max_steps
-    }
-
-    fn config_json(&self) -> serde_json::Value {
-        serde_json::to_value(self.config()).unwrap_or_default()
-    }
-
-    fn episode(
-        &self,
-        seed: u64,
-        behaviour: LiftBehaviour,
-        perturbation: Perturbation,
-        limits: RunLimits,
-    ) -> Result<LiftEpisodeRecord, ScenarioError> {
-        let mut ep = self.reset(seed)?;
-        let init = *ep.init();
-        let r = if behaviour == LiftBehaviour::Random {
-            let mut random = RandomActions::new("lift", seed);
-            run(&mut ep, |_| random.action(), perturbation, behaviour.name(), limits)?
-        } else {
-            let mut expert = LiftExpert::new(behaviour.flaws());
-            let mut wander = (behaviour == LiftBehaviour::Explore).then(|| Wander::new("lift", seed));
-            let act = |e: &LiftEpisode| {
-                let a = expert.act(e);
-                wander.as_mut().map_or(a, |w| w.apply(a))
-            };
-            run(&mut ep, act, perturbation, behaviour.name(), limits)?
-        };
-        Ok(Episode::new(seed, init, behaviour, r))
-    }
-}
-
-impl crate::robosuite::task::ArmEngine for LiftSim {
-    type Ep = LiftEpisode;
-
-    fn reset_episode(&self, seed: u64) -> Result<LiftEpisode, ScenarioError> {
-        self.reset(seed)
-    }
-}
-
-/// A finished Lift episode.
-pub type LiftEpisodeRecord = Episode<LiftInit, LiftBehaviour>;
-
-impl TaskEpisode for LiftEpisode {
-    fn arm(&self) -> &ArmEpisode {
-        self.arm()
-    }
-
-    fn arm_mut(&mut self) -> &mut ArmEpisode {
-        self.arm_mut()
-    }
-
-    fn success(&self) -> bool {
-        self.success()
     }
 }

@@ -1,12 +1,11 @@
-//! The Lift reference simulator: robosuite's scene composed per episode, its
-//! seeded reset, the OSC_POSE control step, the agentview render and the
-//! success check.
+//! Lift's scene for the robosuite tasks' simulator ([`ArmSim`]): robosuite's table arena
+//! composed per episode, the cube's seeded placement and the success check.
 //!
 //! The cube's size is drawn per episode (robosuite draws it whenever it rebuilds
 //! the model, which its default hard reset does every episode), so each episode
 //! compiles its own model; MuJoCo's asset cache keeps that near 0.1 s.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use harness::seed::{derive, fnv1a};
 use mujoco_rs::prelude::*;
@@ -14,10 +13,12 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::config::LiftConfig;
+use super::rollout::LiftBehaviour;
 use crate::error::ScenarioError;
+use crate::robosuite::arm_sim::{Actor, ArmScene, ArmSim, SceneEpisode};
 use crate::robosuite::assets::assets_dir;
 use crate::robosuite::episode::{ArmEpisode, ObjectNames, noisy_init_qpos};
-use crate::robosuite::render_pool::ModelKey;
+use crate::robosuite::rollout::Episode;
 use crate::robosuite::scene::{SceneBuilder, Table};
 
 /// Names of the state columns, in order.
@@ -91,113 +92,87 @@ pub fn lift_model(cfg: &LiftConfig, dir: &Path, cube_half: [f64; 3]) -> Result<M
     b.compile("lift")
 }
 
-/// The Lift task's simulator factory.
+/// Lift's scene: its parameters. The simulator is the robosuite tasks' one ([`ArmSim`]).
 #[derive(Clone, Debug)]
-pub struct LiftSim {
+pub struct Lift {
     cfg: LiftConfig,
-    dir: PathBuf,
 }
 
-impl LiftSim {
+/// The Lift simulator.
+pub type LiftSim = ArmSim<Lift>;
+/// One Lift episode in progress.
+pub type LiftEpisode = SceneEpisode<Lift>;
+/// A finished Lift episode.
+pub type LiftEpisodeRecord = Episode<LiftInit, LiftBehaviour>;
+
+impl ArmSim<Lift> {
     /// Checks the config and finds the assets.
     ///
     /// # Errors
     /// A missing asset folder, or an invalid config.
     pub fn new(cfg: LiftConfig) -> Result<Self, ScenarioError> {
         cfg.validate(Path::new("<lift>"))?;
-        Ok(Self { cfg, dir: assets_dir()? })
+        Ok(Self::of(Lift { cfg }, assets_dir()?))
     }
+}
 
-    /// The config.
-    pub fn config(&self) -> &LiftConfig {
+impl ArmScene for Lift {
+    type Config = LiftConfig;
+    type Init = LiftInit;
+    type Behaviour = LiftBehaviour;
+    const NAME: &'static str = "lift";
+    const STATE_COLUMNS: &'static [&'static str] = &STATE_COLUMNS;
+    const OBJECT: ObjectNames<'static> = ObjectNames { body: "cube_main", joint: "cube_joint0" };
+
+    fn config(&self) -> &LiftConfig {
         &self.cfg
     }
 
-    /// Episode `seed` at its initial state.
-    ///
-    /// # Errors
-    /// A model MuJoCo refuses.
-    pub fn reset(&self, seed: u64) -> Result<LiftEpisode, ScenarioError> {
-        self.reset_to(seed, LiftInit::draw(&self.cfg, seed))
+    fn max_steps(&self) -> usize {
+        self.cfg.max_steps
     }
 
-    /// An episode from a given initial state (the cross-check with robosuite
-    /// starts both simulators from the same one).
-    ///
-    /// # Errors
-    /// A model MuJoCo refuses.
-    pub fn reset_to(&self, seed: u64, init: LiftInit) -> Result<LiftEpisode, ScenarioError> {
-        let model = lift_model(&self.cfg, &self.dir, init.cube_half)?;
-        let [x, y, z] = init.cube_pos;
-        let [qw, qx, qy, qz] = init.cube_quat;
-        let names = ObjectNames { body: "cube_main", joint: "cube_joint0" };
-        let key = ModelKey {
-            task: "lift".into(),
-            config: serde_json::to_string(&self.cfg)
-                .map_err(|e| ScenarioError::Render { message: e.to_string() })?,
-            assets: self.dir.clone(),
-            object_half: Some(init.cube_half),
-        };
-        let arm = ArmEpisode::start("lift", seed, model, &names, init.arm_q, [x, y, z, qw, qx, qy, qz])?
-            .with_model_key(&key)?
-            .with_render_size(self.cfg.visual.render_size.map(|r| r as usize));
-        Ok(LiftEpisode {
-            arm,
-            table_top: self.cfg.table_offset[2],
-            success_height: self.cfg.success_height,
-            init,
-        })
-    }
-}
-
-/// One Lift episode in progress.
-pub struct LiftEpisode {
-    arm: ArmEpisode,
-    table_top: f64,
-    success_height: f64,
-    init: LiftInit,
-}
-
-impl LiftEpisode {
-    /// The arm, the cube and their state.
-    pub fn arm(&self) -> &ArmEpisode {
-        &self.arm
+    fn render_size(&self) -> Option<u32> {
+        self.cfg.visual.render_size
     }
 
-    /// The arm, mutably.
-    pub fn arm_mut(&mut self) -> &mut ArmEpisode {
-        &mut self.arm
+    fn place(&self, seed: u64) -> LiftInit {
+        LiftInit::draw(&self.cfg, seed)
     }
 
-    /// The initial state the episode started from.
-    pub fn init(&self) -> &LiftInit {
-        &self.init
+    fn arm_q(init: &LiftInit) -> [f64; 7] {
+        init.arm_q
     }
 
-    /// One control step (robomimic's 7-D action).
-    ///
-    /// # Errors
-    /// A non-finite action, or a state that became non-finite (naming seed and step).
-    pub fn step(&mut self, action: &[f64; 7]) -> Result<(), ScenarioError> {
-        self.arm.step(action)
+    fn object_pose(init: &LiftInit) -> [f64; 7] {
+        let ([x, y, z], [qw, qx, qy, qz]) = (init.cube_pos, init.cube_quat);
+        [x, y, z, qw, qx, qy, qz]
     }
 
-    /// robosuite's `Lift._check_success`: the cube's centre is more than
-    /// `success_height` above the table top.
-    pub fn success(&self) -> bool {
-        self.arm.object_pos()[2] > self.table_top + self.success_height
+    fn object_half(init: &LiftInit) -> Option<[f64; 3]> {
+        Some(init.cube_half)
     }
 
-    /// The state row ([`STATE_COLUMNS`]).
-    pub fn state(&self) -> Vec<f64> {
-        self.arm.state()
+    /// The cube's size is drawn per episode, so each episode compiles its own model.
+    fn compose(&self, dir: &Path, init: &LiftInit) -> Result<MjModel, ScenarioError> {
+        lift_model(&self.cfg, dir, init.cube_half)
     }
 
-    /// The agentview camera's `size`² RGB image, upright.
-    ///
-    /// # Errors
-    /// [`ScenarioError::Render`] when no offscreen GL context can be made.
-    pub fn render(&mut self, size: usize) -> Result<Vec<u8>, ScenarioError> {
-        self.arm.render(size)
+    /// robosuite's `Lift._check_success`: the cube's centre is more than `success_height`
+    /// above the table top.
+    fn success(&self, arm: &ArmEpisode) -> bool {
+        arm.object_pos()[2] > self.cfg.table_offset[2] + self.cfg.success_height
+    }
+
+    fn behaviours(&self) -> &'static [(&'static str, LiftBehaviour)] {
+        &LiftBehaviour::ALL
+    }
+
+    fn actor(&self, behaviour: LiftBehaviour) -> Option<Actor<'_>> {
+        behaviour.actor()
+    }
+
+    fn wanders(behaviour: LiftBehaviour) -> bool {
+        behaviour == LiftBehaviour::Explore
     }
 }

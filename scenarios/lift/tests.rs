@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::robosuite::osc::{axis_angle_to_mat, orientation_error};
-use crate::robosuite::rollout::{ArmTask, Perturbation, RunLimits};
+use crate::robosuite::rollout::{Perturbation, RunLimits};
 
 fn sim() -> LiftSim {
     LiftSim::new(LiftConfig::default()).expect("robosuite assets (scripts/setup.sh)")

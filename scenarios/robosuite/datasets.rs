@@ -15,9 +15,10 @@ use harness::scripted::{EpisodeSink, FrameChoice, Layout, Recorded, Scripted, Sc
 use harness::task::{Task, TaskError};
 use serde::Serialize;
 
-use super::rollout::{ArmTask, Episode, Perturbation};
+use super::arm_sim::{ArmScene, ArmSim};
+use super::rollout::{Episode, Perturbation};
 use super::runs::ArmRun;
-use super::task::{ArmEngine, IMAGE_SIZE, RobosuiteTask};
+use super::task::{IMAGE_SIZE, RobosuiteTask};
 
 /// Behaviours left out of the default mix: `explore` came after the shipped Lift
 /// models' datasets, which were collected with the default, so the default stays
@@ -60,9 +61,9 @@ fn episode_arrays<I, B>(ep: &Episode<I, B>) -> EpisodeArrays {
 }
 
 /// A finished episode as the data commands write it.
-fn scripted_episode<T: ArmTask>(
-    task: &T,
-    ep: Episode<T::Init, T::Behaviour>,
+fn scripted_episode<S: ArmScene>(
+    task: &ArmSim<S>,
+    ep: Episode<S::Init, S::Behaviour>,
 ) -> Result<ScriptedEpisode, TaskError> {
     let mut step_lines = Vec::with_capacity(ep.rows.len());
     for r in &ep.rows {
@@ -85,7 +86,7 @@ fn scripted_episode<T: ArmTask>(
     })
 }
 
-impl<T: ArmEngine + 'static> Scripted for RobosuiteTask<T> {
+impl<S: ArmScene> Scripted for RobosuiteTask<S> {
     fn behaviours(&self) -> Vec<&'static str> {
         self.sim().behaviours().iter().map(|(n, _)| *n).collect()
     }
@@ -123,7 +124,7 @@ impl<T: ArmEngine + 'static> Scripted for RobosuiteTask<T> {
                 extras: vec!["success".into()],
             },
             header: DatasetAttrs {
-                scenario: Some(ArmTask::name(self.sim()).to_string()),
+                scenario: Some(self.sim().name().to_string()),
                 scenario_config: Some(self.config_json()),
                 state_columns: Some(self.state_columns()),
                 action: Some(
@@ -152,7 +153,7 @@ impl<T: ArmEngine + 'static> Scripted for RobosuiteTask<T> {
     ) -> Result<(), TaskError> {
         let sim = self.sim();
         let all = sim.behaviours();
-        let kinds: Vec<(u64, T::Behaviour)> =
+        let kinds: Vec<(u64, S::Behaviour)> =
             work.iter().map(|&(seed, b)| (seed, all[b.min(all.len() - 1)].1)).collect();
         let runner = ArmRun {
             task: sim,

@@ -1,12 +1,14 @@
-//! What robosuite's manipulation scenes share: the asset folder, the scene
-//! composer (Panda, mount, gripper, arenas), the OSC_POSE arm controller, the
-//! scripted-episode runner, the exploration drift ([`wander`]), and the engine's [`Task`](harness::task::Task)
+//! What robosuite's manipulation scenes share: the one simulator of every such task
+//! ([`arm_sim`]: a task is an [`arm_sim::ArmScene`]), the asset folder, the scene composer
+//! (Panda, mount, gripper, arenas), the OSC_POSE arm controller, the scripted-episode runner,
+//! the exploration drift ([`wander`]), and the engine's [`Task`](harness::task::Task)
 //! implementation ([`task`]).
 //!
 //! Lift and Can (`crate::lift`, `crate::can`) build on it. Everything follows
 //! robosuite 1.5.2 at its default settings, so that a robomimic user recognises
 //! the scenes, actions and success checks.
 
+pub mod arm_sim;
 pub mod assets;
 pub mod datasets;
 pub mod episode;

@@ -7,15 +7,16 @@
 
 use rayon::prelude::*;
 
+use super::arm_sim::{ArmScene, ArmSim};
 use super::renderer::release_renderer;
-use super::rollout::{ArmTask, Episode, Perturbation, RunLimits};
+use super::rollout::{Episode, Perturbation, RunLimits};
 use crate::error::ScenarioError;
 
 /// The behaviour of `task` called `name` (`--policy`, `--mix`).
 ///
 /// # Errors
 /// [`ScenarioError::UnknownBehaviour`] listing the task's behaviours.
-pub fn behaviour<T: ArmTask>(task: &T, name: &str) -> Result<T::Behaviour, ScenarioError> {
+pub fn behaviour<S: ArmScene>(task: &ArmSim<S>, name: &str) -> Result<S::Behaviour, ScenarioError> {
     let all = task.behaviours();
     all.iter().find(|(n, _)| *n == name).map(|(_, b)| *b).ok_or_else(|| {
         let names: Vec<&str> = all.iter().map(|(n, _)| *n).collect();
@@ -27,13 +28,13 @@ pub fn behaviour<T: ArmTask>(task: &T, name: &str) -> Result<T::Behaviour, Scena
     })
 }
 
-/// An episode of `T`'s.
-type ArmEpisode<T> = Episode<<T as ArmTask>::Init, <T as ArmTask>::Behaviour>;
+/// An episode of `S`'s.
+type ArmEpisode<S> = Episode<<S as ArmScene>::Init, <S as ArmScene>::Behaviour>;
 
 /// How a batch of episodes runs.
-pub struct ArmRun<'a, T: ArmTask> {
+pub struct ArmRun<'a, S: ArmScene> {
     /// The task.
-    pub task: &'a T,
+    pub task: &'a ArmSim<S>,
     /// Noise and lag on the behaviours' actions.
     pub perturbation: Perturbation,
     /// Step limit per episode.
@@ -44,7 +45,7 @@ pub struct ArmRun<'a, T: ArmTask> {
     pub jobs: usize,
 }
 
-impl<T: ArmTask> ArmRun<'_, T> {
+impl<S: ArmScene> ArmRun<'_, S> {
     /// Runs `work` on the worker threads in batches, handing the episodes to
     /// `done` in order; `frames(i)` asks episode `i` for frames of that side.
     ///
@@ -54,9 +55,9 @@ impl<T: ArmTask> ArmRun<'_, T> {
     /// returns.
     pub fn run<E: From<ScenarioError>>(
         &self,
-        work: &[(u64, T::Behaviour)],
+        work: &[(u64, S::Behaviour)],
         frames: impl Fn(usize) -> Option<usize> + Sync,
-        mut done: impl FnMut(usize, Episode<T::Init, T::Behaviour>) -> Result<(), E>,
+        mut done: impl FnMut(usize, Episode<S::Init, S::Behaviour>) -> Result<(), E>,
     ) -> Result<(), E> {
         let jobs = self.jobs.max(1);
         let pool =
@@ -71,13 +72,13 @@ impl<T: ArmTask> ArmRun<'_, T> {
         &self,
         pool: &rayon::ThreadPool,
         jobs: usize,
-        work: &[(u64, T::Behaviour)],
+        work: &[(u64, S::Behaviour)],
         frames: impl Fn(usize) -> Option<usize> + Sync,
-        done: &mut impl FnMut(usize, Episode<T::Init, T::Behaviour>) -> Result<(), E>,
+        done: &mut impl FnMut(usize, Episode<S::Init, S::Behaviour>) -> Result<(), E>,
     ) -> Result<(), E> {
         let batch = jobs * 4;
         for (b, chunk) in work.chunks(batch).enumerate() {
-            let results: Vec<Result<ArmEpisode<T>, ScenarioError>> = pool.install(|| {
+            let results: Vec<Result<ArmEpisode<S>, ScenarioError>> = pool.install(|| {
                 chunk
                     .par_iter()
                     .enumerate()

@@ -15,7 +15,7 @@
 //!   --label success`, `rank --judge DIR`) scores them.
 //! - Imagination: the world model starts from the first frame as the policy sees it.
 //!
-//! One implementation serves both tasks, through [`ArmTask`]'s episode reset.
+//! One implementation serves both tasks, through [`ArmSim`]'s episode reset.
 
 use std::cell::RefCell;
 
@@ -25,9 +25,9 @@ use harness::task::{
     TaskError,
 };
 
+use super::arm_sim::{ArmScene, ArmSim, SceneEpisode};
 use super::episode::ROBOT_COLUMNS;
 use super::robot_state::{self, RobotEstimate};
-use super::rollout::{ArmTask, TaskEpisode};
 use crate::error::ScenarioError;
 
 /// Side of the agentview frames policies and world models read.
@@ -67,37 +67,26 @@ impl Commanded {
     }
 }
 
-/// A robosuite task the engine can drive: its episodes, reset by seed.
-pub trait ArmEngine: ArmTask + Send + Sync {
-    /// An episode in progress.
-    type Ep: TaskEpisode + Send + 'static;
-    /// Episode `seed` at its initial state.
-    ///
-    /// # Errors
-    /// A model MuJoCo refuses.
-    fn reset_episode(&self, seed: u64) -> Result<Self::Ep, ScenarioError>;
-}
-
 /// A robosuite task as a [`Task`].
-pub struct RobosuiteTask<T> {
-    sim: T,
+pub struct RobosuiteTask<S: ArmScene> {
+    sim: ArmSim<S>,
 }
 
-impl<T: ArmEngine> RobosuiteTask<T> {
+impl<S: ArmScene> RobosuiteTask<S> {
     /// Wraps a task's simulator.
-    pub fn new(sim: T) -> Self {
+    pub fn new(sim: ArmSim<S>) -> Self {
         Self { sim }
     }
 
     /// The task's simulator (its scripted behaviours, state columns and config).
-    pub fn sim(&self) -> &T {
+    pub fn sim(&self) -> &ArmSim<S> {
         &self.sim
     }
 }
 
-impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
+impl<S: ArmScene> Task for RobosuiteTask<S> {
     fn name(&self) -> &str {
-        ArmTask::name(&self.sim)
+        self.sim.name()
     }
 
     fn action_spec(&self) -> ActionSpec {
@@ -131,7 +120,7 @@ impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
     }
 
     fn max_steps(&self) -> usize {
-        ArmTask::max_steps(&self.sim)
+        self.sim.max_steps()
     }
 
     fn control_hz(&self) -> f64 {
@@ -167,7 +156,7 @@ impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
     }
 
     fn reset(&self, seed: u64) -> Result<Box<dyn Env>, TaskError> {
-        let ep = self.sim.reset_episode(seed).map_err(TaskError::new)?;
+        let ep = self.sim.reset(seed).map_err(TaskError::new)?;
         Ok(Box::new(ArmEnv {
             seed,
             ep: RefCell::new(ep),
@@ -179,9 +168,9 @@ impl<T: ArmEngine + 'static> Task for RobosuiteTask<T> {
 
 /// One episode: the simulator, its frame (rendered when first observed after a
 /// step) and the commanded pose.
-struct ArmEnv<E> {
+struct ArmEnv<S: ArmScene> {
     seed: u64,
-    ep: RefCell<E>,
+    ep: RefCell<SceneEpisode<S>>,
     frame: RefCell<Option<Rendered>>,
     cmd: Commanded,
 }
@@ -189,7 +178,7 @@ struct ArmEnv<E> {
 /// A state's frame, and the camera's own where it renders at another side.
 type Rendered = (Vec<u8>, Option<NativeFrame>);
 
-impl<E: TaskEpisode> ArmEnv<E> {
+impl<S: ArmScene> ArmEnv<S> {
     /// The current frame, rendered once per state.
     fn frame(&self) -> Result<Rendered, ScenarioError> {
         if let Some(f) = self.frame.borrow().as_ref() {
@@ -205,7 +194,7 @@ impl<E: TaskEpisode> ArmEnv<E> {
     }
 }
 
-impl<E: TaskEpisode + Send + 'static> Env for ArmEnv<E> {
+impl<S: ArmScene> Env for ArmEnv<S> {
     fn seed(&self) -> u64 {
         self.seed
     }
@@ -295,7 +284,7 @@ mod tests {
     use crate::can::{CanConfig, CanSim};
     use crate::lift::{LiftConfig, LiftSim};
 
-    fn lift() -> RobosuiteTask<LiftSim> {
+    fn lift() -> RobosuiteTask<crate::lift::sim::Lift> {
         RobosuiteTask::new(LiftSim::new(LiftConfig::default()).expect("robosuite assets (scripts/setup.sh)"))
     }
 

@@ -319,7 +319,7 @@ fn expert_steps(seeds: std::ops::Range<u64>) -> Vec<([f64; 7], Measured, Measure
         let mut ep = sim.reset(seed).unwrap();
         let mut expert = crate::lift::expert::LiftExpert::new(Default::default());
         for _ in 0..120 {
-            let a = expert.act(&ep);
+            let a = expert.act(ep.arm());
             let state = |ep: &crate::lift::sim::LiftEpisode| {
                 (ep.arm().eef_pos(), ep.arm().hand_quat(), ep.arm().fingers())
             };

@@ -1,10 +1,10 @@
-//! One module per subcommand (`rank` and `plan`, the largest, are folders); [`run`] dispatches.
+//! One module per subcommand (`plan`, the largest, is a folder); [`run`] dispatches.
 
 pub(crate) mod agreement;
 mod export_policies;
 mod merge;
 pub(crate) mod plan;
-pub(crate) mod rank;
+mod rank;
 mod read_judge;
 mod scripted;
 mod tasks;
@@ -52,8 +52,8 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Agreement(a) => agreement::run(a),
-        Command::Rank(a) => rank::run(a, cli.render_workers, cli.quiet),
-        Command::RankShard { file } => rank::run_shard(file, cli.render_workers, cli.quiet),
+        Command::Rank(a) => rank::run(cli, a),
+        Command::RankShard { file } => rank::run_shard(cli, file),
         Command::Plan(a) => plan::run(a, cli.quiet),
         Command::Merge(a) => merge::run(&a.shards, &a.out, a.force, a.no_report),
         Command::Tasks(a) => tasks::run(&a.runs, a.tex.as_deref(), a.force),

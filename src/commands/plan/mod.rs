@@ -255,7 +255,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
     if wm.is_some() {
         listed = listed.world_model("--world-model", &a.world_model);
     }
-    let (out_dir, jsonl) = crate::commands::rank::prepare_run(&a.out, &listed, a.resume, a.force)?;
+    let (out_dir, jsonl) = ranking::prepare_run(&a.out, &listed, a.resume, a.force)?;
     let config = plan_config(a, &planners, wm.as_ref(), (imagine, execute), fingerprints);
     let config_file = a.out.join("config.json");
     if a.resume {

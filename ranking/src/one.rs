@@ -1,4 +1,4 @@
-//! `evalharness rank`: every policy checkpoint, many seeded episodes, two branches
+//! One process's `rank` ([`run_with`]): every policy checkpoint, many seeded episodes, two branches
 //! (MuJoCo and the world model) from the same initial state; per-policy scores
 //! with CIs and how well the world model's ranking agrees with MuJoCo's.
 //!
@@ -9,81 +9,62 @@
 //! the batches it claims first); `--judge`
 //! scores the imagined frames with a learned judge instead of the task's own.
 
-pub mod defaults;
-mod processes;
-pub(crate) use processes::run_shard;
-mod summary;
-
 use std::path::Path;
 use std::process::ExitCode;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result, bail};
 use engine::Setup;
+use harness::results::{EpisodeRow, FailedPolicy, RankResults, RunTiming};
+use harness::summarise::summarise;
 use harness::task::Task;
 use policies::dir::{checkpoint_dirs, checkpoint_name};
-
-use harness::results::{FailedPolicy, RankResults, RunTiming};
 use policies::kinds::{expectations, load_any};
+use runner::command::{Invocation, write_json};
+use runner::defaults::Resolved;
+use runner::progress;
 
-use crate::cli::RankArgs;
-use crate::output::write_json;
-use crate::progress;
-use harness::results::EpisodeRow;
-use harness::summarise::summarise;
+use crate::args::RankArgs;
+use crate::error::{Context, RankError};
+use crate::summary;
+
+type Result<T, E = RankError> = std::result::Result<T, E>;
+
+/// What the binary hands `rank` of its process: its command line (recorded in `config.json`)
+/// and whether bars are hidden ([`Invocation`]), and where result lines go (`say`: stdout).
+pub struct Caller<'a> {
+    /// The process.
+    pub invocation: &'a Invocation,
+    /// Writes one result line.
+    pub say: &'a dyn Fn(&str),
+}
 
 /// Parses `--shard i/n`.
 fn parse_shard(s: Option<&str>) -> Result<(usize, usize)> {
     let Some(s) = s else { return Ok((0, 1)) };
     let (i, n) = s.split_once('/').with_context(|| format!("--shard {s}: expected i/n"))?;
-    let (i, n): (usize, usize) = (i.parse().context("--shard index")?, n.parse().context("--shard count")?);
+    let (Ok(i), Ok(n)) = (i.parse::<usize>(), n.parse::<usize>()) else {
+        runner::refuse!("--shard {s}: expected i/n, two whole numbers");
+    };
     if n == 0 || i >= n {
-        bail!("--shard {s}: need 0 <= i < n");
+        runner::refuse!("--shard {s}: need 0 <= i < n");
     }
     Ok((i, n))
-}
-
-/// `evalharness rank`; `render_workers` is the global `--render-workers` when given.
-pub fn run(a: &RankArgs, render_workers: Option<usize>, quiet: bool) -> Result<ExitCode> {
-    match (a.processes, &a.shard) {
-        (Some(0), _) => bail!("--processes 0: must be at least 1"),
-        (Some(n), Some(_)) if n > 1 => {
-            bail!("--processes {n} runs the shards itself: give it without --shard")
-        }
-        _ => {}
-    }
-    // Every input is checked before the output folder is touched.
-    let task = crate::scenario::load_task(&a.scenario)?;
-    let r = defaults::resolve_with(a, render_workers, task.as_ref(), Path::new("checkpoints"))?;
-    let missing = r.missing(&a.scenario);
-    if !missing.is_empty() {
-        bail!("--scenario {}: missing inputs:\n  {}", a.scenario, missing.join("\n  "));
-    }
-    if r.processes > 1 {
-        return processes::run(a, task, &r, quiet);
-    }
-    // The task's default render workers (a one-process run); the global flag, when
-    // given, started them (or not) already.
-    if r.render_workers > 0 && render_workers.is_none() {
-        crate::render_workers::start(r.render_workers)?;
-    }
-    run_with(a, task, &r, quiet, None)
 }
 
 /// One process's run of `a` for `task`, resolved as `r` (its inputs found). `shard_times`:
 /// the times of the shard processes whose joined rows this run finishes (`--processes`),
 /// which `results.json` reports instead of this process's own (it runs no batch); their
 /// wall clock is counted up to this process's start.
-fn run_with(
+pub(crate) fn run_with(
     a: &RankArgs,
     task: Box<dyn Task>,
-    r: &defaults::Resolved,
-    quiet: bool,
+    r: &Resolved,
+    caller: &Caller<'_>,
     shard_times: Option<RunTiming>,
 ) -> Result<ExitCode> {
     let (shard, shards) = parse_shard(a.shard.as_deref())?;
     if shards > 1 {
-        processes::watch_parent();
+        watch_parent();
     }
     check_flags(a, r)?;
     let seeds: Vec<u64> = harness::seed::range(a.seed_start, r.episodes as u64)?.collect();
@@ -93,14 +74,15 @@ fn run_with(
     let fingerprints =
         runner::inputs::fingerprints(Some((&r.world_model, &wm)), &dirs, r.judge.as_deref(), &a.scenario)?;
     // Each checkpoint too: one linked into --policies lies elsewhere on disk.
-    let listed = crate::output::Inputs::new()
+    let listed = runner::output::Inputs::new()
         .scenario(&a.scenario)
         .add("--policies", &r.policies)
         .all("policy checkpoint", &dirs)
         .world_model("--world-model", &r.world_model)
         .maybe("--judge", r.judge.as_deref());
     let (out_dir, jsonl) = prepare_run(&a.out, &listed, a.resume, a.force)?;
-    let config = rank_config(a, r, (&wm, judge.as_ref()), (&dirs, fingerprints), (shard, shards));
+    let command = caller.invocation.command_line.join(" ");
+    let config = rank_config(a, r, command, (&wm, judge.as_ref()), (&dirs, fingerprints), (shard, shards));
     let config_file = a.out.join("config.json");
     if a.resume {
         runner::resume::check(&config_file, &config)?;
@@ -110,17 +92,14 @@ fn run_with(
     let rows: Vec<EpisodeRow> = harness::rows::resume_rows(&jsonl, |r| {
         harness::rows::whole_batches(r, &batches, runner::resume::rank_key, &runner::resume::RANK_KINDS)
     })?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(a.jobs.max(1))
-        .build()
-        .context("starting worker threads")?;
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.jobs.max(1)).build()?;
     let judge = judge.map(|j| std::sync::Arc::new(j) as std::sync::Arc<dyn harness::judge::Judge>);
     let mut setup = Setup {
         judge_every_frame: a.judge_every_frame,
         float_frames: a.float_frames,
         ..Setup::new(task.as_ref(), a.seed, r.max_steps, judge.as_ref())
     };
-    let pb = progress::bar((dirs.len() * r.episodes) as u64, "rank", quiet);
+    let pb = progress::bar((dirs.len() * r.episodes) as u64, "rank", caller.invocation.quiet);
     let started = Instant::now();
     let (names, loaded, failed) = load_policies(&dirs, task.as_ref(), &device, &|| pb.inc(r.episodes as u64));
     let policies: Vec<&dyn harness::policy::Policy> = loaded.iter().map(|(_, p)| p.as_ref()).collect();
@@ -169,22 +148,24 @@ fn run_with(
     if let Some((text, true)) = reports::scene::scene_note(&res.policies) {
         tracing::warn!("{text}");
     }
-    summary::print(&res, &a.out, html.as_deref());
-    summary::gates(a.min_pearson, a.max_inversions, &res)
+    summary::print(&res, &a.out, html.as_deref(), caller.say);
+    Ok(summary::gates(a.min_pearson, a.max_inversions, &res))
 }
 
 /// Refuses flags that contradict each other or the resolved run, before anything is loaded.
 ///
 /// # Errors
 /// A zero step limit or batch, or `--judge-persist` without a judge or of 0.
-fn check_flags(a: &RankArgs, r: &defaults::Resolved) -> Result<()> {
+fn check_flags(a: &RankArgs, r: &Resolved) -> Result<()> {
     if r.max_steps == 0 || a.batch == 0 {
-        bail!("--max-steps and --batch must be positive");
+        runner::refuse!("--max-steps and --batch must be positive");
     }
     match (a.judge_persist, &r.judge) {
-        (Some(0), _) => bail!("--judge-persist 0: must be at least 1 frame"),
+        (Some(0), _) => runner::refuse!("--judge-persist 0: must be at least 1 frame"),
         (Some(_), None) => {
-            bail!("--judge-persist: there is no judge folder to apply it to (the task judges its own frames)")
+            runner::refuse!(
+                "--judge-persist: there is no judge folder to apply it to (the task judges its own frames)"
+            )
         }
         _ => {}
     }
@@ -199,13 +180,13 @@ fn check_flags(a: &RankArgs, r: &defaults::Resolved) -> Result<()> {
 /// goal-free world model.
 fn load_models(
     a: &RankArgs,
-    r: &defaults::Resolved,
+    r: &Resolved,
     task: &dyn Task,
     device: &burn::tensor::Device,
 ) -> Result<(world_model::model::WorldModel, Option<judges::folder::FrameJudge>)> {
     let wm = runner::inputs::load_world_model(&r.world_model, a.alpha, a.noise_scale, device)?;
     if a.float_frames && wm.cfg.is_goal_free() {
-        bail!(
+        runner::refuse!(
             "--float-frames: world model {} is goal-free (its frames get the goal drawn back as bytes); use a world model of whole frames",
             r.world_model.display()
         );
@@ -221,13 +202,14 @@ fn load_models(
 /// fingerprint, and the judge's settings when one was given.
 fn rank_config(
     a: &RankArgs,
-    r: &defaults::Resolved,
+    r: &Resolved,
+    command: String,
     (wm, judge): (&world_model::model::WorldModel, Option<&judges::folder::FrameJudge>),
     (dirs, fingerprints): (&[std::path::PathBuf], std::collections::BTreeMap<String, String>),
     (shard, shards): (usize, usize),
 ) -> runner::RankConfig {
     runner::RankConfig {
-        command: crate::stdout::command_line().join(" "),
+        command,
         scenario: a.scenario.clone(),
         policies: r.policies.clone(),
         world_model: r.world_model.clone(),
@@ -287,7 +269,7 @@ fn load_policies(
 /// shard processes' when this run joins them, else this process's).
 fn results(
     a: &RankArgs,
-    r: &defaults::Resolved,
+    r: &Resolved,
     task: &dyn Task,
     (policies, agreement, failed): (
         Vec<harness::results::PolicyResult>,
@@ -351,16 +333,38 @@ fn report(
 
 /// Checks that `out` stays apart from every input `listed` (every folder of
 /// [`runner::inputs::fingerprints`] among them), then prepares it for a run that appends rows (see
-/// [`crate::output::RunDir::prepare_episodes`]); returns it and its `episodes.jsonl`.
+/// [`runner::output::RunDir::prepare_episodes`]); returns it and its `episodes.jsonl`.
 ///
 /// # Errors
 /// An `out` that overlaps an input, or one `--resume` / `--force` cannot take.
-pub(crate) fn prepare_run(
+pub fn prepare_run(
     out: &Path,
-    listed: &crate::output::Inputs,
+    listed: &runner::output::Inputs,
     resume: bool,
     force: bool,
-) -> Result<(crate::output::RunDir, std::path::PathBuf)> {
-    let dir = crate::output::RunDir::prepare_episodes(out, listed, resume, force)?;
+) -> Result<(runner::output::RunDir, std::path::PathBuf), runner::output::OutputError> {
+    let dir = runner::output::RunDir::prepare_episodes(out, listed, resume, force)?;
     Ok((dir, out.join("episodes.jsonl")))
+}
+
+/// The environment variable naming a shard's parent process ([`watch_parent`]).
+pub(crate) const PARENT_ENV: &str = "EVALHARNESS_PARENT_PID";
+
+/// In a shard started by `rank --processes`: a thread that ends this process once
+/// the parent is gone (killed with `kill -9`, say), so that no shard goes on running
+/// (and claiming batches) for a run nobody will finish. The batches it finished are
+/// on disk whole; `--resume` continues from them. A shard started by hand has no
+/// such parent and is not watched.
+fn watch_parent() {
+    let Some(parent) = std::env::var(PARENT_ENV).ok().and_then(|p| p.parse::<u32>().ok()) else { return };
+    std::thread::spawn(move || {
+        loop {
+            // Once the parent dies the shard is re-parented (to init or a subreaper).
+            if std::os::unix::process::parent_id() != parent {
+                tracing::error!("the rank --processes parent {parent} is gone; this shard stops");
+                std::process::exit(2);
+            }
+            std::thread::sleep(Duration::from_millis(500));
+        }
+    });
 }

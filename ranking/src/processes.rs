@@ -10,6 +10,10 @@
 //! minutes where one took about 27 (BENCHMARKS.md, 2026-11-27). The rows are those of
 //! one process, byte for byte (merge's contract).
 //!
+//! The shards are this program started again as `evalharness -q --render-workers 0
+//! rank-shard FILE` ([`SHARD_COMMAND`]): the binary's hidden command that hands the file to
+//! [`run_shard`].
+//!
 //! The shards share one claims folder (`OUT.shards/claims`, [`runner::claims`]): each
 //! runs the next batch no shard has claimed, so a shard that drew short episodes takes
 //! more batches instead of waiting for the others.
@@ -19,13 +23,16 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitCode, Stdio};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result, bail};
 use harness::results::RunTiming;
 use harness::task::Task;
+use runner::defaults::Resolved;
+use runner::progress;
 
-use super::defaults::Resolved;
-use crate::cli::RankArgs;
-use crate::progress;
+use crate::args::RankArgs;
+use crate::error::{Context, RankError};
+use crate::one::{Caller, PARENT_ENV, run_with};
+
+type Result<T, E = RankError> = std::result::Result<T, E>;
 
 /// Runs `a` (for `task`, resolved as `r`, its inputs found) as `r.processes` shard
 /// processes, joins them into `a.out` and finishes the run there. The shards' folders
@@ -37,19 +44,22 @@ use crate::progress;
 /// An `--out` that exists without `--force` or `--resume`, a shard
 /// that failed (exit 2 or a signal; its log's last lines are quoted), or what `merge`
 /// and the finishing run report.
-pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Result<ExitCode> {
+pub(crate) fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, caller: &Caller<'_>) -> Result<ExitCode> {
     let started = Instant::now();
     let parts = shards_folder(&a.out);
     // The whole run writes `--out` (and its shards beside it): its inputs are checked
     // and it is locked first, as any output is.
-    let _lock = crate::output::Inputs::new()
+    let _lock = runner::output::Inputs::new()
         .scenario(&a.scenario)
         .add("--policies", &r.policies)
         .world_model("--world-model", &r.world_model)
         .maybe("--judge", r.judge.as_deref())
         .claim(&a.out, ".shards")?;
     if a.out.exists() && !a.force && !a.resume {
-        bail!("--out {} exists: pass --force to replace it or --resume to continue it", a.out.display());
+        runner::refuse!(
+            "--out {} exists: pass --force to replace it or --resume to continue it",
+            a.out.display()
+        );
     }
     // Resuming a run that has rows but no shards (finished, or run in one process): the
     // one-process path continues it, checking every setting against its config.json
@@ -58,7 +68,7 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
         tracing::info!("{} has no shards to resume; continuing it in this process", a.out.display());
         let mut one = a.clone();
         one.processes = Some(1);
-        return super::run_with(&one, task, r, quiet, None);
+        return run_with(&one, task, r, caller, None);
     }
     let dirs = policies::dir::checkpoint_dirs(&r.policies)?;
     let total = dirs.len() * r.episodes;
@@ -72,7 +82,7 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
         check_split(&parts, n)?;
     }
     // `OUT.shards` is the tool's own folder: a user's folder of that name is refused, never cleared.
-    crate::output::make_owned(&parts, "the shards of a `rank --processes` run", false)?;
+    runner::output::make_owned(&parts, "the shards of a `rank --processes` run", false)?;
     // A fresh run's shards start empty (`--force`), so claims left by an interrupted
     // one would hold batches nobody runs; a resumed run keeps them for their shards.
     let claims = parts.join("claims");
@@ -90,7 +100,7 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
         shard.start(&exe, a, n, resume, false)?;
         shards.push(shard);
     }
-    let pb = progress::bar(total as u64, "rank", quiet);
+    let pb = progress::bar(total as u64, "rank", caller.invocation.quiet);
     let failed = wait_all(&mut shards, &exe, a, n, &pb)?;
     pb.finish_and_clear();
     if let Some((i, why)) = failed {
@@ -100,14 +110,11 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
         // the corrected command runs as a fresh one.
         if shards.iter().all(|s| count_lines(&s.dir.join("episodes.jsonl")) == 0) {
             let _ = std::fs::remove_dir_all(&parts);
-            bail!("--processes: shard {i}/{n} {why} before any batch was done; its log ended:\n{log}");
+            let log = format!("before any batch was done; its log ended:\n{log}");
+            return Err(RankError::Shard { index: i, count: n, why, log });
         }
-        bail!(
-            "--processes: shard {i}/{n} ({}) {why}; its log {} ends:\n{}",
-            s.dir.display(),
-            s.log.display(),
-            log
-        );
+        let log = format!("its folder is {}, its log {} ends:\n{log}", s.dir.display(), s.log.display());
+        return Err(RankError::Shard { index: i, count: n, why, log });
     }
     let dirs: Vec<PathBuf> = shards.iter().map(|s| s.dir.clone()).collect();
     // The shards' thread times, summed by merge; the wall clock is this command's.
@@ -124,7 +131,7 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
     };
     let mut whole = a.clone();
     (whole.processes, whole.resume, whole.force) = (Some(1), true, false);
-    let code = super::run_with(&whole, task, r, quiet, Some(timing))?;
+    let code = run_with(&whole, task, r, caller, Some(timing))?;
     std::fs::remove_dir_all(&parts)
         .with_context(|| format!("removing the joined shards {}", parts.display()))?;
     Ok(code)
@@ -139,7 +146,7 @@ pub fn run(a: &RankArgs, task: Box<dyn Task>, r: &Resolved, quiet: bool) -> Resu
 fn check_split(parts: &Path, n: usize) -> Result<()> {
     let saved = runner::shards::saved_split(&parts.join("shard-0").join("config.json"));
     match saved {
-        Some(k) if k != n => bail!(
+        Some(k) if k != n => runner::refuse!(
             "--resume: {} holds a run split into {k} processes, and this one would be {n}; \
              resume with --processes {k} (the shards keep their finished batches)",
             parts.display()
@@ -149,7 +156,7 @@ fn check_split(parts: &Path, n: usize) -> Result<()> {
 }
 
 /// Where the shards of a run into `out` go: `OUT.shards` beside it.
-fn shards_folder(out: &Path) -> PathBuf {
+pub fn shards_folder(out: &Path) -> PathBuf {
     let mut name = out.file_name().map_or_else(|| OsString::from("rank"), ToOwned::to_owned);
     name.push(".shards");
     out.with_file_name(name)
@@ -178,11 +185,10 @@ impl Shard {
         // run reaches it as the struct it is (no command line rebuilt flag by flag).
         let file = shard_file(&self.dir);
         let text = serde_json::to_string_pretty(&shard_args(a, self.i, n, &self.dir, resume))?;
-        harness::runfile::write_atomic(&file, &text)
-            .map_err(|e| anyhow::anyhow!("writing {}: {}", e.path.display(), e.message))?;
+        harness::runfile::write_atomic(&file, &text)?;
         // A shard renders its own frames: the processes are the parallelism.
         let child = Command::new(exe)
-            .args([OsString::from("-q"), "--render-workers".into(), "0".into(), "rank-shard".into()])
+            .args(SHARD_COMMAND)
             .arg(&file)
             .env(PARENT_ENV, std::process::id().to_string())
             .stdin(Stdio::null())
@@ -195,27 +201,9 @@ impl Shard {
     }
 }
 
-/// The environment variable naming a shard's parent process ([`watch_parent`]).
-const PARENT_ENV: &str = "EVALHARNESS_PARENT_PID";
-
-/// In a shard started by `rank --processes`: a thread that ends this process once
-/// the parent is gone (killed with `kill -9`, say), so that no shard goes on running
-/// (and claiming batches) for a run nobody will finish. The batches it finished are
-/// on disk whole; `--resume` continues from them. A shard started by hand has no
-/// such parent and is not watched.
-pub(super) fn watch_parent() {
-    let Some(parent) = std::env::var(PARENT_ENV).ok().and_then(|p| p.parse::<u32>().ok()) else { return };
-    std::thread::spawn(move || {
-        loop {
-            // Once the parent dies the shard is re-parented (to init or a subreaper).
-            if std::os::unix::process::parent_id() != parent {
-                tracing::error!("the rank --processes parent {parent} is gone; this shard stops");
-                std::process::exit(2);
-            }
-            std::thread::sleep(Duration::from_millis(500));
-        }
-    });
-}
+/// This program's command line of a shard process, before its arguments' file: quiet, its
+/// frames rendered by itself (the processes are the parallelism), the hidden `rank-shard`.
+pub const SHARD_COMMAND: [&str; 4] = ["-q", "--render-workers", "0", "rank-shard"];
 
 /// Waits for every shard, counting their episodes on `pb` (each `episodes.jsonl` row is
 /// one branch of one episode). A shard killed by a signal (a crash inside the system's
@@ -282,7 +270,7 @@ fn tail(log: &Path) -> String {
 }
 
 /// The file of shard `dir`'s arguments: `OUT.shards/shard-I.args.json`.
-fn shard_file(dir: &Path) -> PathBuf {
+pub fn shard_file(dir: &Path) -> PathBuf {
     let mut name = dir.file_name().map_or_else(|| OsString::from("shard"), ToOwned::to_owned);
     name.push(".args.json");
     dir.with_file_name(name)
@@ -293,7 +281,7 @@ fn shard_file(dir: &Path) -> PathBuf {
 /// reaches the shards by this struct update without being named here), one worker, its
 /// shard and the shards' shared claims folder, no processes of its own, no report and
 /// no gates (they belong to the whole run); `--resume` or `--force`.
-fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> RankArgs {
+pub fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> RankArgs {
     let claims = dir.parent().map_or_else(|| PathBuf::from("claims"), |p| p.join("claims"));
     RankArgs {
         jobs: 1,
@@ -307,119 +295,5 @@ fn shard_args(a: &RankArgs, i: usize, n: usize, dir: &Path, resume: bool) -> Ran
         resume,
         force: !resume,
         ..a.clone()
-    }
-}
-
-/// `evalharness rank-shard FILE`: one shard process of `rank --processes`, its
-/// arguments read from the file its parent wrote.
-///
-/// # Errors
-/// A file that cannot be read or is not `rank`'s arguments (naming it), or what the
-/// shard's run returns.
-pub fn run_shard(file: &Path, render_workers: Option<usize>, quiet: bool) -> Result<ExitCode> {
-    let text = std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
-    let args: RankArgs = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a rank shard's arguments", file.display()))?;
-    if args.shard.is_none() {
-        bail!("{}: not a rank shard's arguments (no shard)", file.display());
-    }
-    super::run(&args, render_workers, quiet)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use clap::Parser;
-
-    fn parse(args: &[OsString]) -> RankArgs {
-        let argv = std::iter::once(OsString::from("evalharness")).chain(args.iter().cloned());
-        match crate::cli::Cli::try_parse_from(argv).unwrap().command {
-            crate::cli::Command::Rank(r) => r,
-            other => panic!("not rank: {other:?}"),
-        }
-    }
-
-    #[test]
-    fn a_shard_gets_every_setting_one_worker_and_no_gates() {
-        let a = parse(
-            &[
-                "rank",
-                "--scenario",
-                "can",
-                "--policies",
-                "p",
-                "--world-model",
-                "w",
-                "--judge",
-                "j",
-                "--judge-persist",
-                "2",
-                "--judge-every-frame",
-                "--float-frames",
-                "--alpha",
-                "0.5",
-                "--noise-scale",
-                "0.25",
-                "--episodes",
-                "20",
-                "--max-steps",
-                "30",
-                "--seed-start",
-                "7",
-                "--batch",
-                "5",
-                "--seed",
-                "3",
-                "--bootstrap",
-                "100",
-                "--jobs",
-                "4",
-                "--processes",
-                "3",
-                "--min-pearson",
-                "0.3",
-                "--max-inversions",
-                "2",
-                "--out",
-                "o",
-            ]
-            .map(OsString::from),
-        );
-        let dir = Path::new("o.shards/shard-2");
-        let s = shard_args(&a, 2, 3, dir, false);
-        // Every setting of the run, as given: only the shard's own fields differ.
-        let own = RankArgs {
-            jobs: a.jobs,
-            shard: None,
-            claims: None,
-            out: a.out.clone(),
-            processes: a.processes,
-            min_pearson: a.min_pearson,
-            max_inversions: a.max_inversions,
-            no_report: a.no_report,
-            resume: a.resume,
-            force: a.force,
-            ..s.clone()
-        };
-        assert_eq!(own, a);
-        assert_eq!((s.jobs, s.shard.as_deref(), s.processes), (1, Some("2/3"), None));
-        assert_eq!((s.min_pearson, s.max_inversions, s.no_report), (None, None, true));
-        assert_eq!((s.out.as_path(), s.force, s.resume), (dir, true, false));
-        assert_eq!(s.claims, Some(PathBuf::from("o.shards/claims")), "the shards share one claims folder");
-        let r = shard_args(&a, 0, 3, Path::new("d"), true);
-        assert!(r.resume && !r.force);
-        // The file round-trips, and the hidden command reads it.
-        let text = serde_json::to_string(&s).unwrap();
-        assert_eq!(serde_json::from_str::<RankArgs>(&text).unwrap(), s);
-        assert_eq!(shard_file(dir), PathBuf::from("o.shards/shard-2.args.json"));
-        let argv = ["evalharness", "-q", "--render-workers", "0", "rank-shard", "o.shards/shard-2.args.json"];
-        let cli = crate::cli::Cli::try_parse_from(argv).unwrap();
-        assert_eq!(cli.render_workers, Some(0), "a shard renders its own frames");
-        assert!(matches!(cli.command, crate::cli::Command::RankShard { .. }));
-    }
-
-    #[test]
-    fn shards_go_beside_the_output() {
-        assert_eq!(shards_folder(Path::new("out/can")), PathBuf::from("out/can.shards"));
     }
 }

@@ -1,21 +1,16 @@
-//! What a finished `rank` says: the per-policy table and agreement line on stdout,
-//! and the exit code of the gates (its episode tables are
-//! `reports::episode_tables`).
+//! What a finished `rank` says: the per-policy table and agreement line (through `say`, the
+//! binary's stdout), and the exit code of the gates, whose failures go to stderr (its episode
+//! tables are `reports::episode_tables`).
 
 use std::path::Path;
 use std::process::ExitCode;
 
-use anyhow::Result;
 use harness::results::RankResults;
 
 /// Exit 1 when a gate fails (or a policy failed, or fewer than two policies were
 /// ranked, so no agreement could be measured), 0 otherwise. Undefined metrics fail
 /// a gate that asks for them, and are printed as n/a.
-pub(super) fn gates(
-    min_pearson: Option<f64>,
-    max_inversions: Option<u64>,
-    res: &RankResults,
-) -> Result<ExitCode> {
+pub(crate) fn gates(min_pearson: Option<f64>, max_inversions: Option<u64>, res: &RankResults) -> ExitCode {
     let mut ok = true;
     let ranked = res.policies.len();
     if ranked < 2 {
@@ -54,12 +49,12 @@ pub(super) fn gates(
         eprintln!("{} policies failed (see results.json \"failed_policies\")", res.failed_policies.len());
         ok = false;
     }
-    Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
+    if ok { ExitCode::SUCCESS } else { ExitCode::from(1) }
 }
 
 /// The per-policy table, the agreement line and where the results (and the report,
 /// when one was written) are (stdout carries results only).
-pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
+pub(crate) fn print(res: &RankResults, out: &Path, report: Option<&Path>, say: &dyn Fn(&str)) {
     // The task's scene checks by name (Push-T: agent kept, block area, goal kept), the
     // world model's means beside the scores.
     let checks: std::collections::BTreeSet<&str> =
@@ -67,12 +62,13 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
     let scene = !checks.is_empty();
     if scene {
         let names: String = checks.iter().map(|c| format!(" {:>11}", c.replace('_', " "))).collect();
-        outln!("{:<16} {:>10} {:>12}{names}", "policy", "MuJoCo", "world model");
+        runner::say!(say, "{:<16} {:>10} {:>12}{names}", "policy", "MuJoCo", "world model");
     } else {
         // A task without scene checks (robomimic's, scored by success alone): the success
         // rates with their Wilson 95% intervals, the mean steps to success, and the seeds
         // that succeed in one branch only.
-        outln!(
+        runner::say!(
+            say,
             "{:<16} {:>22} {:>22} {:>14} {:>14} {:>14} {:>12} {:>6}",
             "policy",
             "MuJoCo success",
@@ -91,7 +87,7 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
                 .iter()
                 .map(|c| format!(" {:>11.2}", wm.scene.get(*c).copied().unwrap_or(f64::NAN)))
                 .collect();
-            outln!("{:<16} {:>10.3} {:>12.3}{means}", p.name, p.sim.mean, wm.mean);
+            runner::say!(say, "{:<16} {:>10.3} {:>12.3}{means}", p.name, p.sim.mean, wm.mean);
         } else {
             let rate = |b: &harness::results::BranchStats| {
                 format!("{:.2} [{:.2}, {:.2}]", b.success_rate, b.success_ci95[0], b.success_ci95[1])
@@ -102,7 +98,8 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
             };
             let kappa =
                 p.paired_success.and_then(|c| c.kappa()).map_or("-".to_string(), |k| format!("{k:.2}"));
-            outln!(
+            runner::say!(
+                say,
                 "{:<16} {:>22} {:>22} {:>14} {:>14} {:>14} {:>12} {:>6}",
                 p.name,
                 rate(&p.sim),
@@ -117,7 +114,8 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
     }
     let ag = &res.agreement;
     let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.3}"));
-    outln!(
+    runner::say!(
+        say,
         "Pearson {}  r² {}  Spearman {}  Kendall tau_b {}  inversions {}  MMRV {}  regret@1 {}  MAE {}",
         f(ag.pearson),
         f(ag.pearson_r2),
@@ -129,15 +127,16 @@ pub(super) fn print(res: &RankResults, out: &Path, report: Option<&Path>) {
         f(ag.mean_abs_error)
     );
     if let Some(c) = &ag.noise_ceiling {
-        outln!(
+        runner::say!(
+            say,
             "noise ceiling (two resampled MuJoCo runs of this size agree at): Pearson {}  inversions {:.1}  MAE {:.3}",
             c.pearson_text(),
             c.rank_inversions,
             c.mean_abs_error
         );
     }
-    outln!("results: {}", out.join("results.json").display());
+    runner::say!(say, "results: {}", out.join("results.json").display());
     if let Some(html) = report {
-        outln!("report: {}", html.display());
+        runner::say!(say, "report: {}", html.display());
     }
 }
