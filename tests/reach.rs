@@ -116,9 +116,13 @@ fn reach_runs_through_every_command() {
         "--out",
         s(&out),
     ];
-    expect_code(&run(&args), 0);
+    let (stdout, _) = expect_code(&run(&args), 0);
     let results = read_json(&out.join("results.json"));
     assert_eq!(results["scenario"], "reach");
+    // Its reference simulator is its own, not MuJoCo (at 8be7ead the table, the report and
+    // results.json said MuJoCo for every task).
+    assert_eq!(results["simulator"], "simulator");
+    assert!(stdout.contains("simulator success") && !stdout.contains("MuJoCo"), "{stdout}");
     let rows = std::fs::read_to_string(out.join("episodes.jsonl")).unwrap();
     // Two policies (the two epochs), 3 seeds, both branches.
     assert_eq!(rows.lines().count(), 12, "{rows}");
@@ -139,6 +143,7 @@ fn reach_runs_through_every_command() {
     assert!(html.contains("An episode's score: 1 if the task succeeded at some step, else 0."), "{html}");
     assert!(html.contains("by the task's own judge"), "{html}");
     assert!(!html.contains("coverage"), "{html}");
+    assert!(html.contains("world model vs simulator") && !html.contains("MuJoCo"), "{html}");
 }
 
 /// The column names of a run's `episodes.parquet`.

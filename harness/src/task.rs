@@ -119,6 +119,11 @@ pub trait Task: Send + Sync {
     /// for every seed): a fact of the task, answered without a reset. A task without
     /// such a judge needs a learned one for `rank`'s world-model branch.
     fn judges_own_frames(&self) -> bool;
+    /// The reference simulator's name, as `rank`'s table and reports say it ("MuJoCo", the
+    /// default; Reach's is its own).
+    fn simulator(&self) -> &'static str {
+        "MuJoCo"
+    }
     /// The episode of `seed`, reset (a pure function of the seed).
     ///
     /// # Errors

@@ -145,7 +145,7 @@ pub(crate) fn run_with(
         .collect();
     let src = runner::media::Sources { rows: &rows, kept: &kept, batches: &batches, setup: &setup, wm: &wm };
     let html = report(a, shards, (&named, &src), &pool, &kept_dir)?;
-    if let Some((text, true)) = reports::scene::scene_note(&res.policies) {
+    if let Some((text, true)) = reports::scene::scene_note(&res.policies, res.simulator()) {
         tracing::warn!("{text}");
     }
     summary::print(&res, &a.out, html.as_deref(), caller.say);
@@ -286,6 +286,7 @@ fn results(
         seed_start: a.seed_start,
         max_steps: r.max_steps,
         scoring: Some(task.score_kind().describe()),
+        simulator: Some(task.simulator().to_string()),
         policies,
         agreement,
         failed_policies: failed,

@@ -55,6 +55,7 @@ pub(crate) fn gates(min_pearson: Option<f64>, max_inversions: Option<u64>, res: 
 /// The per-policy table, the agreement line and where the results (and the report,
 /// when one was written) are (stdout carries results only).
 pub(crate) fn print(res: &RankResults, out: &Path, report: Option<&Path>, say: &dyn Fn(&str)) {
+    let sim = res.simulator();
     // The task's scene checks by name (Push-T: agent kept, block area, goal kept), the
     // world model's means beside the scores.
     let checks: std::collections::BTreeSet<&str> =
@@ -62,7 +63,7 @@ pub(crate) fn print(res: &RankResults, out: &Path, report: Option<&Path>, say: &
     let scene = !checks.is_empty();
     if scene {
         let names: String = checks.iter().map(|c| format!(" {:>11}", c.replace('_', " "))).collect();
-        runner::say!(say, "{:<16} {:>10} {:>12}{names}", "policy", "MuJoCo", "world model");
+        runner::say!(say, "{:<16} {:>10} {:>12}{names}", "policy", sim, "world model");
     } else {
         // A task without scene checks (robomimic's, scored by success alone): the success
         // rates with their Wilson 95% intervals, the mean steps to success, and the seeds
@@ -71,12 +72,12 @@ pub(crate) fn print(res: &RankResults, out: &Path, report: Option<&Path>, say: &
             say,
             "{:<16} {:>22} {:>22} {:>14} {:>14} {:>14} {:>12} {:>6}",
             "policy",
-            "MuJoCo success",
+            format!("{sim} success"),
             "world model success",
-            "MuJoCo steps",
+            format!("{sim} steps"),
             "wm steps",
             "imagined only",
-            "MuJoCo only",
+            format!("{sim} only"),
             "kappa"
         );
     }
@@ -129,7 +130,7 @@ pub(crate) fn print(res: &RankResults, out: &Path, report: Option<&Path>, say: &
     if let Some(c) = &ag.noise_ceiling {
         runner::say!(
             say,
-            "noise ceiling (two resampled MuJoCo runs of this size agree at): Pearson {}  inversions {:.1}  MAE {:.3}",
+            "noise ceiling (two resampled {sim} runs of this size agree at): Pearson {}  inversions {:.1}  MAE {:.3}",
             c.pearson_text(),
             c.rank_inversions,
             c.mean_abs_error

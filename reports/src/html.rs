@@ -68,7 +68,8 @@ pub fn report_html(s: &Summary, x: &Extras) -> String {
         esc(&s.scenario)
     ));
     h.push_str(&format!(
-        "<h1>Policy ranking: world model vs MuJoCo</h1><p class=\"sub\">scenario <b>{}</b> · world model <code>{}</code> · {} policies × {} episodes (seeds {}–{}) · 95% CIs</p>\n",
+        "<h1>Policy ranking: world model vs {}</h1><p class=\"sub\">scenario <b>{}</b> · world model <code>{}</code> · {} policies × {} episodes (seeds {}–{}) · 95% CIs</p>\n",
+        esc(&s.simulator),
         esc(&s.scenario),
         esc(&s.world_model),
         s.policies.len(),
@@ -91,7 +92,8 @@ pub fn report_html(s: &Summary, x: &Extras) -> String {
     h.push_str("</div>\n");
     if let Some(c) = &s.ceiling {
         h.push_str(&format!(
-            "<p class=\"sub\">Noise ceiling: two MuJoCo runs of this size (resampled from this one) agree at Pearson {}, {:.1} inversions, mean absolute error {:.3}: the most a world model can reach with this many episodes.</p>\n",
+            "<p class=\"sub\">Noise ceiling: two {} runs of this size (resampled from this one) agree at Pearson {}, {:.1} inversions, mean absolute error {:.3}: the most a world model can reach with this many episodes.</p>\n",
+            esc(&s.simulator),
             c.pearson_text(),
             c.rank_inversions,
             c.mean_abs_error
@@ -104,7 +106,7 @@ pub fn report_html(s: &Summary, x: &Extras) -> String {
         }
         h.push_str("</ul>\n");
     }
-    h.push_str("<h2>Scores per policy</h2><table><thead><tr><th>Policy</th><th>MuJoCo score</th><th>World-model score</th><th>MuJoCo success</th><th>World-model success</th><th title=\"Seeds that succeed in both branches / only imagined / only in MuJoCo / in neither, and Cohen's kappa of the two outcomes over the seeds (0: the imagined outcome of a seed says nothing of the real one)\">Same seed: both · imagined only · MuJoCo only · neither (κ)</th><th>Episodes</th></tr></thead><tbody>\n");
+    h.push_str(&format!("<h2>Scores per policy</h2><table><thead><tr><th>Policy</th><th>{sim} score</th><th>World-model score</th><th>{sim} success</th><th>World-model success</th><th title=\"Seeds that succeed in both branches / only imagined / only in {sim} / in neither, and Cohen's kappa of the two outcomes over the seeds (0: the imagined outcome of a seed says nothing of the real one)\">Same seed: both · imagined only · {sim} only · neither (κ)</th><th>Episodes</th></tr></thead><tbody>\n", sim = esc(&s.simulator)));
     for p in &s.policies {
         let paired = p.paired.map_or_else(
             || "n/a".to_string(),
@@ -161,17 +163,25 @@ pub fn report_html(s: &Summary, x: &Extras) -> String {
 fn plot_caption(name: &str, s: &Summary) -> String {
     match name {
         "scatter" => format!(
-            "World-model vs MuJoCo mean score per policy with 95% CIs; dashed: y = x; red: least squares. Pearson r = {}, Spearman ρ = {}, Kendall τ_b = {}.",
+            "World-model vs {} mean score per policy with 95% CIs; dashed: y = x; red: least squares. Pearson r = {}, Spearman ρ = {}, Kendall τ_b = {}.",
+            s.simulator,
             est(s.pearson),
             est(s.spearman),
             est(s.kendall)
         ),
         "bars" => {
-            "Mean score of both branches per policy (95% bootstrap CIs), sorted by MuJoCo score.".into()
+            format!(
+                "Mean score of both branches per policy (95% bootstrap CIs), sorted by {} score.",
+                s.simulator
+            )
         }
-        "score_over_time" => "Score so far across episodes (mean and 95% band) at the end of each action chunk, per policy; blue MuJoCo, red world model.".into(),
+        "score_over_time" => format!(
+            "Score so far across episodes (mean and 95% band) at the end of each action chunk, per policy; blue {}, red world model.",
+            s.simulator
+        ),
         "bump" => format!(
-            "Ranks under MuJoCo and the world model; red lines change rank ({} inversions).",
+            "Ranks under {} and the world model; red lines change rank ({} inversions).",
+            s.simulator,
             s.inversions.map_or("n/a".into(), |e| e.fmt(0))
         ),
         other => other.into(),

@@ -95,7 +95,7 @@ fn scatter<DB: DrawingBackend<ErrorType: 'static>>(root: &DrawingArea<DB, Shift>
         .map_err(e)?;
     chart
         .configure_mesh()
-        .x_desc("MuJoCo score (mean over episodes)")
+        .x_desc(format!("{} score (mean over episodes)", s.simulator))
         .y_desc("World-model score")
         .label_style(("sans-serif", 13))
         .axis_desc_style(("sans-serif", 14))
@@ -194,7 +194,10 @@ fn bars<DB: DrawingBackend<ErrorType: 'static>>(root: &DrawingArea<DB, Shift>, s
     let n = order.len().max(1);
     let names: Vec<String> = order.iter().map(|&i| s.policies[i].name.clone()).collect();
     let mut chart = ChartBuilder::on(root)
-        .caption("Mean score per policy (95% CIs), sorted by MuJoCo score", ("sans-serif", 16))
+        .caption(
+            format!("Mean score per policy (95% CIs), sorted by {} score", s.simulator),
+            ("sans-serif", 16),
+        )
         .margin(16)
         .x_label_area_size(44)
         .y_label_area_size(54)
@@ -234,7 +237,7 @@ fn bars<DB: DrawingBackend<ErrorType: 'static>>(root: &DrawingArea<DB, Shift>, s
             }
         }
     }
-    for (label, color) in [("MuJoCo", SIM), ("World model", WM)] {
+    for (label, color) in [(s.simulator.as_str(), SIM), ("World model", WM)] {
         chart
             .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
             .map_err(e)?
@@ -262,7 +265,7 @@ fn bump<DB: DrawingBackend<ErrorType: 'static>>(root: &DrawingArea<DB, Shift>, s
     let sim = ranks(&s.policies.iter().map(|p| p.sim.mean.value).collect::<Vec<_>>());
     let wm = ranks(&s.policies.iter().map(|p| p.world_model.mean.value).collect::<Vec<_>>());
     let mut chart = ChartBuilder::on(root)
-        .caption("Rank under MuJoCo (left) and the world model (right)", ("sans-serif", 16))
+        .caption(format!("Rank under {} (left) and the world model (right)", s.simulator), ("sans-serif", 16))
         .margin(16)
         .build_cartesian_2d(-0.8f64..1.8f64, (n as f64 + 0.5)..0.5f64)
         .map_err(e)?;

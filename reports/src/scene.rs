@@ -25,7 +25,7 @@ pub const DEGRADED: f64 = 0.5;
 /// them. Each check is stated where every policy's world-model branch and at least one
 /// MuJoCo branch made it (a check that some policies lack, as in runs written before the
 /// check existed, is left out).
-pub fn scene_note(pol: &[PolicyResult]) -> Option<(String, bool)> {
+pub fn scene_note(pol: &[PolicyResult], simulator: &str) -> Option<(String, bool)> {
     let names: BTreeSet<&str> =
         pol.iter().flat_map(|p| p.world_model.scene.keys().map(String::as_str)).collect();
     let mut parts = Vec::new();
@@ -41,7 +41,7 @@ pub fn scene_note(pol: &[PolicyResult]) -> Option<(String, bool)> {
             wm.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), w| (l.min(w.1), h.max(w.1)));
         let sim_mean = sim.iter().sum::<f64>() / sim.len() as f64;
         parts.push(format!(
-            "{}: MuJoCo {sim_mean:.2} on average, world model {lo:.2}–{hi:.2} across policies",
+            "{}: {simulator} {sim_mean:.2} on average, world model {lo:.2}–{hi:.2} across policies",
             name.replace('_', " ")
         ));
         bad.extend(wm.iter().filter(|w| w.1 < DEGRADED).map(|w| w.0));
@@ -103,7 +103,7 @@ mod tests {
         let (s, _) = summarise(&rows, &names, 100, 0);
         assert!((s[0].world_model.scene["goal_kept"] - 0.3).abs() < 1e-12);
         assert!((s[2].world_model.scene["agent_kept"] - 0.2).abs() < 1e-12);
-        let (text, warn) = scene_note(&s).unwrap();
+        let (text, warn) = scene_note(&s, "MuJoCo").unwrap();
         assert!(warn);
         // MuJoCo block area: policy means 1.06, 1.05, 1.05 → 1.0533; goal: (0.96 + 0.94 + 0.95) / 3
         // = 0.95; agent: (1.0 + 0.99 + 1.0) / 3 = 0.9967 → "1.00". World model block 0.70–0.90,
@@ -122,10 +122,10 @@ mod tests {
                 r
             })
             .collect();
-        let (text, _) = scene_note(&summarise(&older, &names, 100, 0).0).unwrap();
+        let (text, _) = scene_note(&summarise(&older, &names, 100, 0).0, "MuJoCo").unwrap();
         assert!(!text.contains("agent kept") && text.contains("episodes of a end"), "{text}");
         // Without the checks (a task whose judge makes none): no note.
         let plain: Vec<EpisodeRow> = rows.into_iter().map(|r| r.with_scene(None)).collect();
-        assert_eq!(scene_note(&summarise(&plain, &["a".into()], 100, 0).0), None);
+        assert_eq!(scene_note(&summarise(&plain, &["a".into()], 100, 0).0, "MuJoCo"), None);
     }
 }

@@ -92,6 +92,8 @@ pub struct Summary {
     pub ceiling: Option<NoiseCeiling>,
     /// Scenario name.
     pub scenario: String,
+    /// The reference simulator's name ("MuJoCo" for Push-T, Lift and Can).
+    pub simulator: String,
     /// World-model folder.
     pub world_model: String,
     /// Episodes per policy.
@@ -129,6 +131,7 @@ impl Summary {
             mae: ag.mean_abs_error,
             ceiling: ag.noise_ceiling.clone(),
             scenario: r.scenario.clone(),
+            simulator: r.simulator().to_string(),
             world_model: r.world_model.display().to_string(),
             episodes: r.episodes as u64,
             seed_start: r.seed_start,

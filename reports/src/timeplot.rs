@@ -88,12 +88,13 @@ fn panel<DB: DrawingBackend<ErrorType: 'static>>(
 fn draw<DB: DrawingBackend<ErrorType: 'static>>(
     root: &DrawingArea<DB, Shift>,
     series: &[TimeSeries],
+    simulator: &str,
 ) -> Result<(), DrawError> {
     root.fill(&WHITE).map_err(boxed)?;
     let (title, body) = root.split_vertically(34);
     title
         .draw(&Text::new(
-            "Score so far (mean, 95% band) vs control step — blue: MuJoCo, red: world model",
+            format!("Score so far (mean, 95% band) vs control step — blue: {simulator}, red: world model"),
             (10, 8),
             ("sans-serif", 15),
         ))
@@ -107,20 +108,21 @@ fn draw<DB: DrawingBackend<ErrorType: 'static>>(
     root.present().map_err(boxed)
 }
 
-/// Writes `dir/score_over_time.{png,svg}`; returns the PNG path.
+/// Writes `dir/score_over_time.{png,svg}` (the reference branch named `simulator`); returns
+/// the PNG path.
 ///
 /// # Errors
 /// [`PlotError`] naming the file.
-pub fn write_time_plot(dir: &Path, series: &[TimeSeries]) -> Result<PathBuf, PlotError> {
+pub fn write_time_plot(dir: &Path, series: &[TimeSeries], simulator: &str) -> Result<PathBuf, PlotError> {
     register_fonts();
     let cols = 4.min(series.len().max(1)) as u32;
     let rows = series.len().div_ceil(cols as usize).max(1) as u32;
     let size = (240 * cols + 20, 190 * rows + 40);
     let png = dir.join("score_over_time.png");
     let err = |p: &Path, source: DrawError| PlotError { path: p.to_path_buf(), source };
-    draw(&BitMapBackend::new(&png, size).into_drawing_area(), series).map_err(|m| err(&png, m))?;
+    draw(&BitMapBackend::new(&png, size).into_drawing_area(), series, simulator).map_err(|m| err(&png, m))?;
     let svg = dir.join("score_over_time.svg");
-    draw(&SVGBackend::new(&svg, size).into_drawing_area(), series).map_err(|m| err(&svg, m))?;
+    draw(&SVGBackend::new(&svg, size).into_drawing_area(), series, simulator).map_err(|m| err(&svg, m))?;
     Ok(png)
 }
 
@@ -151,7 +153,7 @@ mod tests {
             sim: vec![[0.2, 0.1, 0.3]; 2],
             world_model: vec![[0.3, 0.2, 0.4]; 2],
         };
-        let e = write_time_plot(&not_a_dir, &[ts]).unwrap_err();
+        let e = write_time_plot(&not_a_dir, &[ts], "MuJoCo").unwrap_err();
         assert!(e.to_string().contains("score_over_time.png"), "{e}");
         assert!(std::error::Error::source(&e).is_some());
     }

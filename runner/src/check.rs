@@ -101,6 +101,7 @@ mod tests {
             seed_start: 0,
             max_steps: 10,
             scoring: None,
+            simulator: None,
             policies,
             agreement,
             failed_policies: Vec::new(),

@@ -70,7 +70,7 @@ pub fn write_report(out: &Path) -> Result<PathBuf, RunError> {
         .filter(|t| !t.sim.is_empty() && t.sim.len() == t.world_model.len())
         .collect();
     if !series.is_empty() {
-        plots.push(write_time_plot(&out.join("plots"), &series)?);
+        plots.push(write_time_plot(&out.join("plots"), &series, &summary.simulator)?);
     }
     let table = out.join("table.tex");
     std::fs::write(&table, latex_table(&summary))
@@ -86,8 +86,13 @@ pub fn write_report(out: &Path) -> Result<PathBuf, RunError> {
     }
     let t = &results.timing;
     let mut notes = vec![format!(
-        "Timing (this run): wall {:.0} s; MuJoCo branch {:.0} s; world-model branch {:.0} s ({:.1} ms per generated frame); policies {:.0} s.",
-        t.wall_seconds, t.sim_seconds, t.world_model_seconds, t.world_model_ms_per_frame, t.policy_seconds,
+        "Timing (this run): wall {:.0} s; {} branch {:.0} s; world-model branch {:.0} s ({:.1} ms per generated frame); policies {:.0} s.",
+        t.wall_seconds,
+        results.simulator(),
+        t.sim_seconds,
+        t.world_model_seconds,
+        t.world_model_ms_per_frame,
+        t.policy_seconds,
     )];
     let errs: Vec<f64> = results.policies.iter().map(|p| p.frame_scorer_mean_abs_error).collect();
     if !errs.is_empty() {
@@ -103,7 +108,7 @@ pub fn write_report(out: &Path) -> Result<PathBuf, RunError> {
         tracing::warn!("{problem}");
         notes.push(format!("Filmstrips: {problem}."));
     }
-    if let Some((text, _)) = reports::scene::scene_note(&results.policies) {
+    if let Some((text, _)) = reports::scene::scene_note(&results.policies, results.simulator()) {
         notes.push(text);
     }
     // Written by the run from version 3 of results.json; an earlier run's is not known here.

@@ -97,6 +97,10 @@ impl ReachTask {
 }
 
 impl Task for ReachTask {
+    fn simulator(&self) -> &'static str {
+        "simulator"
+    }
+
     fn name(&self) -> &str {
         "reach"
     }

@@ -287,6 +287,10 @@ pub struct RankResults {
     /// How the task scores an episode ([`crate::task::ScoreKind::describe`]); from version 3.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scoring: Option<String>,
+    /// The reference simulator's name ([`crate::task::Task::simulator`]); absent, as in files
+    /// written before 2026-12-03, means MuJoCo.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulator: Option<String>,
     /// Ranked policies, in run order.
     pub policies: Vec<PolicyResult>,
     /// Agreement across them.
@@ -330,6 +334,11 @@ pub enum ResultsError {
 }
 
 impl RankResults {
+    /// The reference simulator's name: the recorded one, else MuJoCo's.
+    pub fn simulator(&self) -> &str {
+        self.simulator.as_deref().unwrap_or("MuJoCo")
+    }
+
     /// Reads `path`, naming the first field that is missing or of the wrong type.
     ///
     /// # Errors
