@@ -1,5 +1,9 @@
 //! Integration tests: drive the real `evalharness` binary on tiny inputs.
 
+// A pipeline test runs one command after another through the binary, checking each on the
+// way; the workspace's 100-line rule (`clippy::too_many_lines`) is for library and command code.
+#![allow(clippy::too_many_lines)]
+
 mod agreement;
 mod can_models;
 mod dataset;
