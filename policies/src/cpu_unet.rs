@@ -18,10 +18,42 @@ use burn::nn::conv::{Conv1d, ConvTranspose1d};
 use burn::nn::{GroupNorm, Linear, PaddingConfig1d};
 
 use kernels::direct_conv::Norm;
-use kernels::matrix::{Dense, group_norm_cols, matmul};
+use kernels::matrix::{Dense, group_norm_cols};
 use nn::weights::{bias_values, dense_of, norm_of, values};
 
 use crate::net::{CondRes1d, CondUnet1d, Conv1dBlock, Level1d};
+
+/// The U-Net's matrix products: the `gemm` crate's AVX2 kernels, the same bits on every
+/// x86-64 CPU with FMA, so that the MuJoCo branch's actions (and rows) do not depend on the
+/// machine; or, with `EVALHARNESS_POLICY_GEMM=avx512` on a CPU with AVX-512F, the project's
+/// AVX-512 kernel ([`kernels::avx512_gemm`]) for products of at least 32 columns (its tiles'
+/// width: at batch 1 the U-Net's products have 16, 8 and 4, where the `gemm` crate's kernel is
+/// faster; at batch 8 the deepest level's have 32), quicker on the large imported U-Nets,
+/// whose rows then hold on AVX-512 machines only (read once; docs/performance.md).
+fn matmul(m: usize, k: usize, n: usize, a: &[f32], b: &[f32], c: &mut [f32], accumulate: bool) {
+    static AVX512: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let fast = *AVX512.get_or_init(|| {
+        std::env::var("EVALHARNESS_POLICY_GEMM").is_ok_and(|v| v == "avx512")
+            && kernels::avx512_gemm::avx512_enabled()
+    });
+    matmul_with(fast, (m, k, n), a, b, c, accumulate);
+}
+
+/// [`matmul`] with the AVX-512 kernel allowed (`fast`) or not.
+fn matmul_with(
+    fast: bool,
+    (m, k, n): (usize, usize, usize),
+    a: &[f32],
+    b: &[f32],
+    c: &mut [f32],
+    accumulate: bool,
+) {
+    if fast && n >= 32 {
+        kernels::avx512_gemm::fast_matmul(m, k, n, a, b, c, accumulate);
+    } else {
+        kernels::matrix::matmul(m, k, n, a, b, c, accumulate);
+    }
+}
 
 /// Why a U-Net cannot be run by these kernels (a layer they do not support).
 #[derive(Debug, thiserror::Error)]
@@ -398,6 +430,29 @@ mod tests {
     use nn::weights::Jitter;
 
     use super::*;
+
+    #[test]
+    fn the_avx512_products_agree_with_the_gemm_crates() {
+        // EVALHARNESS_POLICY_GEMM=avx512 swaps the kernel of products of 32 or more columns
+        // (the imported U-Net's deepest level at batch 8 is 1,024 x 5,120 x 32); the two sum in
+        // other orders, so they agree to rounding, not bit for bit. On a CPU without AVX-512F
+        // both are the gemm crate's and agree exactly.
+        let (m, k, n) = (48, 320, 32);
+        let a: Vec<f32> = (0..m * k).map(|i| ((i * 37 % 101) as f32 - 50.0) / 50.0).collect();
+        let b: Vec<f32> = (0..k * n).map(|i| ((i * 53 % 97) as f32 - 48.0) / 48.0).collect();
+        let (mut slow, mut fast) = (vec![0.5; m * n], vec![0.5; m * n]);
+        matmul_with(false, (m, k, n), &a, &b, &mut slow, true);
+        matmul_with(true, (m, k, n), &a, &b, &mut fast, true);
+        // Each entry sums 320 products of magnitude <= 1: f32 rounding of such a sum stays
+        // far below 1e-3.
+        let worst = slow.iter().zip(&fast).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+        assert!(worst < 1e-3, "{worst}");
+        // Fewer columns than a tile: the gemm crate's, bit for bit.
+        let (mut s16, mut f16) = (vec![0.0; m * 16], vec![0.0; m * 16]);
+        matmul_with(false, (m, k, 16), &a, &b[..k * 16], &mut s16, false);
+        matmul_with(true, (m, k, 16), &a, &b[..k * 16], &mut f16, false);
+        assert_eq!(s16, f16);
+    }
     use crate::net::NetConfig;
 
     #[test]
