@@ -3,7 +3,9 @@
 //! trained over all its sessions, its JSON-lines log, and its small state file.
 //!
 //! A trainer keeps its model, optimiser and step counter, and asks the [`Driver`]
-//! the rest, so that every trainer stops, logs and checkpoints the same way:
+//! the rest, so that every trainer stops, logs and checkpoints the same way. The loop itself
+//! is [`Driver::train`]: a trainer says what one step is, when a checkpoint is due and how it
+//! is saved ([`Steps`]), and the loop owns the order of things:
 //! - it stops before a step once the session's deadline (`--max-minutes`,
 //!   [`Clock`]) has passed or Ctrl-C was pressed ([`crate::stop`]), saving a
 //!   checkpoint that `--resume` continues from;
@@ -59,6 +61,8 @@ impl Clock {
 /// and its log.
 pub struct Driver {
     clock: Clock,
+    /// Another clock's deadline this session also stops at ([`Driver::stopping_at`]).
+    deadline: Option<Instant>,
     before_s: f64,
     log: std::fs::File,
     log_path: PathBuf,
@@ -78,13 +82,29 @@ impl Driver {
         elapsed_s: f64,
         clock: Clock,
     ) -> Result<Self, RunFileError> {
-        Ok(Self { clock, before_s: elapsed_s, log: open_log(log, key, step)?, log_path: log.to_path_buf() })
+        Ok(Self {
+            clock,
+            deadline: None,
+            before_s: elapsed_s,
+            log: open_log(log, key, step)?,
+            log_path: log.to_path_buf(),
+        })
+    }
+
+    /// Stops also at `deadline`: a stage of a longer session (a policy's encoder
+    /// pre-training) counts its own seconds but ends with the session's clock.
+    #[must_use]
+    pub fn stopping_at(mut self, deadline: Option<Instant>) -> Self {
+        self.deadline = deadline;
+        self
     }
 
     /// Whether to stop before the next step: the deadline has passed or a stop
     /// (Ctrl-C, SIGTERM) was requested.
     pub fn should_stop(&self) -> bool {
-        self.clock.out_of_time() || crate::stop::requested()
+        self.clock.out_of_time()
+            || self.deadline.is_some_and(|d| Instant::now() >= d)
+            || crate::stop::requested()
     }
 
     /// Training seconds of the run: earlier sessions' plus this one's so far.
@@ -99,6 +119,74 @@ impl Driver {
     pub fn log<T: Serialize + ?Sized>(&mut self, line: &T) -> Result<(), RunFileError> {
         crate::runfile::append_line(&mut self.log, line)
             .map_err(|e| RunFileError { path: self.log_path.clone(), message: e.to_string() })
+    }
+}
+
+/// A trainer's part of the loop every trainer shares ([`Driver::train`]): one optimiser step
+/// on its network, when a checkpoint is due, and how one is saved. `Net` is what an optimiser
+/// step takes and gives back (burn's optimisers consume the module), with its optimiser.
+pub trait Steps {
+    /// The network and optimiser, moved through each step.
+    type Net;
+    /// One step's line in the log.
+    type Line: Serialize;
+    /// The trainer's error; a log line that cannot be written becomes one.
+    type Error: From<RunFileError>;
+    /// Steps done so far (the run's state).
+    fn done(&self) -> u64;
+    /// The step the run ends at.
+    fn total(&self) -> u64;
+    /// Takes the next optimiser step on `net`, with `elapsed_s` giving the run's training
+    /// seconds when asked (after the step, for the state it records). Returns the network and
+    /// the step's log line (`None`: this step writes none).
+    ///
+    /// # Errors
+    /// The trainer's: a non-finite loss, a failed evaluation.
+    fn step(&mut self, net: Self::Net, elapsed_s: &dyn Fn() -> f64) -> Stepped<Self>;
+    /// Whether a checkpoint is due after the step just taken.
+    fn checkpoint_due(&self) -> bool;
+    /// Saves `net` and the run's state as its checkpoint, `elapsed_s` the training seconds now.
+    ///
+    /// # Errors
+    /// A file that cannot be written.
+    fn save(&mut self, net: &Self::Net, elapsed_s: f64) -> Result<(), Self::Error>;
+    /// After each step's line and checkpoint: progress bars and the like.
+    fn progress(&mut self) {}
+    /// The session stops before step [`Steps::done`] (out of time, or Ctrl-C).
+    fn stopping(&mut self) {}
+}
+
+/// What [`Steps::step`] gives back: the network and the step's log line, or the trainer's error.
+pub type Stepped<S> = Result<(<S as Steps>::Net, Option<<S as Steps>::Line>), <S as Steps>::Error>;
+
+impl Driver {
+    /// Runs `steps` from its state until its last step or until the session stops
+    /// ([`Driver::should_stop`], checked before every step): each step, then its log line,
+    /// then a checkpoint when one is due, then progress; a checkpoint at the end either way,
+    /// so `--resume` continues where this session stopped. Returns the network and whether the
+    /// run reached its last step.
+    ///
+    /// # Errors
+    /// What a step or a save returns, or a log line that cannot be written.
+    pub fn train<S: Steps>(&mut self, steps: &mut S, mut net: S::Net) -> Result<(S::Net, bool), S::Error> {
+        while steps.done() < steps.total() {
+            if self.should_stop() {
+                steps.stopping();
+                break;
+            }
+            let (next, line) = steps.step(net, &|| self.elapsed_s())?;
+            net = next;
+            if let Some(line) = line {
+                self.log(&line)?;
+            }
+            if steps.checkpoint_due() {
+                steps.save(&net, self.elapsed_s())?;
+            }
+            steps.progress();
+        }
+        steps.save(&net, self.elapsed_s())?;
+        let finished = steps.done() >= steps.total();
+        Ok((net, finished))
     }
 }
 

@@ -23,7 +23,7 @@
 use std::path::Path;
 
 use burn::module::Module;
-use burn::optim::{AdamWConfig, GradientsParams};
+use burn::optim::{AdamWConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 use harness::driver::{Clock, Driver};
@@ -108,6 +108,103 @@ pub struct JudgeOutcome {
     pub elapsed_s: f64,
 }
 
+/// The judge's steps for the shared loop ([`Driver::train`]): a batch of training frames
+/// (every other one a positive when `balance`, each through a random symmetry when
+/// `symmetries`), binary cross-entropy, an AdamW step after a linear warm-up; the held-out
+/// metrics logged and a checkpoint saved every `eval_every` steps before the last.
+struct JudgeSteps<'a> {
+    data: &'a JudgeData,
+    cfg: &'a JudgeTrainConfig,
+    judge: &'a JudgeFile,
+    /// The training frames, the positives among them, the held-out frames.
+    sets: (&'a [usize], &'a [usize], &'a [usize]),
+    /// The autodiff device training runs on, and the inference one.
+    devices: (&'a Device, &'a Device),
+    dir: &'a Path,
+    state: State,
+    /// The last batch's loss.
+    loss: f64,
+    on_step: &'a mut dyn FnMut(u64, f64),
+    dataset: &'a Path,
+}
+
+impl harness::driver::Steps for JudgeSteps<'_> {
+    type Net = (JudgeNet, ModuleOptimizer);
+    type Line = LogLine;
+    type Error = JudgeError;
+
+    fn done(&self) -> u64 {
+        self.state.step
+    }
+
+    fn total(&self) -> u64 {
+        self.cfg.steps
+    }
+
+    fn step(
+        &mut self,
+        (net, mut optim): Self::Net,
+        elapsed_s: &dyn Fn() -> f64,
+    ) -> harness::driver::Stepped<Self> {
+        let (cfg, data, step) = (self.cfg, self.data, self.state.step);
+        let ((train, positives, held), (device, inner)) = (self.sets, self.devices);
+        let mut rng = Rng::new(derive(cfg.seed, &[step]));
+        let idx: Vec<(usize, u8)> = (0..cfg.batch)
+            .map(|j| {
+                let pool = if cfg.balance && !positives.is_empty() && j % 2 == 1 { positives } else { train };
+                let k = if cfg.symmetries { rng.below(8) as u8 } else { 0 };
+                (pool[rng.below(pool.len() as u64) as usize], k)
+            })
+            .collect();
+        let s = data.size;
+        let owned: Vec<Vec<u8>> = idx.iter().map(|&(i, k)| augment_frame(data.frame(i), s, k)).collect();
+        let frames: Vec<&[u8]> = owned.iter().map(Vec::as_slice).collect();
+        let y: Vec<f32> = idx.iter().map(|&(i, _)| data.labels[i].clamp(0.0, 1.0)).collect();
+        let y = Tensor::from_data(TensorData::new(y, [cfg.batch, 1]), device);
+        let loss = bce_with_logits(net.forward(frames_to_tensor(&frames, s, device)), y);
+        let lv: f64 = loss.clone().into_scalar::<f32>().into();
+        if !lv.is_finite() {
+            let what = format!("non-finite judge loss at step {step}");
+            return Err(JudgeError::Dataset { path: self.dataset.into(), what });
+        }
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        let lr = cfg.lr * ((step + 1) as f64 / WARMUP as f64).min(1.0);
+        let net = optim.step(lr, net, grads);
+        self.state = State { step: step + 1, elapsed_s: elapsed_s() };
+        self.loss = lv;
+        let line = self.checkpoint_due().then(|| {
+            let judge = FrameJudge::new(self.judge.clone(), net.valid(), inner);
+            let heldout = evaluate(&judge, data, held, self.judge.threshold);
+            LogLine { heldout, loss: lv, out_of_time: false, step: self.state.step }
+        });
+        Ok(((net, optim), line))
+    }
+
+    fn checkpoint_due(&self) -> bool {
+        self.state.step.is_multiple_of(self.cfg.eval_every.max(1)) && self.state.step < self.cfg.steps
+    }
+
+    fn save(&mut self, (net, optim): &Self::Net, elapsed_s: f64) -> Result<(), JudgeError> {
+        if !self.checkpoint_due() {
+            // The session's last checkpoint records its training seconds to the end.
+            self.state.elapsed_s = elapsed_s;
+        }
+        run::save(self.dir, net, optim, self.state)
+    }
+
+    fn progress(&mut self) {
+        (self.on_step)(self.state.step, self.loss);
+    }
+
+    fn stopping(&mut self) {
+        tracing::warn!(
+            step = self.state.step,
+            of = self.cfg.steps,
+            "stopped: the session ends at this step (--resume continues)"
+        );
+    }
+}
+
 /// Trains, or goes on training, a judge of `data`'s label with the network and threshold
 /// of `judge` (the folder's `judge.json` as it will be written), logging to `log`, until
 /// `cfg.steps` or until the session stops ([`Driver::should_stop`]: out of time, or
@@ -151,10 +248,6 @@ pub fn train_judge(
         (net, optim, state) = run::load(session.dir, net, optim)?;
     }
     let mut driver = Driver::start(log, "step", state.step, state.elapsed_s, session.clock)?;
-    let s = data.size;
-    let eval = |net: &JudgeNet| {
-        evaluate(&FrameJudge::new(judge.clone(), net.valid(), inner), data, &held, threshold)
-    };
     let held_episodes = data.held_out_episodes();
     // The last evaluation also reads the held-out episodes whole.
     let last_eval = |net: &JudgeNet| {
@@ -168,46 +261,21 @@ pub fn train_judge(
         });
         m
     };
-    let (first, mut lv) = (state.step, f64::NAN);
-    for step in first..cfg.steps {
-        if driver.should_stop() {
-            tracing::warn!(
-                step,
-                of = cfg.steps,
-                "stopped: the session ends at this step (--resume continues)"
-            );
-            break;
-        }
-        let mut rng = Rng::new(derive(cfg.seed, &[step]));
-        let idx: Vec<(usize, u8)> = (0..cfg.batch)
-            .map(|j| {
-                let pool =
-                    if cfg.balance && !positives.is_empty() && j % 2 == 1 { &positives } else { &train };
-                let k = if cfg.symmetries { rng.below(8) as u8 } else { 0 };
-                (pool[rng.below(pool.len() as u64) as usize], k)
-            })
-            .collect();
-        let owned: Vec<Vec<u8>> = idx.iter().map(|&(i, k)| augment_frame(data.frame(i), s, k)).collect();
-        let frames: Vec<&[u8]> = owned.iter().map(Vec::as_slice).collect();
-        let y: Vec<f32> = idx.iter().map(|&(i, _)| data.labels[i].clamp(0.0, 1.0)).collect();
-        let y = Tensor::from_data(TensorData::new(y, [cfg.batch, 1]), &device);
-        let loss = bce_with_logits(net.forward(frames_to_tensor(&frames, s, &device)), y);
-        lv = loss.clone().into_scalar::<f32>().into();
-        if !lv.is_finite() {
-            return Err(err(format!("non-finite judge loss at step {step}")));
-        }
-        let grads = GradientsParams::from_grads(loss.backward(), &net);
-        let lr = cfg.lr * ((step + 1) as f64 / WARMUP as f64).min(1.0);
-        net = optim.step(lr, net, grads);
-        state = State { step: step + 1, elapsed_s: driver.elapsed_s() };
-        on_step(state.step, lv);
-        if state.step.is_multiple_of(cfg.eval_every.max(1)) && state.step < cfg.steps {
-            driver.log(&LogLine { heldout: eval(&net), loss: lv, out_of_time: false, step: state.step })?;
-            run::save(session.dir, &net, &optim, state)?;
-        }
-    }
-    state.elapsed_s = driver.elapsed_s();
-    run::save(session.dir, &net, &optim, state)?;
+    let first = state.step;
+    let mut steps = JudgeSteps {
+        data,
+        cfg,
+        judge,
+        sets: (&train, &positives, &held),
+        devices: (&device, inner),
+        dir: session.dir,
+        state,
+        loss: f64::NAN,
+        on_step,
+        dataset,
+    };
+    let (net, _) = driver.train(&mut steps, (net, optim))?.0;
+    let (state, lv) = (steps.state, steps.loss);
     if state.step == 0 {
         return Ok(JudgeOutcome { judge: None, step: 0, elapsed_s: state.elapsed_s });
     }

@@ -38,6 +38,13 @@ impl PolicyLoadError {
     }
 }
 
+/// A run file of a policy's training (its log, its state) that cannot be read or written.
+impl From<harness::runfile::RunFileError> for PolicyLoadError {
+    fn from(e: harness::runfile::RunFileError) -> Self {
+        Self { path: e.path, message: e.message }
+    }
+}
+
 /// `policy.json`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

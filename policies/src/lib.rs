@@ -35,6 +35,7 @@ pub mod imported_sampling;
 pub mod kinds;
 mod lerobot_config;
 pub mod net;
+pub mod pose_probe;
 pub mod pretrain;
 pub mod provenance;
 pub mod resnet;

@@ -27,7 +27,7 @@
 use std::path::Path;
 
 use burn::module::Module;
-use burn::nn::{Linear, LinearConfig};
+
 use burn::optim::{AdamWConfig, GradientsParams};
 use burn::tensor::{Device, Tensor, TensorData};
 use harness::driver::{Clock, Driver, read_state, write_state};
@@ -36,120 +36,18 @@ use harness::seed::derive;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use crate::data::{Demos, FrameLabels};
+use crate::data::Demos;
 use crate::diffusion::frames_to_tensor;
 use crate::dir::PolicyLoadError;
 use crate::net::{NetConfig, ObsEncoder};
+use crate::pose_probe::{PoseProbe, Targets, column_error, pose_error};
 pub use crate::provenance::{ColumnError, PoseError};
-use crate::symmetry::{augment_frame, augment_point, augment_pose};
+use crate::symmetry::augment_frame;
 
-/// Pose targets per frame: agent x, y, then block and goal x, y (world / 256 − 1),
-/// cos θ, sin θ.
-const POSE_DIM: usize = 10;
 /// Frames per pre-training step.
 const BATCH: usize = 64;
 /// Linear warm-up steps of the pre-training learning rate.
 const WARMUP: u64 = 100;
-
-/// The encoder with a linear pose head.
-#[derive(Module, Debug)]
-pub struct PoseProbe {
-    /// The frame encoder being trained.
-    pub encoder: ObsEncoder,
-    head: Linear,
-}
-
-impl PoseProbe {
-    /// A fresh encoder and a head of `targets` outputs.
-    pub fn new(cfg: &NetConfig, targets: usize, device: &Device) -> Self {
-        Self {
-            encoder: ObsEncoder::new(cfg, device),
-            head: LinearConfig::new(cfg.feature_dim, targets).init(device),
-        }
-    }
-
-    /// # Shapes
-    /// `[n, 3, 96, 96]` → `[n, targets]`
-    pub fn forward(&self, frames: Tensor<4>) -> Tensor<2> {
-        self.head.forward(self.encoder.forward(frames))
-    }
-}
-
-/// What the probe regresses: Push-T's poses, or standardised state columns.
-enum Targets<'a> {
-    PushT { block: &'a [[f32; 3]], goal: &'a [[f32; 3]] },
-    Columns { names: &'a [String], values: &'a [f32], mean: Vec<f32>, std: Vec<f32> },
-}
-
-impl<'a> Targets<'a> {
-    /// The targets of `demos`, columns standardised over the steps `train`; `None` when the
-    /// demonstrations carry no labels.
-    fn of(demos: &'a Demos, train: &[usize]) -> Option<Self> {
-        match &demos.labels {
-            FrameLabels::PushT { block, goal } => Some(Targets::PushT { block, goal }),
-            FrameLabels::Columns { names, values } => {
-                let k = names.len();
-                let n = train.len().max(1) as f64;
-                let mut mean = vec![0.0f64; k];
-                for &i in train {
-                    (0..k).for_each(|c| mean[c] += f64::from(values[i * k + c]) / n);
-                }
-                let mut var = vec![0.0f64; k];
-                for &i in train {
-                    (0..k).for_each(|c| var[c] += (f64::from(values[i * k + c]) - mean[c]).powi(2) / n);
-                }
-                // A constant column keeps unit scale instead of dividing by zero.
-                let std = var.iter().map(|v| if v.sqrt() > 1e-9 { v.sqrt() as f32 } else { 1.0 }).collect();
-                Some(Targets::Columns { names, values, mean: mean.iter().map(|&m| m as f32).collect(), std })
-            }
-            FrameLabels::None => None,
-        }
-    }
-
-    /// Outputs per frame.
-    fn dim(&self) -> usize {
-        match self {
-            Targets::PushT { .. } => POSE_DIM,
-            Targets::Columns { names, .. } => names.len(),
-        }
-    }
-
-    /// Symmetries frames may be mapped through (labels mapped alike).
-    fn symmetries(&self) -> u64 {
-        match self {
-            Targets::PushT { .. } => 8,
-            Targets::Columns { .. } => 1,
-        }
-    }
-
-    /// The regression target of demonstration step `i` seen through symmetry `k`.
-    fn at(&self, demos: &Demos, i: usize, k: u8) -> Vec<f32> {
-        match self {
-            Targets::PushT { block, goal } => {
-                let p = demos.proprio_at(i);
-                let a = augment_point([p[0], p[1]], k);
-                let (b, g) = (augment_pose(block[i], k), augment_pose(goal[i], k));
-                let w = |v: f32| v / 256.0 - 1.0;
-                vec![
-                    w(a[0]),
-                    w(a[1]),
-                    w(b[0]),
-                    w(b[1]),
-                    b[2].cos(),
-                    b[2].sin(),
-                    w(g[0]),
-                    w(g[1]),
-                    g[2].cos(),
-                    g[2].sin(),
-                ]
-            }
-            Targets::Columns { names, values, mean, std } => {
-                let k = names.len();
-                (0..k).map(|c| (values[i * k + c] - mean[c]) / std[c]).collect()
-            }
-        }
-    }
-}
 
 /// Pre-training progress, saved as `encoder_state.json`.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -208,6 +106,8 @@ pub fn pretrain_encoder(
     let targets = Targets::of(demos, &train).ok_or_else(|| {
         err(dir, "encoder pre-training: the dataset's task names no frame labels to pre-train on".into())
     })?;
+    // The probe's fresh weights are a function of the seed, as the policy's are.
+    device.seed(derive(p.seed, &[u64::MAX - 3]));
     let mut probe = PoseProbe::new(cfg, targets.dim(), &device);
     let mut optim = AdamWConfig::new().with_weight_decay(1e-6).init();
     let mut state = PretrainState::default();
@@ -221,7 +121,7 @@ pub fn pretrain_encoder(
         optim = optim.load(&files[1]).map_err(|e| err(&files[1], e.to_string()))?;
     }
     // The log is shared with the U-Net stage's lines, which count "step" and are kept.
-    // This stage's seconds start when it does, not with the session's clock.
+    // This stage's seconds start when it does, not with the session's clock, which it stops at.
     let mut driver = Driver::start(
         &dir.join("log.jsonl"),
         "encoder_step",
@@ -229,17 +129,63 @@ pub fn pretrain_encoder(
         state.elapsed_s,
         Clock::start(None),
     )
-    .map_err(|e| err(&e.path, e.message))?;
-    let save = |probe: &PoseProbe, optim: &burn::optim::ModuleOptimizer, state: &PretrainState| {
-        save_encoder(dir, probe, optim, state)
+    .map_err(|e| err(&e.path, e.message))?
+    .stopping_at(clock.deadline());
+    let mut steps = PretrainSteps {
+        demos,
+        targets: &targets,
+        sets: (&train, &test),
+        p,
+        s: cfg.image_size,
+        dir,
+        device: &device,
+        state,
+        loss: f64::NAN,
+        on_step,
     };
-    let s = cfg.image_size;
-    while state.step < p.steps {
-        if clock.out_of_time() || driver.should_stop() {
-            save(&probe, &optim, &state)?;
-            return Ok((state, None));
-        }
-        let mut rng = Rng::new(derive(p.seed, &[u64::MAX - 1, state.step]));
+    let ((probe, _), finished) = driver.train(&mut steps, (probe, optim))?;
+    Ok((steps.state, finished.then_some(probe)))
+}
+
+/// The pose probe's steps for the shared loop ([`Driver::train`]): 64 training frames, each
+/// through a random symmetry where the task has them, the mean squared error of the probe's
+/// outputs; every 50 steps a log line and a checkpoint, every 500 the held-out error.
+struct PretrainSteps<'a> {
+    demos: &'a Demos,
+    targets: &'a Targets<'a>,
+    /// The training steps and the held-out ones.
+    sets: (&'a [usize], &'a [usize]),
+    p: Pretrain,
+    /// The frames' side.
+    s: usize,
+    dir: &'a Path,
+    device: &'a Device,
+    state: PretrainState,
+    loss: f64,
+    on_step: &'a mut dyn FnMut(u64, f64),
+}
+
+impl harness::driver::Steps for PretrainSteps<'_> {
+    type Net = (PoseProbe, burn::optim::ModuleOptimizer);
+    type Line = serde_json::Value;
+    type Error = PolicyLoadError;
+
+    fn done(&self) -> u64 {
+        self.state.step
+    }
+
+    fn total(&self) -> u64 {
+        self.p.steps
+    }
+
+    fn step(
+        &mut self,
+        (probe, mut optim): Self::Net,
+        elapsed_s: &dyn Fn() -> f64,
+    ) -> harness::driver::Stepped<Self> {
+        let (p, s, demos, targets) = (self.p, self.s, self.demos, self.targets);
+        let (train, test) = self.sets;
+        let mut rng = Rng::new(derive(p.seed, &[u64::MAX - 1, self.state.step]));
         // Random frames, each through a random symmetry of the square for Push-T (8× more
         // distinct block and goal orientations than the demonstrations hold).
         let sym = targets.symmetries();
@@ -249,42 +195,50 @@ pub fn pretrain_encoder(
         let owned: Vec<Vec<u8>> = idx.iter().map(|&(i, k)| augment_frame(demos.frame(i), s, k)).collect();
         let frames: Vec<&[u8]> = owned.iter().map(Vec::as_slice).collect();
         let y: Vec<f32> = idx.iter().flat_map(|&(i, k)| targets.at(demos, i, k)).collect();
-        let y = Tensor::from_data(TensorData::new(y, [BATCH, targets.dim()]), &device);
-        let loss = (probe.forward(frames_to_tensor(&frames, s, &device)) - y).powf_scalar(2.0).mean();
+        let y = Tensor::from_data(TensorData::new(y, [BATCH, targets.dim()]), self.device);
+        let loss = (probe.forward(frames_to_tensor(&frames, s, self.device)) - y).powf_scalar(2.0).mean();
         let lv: f64 = loss.clone().into_scalar::<f32>().into();
         if !lv.is_finite() {
-            return Err(err(
-                dir,
-                format!("non-finite pose loss at encoder pre-training step {}", state.step),
-            ));
+            let what = format!("non-finite pose loss at encoder pre-training step {}", self.state.step);
+            return Err(PolicyLoadError::new(self.dir, what));
         }
         let grads = GradientsParams::from_grads(loss.backward(), &probe);
-        let lr = p.lr * ((state.step + 1) as f64 / WARMUP as f64).min(1.0);
-        probe = optim.step(lr, probe, grads);
+        let lr = p.lr * ((self.state.step + 1) as f64 / WARMUP as f64).min(1.0);
+        let probe = optim.step(lr, probe, grads);
+        let state = &mut self.state;
         state.step += 1;
-        state.elapsed_s = driver.elapsed_s();
-        on_step(state.step, lv);
-        if state.step.is_multiple_of(50) || state.step == p.steps {
-            // No held-out episode (fewer than 20 demonstrations): no held-out error.
-            if (state.step.is_multiple_of(500) || state.step == p.steps) && !test.is_empty() {
-                let valid = probe.valid();
-                match &targets {
-                    Targets::PushT { .. } => {
-                        state.heldout = Some(pose_error(&valid, &targets, demos, &test, s))
-                    }
-                    Targets::Columns { .. } => {
-                        state.heldout_columns = Some(column_error(&valid, &targets, demos, &test, s));
-                    }
+        state.elapsed_s = elapsed_s();
+        self.loss = lv;
+        if !self.checkpoint_due() {
+            return Ok(((probe, optim), None));
+        }
+        let state = &mut self.state;
+        // No held-out episode (fewer than 20 demonstrations): no held-out error.
+        if (state.step.is_multiple_of(500) || state.step == p.steps) && !test.is_empty() {
+            let valid = probe.valid();
+            match targets {
+                Targets::PushT { .. } => state.heldout = Some(pose_error(&valid, targets, demos, test, s)),
+                Targets::Columns { .. } => {
+                    state.heldout_columns = Some(column_error(&valid, targets, demos, test, s));
                 }
             }
-            let line = json!({"encoder_step": state.step, "loss": lv, "heldout": state.heldout,
-                "heldout_columns": state.heldout_columns, "elapsed_s": state.elapsed_s});
-            driver.log(&line).map_err(|e| err(&e.path, e.message))?;
-            save(&probe, &optim, &state)?;
         }
+        let line = json!({"encoder_step": state.step, "loss": lv, "heldout": state.heldout,
+            "heldout_columns": state.heldout_columns, "elapsed_s": state.elapsed_s});
+        Ok(((probe, optim), Some(line)))
     }
-    save(&probe, &optim, &state)?;
-    Ok((state, Some(probe)))
+
+    fn checkpoint_due(&self) -> bool {
+        self.state.step.is_multiple_of(50) || self.state.step == self.p.steps
+    }
+
+    fn save(&mut self, (probe, optim): &Self::Net, _elapsed_s: f64) -> Result<(), PolicyLoadError> {
+        save_encoder(self.dir, probe, optim, &self.state)
+    }
+
+    fn progress(&mut self) {
+        (self.on_step)(self.state.step, self.loss);
+    }
 }
 
 /// The demonstrations' steps in training episodes and in held-out ones (every 20th).
@@ -317,75 +271,6 @@ fn save_encoder(
     stage.commit().map_err(fail)
 }
 
-/// Up to 512 evenly spaced steps of `steps`, and the probe's outputs on their frames
-/// (`dim` per step).
-fn predict(probe: &PoseProbe, demos: &Demos, steps: &[usize], s: usize) -> (Vec<usize>, Vec<f32>) {
-    let pick: Vec<usize> = if steps.len() <= 512 {
-        steps.to_vec()
-    } else {
-        (0..512).map(|k| steps[k * steps.len() / 512]).collect()
-    };
-    let device = probe.head.weight.device();
-    let mut v = Vec::new();
-    for part in pick.chunks(128) {
-        let frames: Vec<&[u8]> = part.iter().map(|&i| demos.frame(i)).collect();
-        let out = probe.forward(frames_to_tensor(&frames, s, &device));
-        v.extend(out.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default());
-    }
-    (pick, v)
-}
-
-/// Mean Push-T pose errors of `probe` on (up to 512 evenly spaced) frames of `steps`.
-fn pose_error(probe: &PoseProbe, targets: &Targets, demos: &Demos, steps: &[usize], s: usize) -> PoseError {
-    let (pick, v) = predict(probe, demos, steps, s);
-    let mut e = PoseError::default();
-    if pick.is_empty() {
-        return e;
-    }
-    for (k, &i) in pick.iter().enumerate() {
-        let (q, t) = (&v[k * POSE_DIM..(k + 1) * POSE_DIM], targets.at(demos, i, 0));
-        let dist = |a: usize| 256.0 * f64::from(q[a] - t[a]).hypot(f64::from(q[a + 1] - t[a + 1]));
-        let angle = |a: usize| {
-            let d = f64::from(q[a + 1]).atan2(f64::from(q[a])) - f64::from(t[a + 1]).atan2(f64::from(t[a]));
-            d.sin().atan2(d.cos()).abs().to_degrees()
-        };
-        e.agent += dist(0);
-        e.block += dist(2);
-        e.angle_deg += angle(4);
-        e.goal += dist(6);
-        e.goal_angle_deg += angle(8);
-    }
-    let n = pick.len() as f64;
-    PoseError {
-        agent: e.agent / n,
-        block: e.block / n,
-        angle_deg: e.angle_deg / n,
-        goal: e.goal / n,
-        goal_angle_deg: e.goal_angle_deg / n,
-    }
-}
-
-/// Mean absolute error of each named column on (up to 512 evenly spaced) frames of
-/// `steps`, in the state's units (standardised outputs scaled back by the column's std).
-fn column_error(
-    probe: &PoseProbe,
-    targets: &Targets,
-    demos: &Demos,
-    steps: &[usize],
-    s: usize,
-) -> Vec<ColumnError> {
-    let Targets::Columns { names, std, .. } = targets else { return Vec::new() };
-    let (pick, v) = predict(probe, demos, steps, s);
-    let k = names.len();
-    let mut sum = vec![0.0f64; k];
-    for (j, &i) in pick.iter().enumerate() {
-        let t = targets.at(demos, i, 0);
-        (0..k).for_each(|c| sum[c] += f64::from((v[j * k + c] - t[c]).abs() * std[c]));
-    }
-    let n = pick.len().max(1) as f64;
-    names.iter().zip(sum).map(|(name, e)| ColumnError { name: name.clone(), mean_abs_error: e / n }).collect()
-}
-
 /// Features of every demonstration frame (`[n · feature_dim]`, frame-major) from a
 /// frozen encoder.
 pub fn encode_frames(encoder: &ObsEncoder, demos: &Demos, s: usize, device: &Device) -> Vec<f32> {
@@ -402,6 +287,7 @@ pub fn encode_frames(encoder: &ObsEncoder, demos: &Demos, s: usize, device: &Dev
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::FrameLabels;
 
     #[test]
     fn targets_are_normalised_poses() {

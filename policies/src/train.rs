@@ -12,7 +12,7 @@
 //! An epoch is one pass over every sample in a permutation that is a function of
 //! (seed, epoch), so a resumed run visits exactly the samples an uninterrupted one would.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use burn::optim::GradientsParams;
 use burn::tensor::Device;
@@ -24,6 +24,7 @@ use serde_json::json;
 use crate::data::Demos;
 use crate::diffusion::alphas_cumprod;
 use crate::dir::PolicyLoadError;
+use crate::provenance::PolicyProvenance;
 pub use crate::train_config::{
     Phase, PolicyOutcome, PolicyProgress, PolicyRun, PolicyTrainConfig, RunConfigs,
 };
@@ -89,21 +90,91 @@ pub fn train_policy(
     let ac = alphas_cumprod(pc.train_steps);
     let mut driver = Driver::start(&dir.join("log.jsonl"), "step", tr.state.step, tr.state.elapsed_s, clock)
         .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
-    let mut recent = Vec::new();
-    let mut saved = Vec::new();
-    let mut order: (u64, Vec<usize>) = (u64::MAX, Vec::new());
-    while tr.state.step < total && !driver.should_stop() {
+    let step = tr.state.step;
+    let mut steps = PolicySteps {
+        demos,
+        configs: &configs,
+        provenance: &provenance,
+        paths: (out, &dir),
+        device: &device,
+        features: &features,
+        ac: &ac,
+        sizes: (n, per_epoch, total),
+        order: (u64::MAX, Vec::new()),
+        step,
+        last: (0, f64::NAN),
+        recent: Vec::new(),
+        saved: Vec::new(),
+        on_progress,
+    };
+    let (tr, _) = driver.train(&mut steps, tr)?;
+    let loss = steps.recent.iter().sum::<f64>() / steps.recent.len().max(1) as f64;
+    Ok(PolicyOutcome { step: tr.state.step, total, saved: steps.saved, loss, elapsed_s: tr.state.elapsed_s })
+}
+
+/// The policy's steps for the shared loop ([`Driver::train`]): a batch in the epoch's
+/// permutation, the denoising loss, an AdamW step, the EMA; a policy checkpoint
+/// (`epoch-NNNN/`) at every `save_every`-th epoch's end and the last, and the resumable state
+/// every `checkpoint_every` steps and at every epoch's end.
+struct PolicySteps<'a> {
+    demos: &'a Demos,
+    configs: &'a RunConfigs,
+    provenance: &'a PolicyProvenance,
+    /// The run's folder and its `.train/`.
+    paths: (&'a Path, &'a Path),
+    device: &'a Device,
+    features: &'a Features,
+    /// The noise schedule's ᾱ.
+    ac: &'a [f64],
+    /// Samples, steps per epoch, steps in all.
+    sizes: (usize, u64, u64),
+    /// The epoch whose permutation is held, and the permutation.
+    order: (u64, Vec<usize>),
+    /// Steps done (the training state's, which moves through the loop with the network).
+    step: u64,
+    /// The last step's epoch (from 1) and loss.
+    last: (u64, f64),
+    /// The last 50 losses.
+    recent: Vec<f64>,
+    /// The policy checkpoints written.
+    saved: Vec<PathBuf>,
+    on_progress: &'a mut dyn FnMut(&PolicyProgress),
+}
+
+impl harness::driver::Steps for PolicySteps<'_> {
+    type Net = Training;
+    type Line = serde_json::Value;
+    type Error = PolicyLoadError;
+
+    fn done(&self) -> u64 {
+        self.step
+    }
+
+    fn total(&self) -> u64 {
+        self.sizes.2
+    }
+
+    fn step(&mut self, mut tr: Training, elapsed_s: &dyn Fn() -> f64) -> harness::driver::Stepped<Self> {
+        let ((n, per_epoch, _), tc) = (self.sizes, &self.configs.train);
         let epoch = tr.state.step / per_epoch;
-        if order.0 != epoch {
-            order = (epoch, permutation(n, derive(tc.seed, &[epoch])));
+        if self.order.0 != epoch {
+            self.order = (epoch, permutation(n, derive(tc.seed, &[epoch])));
         }
         let k = (tr.state.step % per_epoch) as usize * tc.batch;
-        let batch = &order.1[k..(k + tc.batch).min(n)];
-        let loss = batch_loss(&tr.net, demos, &configs, (batch, tr.state.step), &features, &ac, &device);
+        let batch = &self.order.1[k..(k + tc.batch).min(n)];
+        let loss = batch_loss(
+            &tr.net,
+            self.demos,
+            self.configs,
+            (batch, tr.state.step),
+            self.features,
+            self.ac,
+            self.device,
+        );
         let lv: f64 = loss.clone().into_scalar::<f32>().into();
         if !lv.is_finite() {
             return Err(PolicyLoadError::new(
-                out,
+                self.paths.0,
                 format!("non-finite loss at training step {}", tr.state.step),
             ));
         }
@@ -116,27 +187,46 @@ pub fn train_policy(
             tr.ema.update(&tr.net);
             tr.state.ema_updates += 1;
         }
-        tr.state.elapsed_s = driver.elapsed_s();
-        recent.push(lv);
-        if recent.len() > 50 {
-            recent.remove(0);
+        tr.state.elapsed_s = elapsed_s();
+        self.recent.push(lv);
+        if self.recent.len() > 50 {
+            self.recent.remove(0);
         }
+        (self.step, self.last) = (tr.state.step, (epoch + 1, lv));
         let line =
             json!({"step": tr.state.step, "epoch": epoch + 1, "loss": lv, "elapsed_s": tr.state.elapsed_s});
-        driver.log(&line).map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
-        let step = tr.state.step;
-        let done = step / per_epoch;
-        if step.is_multiple_of(per_epoch) && (done.is_multiple_of(tc.save_every) || done == tc.epochs) {
-            saved.push(save_epoch(out, &configs, &provenance, &tr, (done, lv))?);
-        }
-        if step.is_multiple_of(tc.checkpoint_every) || step.is_multiple_of(per_epoch) {
-            tr.save(&dir)?;
-        }
-        on_progress(&PolicyProgress { phase: Phase::Policy, step, total, epoch: epoch + 1, loss: lv });
+        Ok((tr, Some(line)))
     }
-    tr.save(&dir)?;
-    let loss = recent.iter().sum::<f64>() / recent.len().max(1) as f64;
-    Ok(PolicyOutcome { step: tr.state.step, total, saved, loss, elapsed_s: tr.state.elapsed_s })
+
+    fn checkpoint_due(&self) -> bool {
+        let (tc, per_epoch) = (&self.configs.train, self.sizes.1);
+        self.step.is_multiple_of(tc.checkpoint_every) || self.step.is_multiple_of(per_epoch)
+    }
+
+    /// At a save-worthy epoch's end, its policy checkpoint first (once), then the state.
+    fn save(&mut self, tr: &Training, _elapsed_s: f64) -> Result<(), PolicyLoadError> {
+        let (tc, per_epoch) = (&self.configs.train, self.sizes.1);
+        let done = self.step / per_epoch;
+        let epoch_end = self.step.is_multiple_of(per_epoch) && self.step > 0;
+        let wanted = done.is_multiple_of(tc.save_every) || done == tc.epochs;
+        let ck = self.paths.0.join(format!("epoch-{done:04}"));
+        if epoch_end && wanted && self.last.0 == done && !self.saved.contains(&ck) {
+            self.saved.push(save_epoch(
+                self.paths.0,
+                self.configs,
+                self.provenance,
+                tr,
+                (done, self.last.1),
+            )?);
+        }
+        tr.save(self.paths.1)
+    }
+
+    fn progress(&mut self) {
+        let (step, total) = (self.step, self.sizes.2);
+        let (epoch, loss) = self.last;
+        (self.on_progress)(&PolicyProgress { phase: Phase::Policy, step, total, epoch, loss });
+    }
 }
 
 /// Linear warm-up, then constant.

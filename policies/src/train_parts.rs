@@ -54,6 +54,9 @@ impl Training {
     ) -> Result<Self, PolicyLoadError> {
         let (pc, tc) = (&configs.policy, &configs.train);
         let paths = FILES.map(|p| dir.join(p));
+        // The fresh weights are a function of the seed (a run's bytes follow from its
+        // command; before 2026-12-03 they were drawn unseeded and two runs differed).
+        device.seed(derive(tc.seed, &[u64::MAX - 2]));
         let mut net = DiffusionNet::new(pc, device);
         let mut optim = AdamWConfig::new()
             .with_beta_1(0.95)

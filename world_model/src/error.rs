@@ -33,6 +33,14 @@ pub enum WorldModelError {
     },
 }
 
+/// A run file (a log line, a state file) that cannot be read or written, as the trainers
+/// report any file of their checkpoint.
+impl From<harness::runfile::RunFileError> for WorldModelError {
+    fn from(e: harness::runfile::RunFileError) -> Self {
+        Self::Checkpoint { path: e.path, message: e.message }
+    }
+}
+
 /// A setting a world model cannot take: a U-Net configuration burn would panic on, an
 /// inference option the model has no input for or a value out of its range, actions of
 /// another width.

@@ -257,48 +257,18 @@ pub fn train_autoencoder(
     let clock = Clock::start(max_minutes);
     let mut driver = Driver::start(&out.join("train_log.jsonl"), "step", state.step, state.elapsed_s, clock)
         .map_err(|e| ckpt(&e.path, e.message))?;
-    let mut last_psnr = None;
-    while state.step < cfg.steps {
-        if driver.should_stop() {
-            break;
-        }
-        let step = state.step;
-        let mut rng = derive(cfg.seed, &[step]);
-        let idx: Vec<usize> = (0..cfg.batch)
-            .map(|_| {
-                rng = harness::seed::splitmix64(rng);
-                train_idx[(rng % train_idx.len() as u64) as usize]
-            })
-            .collect();
-        let lr = nn::optim::warmup_lr(step, cfg.lr, cfg.warmup);
-        let x = data.frames_tensor(&idx, &device);
-        let recon = match cfg.encoder_from {
-            // A fixed encoder: it encodes on the inner backend, so no gradient reaches it
-            // and the optimizer leaves it as loaded. (Encoding on the autodiff device and
-            // detaching leaks: backward never frees the detached part of the graph.)
-            Some(_) => model.decode(model.valid().encode(x.clone().inner()).autodiff()), // z: [b, C, 12, 12]
-            None => model.forward(x.clone()),
-        }; // [b, 3, 96, 96]
-        let loss = (recon - x).powf_scalar(2.0).mean();
-        let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
-        finite(loss_value, || "autoencoder loss".into(), (step, out))?;
-        let grads = GradientsParams::from_grads(loss.backward(), &model);
-        model = optim.step(lr, model, grads);
-        state.step += 1;
-        state.elapsed_s = driver.elapsed_s();
-        if state.step.is_multiple_of(cfg.eval_every) || state.step == cfg.steps {
-            let (p, mse, _) = evaluate(&model, data, &eval_idx, &device);
-            last_psnr = Some(p);
-            tracing::info!(step = state.step, loss = loss_value, psnr = p, mse, "autoencoder held-out eval");
-        }
-        let line = json!({"step": state.step, "loss": loss_value, "lr": lr, "psnr": last_psnr, "elapsed_s": state.elapsed_s});
-        driver.log(&line).map_err(|e| ckpt(&e.path, e.message))?;
-        if state.step.is_multiple_of(cfg.checkpoint_every) {
-            save_checkpoint(out, &model, &optim, &state)?;
-        }
-        on_progress(&AeProgress { step: state.step, total: cfg.steps, loss: loss_value, psnr: last_psnr });
-    }
-    save_checkpoint(out, &model, &optim, &state)?;
+    let mut steps = AeSteps {
+        data,
+        cfg: &cfg,
+        out,
+        device: &device,
+        sets: (&train_idx, &eval_idx),
+        state,
+        last: (f64::NAN, None),
+        on_progress,
+    };
+    let (model, _) = driver.train(&mut steps, (model, optim))?.0;
+    let state = steps.state;
     let (psnr_v, mse, samples) = evaluate(&model, data, &eval_idx, &device);
     Ok(AeOutcome {
         step: state.step,
@@ -328,6 +298,95 @@ fn resume_from(
     let optim = optim.load(&optim_path).map_err(|e| ckpt(&optim_path, e))?;
     let state = harness::driver::read_state(&state_path).map_err(|e| ckpt(&e.path, e.message))?;
     Ok((model, optim, state))
+}
+
+/// The autoencoder's steps for the shared loop ([`Driver::train`]): a batch of training
+/// frames reconstructed, the held-out PSNR every `eval_every` steps, a checkpoint every
+/// `checkpoint_every`.
+struct AeSteps<'a> {
+    data: &'a EpisodeData,
+    cfg: &'a AeTrainConfig,
+    out: &'a Path,
+    device: &'a Device,
+    /// The training frames, and the held-out ones evaluated.
+    sets: (&'a [usize], &'a [usize]),
+    state: State,
+    /// The last batch loss and held-out PSNR.
+    last: (f64, Option<f64>),
+    on_progress: &'a mut dyn FnMut(&AeProgress),
+}
+
+impl harness::driver::Steps for AeSteps<'_> {
+    type Net = (Autoencoder, burn::optim::ModuleOptimizer);
+    type Line = serde_json::Value;
+    type Error = WorldModelError;
+
+    fn done(&self) -> u64 {
+        self.state.step
+    }
+
+    fn total(&self) -> u64 {
+        self.cfg.steps
+    }
+
+    fn step(
+        &mut self,
+        (model, mut optim): Self::Net,
+        elapsed_s: &dyn Fn() -> f64,
+    ) -> harness::driver::Stepped<Self> {
+        let (cfg, step) = (self.cfg, self.state.step);
+        let (train_idx, eval_idx) = self.sets;
+        let mut rng = derive(cfg.seed, &[step]);
+        let idx: Vec<usize> = (0..cfg.batch)
+            .map(|_| {
+                rng = harness::seed::splitmix64(rng);
+                train_idx[(rng % train_idx.len() as u64) as usize]
+            })
+            .collect();
+        let lr = nn::optim::warmup_lr(step, cfg.lr, cfg.warmup);
+        let x = self.data.frames_tensor(&idx, self.device);
+        let recon = match cfg.encoder_from {
+            // A fixed encoder: it encodes on the inner backend, so no gradient reaches it
+            // and the optimizer leaves it as loaded. (Encoding on the autodiff device and
+            // detaching leaks: backward never frees the detached part of the graph.)
+            Some(_) => model.decode(model.valid().encode(x.clone().inner()).autodiff()), // z: [b, C, 12, 12]
+            None => model.forward(x.clone()),
+        }; // [b, 3, 96, 96]
+        let loss = (recon - x).powf_scalar(2.0).mean();
+        let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
+        finite(loss_value, || "autoencoder loss".into(), (step, self.out))?;
+        let grads = GradientsParams::from_grads(loss.backward(), &model);
+        let model = optim.step(lr, model, grads);
+        self.state.step += 1;
+        self.state.elapsed_s = elapsed_s();
+        if self.state.step.is_multiple_of(cfg.eval_every) || self.state.step == cfg.steps {
+            let (p, mse, _) = evaluate(&model, self.data, eval_idx, self.device);
+            self.last.1 = Some(p);
+            tracing::info!(
+                step = self.state.step,
+                loss = loss_value,
+                psnr = p,
+                mse,
+                "autoencoder held-out eval"
+            );
+        }
+        self.last.0 = loss_value;
+        let line = json!({"step": self.state.step, "loss": loss_value, "lr": lr, "psnr": self.last.1, "elapsed_s": self.state.elapsed_s});
+        Ok(((model, optim), Some(line)))
+    }
+
+    fn checkpoint_due(&self) -> bool {
+        self.state.step.is_multiple_of(self.cfg.checkpoint_every)
+    }
+
+    fn save(&mut self, (model, optim): &Self::Net, _elapsed_s: f64) -> Result<(), WorldModelError> {
+        save_checkpoint(self.out, model, optim, &self.state)
+    }
+
+    fn progress(&mut self) {
+        let (loss, psnr) = self.last;
+        (self.on_progress)(&AeProgress { step: self.state.step, total: self.cfg.steps, loss, psnr });
+    }
 }
 
 /// Writes the weights, the optimiser and `state` as one checkpoint of `out`: staged, then

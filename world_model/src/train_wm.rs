@@ -125,6 +125,112 @@ fn evaluate(model: &WorldModel, latents: &mut Latents, codec: &FrameCodec, windo
     (pred - truth).powf_scalar(2.0).mean().into_scalar::<f32>().into()
 }
 
+/// The world model's steps for the shared loop ([`Driver::train`]): B contexts' windows
+/// drawn from `(seed, step)`, the objective's loss, a clipped AdamW step and the EMA; the
+/// held-out MSE every `eval_every` steps, a checkpoint every `checkpoint_every`.
+struct WmSteps<'a, 'd> {
+    frames: TrainingFrames<'a>,
+    configs: (&'a WorldModelConfig, &'a WmTrainConfig),
+    out: &'a Path,
+    /// The autodiff device training runs on, and its inner one for evaluation.
+    devices: (&'a Device, &'a Device),
+    /// The training windows' starts, the held-out windows, the action scale.
+    windows: (&'a [usize], &'a [Window], &'a crate::action::ActionScale),
+    latents: &'a mut Latents<'d>,
+    ema: &'a mut Ema<UNet>,
+    state: State,
+    /// The last step's loss and per-frame losses, and the last held-out MSE.
+    last: (f64, Vec<f32>, Option<f64>),
+    on_progress: &'a mut dyn FnMut(&WmProgress),
+}
+
+impl harness::driver::Steps for WmSteps<'_, '_> {
+    type Net = (UNet, burn::optim::ModuleOptimizer);
+    type Line = serde_json::Value;
+    type Error = WorldModelError;
+
+    fn done(&self) -> u64 {
+        self.state.step
+    }
+
+    fn total(&self) -> u64 {
+        self.configs.1.steps
+    }
+
+    fn step(
+        &mut self,
+        (unet, mut optim): Self::Net,
+        elapsed_s: &dyn Fn() -> f64,
+    ) -> harness::driver::Stepped<Self> {
+        let ((model_cfg, cfg), (device, inner)) = (self.configs, self.devices);
+        let TrainingFrames { data, codec } = self.frames;
+        let (starts, eval_windows, scale) = self.windows;
+        let objective = model_cfg.objective;
+        let (k, f) = (model_cfg.unet.history, model_cfg.future);
+        let chunks = if objective == Objective::Drifting { cfg.chunks.max(1) } else { 1 };
+        let step = self.state.step;
+        let mut rng = derive(cfg.seed, &[step]);
+        let windows = draw_windows(data, starts, (cfg.contexts, k, f * chunks), scale, &mut rng);
+        let n = if objective == Objective::Drifting { cfg.samples } else { 1 };
+        let Stacked { hist: hist_idx, targets: target_idx, anchors, act } = stack(&windows, n, device);
+        for idx in [&hist_idx, &target_idx, &anchors] {
+            self.latents.ensure(idx, codec, inner);
+        }
+        let latents = &*self.latents;
+        let hist = latents.tensor(&hist_idx, k, device).swap_dims(1, 2); // [b n, C, K, s, s]
+        // Context noise corrupts the history only: the anchor is always a real frame.
+        let hist = crate::context_noise::corrupt(hist, cfg.context_noise, derive(cfg.seed, &[step, 7]));
+        let anchor = model_cfg.unet.uses_anchor().then(|| anchor_tensor(latents, &anchors, device)); // [b n, C, s, s]
+        let targets = Targets { latents, windows: &windows, indices: &target_idx, chunks };
+        let (loss, loss_r) = objective_loss(&unet, (model_cfg, cfg), (hist, anchor, act), &targets, &mut rng);
+        let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
+        finite(loss_value, || format!("{} loss", objective.name()), (step, self.out))?;
+        let mut grads = GradientsParams::from_grads(loss.backward(), &unet);
+        let grad_norm = clip_global_norm(&unet, &mut grads, cfg.clip_norm);
+        finite(grad_norm, || "gradient norm".into(), (step, self.out))?;
+        let lr = warmup_lr(step, cfg.lr, cfg.warmup);
+        let unet = optim.step(lr, unet, grads);
+        self.ema.update(&unet);
+        self.state.step += 1;
+        self.state.elapsed_s = elapsed_s();
+        if self.state.step.is_multiple_of(cfg.eval_every) || self.state.step == cfg.steps {
+            let model =
+                WorldModel::from_parts(model_cfg.clone(), codec.clone(), self.ema.module.clone(), inner);
+            let mse = evaluate(&model, self.latents, codec, eval_windows);
+            finite(mse, || "generated frames".into(), (step, self.out))?;
+            self.last.2 = Some(mse);
+            tracing::info!(
+                step = self.state.step,
+                loss = loss_value,
+                eval_mse = mse,
+                "world-model held-out eval"
+            );
+        }
+        let line = json!({"step": self.state.step, "loss": loss_value, "loss_r": loss_r, "grad_norm": grad_norm,
+            "lr": lr, "eval_mse": self.last.2, "elapsed_s": self.state.elapsed_s});
+        (self.last.0, self.last.1) = (loss_value, loss_r);
+        Ok(((unet, optim), Some(line)))
+    }
+
+    fn checkpoint_due(&self) -> bool {
+        self.state.step.is_multiple_of(self.configs.1.checkpoint_every)
+    }
+
+    fn save(&mut self, (unet, optim): &Self::Net, _elapsed_s: f64) -> Result<(), WorldModelError> {
+        save_checkpoint(self.out, (unet, &self.ema.module, optim), &self.state)
+    }
+
+    fn progress(&mut self) {
+        (self.on_progress)(&WmProgress {
+            step: self.state.step,
+            total: self.configs.1.steps,
+            loss: self.last.0,
+            loss_r: self.last.1.clone(),
+            eval_mse: self.last.2,
+        });
+    }
+}
+
 /// Trains (or resumes) into `out` on `device` (see [`nn::device`]). The codec of
 /// `frames` must be the one `model_cfg` names (the autoencoder at
 /// `out/model.autoencoder`, or pixels), loaded on the same device.
@@ -146,7 +252,6 @@ pub fn train_world_model(
     let fresh = Configs { model: model_cfg.clone(), train: cfg.clone() };
     let (model_cfg, cfg) = run_configs(out, fresh, run, |t: &mut WmTrainConfig| &mut t.steps)?;
     let objective = model_cfg.objective;
-    let (k, f) = (model_cfg.unet.history, model_cfg.future);
     // Training windows hold every chunk of a self-forcing rollout; evaluation windows one.
     let chunks = if objective == Objective::Drifting { cfg.chunks.max(1) } else { 1 };
     let (starts, eval_windows, scale) = windows_of(data, &model_cfg, &cfg, chunks)?;
@@ -169,59 +274,22 @@ pub fn train_world_model(
     let log = out.join("train_log.jsonl");
     let mut driver = Driver::start(&log, "step", state.step, state.elapsed_s, Clock::start(run.max_minutes))
         .map_err(|e| ckpt(&e.path, e.message))?;
+    let mut steps = WmSteps {
+        frames: TrainingFrames { data, codec },
+        configs: (&model_cfg, &cfg),
+        out,
+        devices: (&device, &inner),
+        windows: (&starts, &eval_windows, &scale),
+        latents: &mut latents,
+        ema: &mut ema,
+        state,
+        last: (f64::NAN, Vec::new(), None),
+        on_progress,
+    };
+    driver.train(&mut steps, (unet, optim))?;
+    let state = steps.state;
     let eval_model =
         |ema: &UNet| WorldModel::from_parts(model_cfg.clone(), codec.clone(), ema.clone(), &inner);
-    let mut last_eval = None;
-    while state.step < cfg.steps {
-        if driver.should_stop() {
-            break;
-        }
-        let step = state.step;
-        let mut rng = derive(cfg.seed, &[step]);
-        let windows = draw_windows(data, &starts, (cfg.contexts, k, f * chunks), &scale, &mut rng);
-        let n = if objective == Objective::Drifting { cfg.samples } else { 1 };
-        let Stacked { hist: hist_idx, targets: target_idx, anchors, act } = stack(&windows, n, &device);
-        for idx in [&hist_idx, &target_idx, &anchors] {
-            latents.ensure(idx, codec, &inner);
-        }
-        let hist = latents.tensor(&hist_idx, k, &device).swap_dims(1, 2); // [b n, C, K, s, s]
-        // Context noise corrupts the history only: the anchor is always a real frame.
-        let hist = crate::context_noise::corrupt(hist, cfg.context_noise, derive(cfg.seed, &[step, 7]));
-        let anchor = model_cfg.unet.uses_anchor().then(|| anchor_tensor(&latents, &anchors, &device)); // [b n, C, s, s]
-        let targets = Targets { latents: &latents, windows: &windows, indices: &target_idx, chunks };
-        let (loss, loss_r) =
-            objective_loss(&unet, (&model_cfg, &cfg), (hist, anchor, act), &targets, &mut rng);
-        let loss_value: f64 = loss.clone().into_scalar::<f32>().into();
-        finite(loss_value, || format!("{} loss", objective.name()), (step, out))?;
-        let mut grads = GradientsParams::from_grads(loss.backward(), &unet);
-        let grad_norm = clip_global_norm(&unet, &mut grads, cfg.clip_norm);
-        finite(grad_norm, || "gradient norm".into(), (step, out))?;
-        let lr = warmup_lr(step, cfg.lr, cfg.warmup);
-        unet = optim.step(lr, unet, grads);
-        ema.update(&unet);
-        state.step += 1;
-        state.elapsed_s = driver.elapsed_s();
-        if state.step.is_multiple_of(cfg.eval_every) || state.step == cfg.steps {
-            let mse = evaluate(&eval_model(&ema.module), &mut latents, codec, &eval_windows);
-            finite(mse, || "generated frames".into(), (step, out))?;
-            last_eval = Some(mse);
-            tracing::info!(step = state.step, loss = loss_value, eval_mse = mse, "world-model held-out eval");
-        }
-        let line = json!({"step": state.step, "loss": loss_value, "loss_r": loss_r, "grad_norm": grad_norm,
-            "lr": lr, "eval_mse": last_eval, "elapsed_s": state.elapsed_s});
-        driver.log(&line).map_err(|e| ckpt(&e.path, e.message))?;
-        if state.step.is_multiple_of(cfg.checkpoint_every) {
-            save_checkpoint(out, (&unet, &ema.module, &optim), &state)?;
-        }
-        on_progress(&WmProgress {
-            step: state.step,
-            total: cfg.steps,
-            loss: loss_value,
-            loss_r,
-            eval_mse: last_eval,
-        });
-    }
-    save_checkpoint(out, (&unet, &ema.module, &optim), &state)?;
     let eval_mse = evaluate(&eval_model(&ema.module), &mut latents, codec, &eval_windows);
     Ok(WmOutcome {
         step: state.step,
