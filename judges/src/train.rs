@@ -144,7 +144,7 @@ impl harness::driver::Steps for JudgeSteps<'_> {
     fn step(
         &mut self,
         (net, mut optim): Self::Net,
-        elapsed_s: &dyn Fn() -> f64,
+        _elapsed_s: &dyn Fn() -> f64,
     ) -> harness::driver::Stepped<Self> {
         let (cfg, data, step) = (self.cfg, self.data, self.state.step);
         let ((train, positives, held), (device, inner)) = (self.sets, self.devices);
@@ -170,7 +170,7 @@ impl harness::driver::Steps for JudgeSteps<'_> {
         let grads = GradientsParams::from_grads(loss.backward(), &net);
         let lr = cfg.lr * ((step + 1) as f64 / WARMUP as f64).min(1.0);
         let net = optim.step(lr, net, grads);
-        self.state = State { step: step + 1, elapsed_s: elapsed_s() };
+        self.state.step = step + 1;
         self.loss = lv;
         let line = self.checkpoint_due().then(|| {
             let judge = FrameJudge::new(self.judge.clone(), net.valid(), inner);
@@ -185,10 +185,8 @@ impl harness::driver::Steps for JudgeSteps<'_> {
     }
 
     fn save(&mut self, (net, optim): &Self::Net, elapsed_s: f64) -> Result<(), JudgeError> {
-        if !self.checkpoint_due() {
-            // The session's last checkpoint records its training seconds to the end.
-            self.state.elapsed_s = elapsed_s;
-        }
+        // Its log lines carry no seconds: the state records them when it is saved.
+        self.state.elapsed_s = elapsed_s;
         run::save(self.dir, net, optim, self.state)
     }
 

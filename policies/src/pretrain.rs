@@ -112,11 +112,10 @@ pub fn pretrain_encoder(
     let mut optim = AdamWConfig::new().with_weight_decay(1e-6).init();
     let mut state = PretrainState::default();
     if files[2].exists() || harness::checkpoint::pending(dir, harness::checkpoint::ENCODER) {
-        harness::checkpoint::recover(dir, harness::checkpoint::ENCODER)
-            .map_err(|e| err(&e.path, e.message))?;
+        harness::checkpoint::recover(dir, harness::checkpoint::ENCODER)?;
     }
     if files[2].exists() {
-        state = read_state(&files[2]).map_err(|e| err(&e.path, e.message))?;
+        state = read_state(&files[2])?;
         probe = probe.try_load_file(&files[0]).map_err(|e| err(&files[0], e.to_string()))?;
         optim = optim.load(&files[1]).map_err(|e| err(&files[1], e.to_string()))?;
     }
@@ -128,8 +127,7 @@ pub fn pretrain_encoder(
         state.step,
         state.elapsed_s,
         Clock::start(None),
-    )
-    .map_err(|e| err(&e.path, e.message))?
+    )?
     .stopping_at(clock.deadline());
     let mut steps = PretrainSteps {
         demos,
@@ -262,13 +260,12 @@ fn save_encoder(
     state: &PretrainState,
 ) -> Result<(), PolicyLoadError> {
     let err = |path: &Path, e: String| PolicyLoadError::new(path, e);
-    let fail = |e: harness::runfile::RunFileError| err(&e.path, e.message);
-    let mut stage = harness::checkpoint::begin(dir, harness::checkpoint::ENCODER).map_err(fail)?;
+    let mut stage = harness::checkpoint::begin(dir, harness::checkpoint::ENCODER)?;
     let p = ["encoder.bpk", "encoder_optimizer.bpk", "encoder_state.json"].map(|n| stage.path(n));
     probe.clone().save_file(&p[0]).map_err(|e| err(&p[0], e.to_string()))?;
     optim.save(&p[1]).map_err(|e| err(&p[1], e.to_string()))?;
-    write_state(&p[2], state).map_err(fail)?;
-    stage.commit().map_err(fail)
+    write_state(&p[2], state)?;
+    Ok(stage.commit()?)
 }
 
 /// Features of every demonstration frame (`[n · feature_dim]`, frame-major) from a

@@ -55,8 +55,7 @@ pub fn train_policy(
             let ema = run.ema.filter(|&d| d != c.train.ema);
             c.train.ema = ema.unwrap_or(c.train.ema);
             extend.is_some() || ema.is_some()
-        })
-        .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
+        })?;
     let (pc, tc) = (&configs.policy, &configs.train);
     let device = inner.clone().autodiff();
     let (pd, ad) = (demos.proprio_dim, demos.action_dim);
@@ -88,8 +87,7 @@ pub fn train_policy(
         return Ok(PolicyOutcome { step, total, saved: Vec::new(), loss: f64::NAN, elapsed_s });
     }
     let ac = alphas_cumprod(pc.train_steps);
-    let mut driver = Driver::start(&dir.join("log.jsonl"), "step", tr.state.step, tr.state.elapsed_s, clock)
-        .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
+    let mut driver = Driver::start(&dir.join("log.jsonl"), "step", tr.state.step, tr.state.elapsed_s, clock)?;
     let step = tr.state.step;
     let mut steps = PolicySteps {
         demos,

@@ -65,12 +65,10 @@ impl Training {
             .init();
         let mut state = State::default();
         if run.resume {
-            harness::checkpoint::recover(dir, harness::checkpoint::MAIN)
-                .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
+            harness::checkpoint::recover(dir, harness::checkpoint::MAIN)?;
             net = net.try_load_file(&paths[0]).map_err(|e| PolicyLoadError::new(&paths[0], e.to_string()))?;
             optim = optim.load(&paths[1]).map_err(|e| PolicyLoadError::new(&paths[1], e.to_string()))?;
-            state = harness::driver::read_state(&paths[2])
-                .map_err(|e| PolicyLoadError::new(&e.path, e.message))?;
+            state = harness::driver::read_state(&paths[2])?;
         }
         if let Some(src) = tc.init_from.as_ref().filter(|_| !run.resume) {
             net = init_weights(src, pc, device)?;
@@ -88,8 +86,7 @@ impl Training {
     /// Saves the weights, optimiser, step counter and (after its first update) the EMA as
     /// one checkpoint in `dir`: staged, then committed by a manifest.
     pub(crate) fn save(&self, dir: &Path) -> Result<(), PolicyLoadError> {
-        let fail = |e: harness::runfile::RunFileError| PolicyLoadError::new(&e.path, e.message);
-        let mut stage = harness::checkpoint::begin(dir, harness::checkpoint::MAIN).map_err(fail)?;
+        let mut stage = harness::checkpoint::begin(dir, harness::checkpoint::MAIN)?;
         let p = [FILES[0], FILES[1], FILES[2]].map(|n| stage.path(n));
         self.net.clone().save_file(&p[0]).map_err(|e| PolicyLoadError::new(&p[0], e.to_string()))?;
         self.optim.save(&p[1]).map_err(|e| PolicyLoadError::new(&p[1], e.to_string()))?;
@@ -98,8 +95,8 @@ impl Training {
             let e = stage.path(FILES[3]);
             self.ema.module.clone().save_file(&e).map_err(|err| PolicyLoadError::new(&e, err.to_string()))?;
         }
-        harness::driver::write_state(&p[2], &self.state).map_err(fail)?;
-        stage.commit().map_err(fail)
+        harness::driver::write_state(&p[2], &self.state)?;
+        Ok(stage.commit()?)
     }
 }
 

@@ -79,7 +79,7 @@ impl FolderConfig {
     /// [`WorldModelError::Checkpoint`] naming the file when it is missing or malformed.
     pub fn read(dir: &Path) -> Result<Self, WorldModelError> {
         let path = dir.join("config.json");
-        harness::runfile::read(&path).map_err(|e| ckpt(&e.path, e.message))
+        harness::runfile::read(&path).map_err(WorldModelError::from)
     }
 }
 

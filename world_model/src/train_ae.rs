@@ -144,8 +144,7 @@ where
             *steps(&mut c.train) = want;
         }
         changed
-    })
-    .map_err(|e| ckpt(&e.path, e.message))?;
+    })?;
     Ok((c.model, c.train))
 }
 
@@ -158,7 +157,7 @@ pub(crate) fn ckpt(path: &Path, e: impl std::fmt::Display) -> WorldModelError {
 /// # Errors
 /// [`WorldModelError::Checkpoint`] naming the file when it is missing or malformed.
 pub fn read_configs<C: serde::de::DeserializeOwned>(path: &Path) -> Result<C, WorldModelError> {
-    harness::runfile::read(path).map_err(|e| ckpt(&e.path, e.message))
+    harness::runfile::read(path).map_err(WorldModelError::from)
 }
 
 /// Loads a trained autoencoder from its folder (`config.json` + `model.bpk`).
@@ -255,8 +254,7 @@ pub fn train_autoencoder(
     let stride = (held.len() / cfg.eval_frames.max(1)).max(1);
     let eval_idx: Vec<usize> = held.iter().step_by(stride).take(cfg.eval_frames).copied().collect();
     let clock = Clock::start(max_minutes);
-    let mut driver = Driver::start(&out.join("train_log.jsonl"), "step", state.step, state.elapsed_s, clock)
-        .map_err(|e| ckpt(&e.path, e.message))?;
+    let mut driver = Driver::start(&out.join("train_log.jsonl"), "step", state.step, state.elapsed_s, clock)?;
     let mut steps = AeSteps {
         data,
         cfg: &cfg,
@@ -293,10 +291,10 @@ fn resume_from(
 ) -> Result<(Autoencoder, burn::optim::ModuleOptimizer, State), WorldModelError> {
     let (model_path, optim_path, state_path) =
         (out.join("model.bpk"), out.join("optimizer.bpk"), out.join("state.json"));
-    harness::checkpoint::recover(out, harness::checkpoint::MAIN).map_err(|e| ckpt(&e.path, e.message))?;
+    harness::checkpoint::recover(out, harness::checkpoint::MAIN)?;
     let model = model.try_load_file(&model_path).map_err(|e| ckpt(&model_path, e))?;
     let optim = optim.load(&optim_path).map_err(|e| ckpt(&optim_path, e))?;
-    let state = harness::driver::read_state(&state_path).map_err(|e| ckpt(&e.path, e.message))?;
+    let state = harness::driver::read_state(&state_path)?;
     Ok((model, optim, state))
 }
 
@@ -400,13 +398,12 @@ fn save_checkpoint(
     optim: &burn::optim::ModuleOptimizer,
     state: &State,
 ) -> Result<(), WorldModelError> {
-    let fail = |e: harness::runfile::RunFileError| ckpt(&e.path, e.message);
-    let mut stage = harness::checkpoint::begin(out, harness::checkpoint::MAIN).map_err(fail)?;
+    let mut stage = harness::checkpoint::begin(out, harness::checkpoint::MAIN)?;
     let p = ["model.bpk", "optimizer.bpk", "state.json"].map(|n| stage.path(n));
     model.clone().save_file(&p[0]).map_err(|e| ckpt(&p[0], e))?;
     optim.save(&p[1]).map_err(|e| ckpt(&p[1], e))?;
-    harness::driver::write_state(&p[2], state).map_err(fail)?;
-    stage.commit().map_err(fail)
+    harness::driver::write_state(&p[2], state)?;
+    Ok(stage.commit()?)
 }
 
 /// `Err` naming `what` at `step` of the run in `out` unless `value` is finite.

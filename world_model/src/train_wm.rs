@@ -27,7 +27,7 @@ use crate::data::EpisodeData;
 use crate::error::WorldModelError;
 use crate::latents::{Latents, Window};
 use crate::model::{Objective, WorldModel, WorldModelConfig};
-use crate::train_ae::{Configs, RunOptions, State, ckpt, finite, run_configs};
+use crate::train_ae::{Configs, RunOptions, State, finite, run_configs};
 use crate::train_wm_parts::{
     Targets, draw_windows, objective_loss, resume, save_checkpoint, warm_start, windows_of,
 };
@@ -144,6 +144,16 @@ struct WmSteps<'a, 'd> {
     on_progress: &'a mut dyn FnMut(&WmProgress),
 }
 
+impl WmSteps<'_, '_> {
+    /// The EMA weights' one-chunk latent MSE on the held-out windows.
+    fn held_out_mse(&mut self) -> f64 {
+        let ((model_cfg, _), (_, inner)) = (self.configs, self.devices);
+        let codec = self.frames.codec;
+        let model = WorldModel::from_parts(model_cfg.clone(), codec.clone(), self.ema.module.clone(), inner);
+        evaluate(&model, self.latents, codec, self.windows.1)
+    }
+}
+
 impl harness::driver::Steps for WmSteps<'_, '_> {
     type Net = (UNet, burn::optim::ModuleOptimizer);
     type Line = serde_json::Value;
@@ -164,7 +174,7 @@ impl harness::driver::Steps for WmSteps<'_, '_> {
     ) -> harness::driver::Stepped<Self> {
         let ((model_cfg, cfg), (device, inner)) = (self.configs, self.devices);
         let TrainingFrames { data, codec } = self.frames;
-        let (starts, eval_windows, scale) = self.windows;
+        let (starts, _, scale) = self.windows;
         let objective = model_cfg.objective;
         let (k, f) = (model_cfg.unet.history, model_cfg.future);
         let chunks = if objective == Objective::Drifting { cfg.chunks.max(1) } else { 1 };
@@ -194,9 +204,7 @@ impl harness::driver::Steps for WmSteps<'_, '_> {
         self.state.step += 1;
         self.state.elapsed_s = elapsed_s();
         if self.state.step.is_multiple_of(cfg.eval_every) || self.state.step == cfg.steps {
-            let model =
-                WorldModel::from_parts(model_cfg.clone(), codec.clone(), self.ema.module.clone(), inner);
-            let mse = evaluate(&model, self.latents, codec, eval_windows);
+            let mse = self.held_out_mse();
             finite(mse, || "generated frames".into(), (step, self.out))?;
             self.last.2 = Some(mse);
             tracing::info!(
@@ -272,8 +280,7 @@ pub fn train_world_model(
     // Noise continues from a seed of (seed, step), so a resumed run draws fresh noise.
     device.seed(derive(cfg.seed, &[u64::MAX, state.step]));
     let log = out.join("train_log.jsonl");
-    let mut driver = Driver::start(&log, "step", state.step, state.elapsed_s, Clock::start(run.max_minutes))
-        .map_err(|e| ckpt(&e.path, e.message))?;
+    let mut driver = Driver::start(&log, "step", state.step, state.elapsed_s, Clock::start(run.max_minutes))?;
     let mut steps = WmSteps {
         frames: TrainingFrames { data, codec },
         configs: (&model_cfg, &cfg),
@@ -287,10 +294,8 @@ pub fn train_world_model(
         on_progress,
     };
     driver.train(&mut steps, (unet, optim))?;
+    let eval_mse = steps.held_out_mse();
     let state = steps.state;
-    let eval_model =
-        |ema: &UNet| WorldModel::from_parts(model_cfg.clone(), codec.clone(), ema.clone(), &inner);
-    let eval_mse = evaluate(&eval_model(&ema.module), &mut latents, codec, &eval_windows);
     Ok(WmOutcome {
         step: state.step,
         total: cfg.steps,

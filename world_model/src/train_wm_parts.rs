@@ -93,14 +93,13 @@ pub(crate) fn save_checkpoint(
     (unet, ema, optim): (&UNet, &UNet, &burn::optim::ModuleOptimizer),
     state: &State,
 ) -> Result<(), WorldModelError> {
-    let fail = |e: harness::runfile::RunFileError| ckpt(&e.path, e.message);
-    let mut stage = harness::checkpoint::begin(out, harness::checkpoint::MAIN).map_err(fail)?;
+    let mut stage = harness::checkpoint::begin(out, harness::checkpoint::MAIN)?;
     let p = ["model.bpk", "ema.bpk", "optimizer.bpk", "state.json"].map(|n| stage.path(n));
     unet.clone().save_file(&p[0]).map_err(|e| ckpt(&p[0], e))?;
     ema.clone().save_file(&p[1]).map_err(|e| ckpt(&p[1], e))?;
     optim.save(&p[2]).map_err(|e| ckpt(&p[2], e))?;
-    harness::driver::write_state(&p[3], state).map_err(fail)?;
-    stage.commit().map_err(fail)
+    harness::driver::write_state(&p[3], state)?;
+    Ok(stage.commit()?)
 }
 
 /// What a step's loss is measured against: the batch's windows and their target frames'
@@ -180,11 +179,11 @@ pub(crate) fn resume(
     (unet, ema, optim): (UNet, UNet, burn::optim::ModuleOptimizer),
 ) -> Result<(UNet, UNet, burn::optim::ModuleOptimizer, State), WorldModelError> {
     let paths = ["model.bpk", "ema.bpk", "optimizer.bpk", "state.json"].map(|p| out.join(p));
-    harness::checkpoint::recover(out, harness::checkpoint::MAIN).map_err(|e| ckpt(&e.path, e.message))?;
+    harness::checkpoint::recover(out, harness::checkpoint::MAIN)?;
     let unet = unet.try_load_file(&paths[0]).map_err(|e| ckpt(&paths[0], e))?;
     let ema = ema.try_load_file(&paths[1]).map_err(|e| ckpt(&paths[1], e))?;
     let optim = optim.load(&paths[2]).map_err(|e| ckpt(&paths[2], e))?;
-    let state = harness::driver::read_state(&paths[3]).map_err(|e| ckpt(&e.path, e.message))?;
+    let state = harness::driver::read_state(&paths[3])?;
     Ok((unet, ema, optim, state))
 }
 
