@@ -1,7 +1,7 @@
 //! The roofline's reference points on this machine: one core's FP32 peak, measured as
 //! independent FMA chains in AVX2 (8 lanes) and, where the CPU has it, AVX-512 (16 lanes),
-//! and the `gemm` crate's throughput (`kernels::matrix::matmul`, one thread) at the shapes
-//! the hot paths multiply. Criterion's throughput is in elements: here one element is one
+//! and the throughput of the `gemm` crate (`kernels::matrix::matmul`), the AVX-512 kernel and
+//! the same-bits kernels (`kernels::chain_gemm`), one thread, at the shapes the hot paths multiply. Criterion's throughput is in elements: here one element is one
 //! FLOP (a multiply-add counts 2), so `thrpt` reads directly as GFLOP/s when it prints
 //! `Gelem/s`. BENCHMARKS.md's roofline table divides each path's measured GFLOP/s by these.
 //!
@@ -14,6 +14,8 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use kernels::chain_gemm::{self, Kernel};
+use kernels::matrix::{View, ViewMut};
 
 /// FMA rounds per call: long enough that the call's overhead is noise.
 const ROUNDS: usize = 100_000;
@@ -84,7 +86,7 @@ fn peak(c: &mut Criterion) {
 }
 
 /// `(name, m, k, n)`: the products the hot paths run most.
-const SHAPES: [(&str, usize, usize, usize); 4] = [
+const SHAPES: [(&str, usize, usize, usize); 7] = [
     // The imported 96-channel U-Net's Winograd products: 96 × 96 weights by 8 images' 4×4
     // tiles of a 48² map (one of 16 per convolution).
     ("unet96_winograd", 96, 96, 8 * 24 * 24),
@@ -94,6 +96,11 @@ const SHAPES: [(&str, usize, usize, usize); 4] = [
     ("latent_unet64", 64, 64 * 9, 50 * 4 * 36),
     // The imported GPC policy's 1-D U-Net at 1024 channels, kernel 5, 8 episodes × 16 steps.
     ("policy_unet1024", 1024, 1024 * 5, 8 * 16),
+    // Its other levels at batch 8: 512 channels at 8 steps, 1024 at 4.
+    ("policy_unet512_b8", 512, 512 * 5, 8 * 8),
+    ("policy_unet1024_b8_deep", 1024, 1024 * 5, 8 * 4),
+    // One episode's decision (batch 1): 256 channels at its 16 steps.
+    ("policy_unet256_b1", 256, 256 * 5, 16),
 ];
 
 fn products(c: &mut Criterion) {
@@ -113,6 +120,15 @@ fn products(c: &mut Criterion) {
             g.bench_function(format!("{name}/avx512"), |bch| {
                 bch.iter(|| {
                     kernels::avx512_gemm::fast_matmul(m, k, n, black_box(&a), black_box(&b), &mut out, false)
+                })
+            });
+        }
+        // The same-bits-everywhere kernels (kernels::chain_gemm), each forced.
+        for kernel in [Kernel::Avx2, Kernel::Avx512] {
+            g.bench_function(format!("{name}/chain_{kernel:?}"), |bch| {
+                bch.iter(|| {
+                    let (av, bv) = (View { data: black_box(&a), ld: k }, View { data: black_box(&b), ld: n });
+                    chain_gemm::matmul_on(kernel, (m, k, n), av, bv, ViewMut { data: &mut out, ld: n }, false)
                 })
             });
         }

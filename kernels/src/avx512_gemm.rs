@@ -9,12 +9,12 @@
 //!
 //! Layout: `c[m, n] (+)= a[m, k] · b[k, n]`, row-major with row strides. A micro-tile is 8
 //! rows × 32 columns of `c` held in 16 registers; each step of the depth loop broadcasts 8
-//! values of `a`, loads 32 of `b` and issues 16 FMAs. Columns are walked in panels of 32 and
-//! depth in passes of `KC` (256), so one panel of `b` (`KC` × 32 floats, 32 KB) stays in L1
-//! while every row block of `a` passes over it. The panel is copied contiguous first (read in
-//! place, rows a multiple of 4 KB apart fall into a few of L1's sets and evict each other);
-//! `a`'s rows are read in place as 8 streams. The last panel and the last row block are
-//! masked.
+//! values of `a`, loads 32 of `b` and issues 16 FMAs. Columns are walked in blocks of `NC`
+//! (256) and depth in passes of `KC` (256); each pass copies its block of `b` into contiguous
+//! panels of 32 columns (256 KB, in L2; read in place, rows a multiple of 4 KB apart fall into
+//! a few of L1's sets and evict each other), then every 8-row block of `a` (8 KB, in L1, its
+//! rows read in place as 8 streams) meets every panel, so a large `a` is read once per pass,
+//! not once per panel. The last panel and the last row block are masked.
 //!
 //! Each element of `c` is one chain of FMAs in depth order (`acc = a·b + acc`, starting from
 //! `c` or zero): exactly what a scalar `f32::mul_add` loop gives, whatever the blocking, the
@@ -34,6 +34,9 @@ const MR: usize = 8;
 const NR: usize = 32;
 /// Depth per pass: a `KC` × 32 panel of `b` is 32 KB.
 const KC: usize = 256;
+/// Columns per block: a pass's panels (`KC` × `NC`, 256 KB) stay in L2 while every row block
+/// of `a` passes over them.
+const NC: usize = 256;
 
 /// `c (+)= a · b` like [`matmul_strided`](crate::matrix::matmul_strided), on this crate's AVX-512 kernel
 /// (this module) where the CPU has AVX-512F, else on the `gemm` crate's (AVX2).
@@ -110,58 +113,65 @@ pub unsafe fn matmul(
     accumulate: bool,
 ) {
     let (a, b, c) = (a.as_ptr(), b.as_ptr(), c.as_mut_ptr());
-    // The panel of b, copied contiguous: b's rows are often a multiple of 4 KB apart, and
+    // The panels of b, copied contiguous: b's rows are often a multiple of 4 KB apart, and
     // read in place they fall into a few of L1's sets and evict each other.
-    let mut panel = vec![0.0f32; KC * NR];
-    for j0 in (0..n).step_by(NR) {
-        let masks = panel_masks(n - j0);
+    let mut panels = vec![0.0f32; KC * NC];
+    for jc in (0..n).step_by(NC) {
+        let nc = NC.min(n - jc);
+        let count = nc.div_ceil(NR);
         for k0 in (0..k).step_by(KC) {
             let kc = KC.min(k - k0);
-            let mut src = b.wrapping_add(k0 * ldb + j0);
-            for dst in panel.chunks_exact_mut(NR).take(kc) {
-                // SAFETY: row k0 + p < k of b, its unmasked columns j0.. < n (contract);
-                // `dst` holds NR = 32 floats. Masked lanes are not read.
-                unsafe {
-                    let [m0, m1] = masks;
-                    _mm512_storeu_ps(dst.as_mut_ptr(), _mm512_maskz_loadu_ps(m0, src));
-                    _mm512_storeu_ps(
-                        dst.as_mut_ptr().add(16),
-                        _mm512_maskz_loadu_ps(m1, src.wrapping_add(16)),
-                    );
+            for (q, panel) in panels.chunks_exact_mut(KC * NR).take(count).enumerate() {
+                let [m0, m1] = panel_masks(nc - q * NR);
+                let mut src = b.wrapping_add(k0 * ldb + jc + q * NR);
+                for dst in panel.chunks_exact_mut(NR).take(kc) {
+                    // SAFETY: row k0 + p < k of b, its unmasked columns < n (contract);
+                    // `dst` holds NR = 32 floats. Masked lanes are not read.
+                    unsafe {
+                        _mm512_storeu_ps(dst.as_mut_ptr(), _mm512_maskz_loadu_ps(m0, src));
+                        _mm512_storeu_ps(
+                            dst.as_mut_ptr().add(16),
+                            _mm512_maskz_loadu_ps(m1, src.wrapping_add(16)),
+                        );
+                    }
+                    src = src.wrapping_add(ldb);
                 }
-                src = src.wrapping_add(ldb);
             }
             let start = if accumulate || k0 > 0 { Start::FromC } else { Start::Zero };
             let mut i0 = 0;
             while i0 < m {
                 let rows = MR.min(m - i0);
-                // SAFETY: rows i0..i0 + rows < m, depth k0..k0 + kc ≤ k and the panel's
-                // unmasked columns j0.. < n are inside the slices by the caller's contract;
-                // masked lanes are neither read nor written.
-                let t = unsafe {
-                    Tile {
-                        a: a.add(i0 * lda + k0),
-                        lda,
-                        b: panel.as_ptr(),
-                        ldb: NR,
-                        c: c.add(i0 * ldc + j0),
-                        ldc,
-                        kc,
-                        masks,
-                        start,
-                    }
-                };
-                // SAFETY: as above; the tile's rows are `rows`, its columns the masks'.
-                unsafe {
-                    match rows {
-                        8 => t.run::<8>(),
-                        7 => t.run::<7>(),
-                        6 => t.run::<6>(),
-                        5 => t.run::<5>(),
-                        4 => t.run::<4>(),
-                        3 => t.run::<3>(),
-                        2 => t.run::<2>(),
-                        _ => t.run::<1>(),
+                // A row block of a (in L1) meets every panel of the block in turn, so a is
+                // read once per pass, however many columns.
+                for (q, panel) in panels.chunks_exact(KC * NR).take(count).enumerate() {
+                    // SAFETY: rows i0..i0 + rows < m, depth k0..k0 + kc ≤ k and the panel's
+                    // unmasked columns < n are inside the slices by the caller's contract;
+                    // masked lanes are neither read nor written.
+                    let t = unsafe {
+                        Tile {
+                            a: a.add(i0 * lda + k0),
+                            lda,
+                            b: panel.as_ptr(),
+                            ldb: NR,
+                            c: c.add(i0 * ldc + jc + q * NR),
+                            ldc,
+                            kc,
+                            masks: panel_masks(nc - q * NR),
+                            start,
+                        }
+                    };
+                    // SAFETY: as above; the tile's rows are `rows`, its columns the masks'.
+                    unsafe {
+                        match rows {
+                            8 => t.run::<8>(),
+                            7 => t.run::<7>(),
+                            6 => t.run::<6>(),
+                            5 => t.run::<5>(),
+                            4 => t.run::<4>(),
+                            3 => t.run::<3>(),
+                            2 => t.run::<2>(),
+                            _ => t.run::<1>(),
+                        }
                     }
                 }
                 i0 += rows;

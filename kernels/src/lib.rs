@@ -16,6 +16,8 @@
 //! - [`winograd_batch`]: Winograd over whole batches of channel-major images;
 //! - [`matrix`]: matrix products, dense layers, GroupNorm with FiLM, im2col convolutions;
 //! - [`avx512_gemm`]: the world model's matrix products on AVX-512 (`avx512_gemm::fast_matmul`, falling back to `matrix`);
+//! - [`chain_gemm`]: matrix products with the same bits on every CPU (one FMA chain per element;
+//!   AVX-512, AVX2 or scalar), for the imported policies' U-Nets;
 //! - [`attention`]: multi-head self-attention over each image's positions.
 //!
 //! This crate is the project's one place for `unsafe` code: AVX2 + FMA and AVX-512 intrinsics,
@@ -25,6 +27,7 @@
 
 pub mod attention;
 pub mod avx512_gemm;
+pub mod chain_gemm;
 pub mod direct_conv;
 pub mod elementwise;
 pub mod matrix;

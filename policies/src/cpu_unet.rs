@@ -23,35 +23,62 @@ use nn::weights::{bias_values, dense_of, norm_of, values};
 
 use crate::net::{CondRes1d, CondUnet1d, Conv1dBlock, Level1d};
 
-/// The U-Net's matrix products: the `gemm` crate's AVX2 kernels, the same bits on every
-/// x86-64 CPU with FMA, so that the MuJoCo branch's actions (and rows) do not depend on the
-/// machine; or, with `EVALHARNESS_POLICY_GEMM=avx512` on a CPU with AVX-512F, the project's
-/// AVX-512 kernel ([`kernels::avx512_gemm`]) for products of at least 32 columns (its tiles'
-/// width: at batch 1 the U-Net's products have 16, 8 and 4, where the `gemm` crate's kernel is
-/// faster; at batch 8 the deepest level's have 32), quicker on the large imported U-Nets,
-/// whose rows then hold on AVX-512 machines only (read once; docs/performance.md).
-fn matmul(m: usize, k: usize, n: usize, a: &[f32], b: &[f32], c: &mut [f32], accumulate: bool) {
-    static AVX512: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    let fast = *AVX512.get_or_init(|| {
-        std::env::var("EVALHARNESS_POLICY_GEMM").is_ok_and(|v| v == "avx512")
-            && kernels::avx512_gemm::avx512_enabled()
-    });
-    matmul_with(fast, (m, k, n), a, b, c, accumulate);
+/// Which kernels run a U-Net's matrix products. Policy actions feed back into their MuJoCo
+/// episodes, so this decides the MuJoCo branch's rows bit for bit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Products {
+    /// The `gemm` crate's AVX2 kernels: the same bits on every x86-64 CPU with AVX2 and FMA, the
+    /// bits the shipped policies' recorded rows were made with (their default).
+    GemmCrate,
+    /// [`kernels::chain_gemm`]: one FMA chain per element, the same bits on every CPU, with
+    /// AVX-512 where the CPU has it (the imported policies' default: about 1.5× the `gemm`
+    /// crate's speed on their large U-Nets).
+    Chain,
 }
 
-/// [`matmul`] with the AVX-512 kernel allowed (`fast`) or not.
-fn matmul_with(
-    fast: bool,
-    (m, k, n): (usize, usize, usize),
-    a: &[f32],
-    b: &[f32],
-    c: &mut [f32],
-    accumulate: bool,
-) {
-    if fast && n >= 32 {
-        kernels::avx512_gemm::fast_matmul(m, k, n, a, b, c, accumulate);
-    } else {
-        kernels::matrix::matmul(m, k, n, a, b, c, accumulate);
+/// Chooses [`Products`] for every policy: `crate` or `chain`.
+pub const POLICY_GEMM_ENV: &str = "EVALHARNESS_POLICY_GEMM";
+
+impl Products {
+    /// [`POLICY_GEMM_ENV`]'s choice if it makes one, else `default` (read once; any other value
+    /// is warned about and ignored).
+    pub fn or_env(default: Self) -> Self {
+        static CHOICE: std::sync::OnceLock<Option<Products>> = std::sync::OnceLock::new();
+        let choice = CHOICE.get_or_init(|| match std::env::var(POLICY_GEMM_ENV).as_deref().map(str::trim) {
+            Ok("crate") => Some(Self::GemmCrate),
+            Ok("chain") => Some(Self::Chain),
+            Ok(other) => {
+                tracing::warn!("{POLICY_GEMM_ENV}={other:?} ignored: it takes `crate` or `chain`");
+                None
+            }
+            Err(_) => None,
+        });
+        choice.unwrap_or(default)
+    }
+}
+
+impl Products {
+    /// `c (+)= a · b` (`a: [m, k]`, `b: [k, n]`, `c: [m, n]`, row-major) on these kernels.
+    pub(crate) fn matmul(
+        self,
+        (m, k, n): (usize, usize, usize),
+        a: &[f32],
+        b: &[f32],
+        c: &mut [f32],
+        accumulate: bool,
+    ) {
+        match self {
+            Self::GemmCrate => kernels::matrix::matmul(m, k, n, a, b, c, accumulate),
+            Self::Chain => kernels::chain_gemm::matmul(m, k, n, a, b, c, accumulate),
+        }
+    }
+
+    /// A dense layer's `[n, d_in] -> [n, d_out]` on these kernels.
+    fn dense(self, d: &Dense, x: &[f32]) -> Vec<f32> {
+        match self {
+            Self::GemmCrate => d.forward(x),
+            Self::Chain => d.forward_chain(x),
+        }
     }
 }
 
@@ -118,13 +145,13 @@ impl Conv1 {
     }
 
     /// `[c_in, n·t] -> [c_out, n·t']`, returning t'.
-    fn forward(&self, x: &[f32], n: usize, t: usize) -> (Vec<f32>, usize) {
+    fn forward(&self, pr: Products, x: &[f32], n: usize, t: usize) -> (Vec<f32>, usize) {
         let (s, p, k) = (self.stride, self.pad, self.k);
         let to = (t + 2 * p).saturating_sub(k) / s + 1;
         let cols = n * to;
         let mut y: Vec<f32> = self.b.iter().flat_map(|&b| std::iter::repeat_n(b, cols)).collect();
         if k == 1 && s == 1 && p == 0 {
-            matmul(self.cout, self.cin, cols, &self.w, x, &mut y, true);
+            pr.matmul((self.cout, self.cin, cols), &self.w, x, &mut y, true);
             return (y, to);
         }
         // im2col: row (ci, kk), column (sample, o) holds x[ci, sample, o·s + kk − p].
@@ -142,7 +169,7 @@ impl Conv1 {
                 }
             }
         }
-        matmul(self.cout, self.cin * k, cols, &self.w, &col, &mut y, true);
+        pr.matmul((self.cout, self.cin * k, cols), &self.w, &col, &mut y, true);
         (y, to)
     }
 }
@@ -175,11 +202,11 @@ impl ConvT1 {
     }
 
     /// `[c_in, n·t] -> [c_out, n·t']` with t' = (t − 1)·s − 2p + k + p_out, returning t'.
-    fn forward(&self, x: &[f32], n: usize, t: usize) -> (Vec<f32>, usize) {
+    fn forward(&self, pr: Products, x: &[f32], n: usize, t: usize) -> (Vec<f32>, usize) {
         let (s, p, k) = (self.stride, self.pad, self.k);
         let to = ((t - 1) * s + k + self.pad_out).saturating_sub(2 * p);
         let mut z = vec![0.0; self.cout * k * n * t];
-        matmul(self.cout * k, self.cin, n * t, &self.w, x, &mut z, false);
+        pr.matmul((self.cout * k, self.cin, n * t), &self.w, x, &mut z, false);
         let mut y: Vec<f32> = self.b.iter().flat_map(|&b| std::iter::repeat_n(b, n * to)).collect();
         for co in 0..self.cout {
             let yr = &mut y[co * n * to..][..n * to];
@@ -225,8 +252,8 @@ impl Block {
         Ok(Self { conv: Conv1::new(&b.conv, layer)?, norm: NormMish::new(&b.norm, layer)? })
     }
 
-    fn forward(&self, x: &[f32], n: usize, t: usize) -> Vec<f32> {
-        let (mut y, to) = self.conv.forward(x, n, t);
+    fn forward(&self, pr: Products, x: &[f32], n: usize, t: usize) -> Vec<f32> {
+        let (mut y, to) = self.conv.forward(pr, x, n, t);
         self.norm.apply(&mut y, n, to);
         y
     }
@@ -259,8 +286,9 @@ impl Res {
     }
 
     /// `x: [c_in, n·t]`; `film_obs: [n, 2·c_out]`, `film_step: [2·c_out]` → `[c_out, n·t]`
-    fn forward(&self, x: &[f32], n: usize, t: usize, film_obs: &[f32], film_step: &[f32]) -> Vec<f32> {
-        let mut h = self.b0.forward(x, n, t); // [co, n t]
+    fn forward(&self, pr: Products, x: &[f32], (n, t): (usize, usize), film: (&[f32], &[f32])) -> Vec<f32> {
+        let (film_obs, film_step) = film;
+        let mut h = self.b0.forward(pr, x, n, t); // [co, n t]
         let co = self.b0.conv.cout;
         for (c, rows) in h.chunks_mut(n * t).enumerate() {
             for (smp, row) in rows.chunks_mut(t).enumerate() {
@@ -269,9 +297,9 @@ impl Res {
                 row.iter_mut().for_each(|v| *v = *v * scale + shift);
             }
         }
-        let mut h = self.b1.forward(&h, n, t);
+        let mut h = self.b1.forward(pr, &h, n, t);
         match &self.skip {
-            Some(s) => h.iter_mut().zip(s.forward(x, n, t).0).for_each(|(a, b)| *a += b),
+            Some(s) => h.iter_mut().zip(s.forward(pr, x, n, t).0).for_each(|(a, b)| *a += b),
             None => h.iter_mut().zip(x).for_each(|(a, b)| *a += b),
         }
         h
@@ -309,6 +337,7 @@ pub struct CpuUnet1d {
     ups: Vec<Level>,
     final_block: Block,
     final_conv: Conv1,
+    products: Products,
 }
 
 /// What a decision's observations contribute to every FiLM layer (`[n, 2·c_out]` each,
@@ -319,12 +348,12 @@ pub struct Prepared {
 }
 
 impl CpuUnet1d {
-    /// Copies `u`'s weights.
+    /// Copies `u`'s weights; its products will run on `products`' kernels.
     ///
     /// # Errors
     /// [`UnsupportedLayer`] for a layer these kernels do not run (grouped or dilated
     /// convolutions, asymmetric padding) or weights that are not f32.
-    pub fn new(u: &CondUnet1d) -> Result<Self, UnsupportedLayer> {
+    pub fn new(u: &CondUnet1d, products: Products) -> Result<Self, UnsupportedLayer> {
         let e = u.step_embed;
         let levels = |ls: &[Level1d], name: &str| -> Result<Vec<Level>, UnsupportedLayer> {
             ls.iter().enumerate().map(|(i, l)| Level::new(l, e, &format!("{name}.{i}"))).collect()
@@ -339,6 +368,7 @@ impl CpuUnet1d {
             ups: levels(&u.ups, "ups")?,
             final_block: Block::new(&u.final_block, "final_block")?,
             final_conv: Conv1::new(&u.final_conv, "final_conv")?,
+            products,
         })
     }
 
@@ -353,7 +383,7 @@ impl CpuUnet1d {
     /// The observation part of every FiLM layer for `obs: [n, obs_cond]`.
     pub fn prepare(&self, obs: &[f32], n: usize) -> Prepared {
         let m: Vec<f32> = obs.iter().map(|&v| mish(v)).collect();
-        Prepared { n, film_obs: self.blocks().iter().map(|r| r.film_obs.forward(&m)).collect() }
+        Prepared { n, film_obs: self.blocks().iter().map(|r| self.products.dense(&r.film_obs, &m)).collect() }
     }
 
     /// Predicts the noise of the prepared decision's `n` noisy action sequences at
@@ -363,21 +393,21 @@ impl CpuUnet1d {
     /// - `x`: `[n, horizon, action_dim]`
     /// - returns `[n, horizon, action_dim]`
     pub fn forward(&self, prep: &Prepared, x: &[f32], horizon: usize, t: f32) -> Vec<f32> {
-        let (n, a) = (prep.n, self.final_conv.cout);
+        let (n, a, pr) = (prep.n, self.final_conv.cout, self.products);
         // Step embedding (as `net::sinusoidal`) and its MLP: the same for every sample.
         let half = self.step_embed / 2;
         let args: Vec<f32> =
             (0..half).map(|i| t * (-(10000f32).ln() * i as f32 / (half - 1).max(1) as f32).exp()).collect();
         let emb: Vec<f32> = args.iter().map(|v| v.sin()).chain(args.iter().map(|v| v.cos())).collect();
-        let mut h1 = self.step1.forward(&emb);
+        let mut h1 = pr.dense(&self.step1, &emb);
         h1.iter_mut().for_each(|v| *v = mish(*v));
-        let te: Vec<f32> = self.step2.forward(&h1).into_iter().map(mish).collect(); // mish(te): [e]
+        let te: Vec<f32> = pr.dense(&self.step2, &h1).into_iter().map(mish).collect(); // mish(te): [e]
         let blocks = self.blocks();
-        let film_step: Vec<Vec<f32>> = blocks.iter().map(|r| r.film_step.forward(&te)).collect();
+        let film_step: Vec<Vec<f32>> = blocks.iter().map(|r| pr.dense(&r.film_step, &te)).collect();
         let mut film = prep.film_obs.iter().zip(&film_step);
         let mut res = |r: &Res, h: &[f32], len: usize| {
             let (fo, fs) = film.next().unwrap_or_else(|| unreachable!("one FiLM per block"));
-            r.forward(h, n, len, fo, fs)
+            r.forward(pr, h, (n, len), (fo, fs))
         };
         // [n, horizon, a] -> [a, n·horizon]
         let mut h = vec![0.0; n * horizon * a];
@@ -395,7 +425,7 @@ impl CpuUnet1d {
             h = res(&l.r1, &h, len);
             skips.push(h.clone());
             if let Some(d) = &l.down {
-                (h, len) = d.forward(&h, n, len);
+                (h, len) = d.forward(pr, &h, n, len);
             }
         }
         for m in &self.mids {
@@ -407,10 +437,10 @@ impl CpuUnet1d {
             h = res(&l.r0, &h, len);
             h = res(&l.r1, &h, len);
             if let Some(u) = &l.up {
-                (h, len) = u.forward(&h, n, len);
+                (h, len) = u.forward(pr, &h, n, len);
             }
         }
-        let (y, len) = self.final_conv.forward(&self.final_block.forward(&h, n, len), n, len);
+        let (y, len) = self.final_conv.forward(pr, &self.final_block.forward(pr, &h, n, len), n, len);
         let mut out = vec![0.0; n * len * a];
         for smp in 0..n {
             for s in 0..len {
@@ -424,75 +454,5 @@ impl CpuUnet1d {
 }
 
 #[cfg(test)]
-mod tests {
-    use burn::module::Module;
-    use burn::tensor::{Device, Distribution, Tensor};
-    use nn::weights::Jitter;
-
-    use super::*;
-
-    #[test]
-    fn the_avx512_products_agree_with_the_gemm_crates() {
-        // EVALHARNESS_POLICY_GEMM=avx512 swaps the kernel of products of 32 or more columns
-        // (the imported U-Net's deepest level at batch 8 is 1,024 x 5,120 x 32); the two sum in
-        // other orders, so they agree to rounding, not bit for bit. On a CPU without AVX-512F
-        // both are the gemm crate's and agree exactly.
-        let (m, k, n) = (48, 320, 32);
-        let a: Vec<f32> = (0..m * k).map(|i| ((i * 37 % 101) as f32 - 50.0) / 50.0).collect();
-        let b: Vec<f32> = (0..k * n).map(|i| ((i * 53 % 97) as f32 - 48.0) / 48.0).collect();
-        let (mut slow, mut fast) = (vec![0.5; m * n], vec![0.5; m * n]);
-        matmul_with(false, (m, k, n), &a, &b, &mut slow, true);
-        matmul_with(true, (m, k, n), &a, &b, &mut fast, true);
-        // Each entry sums 320 products of magnitude <= 1: f32 rounding of such a sum stays
-        // far below 1e-3.
-        let worst = slow.iter().zip(&fast).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
-        assert!(worst < 1e-3, "{worst}");
-        // Fewer columns than a tile: the gemm crate's, bit for bit.
-        let (mut s16, mut f16) = (vec![0.0; m * 16], vec![0.0; m * 16]);
-        matmul_with(false, (m, k, 16), &a, &b[..k * 16], &mut s16, false);
-        matmul_with(true, (m, k, 16), &a, &b[..k * 16], &mut f16, false);
-        assert_eq!(s16, f16);
-    }
-    use crate::net::NetConfig;
-
-    #[test]
-    fn mish_matches_its_definition() {
-        for x in [-30.0f32, -5.0, -1.0, -0.1, 0.0, 0.3, 1.0, 4.0, 19.9, 25.0] {
-            let softplus = if x > 20.0 { x } else { x.exp().ln_1p() };
-            let want = x * softplus.tanh();
-            assert!(
-                (mish(x) - want).abs() <= 1e-6 * want.abs().max(1.0),
-                "mish({x}) = {} vs {want}",
-                mish(x)
-            );
-        }
-    }
-
-    #[test]
-    fn predicts_what_burn_predicts() {
-        // The shipped policies' sizes: 3 levels (down and up resampling both exercised),
-        // kernel 5, skip convolutions where the channel count changes.
-        let device = Device::flex();
-        let cfg = NetConfig { down_dims: vec![32, 64, 128], ..NetConfig::new() };
-        let unet = CondUnet1d::new(&cfg, &device).map(&mut Jitter);
-        let cpu = CpuUnet1d::new(&unet).unwrap_or_else(|e| panic!("{e}"));
-        let (n, h) = (3, 16);
-        let x = Tensor::<3>::random([n, h, 2], Distribution::Normal(0.0, 1.0), &device);
-        let obs = Tensor::<2>::random([n, cfg.obs_cond_dim()], Distribution::Normal(0.0, 1.0), &device);
-        for t in [0.0f32, 37.0, 99.0] {
-            let want: Vec<f32> = unet
-                .forward(x.clone(), Tensor::from_floats(vec![t; n].as_slice(), &device), obs.clone())
-                .into_data()
-                .try_to_vec()
-                .unwrap_or_default();
-            let xs: Vec<f32> = x.clone().into_data().try_to_vec().unwrap_or_default();
-            let os: Vec<f32> = obs.clone().into_data().try_to_vec().unwrap_or_default();
-            let got = cpu.forward(&cpu.prepare(&os, n), &xs, h, t);
-            assert_eq!(got.len(), n * h * 2);
-            let scale = want.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
-            let max = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
-            assert!(scale > 1e-2, "degenerate test output");
-            assert!(max < 1e-4 * scale.max(1.0), "t = {t}: max difference {max} (output scale {scale})");
-        }
-    }
-}
+#[path = "cpu_unet_tests.rs"]
+mod tests;

@@ -13,7 +13,7 @@ use harness::rng::Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::cpu_encoder::CpuEncoder;
-use crate::cpu_unet::CpuUnet1d;
+use crate::cpu_unet::{CpuUnet1d, Products};
 use crate::net::{CondUnet1d, NetConfig, ObsEncoder};
 
 /// Per-entry min-max statistics of a vector quantity.
@@ -314,7 +314,7 @@ impl DiffusionPolicy {
         let direct = *device == Device::flex() && !burn_only;
         let cpu_unet = direct
             .then(|| {
-                CpuUnet1d::new(&net.unet)
+                CpuUnet1d::new(&net.unet, Products::or_env(Products::GemmCrate))
                     .inspect_err(|e| tracing::warn!(policy = %name, "burn's U-Net kept: {e}"))
             })
             .and_then(Result::ok);

@@ -8,6 +8,8 @@ use std::path::{Path, PathBuf};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use super::*;
+use crate::cpu_resnet::CpuResNet18;
+use crate::cpu_unet::{CpuUnet1d, Products};
 use crate::imported_policy::{ImportedNet, ddpm_sample, replayed, unet_out};
 
 fn fixture(name: &str) -> PathBuf {
@@ -34,12 +36,17 @@ fn vec2(t: Tensor<2>) -> Vec<f32> {
 
 /// The fixture's observation conditioning, computed by the imported networks.
 fn cond_of(net: &ImportedNet, device: &Device) -> Vec<f32> {
+    cond_on(net, device, None)
+}
+
+/// [`cond_of`] with the encoder on the CPU kernels where given.
+fn cond_on(net: &ImportedNet, device: &Device, cpu: Option<&CpuResNet18>) -> Vec<f32> {
     let r = pytorch_reader::PytorchReader::new(fixture("policy_io.pth")).unwrap_or_else(|e| panic!("{e}"));
     let bytes = r.get("frames").and_then(|t| t.read().ok()).unwrap_or_default(); // [2, 2, 96, 96, 3] u8
     let frames: Vec<&[u8]> = bytes.chunks(96 * 96 * 3).collect();
     let x01 = nn::frames::frames_to_tensor(&frames, 96, device) * 0.5 + 0.5;
     let pos = Tensor::from_data(TensorData::new(read(&io(), "pos"), [2, 2, 2]), device);
-    vec2(net.obs_cond(x01, pos))
+    vec2(net.obs_cond_on(x01, pos, cpu))
 }
 
 #[test]
@@ -64,6 +71,30 @@ fn the_ema_weights_predict_what_pytorch_predicts() {
     let eps = eps.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
     let d = max_abs(&eps, &read(&src, "eps"));
     assert!(d <= 1e-5, "noise prediction differs from PyTorch by {d}");
+}
+
+#[test]
+fn the_cpu_kernels_predict_what_pytorch_predicts() {
+    // What `act` runs on the CPU: the encoder on `cpu_resnet`, the U-Net on `cpu_unet`, with
+    // either kind of products, against the same PyTorch outputs as burn's networks above.
+    let device = Device::flex();
+    let p = import(&fixture("policy.pth"), GpcWeights::Ema, 96, &device).unwrap_or_else(|e| panic!("{e}"));
+    let src = io();
+    let (want_cond, x, want_eps) = (read(&src, "cond"), read(&src, "x"), read(&src, "eps"));
+    let per = want_cond.len() / 2;
+    for products in [Products::GemmCrate, Products::Chain] {
+        let enc = CpuResNet18::new(&p.net.encoder, products).unwrap_or_else(|e| panic!("{e}"));
+        let d = max_abs(&cond_on(&p.net, &device, Some(&enc)), &want_cond);
+        assert!(d <= 1e-5, "{products:?}: conditioning differs from PyTorch by {d}");
+        // The fixture's two samples are at steps 3 and 77; the CPU U-Net takes one step a call.
+        let unet = CpuUnet1d::new(&p.net.unet, products).unwrap_or_else(|e| panic!("{e}"));
+        for (i, t) in [3.0, 77.0].into_iter().enumerate() {
+            let prep = unet.prepare(&want_cond[i * per..(i + 1) * per], 1);
+            let eps = unet.forward(&prep, &x[i * 32..(i + 1) * 32], 16, t);
+            let d = max_abs(&eps, &want_eps[i * 32..(i + 1) * 32]);
+            assert!(d <= 1e-5, "{products:?}, step {t}: noise prediction differs from PyTorch by {d}");
+        }
+    }
 }
 
 #[test]

@@ -30,8 +30,9 @@ use burn::tensor::{Device, Tensor, TensorData};
 use harness::policy::{ActionChunk, Observation, Policy, PolicyError};
 use harness::rng::Rng;
 
-use crate::cpu_unet::CpuUnet1d;
-use crate::diffusion::{Normalisation, alphas_cumprod, executed};
+use crate::cpu_resnet::CpuResNet18;
+use crate::cpu_unet::{CpuUnet1d, Prepared, Products};
+use crate::diffusion::{Normalisation, POLICY_KERNELS_ENV, alphas_cumprod, executed};
 use crate::net::CondUnet1d;
 use crate::resnet_gn::ResNet18Gn;
 
@@ -121,6 +122,12 @@ impl ImportedNet {
     /// - `pos`: `[b, o, p]` normalised proprioception
     /// - returns `[b, o·(features + p)]`
     pub fn obs_cond(&self, frames: Tensor<4>, pos: Tensor<3>) -> Tensor<2> {
+        self.obs_cond_on(frames, pos, None)
+    }
+
+    /// [`Self::obs_cond`] with the encoder's convolutions on `cpu` where given (its weights
+    /// must be this network's encoder's).
+    pub fn obs_cond_on(&self, frames: Tensor<4>, pos: Tensor<3>, cpu: Option<&CpuResNet18>) -> Tensor<2> {
         let [b, o, p] = pos.dims();
         let mut x = frames;
         if let Some((mean, std)) = &self.image_norm {
@@ -137,9 +144,18 @@ impl ImportedNet {
             let (top, left) = (centre_offset(h.saturating_sub(c)), centre_offset(w.saturating_sub(c)));
             x = x.narrow(2, top, c.min(h)).narrow(3, left, c.min(w));
         }
+        let input = |enc| Some((enc, x.clone().into_data().convert::<f32>().try_into_vec::<f32>().ok()?));
+        let map = match cpu.and_then(input) {
+            Some((enc, xs)) => {
+                let [n, _, h, w] = x.dims();
+                let (f, [c, fh, fw]) = enc.features(&xs, n, (h, w));
+                Tensor::from_data(TensorData::new(f, [n, c, fh, fw]), &x.device())
+            }
+            None => self.encoder.features(x),
+        };
         let feat = match &self.head {
-            Some(head) => head.forward(self.encoder.features(x)),
-            None => self.encoder.forward(x),
+            Some(head) => head.forward(map),
+            None => self.encoder.pool(map),
         }; // [b o, f]
         let f = feat.dims()[1];
         let feat = feat.reshape([b, o, f]);
@@ -162,8 +178,10 @@ pub struct ImportedDiffusion {
     /// entries, in this order, are the policy's proprioception (empty: the task's own).
     pub robot: Vec<(usize, usize)>,
     net: ImportedNet,
-    /// The U-Net on plain CPU loops (on the CPU device).
+    /// The U-Net and the encoder on the project's CPU kernels (on the Flex device, unless
+    /// [`POLICY_KERNELS_ENV`] says `burn`).
     cpu_unet: Option<CpuUnet1d>,
+    cpu_encoder: Option<CpuResNet18>,
     ac: Vec<f64>,
     device: Device,
 }
@@ -179,13 +197,25 @@ impl ImportedDiffusion {
         device: &Device,
     ) -> Self {
         let ac = alphas_cumprod(cfg.train_steps);
-        let cpu_unet = (*device == Device::flex())
+        let burn_only = std::env::var(POLICY_KERNELS_ENV).is_ok_and(|v| v.trim() == "burn");
+        let direct = *device == Device::flex() && !burn_only;
+        // Imported policies have no recorded rows to keep: their products are the same bits on
+        // every CPU, at AVX-512 speed where the CPU has it.
+        let products = Products::or_env(Products::Chain);
+        let cpu_unet = direct
             .then(|| {
-                CpuUnet1d::new(&net.unet)
+                CpuUnet1d::new(&net.unet, products)
                     .inspect_err(|e| tracing::warn!(policy = %name, "burn's U-Net kept: {e}"))
             })
             .and_then(Result::ok);
-        Self { name, cfg, norm, bounds, robot: Vec::new(), net, cpu_unet, ac, device: device.clone() }
+        let cpu_encoder = direct
+            .then(|| {
+                CpuResNet18::new(&net.encoder, products)
+                    .inspect_err(|e| tracing::warn!(policy = %name, "burn's encoder kept: {e}"))
+            })
+            .and_then(Result::ok);
+        let robot = Vec::new();
+        Self { name, cfg, norm, bounds, robot, net, cpu_unet, cpu_encoder, ac, device: device.clone() }
     }
 
     /// The observations with their proprioception made of the robot-state entries the policy
@@ -235,17 +265,17 @@ impl ImportedDiffusion {
         Some((side, out))
     }
 
-    /// The noise prediction for `x` (`[b, horizon, action_dim]`) at step `t` under `cond`.
-    fn eps(&self, cond: &[f32], x: &[f32], b: usize, t: usize) -> Vec<f32> {
-        self.cfg.prediction.noise(x, self.net_out(cond, x, b, t), self.ac[t])
+    /// The noise prediction for `x` (`[b, horizon, action_dim]`) at step `t` under `cond`
+    /// (`prep`: its FiLM parts for the CPU U-Net, computed once a decision).
+    fn eps(&self, (cond, prep): (&[f32], Option<&Prepared>), x: &[f32], b: usize, t: usize) -> Vec<f32> {
+        self.cfg.prediction.noise(x, self.net_out((cond, prep), x, b, t), self.ac[t])
     }
 
     /// The U-Net's output for `x` (`[b, horizon, action_dim]`) at step `t` under `cond`.
-    fn net_out(&self, cond: &[f32], x: &[f32], b: usize, t: usize) -> Vec<f32> {
+    fn net_out(&self, (cond, prep): (&[f32], Option<&Prepared>), x: &[f32], b: usize, t: usize) -> Vec<f32> {
         let (h, ad) = (self.cfg.horizon, self.cfg.net.action_dim);
-        if let Some(unet) = &self.cpu_unet {
-            let prep = unet.prepare(cond, b);
-            return unet.forward(&prep, x, h, t as f32);
+        if let Some((unet, prep)) = self.cpu_unet.as_ref().zip(prep) {
+            return unet.forward(prep, x, h, t as f32);
         }
         let c = cond.len() / b.max(1);
         let cond = Tensor::from_data(TensorData::new(cond.to_vec(), [b, c]), &self.device);
@@ -306,11 +336,14 @@ impl Policy for ImportedDiffusion {
         let pos = Tensor::from_data(TensorData::new(pos, [b, o, p]), &self.device);
         let cond = self
             .net
-            .obs_cond(x01, pos)
+            .obs_cond_on(x01, pos, self.cpu_encoder.as_ref())
             .into_data()
             .convert::<f32>()
             .try_into_vec::<f32>()
             .unwrap_or_default();
+        // What the observations give every FiLM layer of the CPU U-Net: the same for all steps.
+        let prep = self.cpu_unet.as_ref().map(|u| u.prepare(&cond, b));
+        let cond = (cond.as_slice(), prep.as_ref());
         // Each episode's initial noise, then each step's, from its own generator.
         let x: Vec<f32> = rngs.iter_mut().flat_map(|r| r.normals_f32(h * ad)).collect();
         let per = h * ad;
@@ -319,10 +352,10 @@ impl Policy for ImportedDiffusion {
                 x,
                 &self.ac,
                 &self.cfg.timesteps(),
-                |x, t| self.eps(&cond, x, b, t),
+                |x, t| self.eps(cond, x, b, t),
                 |_| rngs.iter_mut().flat_map(|r| r.normals_f32(per)).collect(),
             ),
-            Sampler::Ddim => ddim_sample(x, &self.ac, &self.cfg.timesteps(), |x, t| self.eps(&cond, x, b, t)),
+            Sampler::Ddim => ddim_sample(x, &self.ac, &self.cfg.timesteps(), |x, t| self.eps(cond, x, b, t)),
         };
         if v.len() != b * h * ad || v.iter().any(|x| !x.is_finite()) {
             return Err(bad(format!(

@@ -1,8 +1,8 @@
 //! Vision policies for Push-T, trained on the project's own demonstrations.
 //!
 //! - [`net`]: the CNN frame encoder and the conditional 1-D U-Net;
-//! - [`cpu_unet`], [`cpu_encoder`]: the U-Net and the encoder on the project's own CPU
-//!   kernels, which inference uses on the Flex device;
+//! - [`cpu_unet`], [`cpu_encoder`], [`cpu_resnet`]: the U-Net, the encoder and the imported
+//!   policies' ResNet-18 on the project's own CPU kernels, which inference uses on the Flex device;
 //! - [`diffusion`]: the `diffusion` kind (DDPM training, DDIM inference) behind
 //!   [`harness::policy::Policy`];
 //! - [`data`]: demonstrations from a replay-buffer dataset;
@@ -20,6 +20,7 @@
 //!   judges on [`net`]'s frame encoder).
 
 pub mod cpu_encoder;
+pub mod cpu_resnet;
 pub mod cpu_unet;
 pub mod data;
 pub mod diffusion;

@@ -157,7 +157,14 @@ impl ResNet18Gn {
     /// # Shapes
     /// `[n, 3, h, w]` in [0, 1] → `[n, 8 base]`
     pub fn forward(&self, x: Tensor<4>) -> Tensor<2> {
-        let h = self.features(x);
+        self.pool(self.features(x))
+    }
+
+    /// The global average pool of [`Self::features`]' map.
+    ///
+    /// # Shapes
+    /// `[n, c, h, w]` → `[n, c]`
+    pub fn pool(&self, h: Tensor<4>) -> Tensor<2> {
         let [n, c, _, _] = h.dims();
         self.avg.forward(h).reshape([n, c])
     }
