@@ -19,6 +19,8 @@
 //! batch 1 and 50 on the shipped autoencoder (`BENCH_AUTOENCODER=DIR`);
 //! `BENCH_DECODER_CHANNELS=8,16,32,32` adds a decoder of those widths (random
 //! weights) on the direct kernels, to price a narrower decoder before training one.
+//! `reward_predictor` times GPC's reward predictors reading one frame's pose, from an imported
+//! judge folder (`BENCH_JUDGE=DIR`; skipped without one).
 
 // criterion_group! generates undocumented functions.
 #![allow(missing_docs)]
@@ -29,8 +31,10 @@ use std::time::Duration;
 
 use burn::tensor::{Device, Distribution, Tensor, TensorData};
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use harness::judge::Judge;
 use harness::policy::Observation;
 use harness::rng::Rng;
+use judges::folder::FrameJudge;
 use policies::dir::{Expectations, checkpoint_dirs};
 use policies::kinds::load_policy;
 use world_model::autoencoder::AutoencoderConfig;
@@ -105,6 +109,18 @@ fn pixel_world_model(c: &mut Criterion) {
     if threads > 1 {
         chunk(c, "world_model_pixel_chunk", &wm, &batches, threads);
     }
+}
+
+/// GPC's reward predictors as a judge reads a frame's pose (both ResNet-18 regressors on one
+/// 96² frame), from an imported judge folder (`BENCH_JUDGE=DIR`; skipped without one).
+fn reward_predictor(c: &mut Criterion) {
+    let Ok(dir) = std::env::var("BENCH_JUDGE") else { return };
+    let device = nn::device::selected().expect("EVALHARNESS_DEVICE");
+    let judge = FrameJudge::load(std::path::Path::new(&dir), &device).expect("BENCH_JUDGE loads");
+    let frame: Vec<u8> = (0..96 * 96 * 3).map(|i| (i * 7 % 256) as u8).collect();
+    let mut g = c.benchmark_group("reward_predictor");
+    g.bench_function("pose_96", |bench| bench.iter(|| black_box(judge.pose(&frame))));
+    g.finish();
 }
 
 fn env_batches(var: &str, default: &[usize]) -> Vec<usize> {
@@ -228,5 +244,5 @@ fn chunk(c: &mut Criterion, group: &str, wm: &WorldModel, batches: &[usize], thr
     g.finish();
 }
 
-criterion_group!(benches, policy, world_model, decoder, objectives, pixel_world_model);
+criterion_group!(benches, policy, world_model, decoder, objectives, pixel_world_model, reward_predictor);
 criterion_main!(benches);

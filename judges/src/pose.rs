@@ -20,6 +20,9 @@ use burn::tensor::{Device, Tensor, TensorData};
 use nn::ImportError;
 use nn::import::place::{place_all, shapes, transpose};
 use nn::import::tensors::Source;
+use policies::cpu_resnet::CpuResNet18;
+use policies::cpu_unet::Products;
+use policies::diffusion::POLICY_KERNELS_ENV;
 use policies::resnet::{ConvSite, ResNet18, batch_norm_sites, fold_batch_norm};
 
 use crate::error::JudgeError;
@@ -52,7 +55,15 @@ impl PoseNet {
     /// # Shapes
     /// `[n, 3, h, w]` in [0, 1] → `[n, 2]`
     pub fn forward(&self, x: Tensor<4>) -> Tensor<2> {
-        let h = relu(self.l1.forward(self.resnet.forward(x)));
+        self.head(self.resnet.forward(x))
+    }
+
+    /// The MLP on the backbone's pooled features.
+    ///
+    /// # Shapes
+    /// `[n, 8 base]` → `[n, 2]`
+    pub fn head(&self, features: Tensor<2>) -> Tensor<2> {
+        let h = relu(self.l1.forward(features));
         self.l3.forward(relu(self.l2.forward(h)))
     }
 }
@@ -63,21 +74,47 @@ pub struct GpcPose {
     pub xy: PoseNet,
     /// (cos θ, sin θ), unnormalised.
     pub angle: PoseNet,
+    /// The two backbones on the project's CPU kernels (on the Flex device, unless
+    /// `EVALHARNESS_POLICY_KERNELS=burn`), with the imported policies' same-bits products.
+    cpu: Option<[CpuResNet18; 2]>,
     device: Device,
 }
 
 impl GpcPose {
     /// Wraps two predictors on `device`.
     pub fn new(xy: PoseNet, angle: PoseNet, device: &Device) -> Self {
-        Self { xy, angle, device: device.clone() }
+        let burn_only = std::env::var(POLICY_KERNELS_ENV).is_ok_and(|v| v.trim() == "burn");
+        let products = Products::or_env(Products::Chain);
+        let cpu = (*device == Device::flex() && !burn_only)
+            .then(|| {
+                let both = CpuResNet18::folded(&xy.resnet, products)
+                    .and_then(|a| Ok([a, CpuResNet18::folded(&angle.resnet, products)?]));
+                both.inspect_err(|e| tracing::warn!("the reward predictors keep burn's backbone: {e}"))
+            })
+            .and_then(Result::ok);
+        Self { xy, angle, cpu, device: device.clone() }
+    }
+
+    /// `net`'s output for `x` (`[n, 3, s, s]` in [0, 1]), its backbone on `cpu` where given.
+    fn predict(&self, net: &PoseNet, cpu: Option<&CpuResNet18>, x: Tensor<4>) -> Vec<f32> {
+        let v = |t: Tensor<2>| t.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+        let values = |x: &Tensor<4>| x.clone().into_data().convert::<f32>().try_into_vec::<f32>().ok();
+        match cpu.zip(values(&x)) {
+            Some((cpu, xs)) => {
+                let [n, _, h, w] = x.dims();
+                let (f, c) = cpu.pooled(&xs, n, (h, w));
+                v(net.head(Tensor::from_data(TensorData::new(f, [n, c]), &self.device)))
+            }
+            None => v(net.forward(x)),
+        }
     }
 
     /// Block poses `[x, y, θ]` (θ = atan2(sin, cos) in [0, 2π)) of `frames`, each
     /// `s × s × 3` bytes.
     pub fn poses(&self, frames: &[&[u8]], s: usize) -> Vec<[f64; 3]> {
         let x = nn::frames::frames_to_tensor(frames, s, &self.device) * 0.5 + 0.5; // [n, 3, s, s] in [0, 1]
-        let v = |t: Tensor<2>| t.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
-        let (xy, cs) = (v(self.xy.forward(x.clone())), v(self.angle.forward(x)));
+        let [cpu_xy, cpu_angle] = self.cpu.as_ref().map_or([None, None], |[a, b]| [Some(a), Some(b)]);
+        let (xy, cs) = (self.predict(&self.xy, cpu_xy, x.clone()), self.predict(&self.angle, cpu_angle, x));
         xy.chunks_exact(2)
             .zip(cs.chunks_exact(2))
             .map(|(p, c)| {

@@ -1,5 +1,5 @@
-//! The imported policies' ResNet-18 frame encoder ([`ResNet18Gn`]) on the project's CPU
-//! kernels: every convolution one im2col matrix product over a group of images, GroupNorm and
+//! The imported policies' ResNet-18 frame encoder ([`ResNet18Gn`]), and the reward predictors'
+//! ([`ResNet18`]), on the project's CPU kernels: every convolution one im2col matrix product over a group of images, GroupNorm and
 //! ReLU fused after it, the 3×3 max-pool and the residual sums in plain loops.
 //!
 //! Why: once the imported U-Net ran on [`crate::cpu_unet`], burn-flex's convolutions of the
@@ -12,12 +12,14 @@
 //! Inside, maps are `[c, n, h, w]` (channel-major, then image); the interface takes and
 //! returns burn's `[n, c, h, w]`.
 
-use burn::nn::PaddingConfig2d;
+use burn::nn::conv::Conv2d;
+use burn::nn::{GroupNorm, PaddingConfig2d};
 use kernels::direct_conv::Norm;
 use kernels::matrix::{Conv2dShape, group_norm_cols};
 use nn::weights::{UnsupportedLayer, bias_values, norm_of, values};
 
 use crate::cpu_unet::Products;
+use crate::resnet::{self, ResNet18};
 use crate::resnet_gn::{BlockGn, ConvNorm, ResNet18Gn};
 
 /// Images encoded together: their im2col columns (at most 64 × 9 rows × 16 · 24² columns at
@@ -39,7 +41,11 @@ struct ConvGn {
 
 impl ConvGn {
     fn new(c: &ConvNorm, layer: &str) -> Result<Self, UnsupportedLayer> {
-        let conv = &c.conv;
+        Self::of(&c.conv, c.norm.as_ref(), layer)
+    }
+
+    /// `conv`, then `norm` where there is one.
+    fn of(conv: &Conv2d, norm: Option<&GroupNorm>, layer: &str) -> Result<Self, UnsupportedLayer> {
         let [k, kw] = conv.kernel_size;
         let [s, sw] = conv.stride;
         let p = k / 2;
@@ -58,7 +64,7 @@ impl ConvGn {
             shape: Conv2dShape { k, stride: s, pad: p },
             w: values(wt, layer)?,
             b: bias_values(&conv.bias, cout, layer)?,
-            norm: c.norm.as_ref().map(|n| norm_of(n, layer)).transpose()?,
+            norm: norm.map(|n| norm_of(n, layer)).transpose()?,
         })
     }
 
@@ -108,6 +114,15 @@ impl Block {
         })
     }
 
+    /// A block of [`ResNet18`] (its BatchNorms folded into the convolutions).
+    fn folded(b: &resnet::Block, layer: &str) -> Result<Self, UnsupportedLayer> {
+        Ok(Self {
+            c1: ConvGn::of(&b.conv1, None, &format!("{layer}.conv1"))?,
+            c2: ConvGn::of(&b.conv2, None, &format!("{layer}.conv2"))?,
+            down: b.down.as_ref().map(|d| ConvGn::of(d, None, &format!("{layer}.down"))).transpose()?,
+        })
+    }
+
     fn forward(&self, pr: Products, x: &[f32], (n, h, w): (usize, usize, usize)) -> (Vec<f32>, usize, usize) {
         let (a, ho, wo) = self.c1.forward(pr, x, (n, h, w), true);
         let (mut y, _, _) = self.c2.forward(pr, &a, (n, ho, wo), false);
@@ -135,6 +150,27 @@ impl CpuResNet18 {
     pub fn new(r: &ResNet18Gn, products: Products) -> Result<Self, UnsupportedLayer> {
         let blocks = r.blocks.iter().enumerate().map(|(i, b)| Block::new(b, &format!("blocks.{i}")));
         Ok(Self { stem: ConvGn::new(&r.stem, "stem")?, blocks: blocks.collect::<Result<_, _>>()?, products })
+    }
+
+    /// Copies the weights of torchvision's ResNet-18 with its BatchNorms folded ([`ResNet18`],
+    /// GPC's reward predictors).
+    ///
+    /// # Errors
+    /// As [`Self::new`].
+    pub fn folded(r: &ResNet18, products: Products) -> Result<Self, UnsupportedLayer> {
+        let blocks = r.blocks.iter().enumerate().map(|(i, b)| Block::folded(b, &format!("blocks.{i}")));
+        let stem = ConvGn::of(&r.stem, None, "stem")?;
+        Ok(Self { stem, blocks: blocks.collect::<Result<_, _>>()?, products })
+    }
+
+    /// The global average pool of [`Self::features`] ([`ResNet18Gn::forward`], [`ResNet18::forward`]).
+    ///
+    /// # Shapes
+    /// `x: [n, 3, h, w]` in [0, 1] → `[n, c]`
+    pub fn pooled(&self, x: &[f32], n: usize, (h, w): (usize, usize)) -> (Vec<f32>, usize) {
+        let (f, [c, fh, fw]) = self.features(x, n, (h, w));
+        let area = (fh * fw).max(1);
+        (f.chunks(area).map(|plane| plane.iter().sum::<f32>() / area as f32).collect(), c)
     }
 
     /// The last map, before the pool ([`ResNet18Gn::features`]).
@@ -216,6 +252,23 @@ mod tests {
         // columns 1..4 → 7; (1, 0) rows 1..4, columns 0..2 → 13; (1, 1) → 15.
         let x: Vec<f32> = (0..16).map(|v| v as f32).collect();
         assert_eq!(max_pool3s2(&x, 1, 4, 4), (vec![5.0, 7.0, 13.0, 15.0], 2, 2));
+    }
+
+    #[test]
+    fn a_folded_resnet_pools_what_burn_pools() {
+        // torchvision's layout with BatchNorms folded (GPC's reward predictors), base 8, 5 frames
+        // of 36² (maps 18, 9, 5, 3, 2, 1).
+        let device = Device::flex();
+        let net = ResNet18::new(8, &device).map(&mut Jitter);
+        let x = Tensor::<4>::random([5, 3, 36, 36], Distribution::Uniform(0.0, 1.0), &device);
+        let want: Vec<f32> = net.forward(x.clone()).into_data().try_to_vec().unwrap_or_default();
+        let xs: Vec<f32> = x.into_data().try_to_vec().unwrap_or_default();
+        let cpu = CpuResNet18::folded(&net, Products::Chain).unwrap_or_else(|e| panic!("{e}"));
+        let (got, c) = cpu.pooled(&xs, 5, (36, 36));
+        assert_eq!((got.len(), c), (want.len(), 64));
+        let scale = want.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
+        let max = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(scale > 1e-2 && max < 1e-4 * scale.max(1.0), "max difference {max} (scale {scale})");
     }
 
     #[test]
