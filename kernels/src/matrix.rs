@@ -163,13 +163,9 @@ impl Dense {
         self.forward_with(x, matmul)
     }
 
-    /// [`Self::forward`] on the same-bits products of [`crate::chain_gemm`].
-    pub fn forward_chain(&self, x: &[f32]) -> Vec<f32> {
-        self.forward_with(x, crate::chain_gemm::matmul)
-    }
-
-    /// `[n, d_in] -> [n, d_out]` with `product` (`c += a · b`, [`matmul`]'s arguments).
-    fn forward_with(&self, x: &[f32], product: Product) -> Vec<f32> {
+    /// `[n, d_in] -> [n, d_out]` with `product` (`c += a · b`, [`matmul`]'s arguments; the
+    /// policies pass `chain_gemm::matmul` for products with the same bits on every CPU).
+    pub fn forward_with(&self, x: &[f32], product: Product) -> Vec<f32> {
         let n = x.len() / self.din;
         let mut y: Vec<f32> = (0..n).flat_map(|_| self.b.iter().copied()).collect();
         product(n, self.din, self.dout, x, &self.w, &mut y, true);
@@ -178,7 +174,7 @@ impl Dense {
 }
 
 /// A matrix product with [`matmul`]'s arguments: `(m, k, n, a, b, c, accumulate)`.
-type Product = fn(usize, usize, usize, &[f32], &[f32], &mut [f32], bool);
+pub type Product = fn(usize, usize, usize, &[f32], &[f32], &mut [f32], bool);
 
 /// SiLU with the vectorisable [`exp`].
 #[inline(always)]
