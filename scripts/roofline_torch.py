@@ -96,16 +96,7 @@ class LatentUNet(nn.Module):
         self.net.out[2] = dw.FactorConv(u["model_channels"] * u["channel_mult"][0], c)
 
     def forward(self, x, actions):  # x: [b, in_ch, f, s, s]
-        n = self.net
-        emb = n.action_embed(actions)
-        skips = []
-        for blk in n.input_blocks:
-            x = blk(x, emb)
-            skips.append(x)
-        x = n.middle_block(x, emb)
-        for blk in n.output_blocks:
-            x = blk(torch.cat([x, skips.pop()], 1), emb)
-        return n.out(x)
+        return self.net.trunk(x, actions)
 
 
 class ObsEncoder(nn.Module):
