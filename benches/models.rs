@@ -1,5 +1,7 @@
 //! Model throughput benchmarks (criterion): a policy decision and a world-model
-//! chunk at batch 1 and batch 100 (`BENCH_WM_BATCHES=1,25,50,100` for others), on
+//! chunk at batch 1 and batch 100 (`BENCH_WM_BATCHES=1,25,50,100` and
+//! `BENCH_POLICY_BATCHES=1,8` for others; `BENCH_POLICY_THREADS=N` also times N decisions at
+//! once on N threads, as `rank --jobs N` decides for N batches), on
 //! the shipped checkpoints; and one chunk of
 //! the paper's pixel-space U-Net (random weights: the cost does not depend on them; or an
 //! imported model, `BENCH_PIXEL_WORLD_MODEL=DIR`).
@@ -70,11 +72,31 @@ fn policy(c: &mut Criterion) {
         .unwrap_or_else(|e| panic!("benchmark needs a policy checkpoint: {e}"));
     let mut g = c.benchmark_group("policy_decision");
     g.sample_size(10).measurement_time(Duration::from_secs(20));
-    for b in BATCHES {
+    let batches = env_batches("BENCH_POLICY_BATCHES", &BATCHES);
+    for &b in &batches {
         let obs = vec![observation(); b];
         let mut rngs: Vec<Rng> = (0..b as u64).map(Rng::new).collect();
         g.bench_with_input(BenchmarkId::from_parameter(b), &b, |bench, _| {
             bench.iter(|| black_box(p.act(&obs, &mut rngs).expect("policy acts")))
+        });
+    }
+    // N decisions at once, one per thread, each for its own batch (as `rank --jobs N` decides
+    // for N batches); an iteration ends when all are done.
+    let threads = std::env::var("BENCH_POLICY_THREADS").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
+    for &b in batches.iter().filter(|_| threads > 1) {
+        let obs = vec![observation(); b];
+        g.bench_with_input(BenchmarkId::new(format!("x{threads}_threads"), b), &b, |bench, _| {
+            bench.iter(|| {
+                std::thread::scope(|scope| {
+                    for t in 0..threads {
+                        let (p, obs) = (&p, &obs);
+                        scope.spawn(move || {
+                            let mut rngs: Vec<Rng> = (0..b as u64).map(|i| Rng::new(i + 1000 * t as u64)).collect();
+                            black_box(p.act(obs, &mut rngs).expect("policy acts"))
+                        });
+                    }
+                });
+            })
         });
     }
     g.finish();
