@@ -91,7 +91,8 @@ fn policy(c: &mut Criterion) {
                     for t in 0..threads {
                         let (p, obs) = (&p, &obs);
                         scope.spawn(move || {
-                            let mut rngs: Vec<Rng> = (0..b as u64).map(|i| Rng::new(i + 1000 * t as u64)).collect();
+                            let mut rngs: Vec<Rng> =
+                                (0..b as u64).map(|i| Rng::new(i + 1000 * t as u64)).collect();
                             black_box(p.act(obs, &mut rngs).expect("policy acts"))
                         });
                     }
