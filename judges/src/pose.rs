@@ -22,7 +22,7 @@ use nn::import::place::{place_all, shapes, transpose};
 use nn::import::tensors::Source;
 use policies::cpu_resnet::CpuResNet18;
 use policies::cpu_unet::Products;
-use policies::diffusion::POLICY_KERNELS_ENV;
+use policies::diffusion::cpu_kernels_on;
 use policies::resnet::{ConvSite, ResNet18, batch_norm_sites, fold_batch_norm};
 
 use crate::error::JudgeError;
@@ -83,9 +83,8 @@ pub struct GpcPose {
 impl GpcPose {
     /// Wraps two predictors on `device`.
     pub fn new(xy: PoseNet, angle: PoseNet, device: &Device) -> Self {
-        let burn_only = std::env::var(POLICY_KERNELS_ENV).is_ok_and(|v| v.trim() == "burn");
         let products = Products::or_env(Products::Chain);
-        let cpu = (*device == Device::flex() && !burn_only)
+        let cpu = cpu_kernels_on(device)
             .then(|| {
                 let both = CpuResNet18::folded(&xy.resnet, products)
                     .and_then(|a| Ok([a, CpuResNet18::folded(&angle.resnet, products)?]));
@@ -95,26 +94,24 @@ impl GpcPose {
         Self { xy, angle, cpu, device: device.clone() }
     }
 
-    /// `net`'s output for `x` (`[n, 3, s, s]` in [0, 1]), its backbone on `cpu` where given.
-    fn predict(&self, net: &PoseNet, cpu: Option<&CpuResNet18>, x: Tensor<4>) -> Vec<f32> {
-        let v = |t: Tensor<2>| t.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
-        let values = |x: &Tensor<4>| x.clone().into_data().convert::<f32>().try_into_vec::<f32>().ok();
-        match cpu.zip(values(&x)) {
-            Some((cpu, xs)) => {
-                let [n, _, h, w] = x.dims();
-                let (f, c) = cpu.pooled(&xs, n, (h, w));
-                v(net.head(Tensor::from_data(TensorData::new(f, [n, c]), &self.device)))
-            }
-            None => v(net.forward(x)),
-        }
-    }
-
     /// Block poses `[x, y, θ]` (θ = atan2(sin, cos) in [0, 2π)) of `frames`, each
     /// `s × s × 3` bytes.
     pub fn poses(&self, frames: &[&[u8]], s: usize) -> Vec<[f64; 3]> {
         let x = nn::frames::frames_to_tensor(frames, s, &self.device) * 0.5 + 0.5; // [n, 3, s, s] in [0, 1]
-        let [cpu_xy, cpu_angle] = self.cpu.as_ref().map_or([None, None], |[a, b]| [Some(a), Some(b)]);
-        let (xy, cs) = (self.predict(&self.xy, cpu_xy, x.clone()), self.predict(&self.angle, cpu_angle, x));
+        let v = |t: Tensor<2>| t.into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default();
+        let values = |x: &Tensor<4>| x.clone().into_data().convert::<f32>().try_into_vec::<f32>().ok();
+        let (xy, cs) = match self.cpu.as_ref().and_then(|cpu| Some((cpu, values(&x)?))) {
+            Some(([cpu_xy, cpu_angle], xs)) => {
+                // Both backbones on the CPU kernels, then each predictor's MLP on its features.
+                let [n, _, h, w] = x.dims();
+                let head = |net: &PoseNet, cpu: &CpuResNet18| {
+                    let (f, c) = cpu.pooled(&xs, n, (h, w));
+                    v(net.head(Tensor::from_data(TensorData::new(f, [n, c]), &self.device)))
+                };
+                (head(&self.xy, cpu_xy), head(&self.angle, cpu_angle))
+            }
+            None => (v(self.xy.forward(x.clone())), v(self.angle.forward(x))),
+        };
         xy.chunks_exact(2)
             .zip(cs.chunks_exact(2))
             .map(|(p, c)| {

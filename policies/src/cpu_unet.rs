@@ -18,7 +18,7 @@ use burn::nn::conv::{Conv1d, ConvTranspose1d};
 use burn::nn::{GroupNorm, Linear, PaddingConfig1d};
 
 use kernels::direct_conv::Norm;
-use kernels::matrix::{Dense, group_norm_cols};
+use kernels::matrix::{Dense, Product, group_norm_cols};
 use nn::weights::{bias_values, dense_of, norm_of, values};
 
 use crate::net::{CondRes1d, CondUnet1d, Conv1dBlock, Level1d};
@@ -55,9 +55,15 @@ impl Products {
         });
         choice.unwrap_or(default)
     }
-}
 
-impl Products {
+    /// These kernels' matrix product (`c += a · b`, [`kernels::matrix::matmul`]'s arguments).
+    fn product(self) -> Product {
+        match self {
+            Self::GemmCrate => kernels::matrix::matmul,
+            Self::Chain => kernels::chain_gemm::matmul,
+        }
+    }
+
     /// `c (+)= a · b` (`a: [m, k]`, `b: [k, n]`, `c: [m, n]`, row-major) on these kernels.
     pub(crate) fn matmul(
         self,
@@ -67,18 +73,12 @@ impl Products {
         c: &mut [f32],
         accumulate: bool,
     ) {
-        match self {
-            Self::GemmCrate => kernels::matrix::matmul(m, k, n, a, b, c, accumulate),
-            Self::Chain => kernels::chain_gemm::matmul(m, k, n, a, b, c, accumulate),
-        }
+        self.product()(m, k, n, a, b, c, accumulate);
     }
 
     /// A dense layer's `[n, d_in] -> [n, d_out]` on these kernels.
     fn dense(self, d: &Dense, x: &[f32]) -> Vec<f32> {
-        match self {
-            Self::GemmCrate => d.forward(x),
-            Self::Chain => d.forward_with(x, kernels::chain_gemm::matmul),
-        }
+        d.forward_with(x, self.product())
     }
 }
 

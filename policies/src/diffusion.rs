@@ -299,6 +299,12 @@ pub struct DiffusionPolicy {
 /// Set to `burn` to sample with burn's U-Net on the CPU too (the direct loops are the default).
 pub const POLICY_KERNELS_ENV: &str = "EVALHARNESS_POLICY_KERNELS";
 
+/// Whether networks on `device` run on the project's CPU kernels: on the Flex device, unless
+/// [`POLICY_KERNELS_ENV`] says `burn`.
+pub fn cpu_kernels_on(device: &Device) -> bool {
+    *device == Device::flex() && !std::env::var(POLICY_KERNELS_ENV).is_ok_and(|v| v.trim() == "burn")
+}
+
 impl DiffusionPolicy {
     /// Wraps trained networks; `bounds` are the task's action bounds (low, high).
     pub fn new(
@@ -310,8 +316,7 @@ impl DiffusionPolicy {
         device: &Device,
     ) -> Self {
         let ac = alphas_cumprod(cfg.train_steps);
-        let burn_only = std::env::var(POLICY_KERNELS_ENV).is_ok_and(|v| v.trim() == "burn");
-        let direct = *device == Device::flex() && !burn_only;
+        let direct = cpu_kernels_on(device);
         let cpu_unet = direct
             .then(|| {
                 CpuUnet1d::new(&net.unet, Products::or_env(Products::GemmCrate))

@@ -32,7 +32,7 @@ use harness::rng::Rng;
 
 use crate::cpu_resnet::CpuResNet18;
 use crate::cpu_unet::{CpuUnet1d, Prepared, Products};
-use crate::diffusion::{Normalisation, POLICY_KERNELS_ENV, alphas_cumprod, executed};
+use crate::diffusion::{Normalisation, alphas_cumprod, cpu_kernels_on, executed};
 use crate::net::CondUnet1d;
 use crate::resnet_gn::ResNet18Gn;
 
@@ -179,7 +179,7 @@ pub struct ImportedDiffusion {
     pub robot: Vec<(usize, usize)>,
     net: ImportedNet,
     /// The U-Net and the encoder on the project's CPU kernels (on the Flex device, unless
-    /// [`POLICY_KERNELS_ENV`] says `burn`).
+    /// [`crate::diffusion::POLICY_KERNELS_ENV`] says `burn`).
     cpu_unet: Option<CpuUnet1d>,
     cpu_encoder: Option<CpuResNet18>,
     ac: Vec<f64>,
@@ -197,8 +197,7 @@ impl ImportedDiffusion {
         device: &Device,
     ) -> Self {
         let ac = alphas_cumprod(cfg.train_steps);
-        let burn_only = std::env::var(POLICY_KERNELS_ENV).is_ok_and(|v| v.trim() == "burn");
-        let direct = *device == Device::flex() && !burn_only;
+        let direct = cpu_kernels_on(device);
         // Imported policies have no recorded rows to keep: their products are the same bits on
         // every CPU, at AVX-512 speed where the CPU has it.
         let products = Products::or_env(Products::Chain);
