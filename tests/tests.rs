@@ -4,6 +4,7 @@
 // way; the workspace's 100-line rule (`clippy::too_many_lines`) is for library and command code.
 #![allow(clippy::too_many_lines)]
 
+mod adapt;
 mod agreement;
 mod can_models;
 mod dataset;

@@ -19,6 +19,7 @@
 //!   predictors use (imported as a judge by the `judges` crate, which also builds its learned
 //!   judges on [`net`]'s frame encoder).
 
+pub mod adapt;
 pub mod cpu_encoder;
 pub mod cpu_resnet;
 pub mod cpu_unet;

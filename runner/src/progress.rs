@@ -2,7 +2,8 @@
 
 use std::io::IsTerminal;
 
-use indicatif::{ProgressBar, ProgressStyle};
+pub use indicatif::ProgressBar;
+use indicatif::ProgressStyle;
 
 /// A bar over `len` items labelled `what`.
 pub fn bar(len: u64, what: &str, quiet: bool) -> ProgressBar {

@@ -46,6 +46,7 @@ pub fn run(cli: &Cli) -> Result<ExitCode> {
                 TrainCommand::WorldModel(_) => "world-model",
                 TrainCommand::Policy(_) => "policy",
                 TrainCommand::Judge(_) => "judge",
+                TrainCommand::Adapt(_) => "adapt",
             };
             let inv = invocation(cli, crate::cli::given_on_command_line(&["train", subcommand]));
             trainers::run(t, &inv, &mut |line| outln!("{line}"))?;

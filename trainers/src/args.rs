@@ -17,6 +17,10 @@ pub enum TrainCommand {
     /// A learned judge of imagined frames: a small CNN trained on simulator frames
     /// labelled with the exact score (`rank --judge`).
     Judge(TrainJudgeArgs),
+    /// Adapts a task's models to another rendering of its frames: each frame encoder (the
+    /// policies' and the autoencoder's) distilled to read the new frames as it read the old,
+    /// on the same episodes rendered both ways; everything else copied.
+    Adapt(TrainAdaptArgs),
 }
 
 /// What a judge learns to read.
@@ -337,6 +341,43 @@ pub struct TrainAutoencoderArgs {
     /// Session control.
     #[command(flatten)]
     pub session: SessionArgs,
+}
+
+/// `evalharness train adapt`.
+#[derive(Debug, Args)]
+pub struct TrainAdaptArgs {
+    /// A task's model folder, laid out as `checkpoints/<task>`: `policies/` (diffusion
+    /// checkpoints), `autoencoder/`, and optionally `world_model/`, `judge/`, `rank.toml`.
+    #[arg(long)]
+    pub models: PathBuf,
+    /// Episodes rendered as the models were trained (`collect` with the old rendering).
+    #[arg(long)]
+    pub from: PathBuf,
+    /// The same episodes rendered the new way (`collect` with the same seeds, behaviours and
+    /// step limit, and the new scenario file's `[visual]`).
+    #[arg(long)]
+    pub to: PathBuf,
+    /// Output folder: the adapted model folder, in the same layout.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Distillation steps of each distinct policy frame encoder.
+    #[arg(long, default_value_t = 400)]
+    pub steps: u64,
+    /// Distillation steps of the autoencoder's encoder.
+    #[arg(long, default_value_t = 300)]
+    pub ae_steps: u64,
+    /// Frame pairs per step.
+    #[arg(long, default_value_t = 32, value_parser = runner::bounds::batch())]
+    pub batch: usize,
+    /// Learning rate (AdamW, constant).
+    #[arg(long, default_value_t = 2e-4)]
+    pub lr: f64,
+    /// Seed of the frame order.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Replace an existing `--out` (once the new folder is complete).
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Session control shared by the trainers.

@@ -13,6 +13,7 @@
 //! handing over what it knows of the process ([`Invocation`]); the commands' logic, their
 //! errors ([`error::TrainError`]) and their tests live beside the trainers they drive.
 
+mod adapt;
 pub mod args;
 mod autoencoder;
 mod common;
@@ -38,5 +39,6 @@ pub fn run(cmd: &args::TrainCommand, inv: &Invocation, say: &mut dyn FnMut(&str)
         args::TrainCommand::WorldModel(a) => world_model::run(a, inv, say),
         args::TrainCommand::Policy(a) => policy::run(a, inv, say),
         args::TrainCommand::Judge(a) => judge::run(a, inv, say),
+        args::TrainCommand::Adapt(a) => adapt::run(a, inv, say),
     }
 }

@@ -1,0 +1,91 @@
+//! `train adapt` on tiny models: a Lift model folder adapted to frames without
+//! multisampling or reflections, then ranked with them; inputs that do not pair up refused.
+//! Run by the Lift pipeline test (`lift_models`), on the tiny models it trains.
+
+use std::path::Path;
+
+use crate::util::{TinyArm, copy_dir, expect_code, read_json, run, s};
+
+/// Lays the tiny models out as `checkpoints/lift`, adapts them to frames without
+/// multisampling or reflections and ranks the adapted folder on such frames.
+pub fn a_model_folder_adapted_to_cheaper_frames_ranks_with_them(dir: &Path, tiny: &TinyArm) {
+    let TinyArm { data, ae, wm, judge, pol, .. } = tiny;
+    let dir = &dir.join("adapt");
+    // The model folder as `checkpoints/lift` lays it out.
+    let models = dir.join("models");
+    copy_dir(pol, &models.join("policies"));
+    copy_dir(ae, &models.join("autoencoder"));
+    copy_dir(judge, &models.join("judge"));
+    copy_dir(wm, &models.join("world_model"));
+    let cfg_path = models.join("world_model/config.json");
+    let mut cfg = read_json(&cfg_path);
+    cfg["model"]["autoencoder"] = serde_json::json!("../autoencoder");
+    std::fs::write(&cfg_path, cfg.to_string()).unwrap();
+    // The same 10 episodes (seeds, behaviours, steps) rendered the cheap way.
+    let cheap = dir.join("cheap.toml");
+    std::fs::write(&cheap, "name = \"lift\"\n\n[visual]\nsamples = 0\nreflections = false\n").unwrap();
+    let to = dir.join("cheap.zarr");
+    let collect =
+        ["collect", "--scenario", s(&cheap), "--episodes", "10", "--seed-start", "0", "--max-steps", "12"];
+    expect_code(&run(&[&collect[..], &["--out", s(&to)]].concat()), 0);
+
+    let out = dir.join("adapted");
+    let args = ["train", "adapt", "--models", s(&models), "--from", s(data), "--to", s(&to)];
+    let tiny = ["--steps", "3", "--ae-steps", "2", "--batch", "4", "--out", s(&out)];
+    let (stdout, _) = expect_code(&run(&[&args[..], &tiny[..]].concat()), 0);
+    // Both checkpoints were trained on one frozen encoder: it is distilled once.
+    assert_eq!(
+        stdout.matches("policy encoder of epoch-0001, epoch-0002: held-out feature error").count(),
+        1,
+        "{stdout}"
+    );
+    assert!(stdout.contains("autoencoder: held-out feature error on the new frames"), "{stdout}");
+    let adaptation = read_json(&out.join("adaptation.json"));
+    assert_eq!(adaptation["held_out"], "episodes with index % 10 == 9", "{adaptation}");
+    assert_eq!(adaptation["policy_encoders"]["steps"], 3);
+    assert_eq!(adaptation["autoencoder_encoder"]["steps"], 2);
+    let distilled = adaptation["distilled"].as_array().cloned().unwrap_or_default();
+    assert_eq!(distilled.len(), 2, "{adaptation}");
+    for d in &distilled {
+        // Before distillation the original encoder reads the old frames exactly.
+        assert_eq!(d["before"][0], 0.0, "{d}");
+        assert!(d["before"][1].as_f64().is_some_and(|e| e > 0.0), "the new frames differ: {d}");
+    }
+    for part in ["policies/epoch-0001", "policies/epoch-0002", "autoencoder"] {
+        assert_eq!(read_json(&out.join(part).join("adaptation.json")), adaptation, "{part}");
+    }
+    // The world model and judge are copied as they were; the world model reads the adapted
+    // autoencoder beside it.
+    for f in ["world_model/config.json", "world_model/ema.bpk", "judge/judge.json"] {
+        assert_eq!(std::fs::read(out.join(f)).unwrap(), std::fs::read(models.join(f)).unwrap(), "{f}");
+    }
+    assert_ne!(
+        std::fs::read(out.join("autoencoder/model.bpk")).unwrap(),
+        std::fs::read(models.join("autoencoder/model.bpk")).unwrap()
+    );
+
+    // The adapted folder ranks on the cheap frames.
+    let rank = dir.join("rank");
+    let (set, world, judged) = (out.join("policies"), out.join("world_model"), out.join("judge"));
+    let args = ["rank", "--scenario", s(&cheap), "--policies", s(&set)];
+    let models_of = ["--world-model", s(&world), "--judge", s(&judged)];
+    let size = ["--episodes", "1", "--max-steps", "4", "--no-report", "--out", s(&rank)];
+    expect_code(&run(&[&args[..], &models_of[..], &size[..]].concat()), 0);
+    assert_eq!(read_json(&rank.join("results.json"))["policies"].as_array().map(Vec::len), Some(2));
+
+    // Other episodes in --to, or an output over a finished one, are refused before anything runs.
+    let other = dir.join("other.zarr");
+    let collect =
+        ["collect", "--scenario", s(&cheap), "--episodes", "10", "--seed-start", "50", "--max-steps", "12"];
+    expect_code(&run(&[&collect[..], &["--out", s(&other)]].concat()), 0);
+    let out2 = dir.join("adapted2");
+    let args =
+        ["train", "adapt", "--models", s(&models), "--from", s(data), "--to", s(&other), "--out", s(&out2)];
+    let (_, stderr) = expect_code(&run(&args), 2);
+    assert!(stderr.contains("do not hold the same episodes"), "{stderr}");
+    assert!(!out2.exists());
+    let again =
+        ["train", "adapt", "--models", s(&models), "--from", s(data), "--to", s(&to), "--out", s(&out)];
+    let (_, stderr) = expect_code(&run(&again), 2);
+    assert!(stderr.contains("--force"), "{stderr}");
+}
