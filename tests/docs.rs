@@ -16,6 +16,7 @@ const PAGES: &[(&str, &[&str])] = &[
     ("train-world-model.md", &["train", "world-model"]),
     ("train-policy.md", &["train", "policy"]),
     ("train-judge.md", &["train", "judge"]),
+    ("train-adapt.md", &["train", "adapt"]),
     ("read-judge.md", &["read-judge"]),
     ("wm-eval.md", &["wm", "eval"]),
     ("wm-export.md", &["wm", "export"]),

@@ -32,7 +32,8 @@ pub struct Distil {
     pub steps: u64,
     /// Frame pairs per step (each step reads both frames of each pair).
     pub batch: usize,
-    /// Learning rate (AdamW without weight decay, constant).
+    /// Peak learning rate (AdamW without weight decay), decayed to 0 over the steps along a
+    /// half cosine, so that the last steps do not leave the student where one batch pushed it.
     pub lr: f64,
     /// Seed of the frame order.
     pub seed: u64,
@@ -156,7 +157,8 @@ pub fn distil<M: Module>(
             return Err(format!("non-finite distillation loss at step {}", step + 1));
         }
         let grads = GradientsParams::from_grads(loss.backward(), &student);
-        student = optim.step(d.lr, student, grads);
+        let lr = d.lr * 0.5 * (1.0 + (std::f64::consts::PI * step as f64 / d.steps as f64).cos());
+        student = optim.step(lr, student, grads);
         on_step(step + 1, lv);
     }
     Ok(student.valid())
@@ -222,14 +224,15 @@ mod tests {
         let (on_from, on_to) = relative_error(&teacher, &teacher, encode, &pairs, &device);
         assert_eq!(on_from, 0.0, "the teacher is its own copy on the first rendering");
         assert!(on_to > 0.01, "the rendering changes the features: {on_to}");
-        let d = Distil { steps: 120, batch: 8, lr: 3e-3, seed: 0 };
+        let d = Distil { steps: 300, batch: 8, lr: 2e-3, seed: 0 };
         let mut losses = Vec::new();
         let student = distil(&teacher, encode, &pairs, d, &device, &mut |_, l| losses.push(l)).unwrap();
-        assert_eq!(losses.len(), 120);
+        assert_eq!(losses.len(), 300);
         let (after_from, after_to) = relative_error(&student, &teacher, encode, &pairs, &device);
-        // Measured: 0.095 -> 0.031 on this seed; a student that learns nothing stays at 0.095.
-        assert!(after_to < on_to / 2.0, "distilled: {on_to} -> {after_to}");
-        assert!(after_from < on_to / 2.0, "and still reads the first rendering: {after_from}");
+        // Measured: 0.095 -> 0.0035 (and 0.0036 on the first rendering) on this seed; a student
+        // that learns nothing stays at 0.095.
+        assert!(after_to < on_to / 10.0, "distilled: {on_to} -> {after_to}");
+        assert!(after_from < on_to / 10.0, "and still reads the first rendering: {after_from}");
         // The same command distils the same student.
         let again = distil(&teacher, encode, &pairs, d, &device, &mut |_, _| {}).unwrap();
         assert_eq!(relative_error(&again, &student, encode, &pairs, &device).0, 0.0);

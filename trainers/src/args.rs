@@ -360,16 +360,17 @@ pub struct TrainAdaptArgs {
     /// Output folder: the adapted model folder, in the same layout.
     #[arg(long)]
     pub out: PathBuf,
-    /// Distillation steps of each distinct policy frame encoder.
-    #[arg(long, default_value_t = 400)]
+    /// Distillation steps of each distinct policy frame encoder (the default is what adapted
+    /// Lift's models to cheap frames, BENCHMARKS.md, 2026-12-03).
+    #[arg(long, default_value_t = 1500)]
     pub steps: u64,
     /// Distillation steps of the autoencoder's encoder.
-    #[arg(long, default_value_t = 300)]
+    #[arg(long, default_value_t = 600)]
     pub ae_steps: u64,
     /// Frame pairs per step.
     #[arg(long, default_value_t = 32, value_parser = runner::bounds::batch())]
     pub batch: usize,
-    /// Learning rate (AdamW, constant).
+    /// Peak learning rate (AdamW), decayed to 0 along a half cosine.
     #[arg(long, default_value_t = 2e-4)]
     pub lr: f64,
     /// Seed of the frame order.
