@@ -4,6 +4,14 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 
+/// `n` fixed, frame-like inputs `[n, 3, s, s]`: a deterministic pattern in [-1, 1] with edges at
+/// several scales, for telling whether two encoders encode alike.
+pub fn probe_frames(n: usize, s: usize, device: &Device) -> Tensor<4> {
+    let v: Vec<f32> =
+        (0..n * 3 * s * s).map(|i| (((i * 7919) % 251) as f32 / 125.0 - 1.0).clamp(-1.0, 1.0)).collect();
+    Tensor::from_data(TensorData::new(v, [n, 3, s, s]), device)
+}
+
 /// Byte frames (HWC) to a `[n, 3, s, s]` tensor in [-1, 1].
 pub fn frames_to_tensor(frames: &[&[u8]], s: usize, device: &Device) -> Tensor<4> {
     Tensor::from_data(TensorData::new(frames_to_vec(frames, s), [frames.len(), 3, s, s]), device)

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
-use policies::adapt::{Distil, Pairs, distil, paired, relative_error};
+use policies::adapt::{Distil, Pairs, distil, paired, relative_errors};
 use policies::data::Demos;
 use policies::diffusion::DiffusionNet;
 use policies::dir::{
@@ -89,8 +89,7 @@ fn ae_encoder(m: &Autoencoder, x: Tensor<4>) -> Tensor<2> {
 /// moving average that exported them: outputs on a fixed frame-like input within 1e-3 of the
 /// largest (a policy set trained on a frozen encoder exports it once per epoch, bits apart).
 fn same_encoder(a: &ObsEncoder, b: &ObsEncoder, size: usize, device: &Device) -> bool {
-    let v: Vec<f32> = (0..3 * size * size).map(|i| ((i * 7919) % 251) as f32 / 125.0 - 1.0).collect();
-    let x = Tensor::<4>::from_data(burn::tensor::TensorData::new(v, [1, 3, size, size]), device);
+    let x = nn::frames::probe_frames(1, size, device); // [1, 3, size, size]
     let out = |e: &ObsEncoder| {
         obs_encoder(e, x.clone()).into_data().convert::<f32>().try_into_vec::<f32>().unwrap_or_default()
     };
@@ -99,13 +98,15 @@ fn same_encoder(a: &ObsEncoder, b: &ObsEncoder, size: usize, device: &Device) ->
     ya.len() == yb.len() && ya.iter().zip(&yb).all(|(p, q)| (p - q).abs() <= 1e-3 * scale)
 }
 
-/// Copies the plain files of `from` (not its sub-folders or hidden files) into `to`.
-fn copy_files(from: &Path, to: &Path) -> Result<()> {
+/// Copies the plain files of `from` (not its sub-folders, hidden files or those named in
+/// `skip`) into `to`.
+fn copy_files(from: &Path, to: &Path, skip: &[&str]) -> Result<()> {
     std::fs::create_dir_all(to).with_context(|| format!("creating {}", to.display()))?;
     for e in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
         let p = e.with_context(|| format!("reading {}", from.display()))?.path();
-        let hidden = p.file_name().and_then(|n| n.to_str()).is_none_or(|n| n.starts_with('.'));
-        if p.is_file() && !hidden {
+        let name = p.file_name().and_then(|n| n.to_str());
+        let left_out = name.is_none_or(|n| n.starts_with('.') || skip.contains(&n));
+        if p.is_file() && !left_out {
             let dest = to.join(p.file_name().unwrap_or_default());
             std::fs::copy(&p, &dest)
                 .with_context(|| format!("copying {} to {}", p.display(), dest.display()))?;
@@ -223,8 +224,8 @@ fn distil_policies(
         let student = distil(teacher, obs_encoder, fit, d, device, &mut follow(&bar, &what))
             .map_err(|e| crate::TrainError::Refused(format!("{what}: {e}")))?;
         bar.finish_and_clear();
-        let before = relative_error(teacher, teacher, obs_encoder, check, device);
-        let after = relative_error(&student, teacher, obs_encoder, check, device);
+        let errors = relative_errors(teacher, &[teacher, &student], obs_encoder, check, device);
+        let (before, after) = (errors[0], errors[1]);
         let used_by = users.iter().map(|&i| policies::dir::checkpoint_name(&policies[i].0)).collect();
         distilled.push(Distilled { used_by, before, after });
         for &i in users {
@@ -248,8 +249,8 @@ fn distil_autoencoder(
     let student = distil(&ae, ae_encoder, fit, d, device, &mut follow(&bar, what))
         .map_err(|e| crate::TrainError::Refused(format!("{what}: {e}")))?;
     bar.finish_and_clear();
-    let before = relative_error(&ae, &ae, ae_encoder, check, device);
-    let after = relative_error(&student, &ae, ae_encoder, check, device);
+    let errors = relative_errors(&ae, &[&ae, &student], ae_encoder, check, device);
+    let (before, after) = (errors[0], errors[1]);
     Ok((student, Distilled { used_by: vec!["autoencoder".into()], before, after }))
 }
 
@@ -322,23 +323,23 @@ fn write_folder(
         let out = a.out.join("policies").join(dir.file_name().unwrap_or_default());
         let mut net = net.clone();
         net.encoder = student;
-        copy_files(dir, &out)?;
+        copy_files(dir, &out, &["policy.json", "model.bpk"])?;
         write_policy(&out, file, &net)?;
         write_json(&out.join("adaptation.json"), adaptation)?;
     }
     let ae_out = a.out.join("autoencoder");
-    copy_files(&a.models.join("autoencoder"), &ae_out)?;
-    // What described or resumed the original training, not these weights.
-    for stale in [
+    // Its config and provenance; not its weights (written below) nor what described or resumed
+    // the original training.
+    let stale = [
+        "model.bpk",
         "README.md",
         "optimizer.bpk",
         "state.json",
         "reconstructions.png",
         "train_log.jsonl",
         "sessions.jsonl",
-    ] {
-        let _ = std::fs::remove_file(ae_out.join(stale));
-    }
+    ];
+    copy_files(&a.models.join("autoencoder"), &ae_out, &stale)?;
     let weights = ae_out.join("model.bpk");
     ae.clone()
         .save_file(&weights)
@@ -346,7 +347,7 @@ fn write_folder(
     write_json(&ae_out.join("adaptation.json"), adaptation)?;
     for part in ["world_model", "judge"] {
         if a.models.join(part).is_dir() {
-            copy_files(&a.models.join(part), &a.out.join(part))?;
+            copy_files(&a.models.join(part), &a.out.join(part), &[])?;
         }
     }
     if a.models.join("rank.toml").is_file() {

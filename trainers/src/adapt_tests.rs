@@ -6,6 +6,10 @@ use policies::data::FrameLabels;
 use policies::net::NetConfig;
 use world_model::autoencoder::AutoencoderConfig;
 
+/// The tests seed the one Flex device's generator, then draw weights from it: one at a time,
+/// or a test running beside another draws weights seeded by neither.
+static DEVICE_RNG: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 fn demos(n: usize, side: usize, shift: u8) -> Demos {
     Demos {
         frames: (0..n * side * side * 3).map(|k| ((k * 13 % 180) as u8).saturating_add(shift)).collect(),
@@ -22,6 +26,7 @@ fn demos(n: usize, side: usize, shift: u8) -> Demos {
 #[test]
 fn distilling_the_autoencoders_encoder_keeps_its_decoder() {
     let device = Device::flex();
+    let _rng = DEVICE_RNG.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     device.seed(3);
     let cfg = AutoencoderConfig { image_size: 16, channels: [8, 8, 8, 8], ..AutoencoderConfig::new() };
     let ae = cfg.init(&device);
@@ -47,6 +52,7 @@ fn a_flat(t: Tensor<2>) -> Vec<f32> {
 #[test]
 fn encoders_a_rounding_apart_are_one_and_others_are_not() {
     let device = Device::flex();
+    let _rng = DEVICE_RNG.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     device.seed(5);
     let cfg = NetConfig { image_size: 16, encoder_width: 8, feature_dim: 8, ..NetConfig::new() };
     let a = ObsEncoder::new(&cfg, &device);

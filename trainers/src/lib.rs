@@ -1,6 +1,7 @@
 //! `evalharness train ...`: the four training commands (the frame autoencoder, the world
-//! model, a diffusion policy, a judge of imagined frames), from their typed arguments
-//! ([`args`]) to a finished run folder.
+//! model, a diffusion policy, a judge of imagined frames) and `train adapt` (a model folder
+//! moved to another rendering of its frames, `adapt.rs`), from their typed arguments ([`args`])
+//! to a finished run or model folder.
 //!
 //! Each command checks its flags and inputs before the output folder is touched, prepares
 //! the folder (`--resume` continues a run, `--force` replaces one only once the new run is

@@ -179,11 +179,7 @@ impl Autoencoder {
     /// weights do; a retrained encoder does not). Latents of one are then latents
     /// of the other, so a world model trained on them may decode with either.
     pub fn encodes_like(&self, other: &Autoencoder, device: &Device) -> bool {
-        let n = 2 * 3 * 32 * 32;
-        // A deterministic pattern in [-1, 1] with edges at several scales.
-        let v: Vec<f32> =
-            (0..n).map(|i| (((i * 7919) % 251) as f32 / 125.0 - 1.0).clamp(-1.0, 1.0)).collect();
-        let x = Tensor::<4>::from_data(burn::tensor::TensorData::new(v, [2, 3, 32, 32]), device); // [2, 3, 32, 32]
+        let x = nn::frames::probe_frames(2, 32, device); // [2, 3, 32, 32]
         let (a, b) = (self.encode(x.clone()).into_data(), other.encode(x).into_data());
         a.shape() == b.shape() && a.as_slice::<f32>().ok() == b.as_slice::<f32>().ok()
     }
