@@ -4,7 +4,8 @@
 Evidence, not a CI test: it needs the package index. It
 1. installs robosuite==1.5.2 and mujoco==3.17.0 into a throw-away virtual
    environment (``--venv``, default ``.robosuite/venv``, git-ignored);
-2. runs ``evalharness simulate --scenario lift|can`` for one expert and one
+2. runs ``evalharness simulate --scenario scenarios/{lift,can}_robosuite.toml``
+   (robosuite's rendering) for one expert and one
    random-action episode, stepping past success (``--no-early-stop``);
 3. starts robosuite's ``Lift`` / ``PickPlaceCan`` from the same initial state
    (the object's size, position and yaw, the arm's joints), feeds it the same
@@ -45,8 +46,11 @@ def ensure_venv(venv: Path) -> Path:
 
 
 def run_evalharness(binary: str, task: str, policy: str, seed: int, out: Path) -> None:
+    # robosuite's rendering (multisampling, reflections), not evalharness's cheaper default,
+    # so that the pictures compare like with like.
+    scenario = ROOT / "scenarios" / f"{task}_robosuite.toml"
     subprocess.run(
-        [binary, "--quiet", "simulate", "--scenario", task, "--policy", policy, "--episodes", "1",
+        [binary, "--quiet", "simulate", "--scenario", str(scenario), "--policy", policy, "--episodes", "1",
          "--seed-start", str(seed), "--max-steps", str(max(STEPS) + 1), "--no-early-stop",
          "--jobs", "1", "--force", "--out", str(out)],
         check=True,

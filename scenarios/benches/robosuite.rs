@@ -69,9 +69,9 @@ fn can(c: &mut Criterion) {
 
 /// The rendering settings the `frame` group compares, each alone, then together.
 fn settings() -> Vec<(&'static str, Visual)> {
-    let base = Visual::default();
+    let base = Visual::robosuite();
     vec![
-        ("default", base),
+        ("robosuite", base),
         ("offscreen_640x480", Visual { offscreen: [640, 480], ..base }),
         ("samples_0", Visual { samples: 0, ..base }),
         ("shadow_256", Visual { shadow_size: 256, ..base }),

@@ -38,8 +38,8 @@ pub struct LiftConfig {
     /// Control steps per episode (robomimic's rollout horizon).
     pub max_steps: usize,
     /// How agentview frames are rendered (`[visual]`; the default is what the shipped
-    /// models were trained on).
-    #[serde(skip_serializing_if = "Visual::is_default")]
+    /// models read, [`Visual::robosuite`] robosuite's own frames). Always written out, so a
+    /// dataset's or run's recorded config says which rendering made its frames.
     pub visual: Visual,
 }
 

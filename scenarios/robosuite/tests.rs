@@ -94,9 +94,9 @@ fn the_cube_weighs_what_robosuites_does_for_the_same_size() {
 #[ignore = "a measurement, printed: cargo test -p scenarios frame_cost -- --ignored --nocapture"]
 fn frame_cost_per_visual_setting() {
     use crate::robosuite::visual::Visual;
-    let base = Visual::default();
+    let base = Visual::robosuite();
     let variants = [
-        ("default", base),
+        ("robosuite", base),
         ("offscreen 640x480", Visual { offscreen: [640, 480], ..base }),
         ("samples 0", Visual { samples: 0, ..base }),
         ("samples 1", Visual { samples: 1, ..base }),
@@ -203,22 +203,41 @@ fn frames_rendered_at_84_are_upsampled_as_driftworlds_robomimic_data() {
 }
 
 #[test]
-fn the_default_offscreen_buffer_renders_the_bytes_of_robosuites() {
-    // The default buffer is the frame's size; robosuite's 640 x 480 one, which the shipped
-    // models' frames were rendered in, gives the same bytes along a moving episode of each
-    // task (the arm sweeping, the gripper opening and closing).
+fn the_shipped_robosuite_scenario_files_render_as_robosuite_and_differ_from_the_default() {
+    // scenarios/{lift,can}_robosuite.toml: the task's defaults but for robosuite's rendering.
     use crate::robosuite::visual::Visual;
-    let robosuites = Visual { offscreen: [640, 480], ..Visual::default() };
-    assert_eq!(Visual::default().offscreen, [96, 96]);
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let lift = crate::lift::LiftConfig::from_file(&dir.join("lift_robosuite.toml")).unwrap();
+    assert_eq!(lift, crate::lift::LiftConfig { visual: Visual::robosuite(), ..Default::default() });
+    let can = crate::can::CanConfig::from_file(&dir.join("can_robosuite.toml")).unwrap();
+    assert_eq!(can, crate::can::CanConfig { visual: Visual::robosuite(), ..Default::default() });
+    // The two renderings draw other bytes of the same state (multisampled edges, the floor's
+    // mirror image).
+    let action = |_k: usize| [0.0; 7];
+    let (ours, theirs) = (
+        frames_along("lift", Visual::default(), 4, 1, action).0,
+        frames_along("lift", Visual::robosuite(), 4, 1, action).0,
+    );
+    assert_ne!(ours, theirs);
+}
+
+#[test]
+fn the_default_offscreen_buffer_renders_the_bytes_of_robosuites() {
+    // The default buffer is the frame's size; robosuite's 640 x 480 one, which robomimic's
+    // frames (and the shipped models' first training data) were rendered in, gives the same
+    // bytes along a moving episode of each task (the arm sweeping, the gripper opening and
+    // closing), with robosuite's multisampling and reflections.
+    use crate::robosuite::visual::Visual;
+    let ours = Visual::robosuite();
+    let robosuites = Visual { offscreen: [640, 480], ..ours };
+    assert_eq!((ours.offscreen, Visual::default().offscreen), ([96, 96], [96, 96]));
     let action = |k: usize| {
         let s = if k % 10 < 5 { 0.5 } else { -0.5 };
         [s, -s, -0.3, 0.0, 0.0, 0.2 * s, if k % 12 < 6 { 1.0 } else { -1.0 }]
     };
     for task in ["lift", "can"] {
-        let (ours, theirs) = (
-            frames_along(task, Visual::default(), 4, 12, action).0,
-            frames_along(task, robosuites, 4, 12, action).0,
-        );
+        let (ours, theirs) =
+            (frames_along(task, ours, 4, 12, action).0, frames_along(task, robosuites, 4, 12, action).0);
         assert!(ours.windows(2).any(|w| w[0] != w[1]), "{task}: the episode should move");
         assert!(ours == theirs, "{task}: a 96 x 96 buffer renders other bytes than robosuite's 640 x 480");
     }

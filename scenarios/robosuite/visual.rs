@@ -1,11 +1,17 @@
 //! How Lift's and Can's agentview frames are rendered: the few MuJoCo `<visual>` and
 //! material settings that decide what a frame costs on a CPU rasteriser (Mesa's
-//! llvmpipe), typed so that a scenario TOML can choose a cheaper rendering.
+//! llvmpipe), typed so that a scenario TOML can choose another rendering.
 //!
-//! The default renders exactly the bytes the shipped models and judges were trained on
-//! (robosuite's arena files as they are, MuJoCo's defaults otherwise, and an offscreen
-//! buffer of the frame's size, which renders robosuite's 640 × 480 buffer's bytes), so a
-//! scenario that does not mention `[visual]` renders the same bytes as before this existed.
+//! Two renderings matter. [`Visual::robosuite`] draws robosuite's own frames (its arena
+//! files as they are, MuJoCo's 4× multisampling; an offscreen buffer of the frame's size
+//! renders the bytes of robosuite's 640 × 480 one): what robomimic's and DriftWorld's models
+//! were trained on, and what this project's Lift and Can models were first trained on.
+//! The default, [`Visual::default`], skips the multisampling and the floor's mirrored pass:
+//! a frame costs about a quarter (BENCHMARKS.md, 2026-11-29, "what a robosuite frame costs"),
+//! and the shipped Lift and Can models read it, their frame encoders adapted to it by
+//! `evalharness train adapt` (BENCHMARKS.md, 2026-12-03). A scenario file chooses robosuite's
+//! rendering with `[visual] samples = 4` and `reflections = true`
+//! (`scenarios/lift_robosuite.toml`, `scenarios/can_robosuite.toml`).
 //! Each setting is benchmarked on its own (`cargo bench -p scenarios --bench robosuite`), with the
 //! pixel difference it makes, in BENCHMARKS.md.
 
@@ -23,13 +29,14 @@ pub struct Visual {
     /// is cheaper to clear and resolve (BENCHMARKS.md, 2026-11-29, "what a robosuite frame
     /// costs": 10% of a Lift frame, 3% of a Can frame).
     pub offscreen: [u32; 2],
-    /// Multisamples per pixel of the offscreen buffer, `<quality offsamples>` (MuJoCo: 4).
+    /// Multisamples per pixel of the offscreen buffer, `<quality offsamples>` (MuJoCo and
+    /// robosuite: 4; here 0 unless set).
     pub samples: u32,
     /// The shadow map's side, `<quality shadowsize>` (MuJoCo: 4096).
     pub shadow_size: u32,
-    /// Keep the materials' reflectance (robosuite's floor reflects at 0.01); `false`
-    /// sets every arena material's reflectance to 0, which skips MuJoCo's mirrored
-    /// second pass over the scene.
+    /// Keep the materials' reflectance (robosuite's floor reflects at 0.01); `false` (here
+    /// unless set) sets every arena material's reflectance to 0, which skips MuJoCo's
+    /// mirrored second pass over the scene.
     pub reflections: bool,
     /// Render frames at this side and upsample them to the observation size with PyTorch's
     /// bilinear interpolation (`align_corners=False`, rounded to bytes), as DriftWorld's
@@ -39,16 +46,19 @@ pub struct Visual {
     pub render_size: Option<u32>,
 }
 
+/// The default: robosuite's rendering without multisampling or reflections, what the shipped
+/// Lift and Can models read.
 impl Default for Visual {
     fn default() -> Self {
-        Self { offscreen: [96, 96], samples: 4, shadow_size: 4096, reflections: true, render_size: None }
+        Self { samples: 0, reflections: false, ..Self::robosuite() }
     }
 }
 
 impl Visual {
-    /// Whether these are the defaults (a config that keeps them writes no `visual`).
-    pub fn is_default(&self) -> bool {
-        *self == Self::default()
+    /// robosuite's own rendering (MuJoCo's quality defaults, the arena's reflectance), in a
+    /// buffer of the frame's size: the bytes robosuite renders.
+    pub fn robosuite() -> Self {
+        Self { offscreen: [96, 96], samples: 4, shadow_size: 4096, reflections: true, render_size: None }
     }
 
     /// Checks ranges, for `field` of a scenario file.
@@ -115,18 +125,22 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_default_is_mujocos_and_robosuites_and_reflections_can_go() {
-        // MuJoCo's documented defaults: offsamples 4, shadowsize 4096; an offscreen buffer
-        // of the frame's size (robosuite's 640 x 480 renders the same bytes).
+    fn robosuites_rendering_is_mujocos_defaults_and_the_default_drops_samples_and_reflections() {
+        // robosuite's: MuJoCo's documented defaults (offsamples 4, shadowsize 4096, so no
+        // <quality> element) in an offscreen buffer of the frame's size (robosuite's 640 x 480
+        // renders the same bytes).
+        let r = Visual::robosuite();
+        assert_eq!(r.xml(), r#"<visual><map znear="0.001"/><global offwidth="96" offheight="96"/></visual>"#);
+        // The default: the same but for no multisampling and no reflections.
         let v = Visual::default();
-        assert_eq!(v.xml(), r#"<visual><map znear="0.001"/><global offwidth="96" offheight="96"/></visual>"#);
+        assert_eq!(v, Visual { samples: 0, reflections: false, ..r });
+        assert!(v.xml().contains(r#"<quality offsamples="0" shadowsize="4096"/>"#), "{}", v.xml());
         let cheap = Visual { samples: 0, shadow_size: 256, ..v };
         assert!(cheap.xml().contains(r#"<quality offsamples="0" shadowsize="256"/>"#), "{}", cheap.xml());
         let xml = r#"<material name="floor" reflectance="0.01"/><material name="legs" reflectance="0.8" shininess="0.8"/>"#;
-        assert_eq!(v.arena(xml), xml);
-        let off = Visual { reflections: false, ..v };
+        assert_eq!(r.arena(xml), xml);
         assert_eq!(
-            off.arena(xml),
+            v.arena(xml),
             r#"<material name="floor" reflectance="0"/><material name="legs" reflectance="0" shininess="0.8"/>"#
         );
         let p = std::path::Path::new("s.toml");
@@ -138,10 +152,14 @@ mod tests {
                 .contains("visual.offscreen")
         );
         v.validate(p).unwrap();
+        r.validate(p).unwrap();
         let small = Visual { render_size: Some(8), ..v };
         assert!(small.validate(p).unwrap_err().to_string().contains("visual.render_size"));
-        // The default is not written out: configs from before the setting read the same.
+        // Written out, the rendering says what it is; an absent render size is not written,
+        // and a `[visual]` section fills what it leaves out from the default.
         let text = toml::to_string(&v).unwrap();
-        assert!(!text.contains("render_size"), "{text}");
+        assert!(!text.contains("render_size") && text.contains("samples = 0"), "{text}");
+        let partial: Visual = toml::from_str("render_size = 84").unwrap();
+        assert_eq!(partial, Visual { render_size: Some(84), ..v });
     }
 }

@@ -217,6 +217,13 @@ pub struct Recipe {
     /// The version that wrote the dataset.
     #[serde(default)]
     pub evalharness_version: Option<String>,
+    /// The scenario's parameters the dataset was made with, as it records them
+    /// (`scenario_config`; for Lift and Can it includes how frames were rendered). Where they
+    /// are not the task's shipped ones, the command's `--scenario NAME` stands for a scenario
+    /// file holding them. Absent for a merge (each input's recipe has its own) and for a
+    /// dataset that does not record them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scenario_config: Option<Value>,
 }
 
 /// A value as JSON writes it (`null` when absent): the numbers of a recipe's command
@@ -239,6 +246,7 @@ impl DatasetAttrs {
                 ),
                 checkpoints: None,
                 evalharness_version: version,
+                scenario_config: None,
             };
         }
         let episodes = episodes.unwrap_or(self.episodes.len() as u64);
@@ -255,6 +263,7 @@ impl DatasetAttrs {
                 inputs: None,
                 checkpoints: None,
                 evalharness_version: version,
+                scenario_config: self.scenario_config.clone(),
             };
         }
         if let Some(policy) = &self.source.policy {
@@ -267,6 +276,7 @@ impl DatasetAttrs {
                 inputs: None,
                 checkpoints: self.source.checkpoints.clone(),
                 evalharness_version: version,
+                scenario_config: self.scenario_config.clone(),
             };
         }
         Recipe {
@@ -279,6 +289,7 @@ impl DatasetAttrs {
             inputs: None,
             checkpoints: None,
             evalharness_version: version,
+            scenario_config: self.scenario_config.clone(),
         }
     }
 
@@ -345,6 +356,13 @@ mod tests {
             lift.recipe(None).command,
             "evalharness collect --scenario lift --episodes 1 --seed-start 5 --mix expert=1 --noise 0.0 --lag 0 --max-steps 150 --no-early-stop"
         );
+        assert_eq!(lift.recipe(None).scenario_config, None);
+        // A dataset that records its scenario's parameters (how its frames were rendered)
+        // passes them on, so that `--scenario lift` is not mistaken for the shipped rendering.
+        let visual = json!({"visual": {"samples": 4, "reflections": true}});
+        let mut with = lift.clone();
+        with.scenario_config = Some(visual.clone());
+        assert_eq!(with.recipe(None).scenario_config, Some(visual));
         let lift_pol =
             attrs(json!({"scenario": "lift", "seed_start": 7, "policy": "p", "checkpoints": [entry("p")],
                                     "max_steps": 9, "episodes": [{}], "version": "0.1.0"}));
