@@ -1,13 +1,14 @@
-//! `train adapt` on tiny models: a Lift model folder adapted to frames without
-//! multisampling or reflections, then ranked with them; inputs that do not pair up refused.
+//! `train adapt` on tiny models: a Lift model folder adapted to frames of a coarser shadow map
+//! (another rendering, cheaper still than the default), then ranked with them; inputs that do
+//! not pair up refused.
 //! Run by the Lift pipeline test (`lift_models`), on the tiny models it trains.
 
 use std::path::Path;
 
 use crate::util::{TinyArm, copy_dir, expect_code, read_json, run, s};
 
-/// Lays the tiny models out as `checkpoints/lift`, adapts them to frames without
-/// multisampling or reflections and ranks the adapted folder on such frames.
+/// Lays the tiny models out as `checkpoints/lift`, adapts them to frames with a 256-pixel
+/// shadow map and ranks the adapted folder on such frames.
 pub fn a_model_folder_adapted_to_cheaper_frames_ranks_with_them(dir: &Path, tiny: &TinyArm) {
     let TinyArm { data, ae, wm, judge, pol, .. } = tiny;
     let dir = &dir.join("adapt");
@@ -21,9 +22,9 @@ pub fn a_model_folder_adapted_to_cheaper_frames_ranks_with_them(dir: &Path, tiny
     let mut cfg = read_json(&cfg_path);
     cfg["model"]["autoencoder"] = serde_json::json!("../autoencoder");
     std::fs::write(&cfg_path, cfg.to_string()).unwrap();
-    // The same 10 episodes (seeds, behaviours, steps) rendered the cheap way.
+    // The same 10 episodes (seeds, behaviours, steps) rendered another way.
     let cheap = dir.join("cheap.toml");
-    std::fs::write(&cheap, "name = \"lift\"\n\n[visual]\nsamples = 0\nreflections = false\n").unwrap();
+    std::fs::write(&cheap, "name = \"lift\"\n\n[visual]\nshadow_size = 256\n").unwrap();
     let to = dir.join("cheap.zarr");
     let collect =
         ["collect", "--scenario", s(&cheap), "--episodes", "10", "--seed-start", "0", "--max-steps", "12"];
