@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::ScenarioError;
 use crate::robosuite::read_named_toml;
-use crate::robosuite::visual::Visual;
+use crate::robosuite::visual::{Visual, VisualPatch};
 
 /// Everything that defines a Can episode except the seed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -35,9 +35,10 @@ pub struct CanConfig {
     pub release_distance: f64,
     /// Control steps per episode (robomimic's rollout horizon).
     pub max_steps: usize,
-    /// How agentview frames are rendered (`[visual]`; the default is what the shipped
-    /// models read, [`Visual::robosuite`] robosuite's own frames). Always written out, so a
+    /// How agentview frames are rendered. The default is Can's: [`Visual::robosuite`], which its shipped models read; a
+    /// scenario file's `[visual]` replaces the settings it names. Always written out, so a
     /// dataset's or run's recorded config says which rendering made its frames.
+    #[serde(deserialize_with = "can_visual")]
     pub visual: Visual,
 }
 
@@ -53,9 +54,14 @@ impl Default for CanConfig {
             init_noise: 0.02,
             release_distance: 0.4f64.atanh() / 10.0,
             max_steps: 400,
-            visual: Visual::default(),
+            visual: Visual::robosuite(),
         }
     }
+}
+
+/// A `[visual]` section over Can's default rendering.
+fn can_visual<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Visual, D::Error> {
+    Ok(VisualPatch::deserialize(d)?.over(Visual::robosuite()))
 }
 
 impl CanConfig {

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::ScenarioError;
 use crate::robosuite::read_named_toml;
-use crate::robosuite::visual::Visual;
+use crate::robosuite::visual::{Visual, VisualPatch};
 
 /// Everything that defines a Lift episode except the seed.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -37,9 +37,10 @@ pub struct LiftConfig {
     pub success_height: f64,
     /// Control steps per episode (robomimic's rollout horizon).
     pub max_steps: usize,
-    /// How agentview frames are rendered (`[visual]`; the default is what the shipped
-    /// models read, [`Visual::robosuite`] robosuite's own frames). Always written out, so a
+    /// How agentview frames are rendered. The default is Lift's: [`Visual::cheap`], which its shipped models read (adapted to it by `train adapt`); a
+    /// scenario file's `[visual]` replaces the settings it names. Always written out, so a
     /// dataset's or run's recorded config says which rendering made its frames.
+    #[serde(deserialize_with = "lift_visual")]
     pub visual: Visual,
 }
 
@@ -57,9 +58,14 @@ impl Default for LiftConfig {
             init_noise: 0.02,
             success_height: 0.04,
             max_steps: 400,
-            visual: Visual::default(),
+            visual: Visual::cheap(),
         }
     }
+}
+
+/// A `[visual]` section over Lift's default rendering.
+fn lift_visual<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Visual, D::Error> {
+    Ok(VisualPatch::deserialize(d)?.over(Visual::cheap()))
 }
 
 impl LiftConfig {

@@ -14,7 +14,7 @@ use crate::lift::sim::{LiftInit, LiftSim, lift_model};
 fn lift_scene() -> MjModel {
     let dir = assets_dir().expect("robosuite assets (scripts/setup.sh)");
     let mut b =
-        SceneBuilder::table_arena(&dir, &Table::LIFT, &crate::robosuite::visual::Visual::default()).unwrap();
+        SceneBuilder::table_arena(&dir, &Table::LIFT, &crate::robosuite::visual::Visual::cheap()).unwrap();
     // Lift: base at (-0.16 - 0.8 / 2, 0, 0) raised by the mount's 0.912 m.
     b.panda([-0.56, 0.0, 0.912]).unwrap();
     b.compile("lift").unwrap()
@@ -176,7 +176,7 @@ fn frames_rendered_at_84_are_upsampled_as_driftworlds_robomimic_data() {
     // robomimic's 84² frames. The same state rendered at 84 by a default scene and upsampled
     // gives the same bytes; a direct 96² render differs.
     use crate::robosuite::visual::Visual;
-    let at84 = Visual { render_size: Some(84), ..Visual::default() };
+    let at84 = Visual { render_size: Some(84), ..Visual::cheap() };
     let sim =
         crate::lift::LiftSim::new(crate::lift::LiftConfig { visual: at84, ..Default::default() }).unwrap();
     let plain = crate::lift::LiftSim::new(crate::lift::LiftConfig::default()).unwrap();
@@ -203,19 +203,35 @@ fn frames_rendered_at_84_are_upsampled_as_driftworlds_robomimic_data() {
 }
 
 #[test]
-fn the_shipped_robosuite_scenario_files_render_as_robosuite_and_differ_from_the_default() {
-    // scenarios/{lift,can}_robosuite.toml: the task's defaults but for robosuite's rendering.
+fn the_shipped_robosuite_scenario_files_render_as_robosuite_and_differ_from_lifts_default() {
+    // scenarios/{lift,can}_robosuite.toml: the task's defaults but for robosuite's rendering,
+    // which is Can's default and not Lift's.
     use crate::robosuite::visual::Visual;
+    assert_eq!(crate::lift::LiftConfig::default().visual, Visual::cheap());
+    assert_eq!(crate::can::CanConfig::default().visual, Visual::robosuite());
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let lift = crate::lift::LiftConfig::from_file(&dir.join("lift_robosuite.toml")).unwrap();
     assert_eq!(lift, crate::lift::LiftConfig { visual: Visual::robosuite(), ..Default::default() });
     let can = crate::can::CanConfig::from_file(&dir.join("can_robosuite.toml")).unwrap();
     assert_eq!(can, crate::can::CanConfig { visual: Visual::robosuite(), ..Default::default() });
+    // A file naming one setting keeps its task's default for the others.
+    let tmp = tempfile::tempdir().unwrap();
+    for (name, base) in [("lift", Visual::cheap()), ("can", Visual::robosuite())] {
+        let file = tmp.path().join(format!("{name}.toml"));
+        std::fs::write(&file, format!("name = \"{name}\"\n[visual]\nrender_size = 84\n")).unwrap();
+        let want = Visual { render_size: Some(84), ..base };
+        let got = if name == "lift" {
+            crate::lift::LiftConfig::from_file(&file).unwrap().visual
+        } else {
+            crate::can::CanConfig::from_file(&file).unwrap().visual
+        };
+        assert_eq!(got, want, "{name}");
+    }
     // The two renderings draw other bytes of the same state (multisampled edges, the floor's
     // mirror image).
     let action = |_k: usize| [0.0; 7];
     let (ours, theirs) = (
-        frames_along("lift", Visual::default(), 4, 1, action).0,
+        frames_along("lift", Visual::cheap(), 4, 1, action).0,
         frames_along("lift", Visual::robosuite(), 4, 1, action).0,
     );
     assert_ne!(ours, theirs);
@@ -230,7 +246,7 @@ fn the_default_offscreen_buffer_renders_the_bytes_of_robosuites() {
     use crate::robosuite::visual::Visual;
     let ours = Visual::robosuite();
     let robosuites = Visual { offscreen: [640, 480], ..ours };
-    assert_eq!((ours.offscreen, Visual::default().offscreen), ([96, 96], [96, 96]));
+    assert_eq!((ours.offscreen, Visual::cheap().offscreen), ([96, 96], [96, 96]));
     let action = |k: usize| {
         let s = if k % 10 < 5 { 0.5 } else { -0.5 };
         [s, -s, -0.3, 0.0, 0.0, 0.2 * s, if k % 12 < 6 { 1.0 } else { -1.0 }]

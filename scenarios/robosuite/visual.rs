@@ -6,22 +6,25 @@
 //! files as they are, MuJoCo's 4× multisampling; an offscreen buffer of the frame's size
 //! renders the bytes of robosuite's 640 × 480 one): what robomimic's and DriftWorld's models
 //! were trained on, and what this project's Lift and Can models were first trained on.
-//! The default, [`Visual::default`], skips the multisampling and the floor's mirrored pass:
-//! a frame costs about a quarter (BENCHMARKS.md, 2026-11-29, "what a robosuite frame costs"),
-//! and the shipped Lift and Can models read it, their frame encoders adapted to it by
-//! `evalharness train adapt` (BENCHMARKS.md, 2026-12-03). A scenario file chooses robosuite's
-//! rendering with `[visual] samples = 4` and `reflections = true`
-//! (`scenarios/lift_robosuite.toml`, `scenarios/can_robosuite.toml`).
-//! Each setting is benchmarked on its own (`cargo bench -p scenarios --bench robosuite`), with the
-//! pixel difference it makes, in BENCHMARKS.md.
+//! [`Visual::cheap`] skips the multisampling and the floor's mirrored pass: a frame costs about
+//! a quarter (BENCHMARKS.md, 2026-11-29, "what a robosuite frame costs").
+//!
+//! Each task renders by default what its shipped models read: Lift the cheap rendering (its
+//! models' frame encoders adapted to it by `evalharness train adapt`, BENCHMARKS.md,
+//! 2026-12-03), Can robosuite's (its adaptation did not keep its policies' MuJoCo success). A
+//! scenario file's `[visual]` ([`VisualPatch`]) changes the settings it names and keeps the
+//! task's default for the others. Each setting is benchmarked on its own
+//! (`cargo bench -p scenarios --bench robosuite`), with the pixel difference it makes, in
+//! BENCHMARKS.md.
 
 use serde::{Deserialize, Serialize};
 
 use crate::error::ScenarioError;
 
-/// The rendering settings of an arm scene.
+/// The rendering settings of an arm scene (every one written out; a scenario file gives a
+/// [`VisualPatch`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[serde(deny_unknown_fields)]
 pub struct Visual {
     /// The offscreen buffer, `<global offwidth offheight>`, pixels (robosuite: 640 × 480;
     /// here 96 × 96 unless set). It must hold the rendered frame; a frame renders into its
@@ -30,35 +33,63 @@ pub struct Visual {
     /// costs": 10% of a Lift frame, 3% of a Can frame).
     pub offscreen: [u32; 2],
     /// Multisamples per pixel of the offscreen buffer, `<quality offsamples>` (MuJoCo and
-    /// robosuite: 4; here 0 unless set).
+    /// robosuite: 4; llvmpipe renders 1 and 2 as 4).
     pub samples: u32,
     /// The shadow map's side, `<quality shadowsize>` (MuJoCo: 4096).
     pub shadow_size: u32,
-    /// Keep the materials' reflectance (robosuite's floor reflects at 0.01); `false` (here
-    /// unless set) sets every arena material's reflectance to 0, which skips MuJoCo's
-    /// mirrored second pass over the scene.
+    /// Keep the materials' reflectance (robosuite's floor reflects at 0.01); `false` sets
+    /// every arena material's reflectance to 0, which skips MuJoCo's mirrored second pass
+    /// over the scene.
     pub reflections: bool,
     /// Render frames at this side and upsample them to the observation size with PyTorch's
     /// bilinear interpolation (`align_corners=False`, rounded to bytes), as DriftWorld's
     /// robomimic data brought robomimic's 84² frames to 96² (`render_size = 84`). Absent: render
     /// at the observation size.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub render_size: Option<u32>,
 }
 
-/// The default: robosuite's rendering without multisampling or reflections, what the shipped
-/// Lift and Can models read.
-impl Default for Visual {
-    fn default() -> Self {
-        Self { samples: 0, reflections: false, ..Self::robosuite() }
+/// A scenario file's `[visual]`: the settings it names, each replacing the task's default
+/// ([`VisualPatch::over`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VisualPatch {
+    /// [`Visual::offscreen`].
+    pub offscreen: Option<[u32; 2]>,
+    /// [`Visual::samples`].
+    pub samples: Option<u32>,
+    /// [`Visual::shadow_size`].
+    pub shadow_size: Option<u32>,
+    /// [`Visual::reflections`].
+    pub reflections: Option<bool>,
+    /// [`Visual::render_size`].
+    pub render_size: Option<u32>,
+}
+
+impl VisualPatch {
+    /// `base` with the settings this names replaced.
+    pub fn over(self, base: Visual) -> Visual {
+        Visual {
+            offscreen: self.offscreen.unwrap_or(base.offscreen),
+            samples: self.samples.unwrap_or(base.samples),
+            shadow_size: self.shadow_size.unwrap_or(base.shadow_size),
+            reflections: self.reflections.unwrap_or(base.reflections),
+            render_size: self.render_size.or(base.render_size),
+        }
     }
 }
 
 impl Visual {
     /// robosuite's own rendering (MuJoCo's quality defaults, the arena's reflectance), in a
-    /// buffer of the frame's size: the bytes robosuite renders.
+    /// buffer of the frame's size: the bytes robosuite renders. Can's default.
     pub fn robosuite() -> Self {
         Self { offscreen: [96, 96], samples: 4, shadow_size: 4096, reflections: true, render_size: None }
+    }
+
+    /// robosuite's rendering without multisampling or reflections, about a quarter of its cost
+    /// on a CPU renderer. Lift's default.
+    pub fn cheap() -> Self {
+        Self { samples: 0, reflections: false, ..Self::robosuite() }
     }
 
     /// Checks ranges, for `field` of a scenario file.
@@ -125,18 +156,18 @@ mod tests {
     use super::*;
 
     #[test]
-    fn robosuites_rendering_is_mujocos_defaults_and_the_default_drops_samples_and_reflections() {
+    fn robosuites_rendering_is_mujocos_defaults_and_the_cheap_one_drops_samples_and_reflections() {
         // robosuite's: MuJoCo's documented defaults (offsamples 4, shadowsize 4096, so no
         // <quality> element) in an offscreen buffer of the frame's size (robosuite's 640 x 480
         // renders the same bytes).
         let r = Visual::robosuite();
         assert_eq!(r.xml(), r#"<visual><map znear="0.001"/><global offwidth="96" offheight="96"/></visual>"#);
-        // The default: the same but for no multisampling and no reflections.
-        let v = Visual::default();
+        // The cheap one: the same but for no multisampling and no reflections.
+        let v = Visual::cheap();
         assert_eq!(v, Visual { samples: 0, reflections: false, ..r });
         assert!(v.xml().contains(r#"<quality offsamples="0" shadowsize="4096"/>"#), "{}", v.xml());
-        let cheap = Visual { samples: 0, shadow_size: 256, ..v };
-        assert!(cheap.xml().contains(r#"<quality offsamples="0" shadowsize="256"/>"#), "{}", cheap.xml());
+        let coarse = Visual { shadow_size: 256, ..v };
+        assert!(coarse.xml().contains(r#"<quality offsamples="0" shadowsize="256"/>"#), "{}", coarse.xml());
         let xml = r#"<material name="floor" reflectance="0.01"/><material name="legs" reflectance="0.8" shininess="0.8"/>"#;
         assert_eq!(r.arena(xml), xml);
         assert_eq!(
@@ -155,11 +186,23 @@ mod tests {
         r.validate(p).unwrap();
         let small = Visual { render_size: Some(8), ..v };
         assert!(small.validate(p).unwrap_err().to_string().contains("visual.render_size"));
-        // Written out, the rendering says what it is; an absent render size is not written,
-        // and a `[visual]` section fills what it leaves out from the default.
+        // Written out, a rendering says what it is (an absent render size is not written) and
+        // reads back the same.
         let text = toml::to_string(&v).unwrap();
         assert!(!text.contains("render_size") && text.contains("samples = 0"), "{text}");
-        let partial: Visual = toml::from_str("render_size = 84").unwrap();
-        assert_eq!(partial, Visual { render_size: Some(84), ..v });
+        assert_eq!(toml::from_str::<Visual>(&text).unwrap(), v);
+    }
+
+    #[test]
+    fn a_scenario_files_visual_replaces_only_the_settings_it_names() {
+        // `render_size = 84` over each task's default keeps that default's other settings.
+        let patch: VisualPatch = toml::from_str("render_size = 84").unwrap();
+        assert_eq!(patch.over(Visual::cheap()), Visual { render_size: Some(84), ..Visual::cheap() });
+        assert_eq!(patch.over(Visual::robosuite()), Visual { render_size: Some(84), ..Visual::robosuite() });
+        let patch: VisualPatch = toml::from_str("samples = 4\nreflections = true").unwrap();
+        assert_eq!(patch.over(Visual::cheap()), Visual::robosuite());
+        assert_eq!(VisualPatch::default().over(Visual::cheap()), Visual::cheap());
+        let err = toml::from_str::<VisualPatch>("sample = 4").unwrap_err().to_string();
+        assert!(err.contains("sample"), "{err}");
     }
 }
