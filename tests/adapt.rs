@@ -1,5 +1,5 @@
-//! `train adapt` on tiny models: a Lift model folder adapted to frames of a coarser shadow map
-//! (another rendering, cheaper still than the default), then ranked with them; inputs that do
+//! `train adapt` on tiny models: a Lift model folder adapted to frames with the floor's
+//! reflections (another rendering than Lift's default), then ranked with them; inputs that do
 //! not pair up refused.
 //! Run by the Lift pipeline test (`lift_models`), on the tiny models it trains.
 
@@ -7,9 +7,10 @@ use std::path::Path;
 
 use crate::util::{TinyArm, copy_dir, expect_code, read_json, run, s};
 
-/// Lays the tiny models out as `checkpoints/lift`, adapts them to frames with a 256-pixel
-/// shadow map and ranks the adapted folder on such frames.
-pub fn a_model_folder_adapted_to_cheaper_frames_ranks_with_them(dir: &Path, tiny: &TinyArm) {
+/// Lays the tiny models out as `checkpoints/lift`, adapts them to frames with reflections
+/// and ranks the adapted folder on such frames. (A smaller shadow map would not do: Lift's
+/// light casts no shadow, so it renders the same bytes.)
+pub fn a_model_folder_adapted_to_another_rendering_ranks_with_it(dir: &Path, tiny: &TinyArm) {
     let TinyArm { data, ae, wm, judge, pol, .. } = tiny;
     let dir = &dir.join("adapt");
     // The model folder as `checkpoints/lift` lays it out.
@@ -23,11 +24,11 @@ pub fn a_model_folder_adapted_to_cheaper_frames_ranks_with_them(dir: &Path, tiny
     cfg["model"]["autoencoder"] = serde_json::json!("../autoencoder");
     std::fs::write(&cfg_path, cfg.to_string()).unwrap();
     // The same 10 episodes (seeds, behaviours, steps) rendered another way.
-    let cheap = dir.join("cheap.toml");
-    std::fs::write(&cheap, "name = \"lift\"\n\n[visual]\nshadow_size = 256\n").unwrap();
-    let to = dir.join("cheap.zarr");
+    let scene = dir.join("reflecting.toml");
+    std::fs::write(&scene, "name = \"lift\"\n\n[visual]\nreflections = true\n").unwrap();
+    let to = dir.join("reflecting.zarr");
     let collect =
-        ["collect", "--scenario", s(&cheap), "--episodes", "10", "--seed-start", "0", "--max-steps", "12"];
+        ["collect", "--scenario", s(&scene), "--episodes", "10", "--seed-start", "0", "--max-steps", "12"];
     expect_code(&run(&[&collect[..], &["--out", s(&to)]].concat()), 0);
 
     let out = dir.join("adapted");
@@ -65,10 +66,10 @@ pub fn a_model_folder_adapted_to_cheaper_frames_ranks_with_them(dir: &Path, tiny
         std::fs::read(models.join("autoencoder/model.bpk")).unwrap()
     );
 
-    // The adapted folder ranks on the cheap frames.
+    // The adapted folder ranks on the frames it was adapted to.
     let rank = dir.join("rank");
     let (set, world, judged) = (out.join("policies"), out.join("world_model"), out.join("judge"));
-    let args = ["rank", "--scenario", s(&cheap), "--policies", s(&set)];
+    let args = ["rank", "--scenario", s(&scene), "--policies", s(&set)];
     let models_of = ["--world-model", s(&world), "--judge", s(&judged)];
     let size = ["--episodes", "1", "--max-steps", "4", "--no-report", "--out", s(&rank)];
     expect_code(&run(&[&args[..], &models_of[..], &size[..]].concat()), 0);
@@ -77,7 +78,7 @@ pub fn a_model_folder_adapted_to_cheaper_frames_ranks_with_them(dir: &Path, tiny
     // Other episodes in --to, or an output over a finished one, are refused before anything runs.
     let other = dir.join("other.zarr");
     let collect =
-        ["collect", "--scenario", s(&cheap), "--episodes", "10", "--seed-start", "50", "--max-steps", "12"];
+        ["collect", "--scenario", s(&scene), "--episodes", "10", "--seed-start", "50", "--max-steps", "12"];
     expect_code(&run(&[&collect[..], &["--out", s(&other)]].concat()), 0);
     let out2 = dir.join("adapted2");
     let args =

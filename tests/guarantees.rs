@@ -203,7 +203,8 @@ fn a_changed_scene_file_or_an_incomplete_merge_is_refused() {
     let mut grow = args.clone();
     grow.push("--resume");
     let (_, err) = expect_code(&run(&grow), 2);
-    assert!(err.contains("content of scenario changed"), "{err}");
+    // The file's bytes and the parameters they load as both changed; both are named.
+    assert!(err.contains("content of scenario, scenario parameters changed"), "{err}");
     // D11: merge accepted shards with a batch missing.
     let (a, b) = (tmp.path().join("s0"), tmp.path().join("s1"));
     for (i, d) in [(0, &a), (1, &b)] {

@@ -338,6 +338,16 @@ fn rank_filmstrips_show_the_runs_own_episodes_when_resumed_or_sharded_too() {
     let (_, err) = expect_code(&run(&[&args[..], &more[..], &["--out", s(&first)]].concat()), 1);
     assert!(!err.contains("replaying"), "{err}");
     assert!(!first.join("filmstrip-frames").exists(), "the kept frames are removed");
+    // The run records Lift's parameters as it loaded them, its default rendering (no
+    // multisampling, no reflections) among them, and their fingerprint, which a resume compares.
+    let cfg = read_json(&first.join("config.json"));
+    let visual = &cfg["scenario_parameters"]["visual"];
+    assert_eq!(
+        (visual["samples"].as_u64(), visual["reflections"].as_bool()),
+        (Some(0), Some(false)),
+        "{cfg}"
+    );
+    assert!(cfg["fingerprints"]["scenario parameters"].as_str().is_some_and(|f| f.starts_with("sha256:")));
     crate::util::copy_dir(&first, &resumed);
     std::fs::remove_dir_all(resumed.join("filmstrips")).unwrap();
     let (_, err) =

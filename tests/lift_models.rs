@@ -10,7 +10,7 @@ fn the_lift_pipeline_collects_trains_every_model_and_ranks() {
     let dir = tmp.path();
     // 10 short episodes (every 10th is held out): no behaviour lifts the cube in 12 steps.
     let tiny = tiny_arm_models(dir, "lift");
-    crate::adapt::a_model_folder_adapted_to_cheaper_frames_ranks_with_them(dir, &tiny);
+    crate::adapt::a_model_folder_adapted_to_another_rendering_ranks_with_it(dir, &tiny);
     let TinyArm { data, ae, wm, judge, pol, judge_stdout } = tiny;
     // The model reads the task's 7 actions, each in robomimic's [-1, 1].
     let model = &read_json(&wm.join("config.json"))["model"];

@@ -48,6 +48,13 @@ pub fn file(path: &Path) -> Result<String, FingerprintError> {
     Ok(hex(h))
 }
 
+/// `sha256:<hex>` of `bytes`.
+pub fn bytes(bytes: &[u8]) -> String {
+    let mut h = Sha256::new();
+    h.update(bytes);
+    hex(h)
+}
+
 /// Hashes the rest of the open file `f` (at `path`, for errors) into `h`.
 fn feed(h: &mut Sha256, f: &mut fs::File, path: &Path) -> Result<(), FingerprintError> {
     let mut buf = vec![0u8; 1 << 16];

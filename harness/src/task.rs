@@ -124,6 +124,13 @@ pub trait Task: Send + Sync {
     fn simulator(&self) -> &'static str {
         "MuJoCo"
     }
+    /// The task's parameters as loaded (its shipped ones or a scenario file's; for Lift and
+    /// Can they include how frames are rendered), for a run's `config.json` and the
+    /// fingerprint `--resume` and `merge` compare: a run is never continued on another scene,
+    /// even one given by the same name. `None` for a task without recorded parameters.
+    fn parameters(&self) -> Option<serde_json::Value> {
+        None
+    }
     /// The episode of `seed`, reset (a pure function of the seed).
     ///
     /// # Errors

@@ -71,8 +71,14 @@ pub(crate) fn run_with(
     let device = nn::device::selected()?;
     let (wm, judge) = load_models(a, r, task.as_ref(), &device)?;
     let dirs = checkpoint_dirs(&r.policies)?;
-    let fingerprints =
-        runner::inputs::fingerprints(Some((&r.world_model, &wm)), &dirs, r.judge.as_deref(), &a.scenario)?;
+    let parameters = task.parameters();
+    let fingerprints = runner::inputs::fingerprints(
+        Some((&r.world_model, &wm)),
+        &dirs,
+        r.judge.as_deref(),
+        &a.scenario,
+        parameters.as_ref(),
+    )?;
     // Each checkpoint too: one linked into --policies lies elsewhere on disk.
     let listed = runner::output::Inputs::new()
         .scenario(&a.scenario)
@@ -82,7 +88,8 @@ pub(crate) fn run_with(
         .maybe("--judge", r.judge.as_deref());
     let (out_dir, jsonl) = prepare_run(&a.out, &listed, a.resume, a.force)?;
     let command = caller.invocation.command_line.join(" ");
-    let config = rank_config(a, r, command, (&wm, judge.as_ref()), (&dirs, fingerprints), (shard, shards));
+    let config =
+        rank_config(a, r, command, (&wm, judge.as_ref()), (&dirs, fingerprints), (shard, shards), parameters);
     let config_file = a.out.join("config.json");
     if a.resume {
         runner::resume::check(&config_file, &config)?;
@@ -198,8 +205,8 @@ fn load_models(
     Ok((wm, judge))
 }
 
-/// The run's `config.json`: its resolved settings, the checkpoints and every input's
-/// fingerprint, and the judge's settings when one was given.
+/// The run's `config.json`: its resolved settings and the task's parameters, the checkpoints
+/// and every input's fingerprint, and the judge's settings when one was given.
 fn rank_config(
     a: &RankArgs,
     r: &Resolved,
@@ -207,10 +214,12 @@ fn rank_config(
     (wm, judge): (&world_model::model::WorldModel, Option<&judges::folder::FrameJudge>),
     (dirs, fingerprints): (&[std::path::PathBuf], std::collections::BTreeMap<String, String>),
     (shard, shards): (usize, usize),
+    scenario_parameters: Option<serde_json::Value>,
 ) -> runner::RankConfig {
     runner::RankConfig {
         command,
         scenario: a.scenario.clone(),
+        scenario_parameters,
         policies: r.policies.clone(),
         world_model: r.world_model.clone(),
         world_model_config: wm.cfg.clone(),

@@ -26,6 +26,11 @@ pub struct RankConfig {
     pub command: String,
     /// `--scenario`: a task's name or a scenario file.
     pub scenario: String,
+    /// The task's parameters as the run loaded them (for Lift and Can, how frames were
+    /// rendered; [`harness::task::Task::parameters`]); absent in folders written before it
+    /// was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scenario_parameters: Option<serde_json::Value>,
     /// `--policies`: the folder of checkpoints (or one checkpoint).
     pub policies: PathBuf,
     /// `--world-model`: its folder.
@@ -185,7 +190,7 @@ macro_rules! named {
 impl RunSettings for RankConfig {
     const KIND: &'static str = "rank";
     fn settings(&self) -> Vec<(&'static str, String)> {
-        named!(self: scenario, policies, world_model, world_model_config, episodes, seed_start,
+        named!(self: scenario, scenario_parameters, policies, world_model, world_model_config, episodes, seed_start,
             max_steps, batch, seed, bootstrap, shard, checkpoints, fingerprints, judge,
             judge_every_frame, float_frames, merged_from)
     }
@@ -272,6 +277,7 @@ pub(crate) mod tests {
         RankConfig {
             command: "evalharness rank".into(),
             scenario: "pusht".into(),
+            scenario_parameters: None,
             policies: "set".into(),
             world_model: "wm".into(),
             world_model_config: wm,

@@ -81,7 +81,10 @@ pub fn load_judge(dir: &Path, task: &dyn Task, device: &Device) -> Result<FrameJ
 /// The content fingerprints of everything a run reads, by the names `config.json`
 /// records them under: the world model (when the run uses one) and its autoencoder
 /// (`world_model`, `autoencoder`), every policy checkpoint (`policy NAME`), the learned
-/// judge (`judge`), and the scenario file (`scenario`; none for a task given by name).
+/// judge (`judge`), the scenario file (`scenario`; none for a task given by name) and the
+/// task's parameters as loaded (`scenario parameters`, [`harness::task::Task::parameters`]:
+/// a task given by name renders and simulates as the binary's defaults say, which a later
+/// version may change).
 ///
 /// # Errors
 /// [`RunError::Fingerprint`]: a folder or file that cannot be read, naming it.
@@ -90,6 +93,7 @@ pub fn fingerprints(
     policies: &[PathBuf],
     judge: Option<&Path>,
     scenario: &str,
+    parameters: Option<&serde_json::Value>,
 ) -> Result<BTreeMap<String, String>, RunError> {
     let mut out = BTreeMap::new();
     if let Some((wm_dir, wm)) = wm {
@@ -106,6 +110,9 @@ pub fn fingerprints(
     }
     if let Some(sha) = scenario_file(scenario)? {
         out.insert("scenario".to_string(), sha);
+    }
+    if let Some(p) = parameters {
+        out.insert("scenario parameters".to_string(), harness::fingerprint::bytes(p.to_string().as_bytes()));
     }
     Ok(out)
 }
@@ -135,9 +142,18 @@ mod tests {
         // Everything else a run reads is named as config.json records it.
         let policy = dir.path().join("epoch-0007");
         std::fs::create_dir_all(&policy).unwrap();
-        let all = fingerprints(None, std::slice::from_ref(&policy), Some(dir.path()), file.to_str().unwrap());
+        let all =
+            fingerprints(None, std::slice::from_ref(&policy), Some(dir.path()), file.to_str().unwrap(), None);
         let names: Vec<String> = all.unwrap().into_keys().collect();
         assert_eq!(names, ["judge", "policy epoch-0007", "scenario"]);
+        // A task's parameters, given by name or by file, are fingerprinted as loaded: two
+        // renderings of the same named task differ.
+        let lift = |samples: u32| serde_json::json!({"visual": {"samples": samples}});
+        let print = |p: &serde_json::Value| fingerprints(None, &[], None, "lift", Some(p)).unwrap();
+        let (a, b) = (print(&lift(0)), print(&lift(4)));
+        assert_eq!(a.keys().collect::<Vec<_>>(), ["scenario parameters"]);
+        assert_ne!(a, b);
+        assert_eq!(a, print(&lift(0)));
     }
 
     #[test]

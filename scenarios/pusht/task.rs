@@ -62,6 +62,10 @@ impl Task for PushTTask {
         "pusht"
     }
 
+    fn parameters(&self) -> Option<serde_json::Value> {
+        serde_json::to_value(&self.cfg).ok()
+    }
+
     fn pose_labels(&self) -> Option<PoseColumns> {
         // `collect`'s state columns: agent x, y; block x, y, θ; goal x, y, θ.
         Some(PoseColumns { object: [2, 3, 4], goal: [5, 6, 7] })

@@ -101,6 +101,10 @@ impl Task for ReachTask {
         "simulator"
     }
 
+    fn parameters(&self) -> Option<serde_json::Value> {
+        serde_json::to_value(&self.cfg).ok()
+    }
+
     fn name(&self) -> &str {
         "reach"
     }

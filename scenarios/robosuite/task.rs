@@ -89,6 +89,10 @@ impl<S: ArmScene> Task for RobosuiteTask<S> {
         self.sim.name()
     }
 
+    fn parameters(&self) -> Option<serde_json::Value> {
+        Some(self.sim.config_json())
+    }
+
     fn action_spec(&self) -> ActionSpec {
         ActionSpec { dim: 7, low: vec![-1.0; 7], high: vec![1.0; 7], kind: ActionKind::Delta }
     }

@@ -247,6 +247,7 @@ pub fn run(a: &PlanArgs, quiet: bool) -> Result<ExitCode> {
         std::slice::from_ref(&a.policy),
         a.judge.as_deref(),
         &a.scenario,
+        task.parameters().as_ref(),
     )?;
     let mut listed = crate::output::Inputs::new().scenario(&a.scenario).add("--policy", &a.policy);
     if let Some(dir) = &a.judge {
