@@ -72,8 +72,22 @@ pub fn a_model_folder_adapted_to_another_rendering_ranks_with_it(dir: &Path, tin
     let args = ["rank", "--scenario", s(&scene), "--policies", s(&set)];
     let models_of = ["--world-model", s(&world), "--judge", s(&judged)];
     let size = ["--episodes", "1", "--max-steps", "4", "--no-report", "--out", s(&rank)];
-    expect_code(&run(&[&args[..], &models_of[..], &size[..]].concat()), 0);
+    let (_, err) = expect_code(&run(&[&args[..], &models_of[..], &size[..]].concat()), 0);
     assert_eq!(read_json(&rank.join("results.json"))["policies"].as_array().map(Vec::len), Some(2));
+    assert!(!err.contains("learned on frames of other scene parameters"), "{err}");
+    // The folder before adaptation, on these frames: each policy and the autoencoder are
+    // named, with the parameter that differs (their data was rendered Lift's default way).
+    let (old_set, old_world, rank0) =
+        (models.join("policies"), models.join("world_model"), dir.join("rank0"));
+    let unadapted = ["rank", "--scenario", s(&scene), "--policies", s(&old_set)];
+    let models_of = ["--world-model", s(&old_world), "--judge", s(&judged)];
+    let size = ["--episodes", "1", "--max-steps", "4", "--no-report", "--out", s(&rank0)];
+    let (_, err) = expect_code(&run(&[&unadapted[..], &models_of[..], &size[..]].concat()), 0);
+    let said = "learned on frames of other scene parameters than this run's (visual)";
+    assert_eq!(err.matches(said).count(), 3, "{err}");
+    for name in ["policy epoch-0001 learned", "policy epoch-0002 learned", "autoencoder "] {
+        assert!(err.contains(name), "{name}: {err}");
+    }
 
     // Other episodes in --to, or an output over a finished one, are refused before anything runs.
     let other = dir.join("other.zarr");

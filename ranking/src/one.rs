@@ -72,6 +72,14 @@ pub(crate) fn run_with(
     let (wm, judge) = load_models(a, r, task.as_ref(), &device)?;
     let dirs = checkpoint_dirs(&r.policies)?;
     let parameters = task.parameters();
+    // A policy or autoencoder that learned on frames of another scene (a changed rendering)
+    // is named on stderr before the run.
+    if let Some(now) = &parameters {
+        let ae = wm.cfg.autoencoder.as_ref().map(|a| r.world_model.join(a));
+        for line in runner::frames_seen::mismatches(now, &dirs, ae.as_deref()) {
+            tracing::warn!("{line}");
+        }
+    }
     let fingerprints = runner::inputs::fingerprints(
         Some((&r.world_model, &wm)),
         &dirs,

@@ -10,7 +10,8 @@
 //! processes of one run share out as they go ([`claims`]); and the report's filmstrips,
 //! from the frames a run keeps or replays ([`media`]), and its report ([`report`]); and
 //! the batches one process of a run runs, appended as they finish ([`batches`]), and the
-//! models a run reads, loaded, checked and fingerprinted ([`inputs`]); and what a bare
+//! models a run reads, loaded, checked and fingerprinted ([`inputs`]), and whether they learned on
+//! frames of the scene the run renders ([`frames_seen`]); and what a bare
 //! `rank --scenario NAME` runs, from the task's shipped folder and `rank.toml` ([`defaults`]);
 //! and what the command crates share around their errors and output ([`command`]);
 //! and `agreement`'s metrics of any predictor's scores from a CSV ([`agreement`]);
@@ -32,6 +33,7 @@ pub mod config;
 pub mod defaults;
 pub mod error;
 pub mod filmstrips;
+pub mod frames_seen;
 pub mod inputs;
 pub mod media;
 pub mod merge;
