@@ -28,7 +28,8 @@ pub struct RankConfig {
     pub scenario: String,
     /// The task's parameters as the run loaded them (for Lift and Can, how frames were
     /// rendered; [`harness::task::Task::parameters`]); absent in folders written before it
-    /// was recorded.
+    /// was recorded. A record: `--resume` and `merge` compare them by their fingerprint
+    /// (`fingerprints["scenario parameters"]`), as they do every input.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scenario_parameters: Option<serde_json::Value>,
     /// `--policies`: the folder of checkpoints (or one checkpoint).
@@ -190,7 +191,7 @@ macro_rules! named {
 impl RunSettings for RankConfig {
     const KIND: &'static str = "rank";
     fn settings(&self) -> Vec<(&'static str, String)> {
-        named!(self: scenario, scenario_parameters, policies, world_model, world_model_config, episodes, seed_start,
+        named!(self: scenario, policies, world_model, world_model_config, episodes, seed_start,
             max_steps, batch, seed, bootstrap, shard, checkpoints, fingerprints, judge,
             judge_every_frame, float_frames, merged_from)
     }

@@ -26,8 +26,7 @@ struct AdaptedTo {
 /// The scene parameters recorded in `dir/adaptation.json`'s `to`, if the folder was adapted
 /// and they were recorded.
 fn adapted(dir: &Path) -> Option<Value> {
-    let text = std::fs::read_to_string(dir.join("adaptation.json")).ok()?;
-    let a: AdaptedTo = serde_json::from_str(&text).ok()?;
+    let a: AdaptedTo = harness::provenance::read(&dir.join("adaptation.json")).ok()?;
     a.to.collected_with?.scenario_config
 }
 
@@ -42,8 +41,7 @@ fn policy_scene(dir: &Path) -> Option<Value> {
 /// The scene parameters an autoencoder folder's frames came from, where recorded.
 fn autoencoder_scene(dir: &Path) -> Option<Value> {
     adapted(dir).or_else(|| {
-        let text = std::fs::read_to_string(dir.join("provenance.json")).ok()?;
-        let p: AutoencoderProvenance = serde_json::from_str(&text).ok()?;
+        let p: AutoencoderProvenance = harness::provenance::read(&dir.join("provenance.json")).ok()?;
         p.data.collected_with?.scenario_config
     })
 }

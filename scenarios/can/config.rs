@@ -35,9 +35,10 @@ pub struct CanConfig {
     pub release_distance: f64,
     /// Control steps per episode (robomimic's rollout horizon).
     pub max_steps: usize,
-    /// How agentview frames are rendered. The default is Can's: [`Visual::robosuite`], which its shipped models read; a
-    /// scenario file's `[visual]` replaces the settings it names. Always written out, so a
-    /// dataset's or run's recorded config says which rendering made its frames.
+    /// How agentview frames are rendered. The default is Can's, [`Visual::robosuite`], which its
+    /// shipped models read; a scenario file's `[visual]` replaces the settings it names. Always
+    /// written out, so a dataset's or run's recorded config says which rendering made its
+    /// frames.
     #[serde(deserialize_with = "can_visual")]
     pub visual: Visual,
 }

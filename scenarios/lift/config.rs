@@ -37,9 +37,10 @@ pub struct LiftConfig {
     pub success_height: f64,
     /// Control steps per episode (robomimic's rollout horizon).
     pub max_steps: usize,
-    /// How agentview frames are rendered. The default is Lift's: [`Visual::cheap`], which its shipped models read (adapted to it by `train adapt`); a
-    /// scenario file's `[visual]` replaces the settings it names. Always written out, so a
-    /// dataset's or run's recorded config says which rendering made its frames.
+    /// How agentview frames are rendered. The default is Lift's, [`Visual::cheap`], which its
+    /// shipped models read (adapted to it by `train adapt`); a scenario file's `[visual]`
+    /// replaces the settings it names. Always written out, so a dataset's or run's recorded
+    /// config says which rendering made its frames.
     #[serde(deserialize_with = "lift_visual")]
     pub visual: Visual,
 }
