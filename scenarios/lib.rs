@@ -76,6 +76,16 @@ pub fn load_task(spec: &str) -> Result<Box<dyn Task>, ScenarioError> {
     (task.load)(Some(path))
 }
 
+/// A dataset's or recipe's recorded configuration of the task named `scenario`, as that task
+/// writes one today ([`Task::recorded_parameters`]): what two records are compared as. An
+/// unknown task's record as it is.
+pub fn recorded_config(scenario: &str, config: &serde_json::Value) -> serde_json::Value {
+    match TASKS.iter().find(|t| t.name == scenario).and_then(|t| (t.load)(None).ok()) {
+        Some(task) => task.recorded_parameters(config),
+        None => config.clone(),
+    }
+}
+
 /// The `name` a scenario file gives itself, if it parses and has one.
 fn file_names(path: &Path) -> Result<Option<String>, ScenarioError> {
     let text =

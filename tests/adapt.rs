@@ -42,6 +42,11 @@ pub fn a_model_folder_adapted_to_another_rendering_ranks_with_it(dir: &Path, tin
         "{stdout}"
     );
     assert!(stdout.contains("autoencoder: held-out feature error on the new frames"), "{stdout}");
+    assert!(
+        stdout
+            .contains("policy encoder of epoch-0001, epoch-0002: held-out decision error on the new frames"),
+        "{stdout}"
+    );
     let adaptation = read_json(&out.join("adaptation.json"));
     assert_eq!(adaptation["held_out"], "episodes with index % 10 == 9", "{adaptation}");
     assert_eq!(adaptation["policy_encoders"]["steps"], 3);
@@ -53,6 +58,12 @@ pub fn a_model_folder_adapted_to_another_rendering_ranks_with_it(dir: &Path, tin
         assert_eq!(d["before"][0], 0.0, "{d}");
         assert!(d["before"][1].as_f64().is_some_and(|e| e > 0.0), "the new frames differ: {d}");
     }
+    // The policies' decisions are measured too (the autoencoder has none): the original
+    // encoder decides as itself on the old frames, otherwise on the new.
+    assert_eq!(distilled[0]["decisions"][0][0], 0.0, "{adaptation}");
+    assert!(distilled[0]["decisions"][0][1].as_f64().is_some_and(|e| e > 0.0), "{adaptation}");
+    assert!(distilled[0]["decisions"][1][1].as_f64().is_some_and(f64::is_finite), "{adaptation}");
+    assert!(distilled[1].get("decisions").is_none(), "{adaptation}");
     for part in ["policies/epoch-0001", "policies/epoch-0002", "autoencoder"] {
         assert_eq!(read_json(&out.join(part).join("adaptation.json")), adaptation, "{part}");
     }

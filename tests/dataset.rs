@@ -211,3 +211,42 @@ fn a_gpc_data_folder_opens_as_one_dataset_and_evaluates_as_the_original() {
     assert_eq!(from_src["frames"], from_folder["frames"]);
     assert_eq!(from_src["psnr"], from_folder["psnr"], "{from_src} vs {from_folder}");
 }
+
+/// A Lift or Can dataset collected before 2026-12-03 left its rendering out of
+/// `scenario_config` when it was the default, which was then robosuite's: it merges with data
+/// rendered robosuite's way (and the merged dataset writes that rendering out), not with data
+/// rendered another way.
+#[test]
+fn an_older_dataset_merges_as_the_rendering_it_was_made_with() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let cheap = dir.path().join("can_cheap.toml");
+    std::fs::write(&cheap, "name = \"can\"\n[visual]\nsamples = 0\nreflections = false\n").unwrap();
+    let robosuite = root.join("scenarios/can_robosuite.toml");
+    let collect = |scene: &std::path::Path, seed: &str, out: &std::path::Path| {
+        let args =
+            ["collect", "--scenario", scene.to_str().unwrap(), "--episodes", "1", "--seed-start", seed];
+        expect_code(&run(&[&args[..], &["--max-steps", "2", "--out", out.to_str().unwrap()]].concat()), 0);
+    };
+    let (old, new, other) =
+        (dir.path().join("old.zarr"), dir.path().join("new.zarr"), dir.path().join("cheap.zarr"));
+    collect(&robosuite, "0", &old);
+    collect(&robosuite, "1", &new);
+    collect(&cheap, "2", &other);
+    // `old` as written before 2026-12-03: the same, without `visual`.
+    let attrs = old.join(".zattrs");
+    let mut a = read_json(&attrs);
+    let visual = a["evalharness"]["scenario_config"]["visual"].clone();
+    assert_eq!(visual["samples"], 4, "{a}");
+    a["evalharness"]["scenario_config"].as_object_mut().unwrap().remove("visual");
+    std::fs::write(&attrs, a.to_string()).unwrap();
+    let merged = dir.path().join("merged.zarr");
+    let m = merged.to_str().unwrap();
+    expect_code(&run(&["dataset", "merge", old.to_str().unwrap(), new.to_str().unwrap(), "--out", m]), 0);
+    assert_eq!(read_json(&merged.join(".zattrs"))["evalharness"]["scenario_config"]["visual"], visual);
+    let (_, err) = expect_code(
+        &run(&["dataset", "merge", old.to_str().unwrap(), other.to_str().unwrap(), "--out", m]),
+        2,
+    );
+    assert!(err.contains("scenario_config differs"), "{err}");
+}

@@ -131,6 +131,13 @@ pub trait Task: Send + Sync {
     fn parameters(&self) -> Option<serde_json::Value> {
         None
     }
+    /// A recorded configuration of this task (a dataset's `scenario_config`, a training-data
+    /// recipe's) as [`Task::parameters`] writes one today, for comparing the two: a record
+    /// written by an older evalharness may leave implicit what was then a default (Lift's and
+    /// Can's rendering, before 2026-12-03). The record itself by default.
+    fn recorded_parameters(&self, recorded: &serde_json::Value) -> serde_json::Value {
+        recorded.clone()
+    }
     /// The episode of `seed`, reset (a pure function of the seed).
     ///
     /// # Errors

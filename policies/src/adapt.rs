@@ -53,14 +53,14 @@ pub struct Pairs<'a> {
 impl Pairs<'_> {
     /// Frames `idx` of `from`, then the same steps of `to`: `[2 n, 3, s, s]` values in
     /// [-1, 1], converted once for every device they go to.
-    fn values(&self, idx: &[usize]) -> Vec<f32> {
+    pub(crate) fn values(&self, idx: &[usize]) -> Vec<f32> {
         let frames: Vec<&[u8]> =
             idx.iter().map(|&i| self.from.frame(i)).chain(idx.iter().map(|&i| self.to.frame(i))).collect();
         frames_to_vec(&frames, self.from.size)
     }
 
     /// `values` (or its first `n` frames) as a `[n, 3, s, s]` tensor on `device`.
-    fn tensor(&self, values: &[f32], n: usize, device: &Device) -> Tensor<4> {
+    pub(crate) fn tensor(&self, values: &[f32], n: usize, device: &Device) -> Tensor<4> {
         let s = self.from.size;
         Tensor::from_data(TensorData::new(values[..n * 3 * s * s].to_vec(), [n, 3, s, s]), device)
     }

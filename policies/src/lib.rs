@@ -20,6 +20,7 @@
 //!   judges on [`net`]'s frame encoder).
 
 pub mod adapt;
+pub mod adapt_decision;
 pub mod cpu_encoder;
 pub mod cpu_resnet;
 pub mod cpu_unet;

@@ -76,7 +76,9 @@ pub(crate) fn run_with(
     // is named on stderr before the run.
     if let Some(now) = &parameters {
         let ae = wm.cfg.autoencoder.as_ref().map(|a| r.world_model.join(a));
-        for line in runner::frames_seen::mismatches(now, &dirs, ae.as_deref()) {
+        for line in
+            runner::frames_seen::mismatches(now, &|r| task.recorded_parameters(r), &dirs, ae.as_deref())
+        {
             tracing::warn!("{line}");
         }
     }

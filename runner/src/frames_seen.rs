@@ -63,15 +63,22 @@ fn differing(recorded: &Value, now: &Value) -> Vec<String> {
 
 /// A line for each of the run's frame readers (the policy checkpoints `policies`, the
 /// autoencoder folder `autoencoder`) whose recorded frames came from other scene parameters
-/// than `now`, the run's task's.
-pub fn mismatches(now: &Value, policies: &[std::path::PathBuf], autoencoder: Option<&Path>) -> Vec<String> {
+/// than `now`, the run's task's; `read` gives a record as the task writes one today
+/// (`Task::recorded_parameters`: an older Lift or Can record left robosuite's rendering
+/// implicit).
+pub fn mismatches(
+    now: &Value,
+    read: &dyn Fn(&Value) -> Value,
+    policies: &[std::path::PathBuf],
+    autoencoder: Option<&Path>,
+) -> Vec<String> {
     let readers = policies
         .iter()
         .map(|d| (format!("policy {}", policies::dir::checkpoint_name(d)), policy_scene(d)))
         .chain(autoencoder.map(|d| (format!("autoencoder {}", d.display()), autoencoder_scene(d))));
     readers
         .filter_map(|(name, recorded)| {
-            let keys = differing(&recorded?, now);
+            let keys = differing(&read(&recorded?), now);
             (!keys.is_empty()).then(|| {
                 format!(
                     "{name} learned on frames of other scene parameters than this run's ({}): it is \
@@ -102,6 +109,7 @@ mod tests {
     #[test]
     fn a_model_is_named_when_its_frames_came_from_another_scene() {
         let tmp = tempfile::tempdir().unwrap();
+        let as_is = |v: &Value| v.clone();
         let cheap = serde_json::json!({"max_steps": 400, "visual": {"samples": 0, "reflections": false}});
         let robosuite = serde_json::json!({"max_steps": 400, "visual": {"samples": 4, "reflections": true}});
         let (same, other, silent) =
@@ -111,13 +119,30 @@ mod tests {
         std::fs::create_dir_all(&silent).unwrap();
         let ae = tmp.path().join("ae");
         adapted_to(&ae, &robosuite);
-        let got = mismatches(&cheap, &[same.clone(), other, silent], Some(&ae));
+        let got = mismatches(&cheap, &as_is, &[same.clone(), other, silent], Some(&ae));
         // The checkpoint on robosuite's frames and the autoencoder are named with the parameter
         // that differs; the matching one and the one without a record are not.
         assert_eq!(got.len(), 2, "{got:?}");
         assert!(got[0].starts_with("policy epoch-0002 learned on frames") && got[0].contains("(visual)"));
         assert!(got[1].starts_with("autoencoder ") && got[1].contains("(visual)"), "{got:?}");
-        assert!(mismatches(&robosuite, &[same], None)[0].contains("(visual)"));
+        assert!(mismatches(&robosuite, &as_is, &[same], None)[0].contains("(visual)"));
+        // A record is read as the task reads it: Can's, written before renderings were
+        // recorded, was robosuite's rendering, so a run rendering robosuite's way does not name
+        // it (read as it is, it would be), and one rendering the cheap way does.
+        use scenarios::robosuite::visual::Visual;
+        let legacy = tmp.path().join("epoch-0004");
+        let can = scenarios::load_task("can").unwrap();
+        let read = |v: &Value| can.recorded_parameters(v);
+        let mut now = can.parameters().unwrap();
+        now["visual"] = serde_json::to_value(Visual::robosuite()).unwrap();
+        let mut written_then = now.clone();
+        written_then.as_object_mut().unwrap().remove("visual");
+        adapted_to(&legacy, &written_then);
+        assert!(mismatches(&now, &read, std::slice::from_ref(&legacy), None).is_empty());
+        assert_eq!(mismatches(&now, &as_is, std::slice::from_ref(&legacy), None).len(), 1);
+        let mut cheap_now = now.clone();
+        cheap_now["visual"] = serde_json::to_value(Visual::cheap()).unwrap();
+        assert!(mismatches(&cheap_now, &read, &[legacy], None)[0].contains("(visual)"));
         assert_eq!(differing(&Value::Null, &Value::Null), Vec::<String>::new());
         assert_eq!(differing(&Value::Null, &cheap), ["parameters"]);
     }

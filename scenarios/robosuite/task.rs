@@ -93,6 +93,10 @@ impl<S: ArmScene> Task for RobosuiteTask<S> {
         Some(self.sim.config_json())
     }
 
+    fn recorded_parameters(&self, recorded: &serde_json::Value) -> serde_json::Value {
+        crate::robosuite::visual::Visual::written_out(true, recorded)
+    }
+
     fn action_spec(&self) -> ActionSpec {
         ActionSpec { dim: 7, low: vec![-1.0; 7], high: vec![1.0; 7], kind: ActionKind::Delta }
     }

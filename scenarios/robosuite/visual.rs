@@ -86,6 +86,19 @@ impl Visual {
         Self { offscreen: [96, 96], samples: 4, shadow_size: 4096, reflections: true, render_size: None }
     }
 
+    /// A recorded configuration of a task that renders (`renders`: Lift, Can) with its rendering
+    /// written out: until 2026-12-03 (8a2407e) a configuration left `visual` out when it was
+    /// the default, and the default was then robosuite's rendering for both tasks, so such a
+    /// record (a dataset's `scenario_config`, a training-data recipe's) gets
+    /// [`Visual::robosuite`], which rendered its frames. Any other record is returned as it is.
+    pub fn written_out(renders: bool, config: &serde_json::Value) -> serde_json::Value {
+        let mut c = config.clone();
+        if let Some(map) = c.as_object_mut().filter(|m| renders && !m.contains_key("visual")) {
+            map.insert("visual".into(), serde_json::to_value(Self::robosuite()).unwrap_or_default());
+        }
+        c
+    }
+
     /// robosuite's rendering without multisampling or reflections, about a quarter of its cost
     /// on a CPU renderer. Lift's default.
     pub fn cheap() -> Self {
@@ -154,6 +167,20 @@ impl Visual {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_record_written_before_renderings_were_recorded_was_robosuites() {
+        // A Can dataset of 2026-12-02 (no `visual`: robosuite's, the default then) and one of
+        // its cheap rendering (written out, as any rendering but the default was).
+        let old = serde_json::json!({"max_steps": 400, "init_noise": 0.02});
+        let cheap = serde_json::json!({"max_steps": 400, "visual": Visual::cheap()});
+        let filled = Visual::written_out(true, &old);
+        assert_eq!(filled["visual"], serde_json::to_value(Visual::robosuite()).unwrap());
+        assert_eq!(filled["max_steps"], 400);
+        assert_eq!(Visual::written_out(true, &cheap), cheap, "a written rendering is kept");
+        assert_eq!(Visual::written_out(false, &old), old, "a task that does not render");
+        assert_eq!(Visual::written_out(true, &serde_json::Value::Null), serde_json::Value::Null);
+    }
 
     #[test]
     fn robosuites_rendering_is_mujocos_defaults_and_the_cheap_one_drops_samples_and_reflections() {

@@ -54,13 +54,21 @@ fn check_compatible(
     }
     let differs = [
         ("scenario", ea.scenario != eb.scenario),
-        ("scenario_config", ea.scenario_config != eb.scenario_config),
+        ("scenario_config", recorded_config(ea) != recorded_config(eb)),
         ("state_columns", ea.state_columns != eb.state_columns),
     ];
     if let Some((field, _)) = differs.iter().find(|(_, d)| *d) {
         refuse!("{name}: attribute evalharness.{field} differs from {}'s", first.path.display());
     }
     Ok(())
+}
+
+/// An input's task configuration with its rendering written out (a Lift or Can dataset
+/// collected before 2026-12-03 left robosuite's rendering implicit), as inputs are compared and
+/// the merged dataset records it.
+fn recorded_config(a: &DatasetAttrs) -> Option<serde_json::Value> {
+    let scenario = a.scenario.as_deref().unwrap_or_default();
+    a.scenario_config.as_ref().map(|c| scenarios::recorded_config(scenario, c))
 }
 
 /// An input's episode attributes (`e`, of the input `r`), relabelled and tagged with their
@@ -108,7 +116,7 @@ pub fn run(
     // The merged dataset describes its arrays as the first input does.
     let header = DatasetAttrs {
         scenario: first.scenario.clone(),
-        scenario_config: first.scenario_config.clone(),
+        scenario_config: recorded_config(first),
         state_columns: first.state_columns.clone(),
         action: first.action.clone(),
         coverage: first.coverage.clone(),

@@ -15,8 +15,9 @@ use std::path::{Path, PathBuf};
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 use policies::adapt::{Distil, Pairs, distil, paired, relative_errors};
+use policies::adapt_decision::{Decisions, decision_errors};
 use policies::data::Demos;
-use policies::diffusion::DiffusionNet;
+use policies::diffusion::{DiffusionConfig, DiffusionNet};
 use policies::dir::{
     PolicyFile, checkpoint_dirs, diffusion_config, diffusion_weights, read_policy_file, write_policy,
 };
@@ -47,6 +48,12 @@ pub struct Distilled {
     pub before: (f64, f64),
     /// After distillation.
     pub after: (f64, f64),
+    /// For a policy encoder: the mean squared difference of its checkpoints' noise
+    /// predictions from the original's on the old frames ([`decision_errors`]), on the
+    /// held-out steps, each rendering, before and after (absent in folders adapted before
+    /// 2026-12-03 17:00 UTC and for the autoencoder).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decisions: Option<((f64, f64), (f64, f64))>,
 }
 
 /// `adaptation.json`: how a model folder was adapted to a rendering.
@@ -115,8 +122,8 @@ fn copy_files(from: &Path, to: &Path, skip: &[&str]) -> Result<()> {
     Ok(())
 }
 
-/// A policy checkpoint: its folder, file, networks and frame side.
-type Policy = (PathBuf, PolicyFile, DiffusionNet, usize);
+/// A policy checkpoint: its folder, file, networks and configuration.
+type Policy = (PathBuf, PolicyFile, DiffusionNet, DiffusionConfig);
 
 /// The policy checkpoints of `dir`, each with its file and networks.
 fn load_policies(dir: &Path, device: &Device) -> Result<Vec<Policy>> {
@@ -132,7 +139,7 @@ fn load_policies(dir: &Path, device: &Device) -> Result<Vec<Policy>> {
         }
         let cfg = diffusion_config(&d, &file)?;
         let net = diffusion_weights(&d, &cfg, device)?;
-        out.push((d, file, net, cfg.net.image_size));
+        out.push((d, file, net, cfg));
     }
     Ok(out)
 }
@@ -200,8 +207,30 @@ fn follow<'a>(bar: &'a runner::progress::ProgressBar, what: &'a str) -> impl FnM
     }
 }
 
+/// The U-Nets of `users` among `policies` that share the first one's windows (observed steps,
+/// horizon, diffusion schedule): what a decision distillation measures decisions with.
+fn decisions<'a>(policies: &'a [Policy], users: &[usize]) -> Decisions<'a> {
+    let first = &policies[users[0]].3;
+    let same = |c: &DiffusionConfig| {
+        (c.net.obs_horizon, c.horizon, c.train_steps)
+            == (first.net.obs_horizon, first.horizon, first.train_steps)
+    };
+    Decisions {
+        policies: users
+            .iter()
+            .map(|&i| &policies[i])
+            .filter(|p| same(&p.3))
+            .map(|p| (&p.2.unet, &p.1.normalisation))
+            .collect(),
+        obs_horizon: first.net.obs_horizon,
+        horizon: first.horizon,
+        train_steps: first.train_steps,
+    }
+}
+
 /// Distils each distinct frame encoder of `policies` (checkpoints sharing one, in checkpoint
-/// order, are distilled once): the student of each checkpoint, and what each distillation did.
+/// order, are distilled once): the student of each checkpoint, and what each distillation did,
+/// in features and in the sharing checkpoints' decisions.
 fn distil_policies(
     policies: &[Policy],
     (fit, check): (&Pairs, &Pairs),
@@ -221,13 +250,16 @@ fn distil_policies(
     for (k, (teacher, users)) in encoders.iter().enumerate() {
         let what = format!("policy encoder {}/{}", k + 1, encoders.len());
         let bar = runner::progress::bar(d.steps, &what, quiet);
-        let student = distil(teacher, obs_encoder, fit, d, device, &mut follow(&bar, &what))
-            .map_err(|e| crate::TrainError::Refused(format!("{what}: {e}")))?;
+        let refused = |e: String| crate::TrainError::Refused(format!("{what}: {e}"));
+        let student =
+            distil(teacher, obs_encoder, fit, d, device, &mut follow(&bar, &what)).map_err(refused)?;
         bar.finish_and_clear();
         let errors = relative_errors(teacher, &[teacher, &student], obs_encoder, check, device);
         let (before, after) = (errors[0], errors[1]);
+        let e = decision_errors(teacher, &[teacher, &student], check, &decisions(policies, users), device);
+        let decisions = Some((e[0], e[1]));
         let used_by = users.iter().map(|&i| policies::dir::checkpoint_name(&policies[i].0)).collect();
-        distilled.push(Distilled { used_by, before, after });
+        distilled.push(Distilled { used_by, before, after, decisions });
         for &i in users {
             students[i] = Some(student.clone());
         }
@@ -251,7 +283,7 @@ fn distil_autoencoder(
     bar.finish_and_clear();
     let errors = relative_errors(&ae, &[&ae, &student], ae_encoder, check, device);
     let (before, after) = (errors[0], errors[1]);
-    Ok((student, Distilled { used_by: vec!["autoencoder".into()], before, after }))
+    Ok((student, Distilled { used_by: vec!["autoencoder".into()], before, after, decisions: None }))
 }
 
 /// `evalharness train adapt`.
@@ -261,9 +293,9 @@ pub fn run(a: &TrainAdaptArgs, inv: &Invocation, say: &mut dyn FnMut(&str)) -> R
     let out_dir = prepare_out(&a.out, false, a.force, "adaptation.json", &inputs)?;
     let device = nn::device::selected()?;
     let policies = load_policies(&a.models.join("policies"), &device)?;
-    let size = policies.first().map_or(96, |p| p.3);
-    if let Some((d, _, _, other)) = policies.iter().find(|p| p.3 != size) {
-        refuse!("--models: {} reads {other}² frames, the others {size}²", d.display());
+    let size = policies.first().map_or(96, |p| p.3.net.image_size);
+    if let Some((d, _, _, other)) = policies.iter().find(|p| p.3.net.image_size != size) {
+        refuse!("--models: {} reads {}² frames, the others {size}²", d.display(), other.net.image_size);
     }
     let (from, to, train, test) = load_pairs(a, size)?;
     let fit = Pairs { from: &from, to: &to, steps: &train };
@@ -303,6 +335,16 @@ pub fn run(a: &TrainAdaptArgs, inv: &Invocation, say: &mut dyn FnMut(&str)) -> R
             d.before.0,
             d.after.0
         );
+        if let Some((before, after)) = d.decisions {
+            say!(
+                say,
+                "{who}: held-out decision error on the new frames {:.4} -> {:.4} (on the old {:.4} -> {:.4}; squared noise-prediction difference)",
+                before.1,
+                after.1,
+                before.0,
+                after.0
+            );
+        }
     }
     say!(say, "adapted models -> {}", a.out.display());
     out_dir.finish(true)?;
