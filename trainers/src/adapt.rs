@@ -50,8 +50,8 @@ pub struct Distilled {
     pub after: (f64, f64),
     /// For a policy encoder: the mean squared difference of its checkpoints' noise
     /// predictions from the original's on the old frames ([`decision_errors`]), on the
-    /// held-out steps, each rendering, before and after (absent in folders adapted before
-    /// 2026-12-03 17:00 UTC and for the autoencoder).
+    /// held-out steps, each rendering, before and after (absent for the autoencoder and in
+    /// folders adapted by a binary before cb10675, such as the shipped Lift folder).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub decisions: Option<((f64, f64), (f64, f64))>,
 }
@@ -208,7 +208,7 @@ fn follow<'a>(bar: &'a runner::progress::ProgressBar, what: &'a str) -> impl FnM
 }
 
 /// The U-Nets of `users` among `policies` that share the first one's windows (observed steps,
-/// horizon, diffusion schedule): what a decision distillation measures decisions with.
+/// horizon, diffusion schedule): what the decision error is measured with.
 fn decisions<'a>(policies: &'a [Policy], users: &[usize]) -> Decisions<'a> {
     let first = &policies[users[0]].3;
     let same = |c: &DiffusionConfig| {
