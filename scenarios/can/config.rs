@@ -35,8 +35,8 @@ pub struct CanConfig {
     pub release_distance: f64,
     /// Control steps per episode (robomimic's rollout horizon).
     pub max_steps: usize,
-    /// How agentview frames are rendered. The default is Can's, [`Visual::robosuite`], which its
-    /// shipped models read; a scenario file's `[visual]` replaces the settings it names. Always
+    /// How agentview frames are rendered. The default is Can's, [`Visual::no_reflections`],
+    /// which its shipped models read (adapted from robosuite's rendering, 2026-12-03); a scenario file's `[visual]` replaces the settings it names. Always
     /// written out, so a dataset's or run's recorded config says which rendering made its
     /// frames.
     #[serde(deserialize_with = "can_visual")]
@@ -55,14 +55,14 @@ impl Default for CanConfig {
             init_noise: 0.02,
             release_distance: 0.4f64.atanh() / 10.0,
             max_steps: 400,
-            visual: Visual::robosuite(),
+            visual: Visual::no_reflections(),
         }
     }
 }
 
 /// A `[visual]` section over Can's default rendering.
 fn can_visual<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Visual, D::Error> {
-    Ok(VisualPatch::deserialize(d)?.over(Visual::robosuite()))
+    Ok(VisualPatch::deserialize(d)?.over(Visual::no_reflections()))
 }
 
 impl CanConfig {

@@ -205,10 +205,12 @@ fn frames_rendered_at_84_are_upsampled_as_driftworlds_robomimic_data() {
 #[test]
 fn the_shipped_robosuite_scenario_files_render_as_robosuite_and_differ_from_lifts_default() {
     // scenarios/{lift,can}_robosuite.toml: the task's defaults but for robosuite's rendering,
-    // which is Can's default and not Lift's.
+    // which is neither task's default (Lift's drops multisampling and reflections, Can's only
+    // reflections).
     use crate::robosuite::visual::Visual;
     assert_eq!(crate::lift::LiftConfig::default().visual, Visual::cheap());
-    assert_eq!(crate::can::CanConfig::default().visual, Visual::robosuite());
+    assert_eq!(crate::can::CanConfig::default().visual, Visual::no_reflections());
+    assert_eq!(Visual::no_reflections(), Visual { reflections: false, ..Visual::robosuite() });
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let lift = crate::lift::LiftConfig::from_file(&dir.join("lift_robosuite.toml")).unwrap();
     assert_eq!(lift, crate::lift::LiftConfig { visual: Visual::robosuite(), ..Default::default() });
@@ -216,7 +218,7 @@ fn the_shipped_robosuite_scenario_files_render_as_robosuite_and_differ_from_lift
     assert_eq!(can, crate::can::CanConfig { visual: Visual::robosuite(), ..Default::default() });
     // A file naming one setting keeps its task's default for the others.
     let tmp = tempfile::tempdir().unwrap();
-    for (name, base) in [("lift", Visual::cheap()), ("can", Visual::robosuite())] {
+    for (name, base) in [("lift", Visual::cheap()), ("can", Visual::no_reflections())] {
         let file = tmp.path().join(format!("{name}.toml"));
         std::fs::write(&file, format!("name = \"{name}\"\n[visual]\nrender_size = 84\n")).unwrap();
         let want = Visual { render_size: Some(84), ..base };
@@ -235,6 +237,11 @@ fn the_shipped_robosuite_scenario_files_render_as_robosuite_and_differ_from_lift
         frames_along("lift", Visual::robosuite(), 4, 1, action).0,
     );
     assert_ne!(ours, theirs);
+    let (cans, robosuites) = (
+        frames_along("can", Visual::no_reflections(), 4, 1, action).0,
+        frames_along("can", Visual::robosuite(), 4, 1, action).0,
+    );
+    assert_ne!(cans, robosuites, "Can's floor without its mirror image");
 }
 
 #[test]

@@ -8,10 +8,13 @@
 //! were trained on, and what this project's Lift and Can models were first trained on.
 //! [`Visual::cheap`] skips the multisampling and the floor's mirrored pass: a frame costs about
 //! a quarter (BENCHMARKS.md, 2026-11-29, "what a robosuite frame costs").
+//! [`Visual::no_reflections`] skips only the mirrored pass (about a third of a Can episode's
+//! cost in `collect`, BENCHMARKS.md, 2026-12-03).
 //!
-//! Each task renders by default what its shipped models read: Lift the cheap rendering (its
-//! models' frame encoders adapted to it by `evalharness train adapt`, BENCHMARKS.md,
-//! 2026-12-03), Can robosuite's (its adaptation did not keep its policies' MuJoCo success). A
+//! Each task renders by default what its shipped models read, their frame encoders adapted to it
+//! by `evalharness train adapt` (BENCHMARKS.md, 2026-12-03): Lift the cheap rendering, Can the one
+//! without reflections (Can's policies did not keep their MuJoCo success on the cheap one, whose
+//! missing multisampling changes their decisions; the mirrored pass barely does). A
 //! scenario file's `[visual]` ([`VisualPatch`]) changes the settings it names and keeps the
 //! task's default for the others. Each setting is benchmarked on its own
 //! (`cargo bench -p scenarios --bench robosuite`), with the pixel difference it makes, in
@@ -81,7 +84,7 @@ impl VisualPatch {
 
 impl Visual {
     /// robosuite's own rendering (MuJoCo's quality defaults, the arena's reflectance), in a
-    /// buffer of the frame's size: the bytes robosuite renders. Can's default.
+    /// buffer of the frame's size: the bytes robosuite renders.
     pub fn robosuite() -> Self {
         Self { offscreen: [96, 96], samples: 4, shadow_size: 4096, reflections: true, render_size: None }
     }
@@ -103,6 +106,12 @@ impl Visual {
     /// on a CPU renderer. Lift's default.
     pub fn cheap() -> Self {
         Self { samples: 0, reflections: false, ..Self::robosuite() }
+    }
+
+    /// robosuite's rendering without the floor's mirrored pass (multisampling kept). Can's
+    /// default.
+    pub fn no_reflections() -> Self {
+        Self { reflections: false, ..Self::robosuite() }
     }
 
     /// Checks ranges, for `field` of a scenario file.
