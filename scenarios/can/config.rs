@@ -36,9 +36,9 @@ pub struct CanConfig {
     /// Control steps per episode (robomimic's rollout horizon).
     pub max_steps: usize,
     /// How agentview frames are rendered. The default is Can's, [`Visual::no_reflections`],
-    /// which its shipped models read (adapted from robosuite's rendering, 2026-12-03); a scenario file's `[visual]` replaces the settings it names. Always
-    /// written out, so a dataset's or run's recorded config says which rendering made its
-    /// frames.
+    /// which its shipped models read (adapted from robosuite's rendering, 2026-12-03); a
+    /// scenario file's `[visual]` replaces the settings it names. Always written out, so a
+    /// dataset's or run's recorded config says which rendering made its frames.
     #[serde(deserialize_with = "can_visual")]
     pub visual: Visual,
 }

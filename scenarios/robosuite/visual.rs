@@ -8,8 +8,8 @@
 //! were trained on, and what this project's Lift and Can models were first trained on.
 //! [`Visual::cheap`] skips the multisampling and the floor's mirrored pass: a frame costs about
 //! a quarter (BENCHMARKS.md, 2026-11-29, "what a robosuite frame costs").
-//! [`Visual::no_reflections`] skips only the mirrored pass (about a third of a Can episode's
-//! cost in `collect`, BENCHMARKS.md, 2026-12-03).
+//! [`Visual::no_reflections`] skips only the mirrored pass: a Can step in `collect` costs about
+//! 1 / 1.7 of robosuite's (BENCHMARKS.md, 2026-12-03).
 //!
 //! Each task renders by default what its shipped models read, their frame encoders adapted to it
 //! by `evalharness train adapt` (BENCHMARKS.md, 2026-12-03): Lift the cheap rendering, Can the one
