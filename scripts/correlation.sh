@@ -20,7 +20,7 @@
 #   inversions on one machine and 0.68 with 7 on the other (its headline: 0.74 and 7). In one
 #   process with 2 render workers; it took 14 minutes in 3 shard processes on the slower kind.
 #   With Can's adapted models and frames without reflections (2026-12-03): Pearson 0.74 with 6
-#   inversions, 6 minutes on the faster kind.
+#   inversions, 5-6 minutes on an Intel Xeon machine (BENCHMARKS.md, 2026-12-04).
 # Then `evalharness tasks` writes the side-by-side table ($OUT/tasks.md, $OUT/tasks.tex).
 #
 # To rank your own checkpoints instead, set SCENARIO (default pusht) and any of POLICIES,
