@@ -76,6 +76,15 @@ pub fn a_model_folder_adapted_to_another_rendering_ranks_with_it(dir: &Path, tin
         std::fs::read(out.join("autoencoder/model.bpk")).unwrap(),
         std::fs::read(models.join("autoencoder/model.bpk")).unwrap()
     );
+    // The same command again gives the same weights and errors (its seed drives every draw).
+    let out_b = dir.join("adapted-again");
+    let tiny_b = ["--steps", "3", "--ae-steps", "2", "--batch", "4", "--out", s(&out_b)];
+    expect_code(&run(&[&args[..], &tiny_b[..]].concat()), 0);
+    for f in ["autoencoder/model.bpk", "policies/epoch-0001/model.bpk", "policies/epoch-0002/model.bpk"] {
+        let read = |d: &Path| std::fs::read(d.join(f)).unwrap_or_default();
+        assert!(!read(&out).is_empty() && read(&out) == read(&out_b), "{f} differs between two runs");
+    }
+    assert_eq!(read_json(&out_b.join("adaptation.json"))["distilled"], adaptation["distilled"]);
 
     // The adapted folder ranks on the frames it was adapted to.
     let rank = dir.join("rank");
