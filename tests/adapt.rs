@@ -1,6 +1,6 @@
 //! `train adapt` on tiny models: a Lift model folder adapted to frames with the floor's
-//! reflections (another rendering than Lift's default), then ranked with them; inputs that do
-//! not pair up refused.
+//! reflections (another rendering than Lift's default), the same command giving the same
+//! weights twice, then ranked with them; inputs that do not pair up refused.
 //! Run by the Lift pipeline test (`lift_models`), on the tiny models it trains.
 
 use std::path::Path;
